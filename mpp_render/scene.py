@@ -1,0 +1,144 @@
+"""Plain, bpy-free description of what is rendered.
+
+The Blender glue (``mpp_render.blender``) fills these dataclasses from the evaluated
+depsgraph; everything after that (precompute, march, passes) reads only them.
+
+Conventions used throughout the numeric core:
+
+* World space is Blender's: metres, right-handed, +Z up.
+* Directions called ``direction`` are unit vectors along which light *propagates*.
+* Colours are linear scene-referred RGB (Rec.709 primaries), as float64 arrays of shape (3,).
+* Coefficients are in 1/m; light powers in watts, sun irradiance in W/m^2, radiance in
+  W/(m^2 sr) -- the same units Cycles uses, so images compare one to one.
+* Images are (height, width, channels) with row 0 at the *top*.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import List, Optional
+
+import numpy as np
+
+
+@dataclass
+class Camera:
+    """A pinhole (PERSP) or orthographic (ORTHO) camera.
+
+    ``cam_to_world`` is a 4x4 rigid transform (rotation + translation, no scale): the camera
+    looks down its local -Z with +Y up, as in Blender.  ``plane`` = (xmin, xmax, ymin, ymax)
+    bounds the image in camera space: for PERSP on the plane z = -1 (dimensionless, so
+    tangents of the half angles), for ORTHO in metres.  ``clip_start``/``clip_end`` are planar
+    distances along the view axis in metres, as in Cycles.
+    """
+
+    projection: str
+    cam_to_world: np.ndarray
+    width: int
+    height: int
+    plane: tuple
+    clip_start: float = 0.1
+    clip_end: float = 1000.0
+
+
+@dataclass
+class Light:
+    """One light in Cycles' units.
+
+    ``kind``: 'POINT', 'SPOT', 'SUN' or 'AREA'.
+    ``strength``: RGB; for POINT/SPOT/AREA the emitted power in W (colour x temperature colour
+    x energy x 2**exposure), for SUN the irradiance in W/m^2 on a plane facing the sun.
+    ``position``: metres (unused for SUN).  ``direction``: unit vector of propagation (the
+    light's local -Z in world space).  ``matrix``: the light object's 4x4 world matrix (spot
+    cone frame with non-uniform scale, area-light axes and size).
+    ``radius``: metres, sphere radius of POINT and SPOT.  ``spot_size``: full cone angle in
+    radians; ``spot_blend`` in [0, 1].  ``angle``: SUN angular diameter in radians.
+    ``shape``: area shape 'SQUARE', 'RECTANGLE', 'DISK' or 'ELLIPSE'; ``size_x``/``size_y``:
+    metres in the light's local X/Y (before the object's scale, which ``matrix`` carries).
+    ``normalize``: area power is spread over the area (Cycles' default).
+    """
+
+    kind: str
+    name: str
+    strength: np.ndarray
+    position: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    direction: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, -1.0]))
+    matrix: np.ndarray = field(default_factory=lambda: np.eye(4))
+    radius: float = 0.0
+    spot_size: float = np.pi / 4
+    spot_blend: float = 0.15
+    angle: float = 0.0
+    shape: str = "SQUARE"
+    size_x: float = 1.0
+    size_y: float = 1.0
+    normalize: bool = True
+
+
+@dataclass
+class Medium:
+    """A participating medium on a voxel grid.
+
+    ``density``: float32 array (nx, ny, nz), dimensionless, >= 0, finite.  Values sit at
+    integer index points (voxel centres at integer ijk, as in OpenVDB) and are interpolated
+    trilinearly; outside the array the density is 0.
+    ``index_to_world``: 4x4 affine map from index space (i, j, k, 1) to world metres.
+    ``sigma_s`` / ``sigma_a``: RGB scattering / absorption coefficient in 1/m per unit density,
+    so sigma_s(x) = sigma_s * density(x).  ``g``: Henyey-Greenstein anisotropy in (-1, 1).
+    ``emission``: RGB emitted radiance per metre (W/(m^3 sr)), not scaled by density, as in
+    Cycles' Principled Volume; zero for most media.
+    ``source``: 'MESH', 'VDB', 'FLUID' or 'WORLD' (for messages and tests).
+    """
+
+    name: str
+    density: np.ndarray
+    index_to_world: np.ndarray
+    sigma_s: np.ndarray
+    sigma_a: np.ndarray
+    g: float = 0.0
+    emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    source: str = "VDB"
+
+    @property
+    def sigma_t(self) -> np.ndarray:
+        return self.sigma_s + self.sigma_a
+
+
+@dataclass
+class World:
+    """Constant background radiance ``color`` (RGB, W/(m^2 sr)), seen by rays that leave the
+    scene and lighting the media from every direction."""
+
+    color: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+
+@dataclass
+class Settings:
+    """Render quality settings.
+
+    ``samples``: jittered rays per pixel (box filter over the pixel square).
+    ``step_size``: march step in metres; 0 picks half the finest voxel size.
+    ``multiple``: compute multiple scattering (MPP).  ``film_transparent``: alpha from
+    transmittance instead of 1.  ``seed``: jitter seed (same seed, same image).
+    ``ambient_directions``: directions used to integrate the world light's transmittance.
+    ``passes``: names of the passes to fill; None means every pass the engine has.
+    """
+
+    samples: int = 16
+    step_size: float = 0.0
+    multiple: bool = True
+    film_transparent: bool = False
+    seed: int = 0
+    ambient_directions: int = 64
+    passes: Optional[List[str]] = None
+    threads: int = 0
+
+
+@dataclass
+class SceneDescription:
+    """Everything one frame of one view layer needs, free of Blender objects."""
+
+    camera: Camera
+    lights: List[Light] = field(default_factory=list)
+    media: List[Medium] = field(default_factory=list)
+    world: World = field(default_factory=World)
+    settings: Settings = field(default_factory=Settings)
+    warnings: List[str] = field(default_factory=list)
