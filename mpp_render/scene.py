@@ -120,6 +120,8 @@ class Settings:
     transmittance instead of 1.  ``seed``: jitter seed (same seed, same image).
     ``ambient_directions``: directions used to integrate the world light's transmittance.
     ``passes``: names of the passes to fill; None means every pass the engine has.
+    ``voxel_resolution``: voxels along the longest side when a mesh volume is voxelised.
+    ``threads``: worker threads for the march; 0 means one per core.
     """
 
     samples: int = 16
@@ -130,6 +132,7 @@ class Settings:
     ambient_directions: int = 64
     passes: Optional[List[str]] = None
     threads: int = 0
+    voxel_resolution: int = 128
 
 
 @dataclass
