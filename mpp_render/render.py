@@ -1,15 +1,30 @@
 """The render pipeline: scene description -> per-light precompute -> march -> passes.
 
-(Interface fixed; implementation in progress.)
+The image is cut into square tiles; each tile's rays (``samples`` jittered rays per pixel,
+stratified over the pixel square like Cycles' 1 px box filter) are marched independently with
+a random stream seeded by (seed, tile index), so the image does not depend on the number of
+threads.  ``progress`` and ``should_cancel`` are served between tiles.
 """
 from __future__ import annotations
 
+import math
+import os
+import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Callable, Dict, List, Optional
 
 import numpy as np
 
+from . import kernels
+from .camera import primary_rays
+from .march import MarchContext, march_rays
+from .media import prepare, union_interval
+from .passes import DEPTH_MISS, enabled_passes
+from .precompute import precompute
 from .scene import SceneDescription
+
+TILE = 32
 
 
 @dataclass
@@ -23,6 +38,24 @@ class RenderOutput:
     timings: Dict[str, float] = field(default_factory=dict)
     warnings: List[str] = field(default_factory=list)
     cancelled: bool = False
+    stats: dict = field(default_factory=dict)
+
+
+def pixel_offsets(samples: int, rng):
+    """(samples, 2) jittered offsets in [0,1)^2: stratified on a k x k grid when samples is
+    a square, otherwise uniform."""
+    k = int(round(math.sqrt(samples)))
+    if k * k == samples:
+        g = np.stack(np.meshgrid(np.arange(k), np.arange(k), indexing="ij"), -1).reshape(-1, 2)
+        return (g + rng.random((samples, 2))) / k
+    return rng.random((samples, 2))
+
+
+def auto_step(desc: SceneDescription, media) -> float:
+    """The march step (m): the user's, or half the finest voxel."""
+    if desc.settings.step_size > 0:
+        return float(desc.settings.step_size)
+    return 0.5 * min(pm.voxel_size for pm in media) if media else 1.0
 
 
 def render(desc: SceneDescription,
@@ -30,4 +63,107 @@ def render(desc: SceneDescription,
            should_cancel: Optional[Callable[[], bool]] = None) -> RenderOutput:
     """Render one frame.  ``progress(fraction, message)`` is called between tiles;
     ``should_cancel()`` is polled between tiles and precompute chunks (Esc)."""
-    raise NotImplementedError
+    st = desc.settings
+    cam = desc.camera
+    W, H = int(cam.width), int(cam.height)
+    warnings = list(desc.warnings)
+    timings = {}
+    media = []
+    for m in desc.media:
+        try:
+            media.append(prepare(m))
+        except ValueError as e:
+            warnings.append(str(e))
+    passes_on = [p.name for p in enabled_passes(st.multiple, st.passes)]
+    out = {p.name: np.zeros((H, W, p.channels), np.float32) for p in enabled_passes(st.multiple, st.passes)}
+    if "Depth" in out:
+        out["Depth"][:] = DEPTH_MISS
+    cancel = should_cancel or (lambda: False)
+
+    t_pre = time.perf_counter()
+    pre = None
+    if media:
+        pre = precompute(media, desc.lights, desc.world, cam, n_dirs=st.ambient_directions,
+                         seed=st.seed, should_cancel=cancel, progress=progress)
+        if pre is None:
+            return RenderOutput(out, {"precompute": time.perf_counter() - t_pre}, warnings, True)
+    timings["precompute"] = time.perf_counter() - t_pre
+
+    bg = np.asarray(desc.world.color, np.float64)
+    step = auto_step(desc, media)
+    ctx = MarchContext(media, pre.fields if pre else [], pre.layout if pre else None,
+                       desc.lights, step) if media else None
+    tiles = [(x0, y0) for y0 in range(0, H, TILE) for x0 in range(0, W, TILE)]
+    spp = max(1, int(st.samples))
+
+    def do_tile(index):
+        x0, y0 = tiles[index]
+        tw, th = min(TILE, W - x0), min(TILE, H - y0)
+        rng = np.random.default_rng([st.seed, index])
+        offs = pixel_offsets(spp, rng)
+        yy, xx = np.mgrid[y0:y0 + th, x0:x0 + tw]
+        px = (xx.reshape(-1, 1) + offs[None, :, 0]).ravel()
+        py = (yy.reshape(-1, 1) + offs[None, :, 1]).ravel()
+        o, d, tmin, tmax, axial = primary_rays(cam, px, py)
+        n = len(o)
+        if ctx is not None:
+            t0, t1 = union_interval(media, o, d, tmin, tmax)
+            r = march_rays(ctx, o, d, t0, t1, axial, rng)
+        else:
+            r = {"single": np.zeros((n, 3)), "T": np.ones((n, 3)), "depth": np.full(n, DEPTH_MISS)}
+        res = {}
+        single = r["single"].reshape(th * tw, spp, 3).mean(axis=1)
+        T = r["T"].reshape(th * tw, spp, 3).mean(axis=1)
+        res["Volume Single"] = single
+        res["Transmittance"] = T
+        comb = np.empty((th * tw, 4))
+        if st.film_transparent:
+            comb[:, :3] = single
+            comb[:, 3] = 1.0 - T.mean(axis=1)
+        else:
+            comb[:, :3] = single + T * bg
+            comb[:, 3] = 1.0
+        res["Combined"] = comb
+        dep = r["depth"].reshape(th * tw, spp)
+        hitd = dep < DEPTH_MISS
+        res["Depth"] = np.where(hitd.any(axis=1), np.where(hitd, dep, np.inf).min(axis=1), DEPTH_MISS)[:, None]
+        return index, (x0, y0, tw, th), res
+
+    t_march = time.perf_counter()
+    threads = st.threads if st.threads > 0 else (os.cpu_count() or 1)
+    done = 0
+    cancelled = False
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        pending = set()
+        it = iter(range(len(tiles)))
+        for _ in range(threads * 2):
+            i = next(it, None)
+            if i is not None:
+                pending.add(pool.submit(do_tile, i))
+        while pending:
+            fut = next(iter(pending))
+            # wait for whichever finishes first
+            from concurrent.futures import FIRST_COMPLETED, wait
+            fin, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for f in fin:
+                index, (x0, y0, tw, th), res = f.result()
+                for name, arr in res.items():
+                    if name in out:
+                        out[name][y0:y0 + th, x0:x0 + tw] = arr.reshape(th, tw, -1)
+                done += 1
+            if cancel():
+                cancelled = True
+                for f in pending:
+                    f.cancel()
+                break
+            for _ in fin:
+                i = next(it, None)
+                if i is not None:
+                    pending.add(pool.submit(do_tile, i))
+            if progress:
+                progress(done / len(tiles), f"Tiles {done}/{len(tiles)}")
+    timings["march"] = time.perf_counter() - t_march
+    stats = {"backend": kernels.backend(), "step": step, "tiles": len(tiles), "passes": passes_on}
+    if pre is not None:
+        stats.update(pre.stats)
+    return RenderOutput(out, timings, warnings, cancelled, stats)

@@ -1,0 +1,51 @@
+"""Kernel dispatch: the compiled twin when it is built, otherwise the numpy twin.
+
+``MPP_KERNELS=numpy`` in the environment forces the numpy path (tests use it to hold the
+two twins to each other).  ``backend()`` says which one runs.  The wrappers here hand the C
+kernels contiguous arrays of the exact dtypes they check for, and turn results into numpy.
+"""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from . import kernels_np
+
+try:  # pragma: no cover - depends on the build
+    from . import _kernels as _c
+except ImportError:  # the engine still renders, on numpy
+    _c = None
+
+_FORCE_NUMPY = os.environ.get("MPP_KERNELS", "").lower() == "numpy"
+
+
+def backend() -> str:
+    return "numpy" if (_c is None or _FORCE_NUMPY) else "c"
+
+
+def _f64(a):
+    return np.ascontiguousarray(a, np.float64)
+
+
+def _f32(a):
+    return np.ascontiguousarray(a, np.float32)
+
+
+def c_optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, offset=0.5):
+    n = len(points)
+    buf = _c.optical_depth(_f64(points).reshape(n, 3), _f64(dirs).reshape(n, 3),
+                           _f64(t_max).reshape(n), [_f32(g) for g in grids],
+                           [_f64(w) for w in w2is], [_f64(s).reshape(3) for s in sigma_ts],
+                           [float(t) for t in thresholds], float(step), float(offset))
+    return np.frombuffer(buf, np.float64).reshape(n, 3)
+
+
+_C_WRAPPERS = {"optical_depth": c_optical_depth}
+
+
+def get(name: str):
+    """The kernel ``name`` from the active backend."""
+    if backend() == "c" and name in _C_WRAPPERS and hasattr(_c, name):
+        return _C_WRAPPERS[name]
+    return getattr(kernels_np, name)

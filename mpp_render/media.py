@@ -1,0 +1,135 @@
+"""Media prepared for sampling: padded density grids, world <-> index maps, ray bounds.
+
+A ``Medium`` (scene.py) holds density values at integer index points.  Here each medium is
+padded by one voxel of zeros on every side, so trilinear interpolation fades the density to
+zero over the voxel beyond the data, as OpenVDB's background does; ``PreparedMedium`` stores
+the padded array and the affine map from world metres to *padded* index coordinates.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import List
+
+import numpy as np
+
+from .scene import Medium
+
+
+@dataclass
+class PreparedMedium:
+    """A medium ready for the march and the precompute.
+
+    ``grid``: float32 (X, Y, Z) padded density.  ``w2i``: (3, 4) world -> padded index map.
+    ``i2w``: (4, 4) padded index -> world.  ``sigma_s``, ``sigma_a``, ``sigma_t``: RGB 1/m
+    per unit density.  ``voxel_size``: the shortest world length of a voxel edge (m).
+    """
+
+    medium: Medium
+    grid: np.ndarray
+    w2i: np.ndarray
+    i2w: np.ndarray
+    sigma_s: np.ndarray
+    sigma_a: np.ndarray
+    sigma_t: np.ndarray
+    g: float
+    voxel_size: float
+    threshold: float = -1.0
+
+    @property
+    def sharp(self) -> bool:
+        return self.threshold >= 0.0
+
+    @property
+    def shape(self):
+        return self.grid.shape
+
+
+def prepare(medium: Medium) -> PreparedMedium:
+    d = np.asarray(medium.density, dtype=np.float32)
+    if d.ndim != 3 or min(d.shape) < 1:
+        raise ValueError(f"medium '{medium.name}': density must be a non-empty 3-D array")
+    grid = np.zeros(tuple(s + 2 for s in d.shape), np.float32)
+    grid[1:-1, 1:-1, 1:-1] = np.nan_to_num(np.maximum(d, 0.0), nan=0.0, posinf=0.0)
+    shift = np.eye(4)
+    shift[:3, 3] = -1.0
+    i2w = np.asarray(medium.index_to_world, np.float64) @ shift
+    w2i = np.linalg.inv(i2w)[:3, :]
+    voxel = float(np.min(np.linalg.norm(i2w[:3, :3], axis=0)))
+    ss = np.asarray(medium.sigma_s, np.float64).reshape(3)
+    sa = np.asarray(medium.sigma_a, np.float64).reshape(3)
+    thr = 0.5 if medium.source == "MESH" else -1.0
+    return PreparedMedium(medium, np.ascontiguousarray(grid), np.ascontiguousarray(w2i), i2w,
+                          ss, sa, ss + sa, float(medium.g), voxel, thr)
+
+
+def density_from(value, threshold: float):
+    """Density from an interpolated grid value: thresholded for sharp (mesh) media."""
+    if threshold >= 0.0:
+        return (value >= threshold).astype(value.dtype)
+    return value
+
+
+def to_index(pm: PreparedMedium, points):
+    """World points (N,3) -> padded index coordinates (N,3)."""
+    return points @ pm.w2i[:, :3].T + pm.w2i[:, 3]
+
+
+def trilinear(grid, idx):
+    """Trilinear interpolation of ``grid`` (X,Y,Z) or (X,Y,Z,C) at index coords (N,3).
+
+    Points outside [0, X-1] x [0, Y-1] x [0, Z-1] return 0 (the padding makes the field fade
+    to zero inside that range)."""
+    X, Y, Z = grid.shape[:3]
+    f = np.floor(idx)
+    i0 = f.astype(np.int64)
+    fr = idx - f
+    inside = ((i0[:, 0] >= 0) & (i0[:, 0] < X - 1) & (i0[:, 1] >= 0) & (i0[:, 1] < Y - 1)
+              & (i0[:, 2] >= 0) & (i0[:, 2] < Z - 1))
+    i = np.where(inside[:, None], i0, 0)
+    fx, fy, fz = fr[:, 0], fr[:, 1], fr[:, 2]
+    flat = grid.reshape(X * Y * Z, -1)
+    base = (i[:, 0] * Y + i[:, 1]) * Z + i[:, 2]
+    sx, sy = Y * Z, Z
+    out = 0.0
+    for dx, wx in ((0, 1 - fx), (sx, fx)):
+        for dy, wy in ((0, 1 - fy), (sy, fy)):
+            w_xy = wx * wy
+            c0 = flat[base + dx + dy]
+            c1 = flat[base + dx + dy + 1]
+            out = out + (w_xy * (1 - fz))[:, None] * c0 + (w_xy * fz)[:, None] * c1
+    out = np.where(inside[:, None], out, 0.0)
+    return out if grid.ndim == 4 else out[:, 0]
+
+
+def ray_box(pm: PreparedMedium, origins, dirs):
+    """Parametric interval (t0, t1) where rays o + t d (world, any |d|) lie inside the padded
+    grid's sampling box; t0 > t1 where they miss.  Works in index space, where the map is
+    affine, so t is the same parameter as in world space."""
+    o = to_index(pm, origins)
+    d = dirs @ pm.w2i[:, :3].T
+    lo = np.zeros(3)
+    hi = np.array(pm.grid.shape, np.float64) - 1.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / d
+        ta = (lo - o) * inv
+        tb = (hi - o) * inv
+    tmin = np.minimum(ta, tb)
+    tmax = np.maximum(ta, tb)
+    par = np.abs(d) < 1e-300
+    inside_par = (o >= lo) & (o <= hi)
+    tmin = np.where(par, np.where(inside_par, -np.inf, np.inf), tmin)
+    tmax = np.where(par, np.where(inside_par, np.inf, -np.inf), tmax)
+    return np.nanmax(tmin, axis=1), np.nanmin(tmax, axis=1)
+
+
+def union_interval(media: List[PreparedMedium], origins, dirs, t_lo, t_hi):
+    """Smallest interval covering every medium the rays cross, clipped to [t_lo, t_hi]."""
+    n = len(origins)
+    t0 = np.full(n, np.inf)
+    t1 = np.full(n, -np.inf)
+    for pm in media:
+        a, b = ray_box(pm, origins, dirs)
+        hit = b > a
+        t0 = np.where(hit, np.minimum(t0, a), t0)
+        t1 = np.where(hit, np.maximum(t1, b), t1)
+    return np.maximum(t0, t_lo), np.minimum(t1, t_hi)

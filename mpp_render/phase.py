@@ -1,0 +1,58 @@
+"""Henyey-Greenstein phase function.
+
+Convention: ``cos_theta`` is the cosine between the *propagation* direction of the incident
+light and the propagation direction of the scattered light, so g > 0 scatters forward.
+The phase function is normalised over the sphere: its integral over solid angle (sr) is 1,
+its unit is 1/sr.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+G_LIMIT = 0.999  # |g| is clamped here: beyond it the lobe is narrower than any grid resolves
+
+
+def clamp_g(g: float) -> float:
+    return float(np.clip(g, -G_LIMIT, G_LIMIT))
+
+
+def hg(cos_theta, g: float):
+    """Henyey-Greenstein p(cos) = (1 - g^2) / (4 pi (1 + g^2 - 2 g cos)^1.5), in 1/sr."""
+    g = clamp_g(g)
+    c = np.asarray(cos_theta, dtype=np.float64)
+    denom = np.maximum(1.0 + g * g - 2.0 * g * c, 1e-12)
+    return (1.0 - g * g) / (4.0 * np.pi * denom * np.sqrt(denom))
+
+
+def sample_hg(u1, u2, g: float, axis):
+    """Directions distributed by HG around the unit propagation direction ``axis`` (N,3).
+
+    ``u1``, ``u2`` in [0, 1) (N,); returns unit vectors (N,3) whose cosine with ``axis``
+    follows the HG distribution (inverse CDF, exact for any g in (-1, 1))."""
+    g = clamp_g(g)
+    u1 = np.asarray(u1, np.float64)
+    u2 = np.asarray(u2, np.float64)
+    if abs(g) < 1e-4:
+        cos_t = 1.0 - 2.0 * u1
+    else:
+        s = (1.0 - g * g) / (1.0 - g + 2.0 * g * u1)
+        cos_t = (1.0 + g * g - s * s) / (2.0 * g)
+    cos_t = np.clip(cos_t, -1.0, 1.0)
+    sin_t = np.sqrt(np.maximum(0.0, 1.0 - cos_t * cos_t))
+    phi = 2.0 * np.pi * u2
+    axis = np.asarray(axis, np.float64)
+    t1, t2 = orthonormal_basis(axis)
+    return (t1 * (sin_t * np.cos(phi))[:, None] + t2 * (sin_t * np.sin(phi))[:, None]
+            + axis * cos_t[:, None])
+
+
+def orthonormal_basis(n):
+    """Two unit vectors (N,3) orthogonal to the unit vectors ``n`` (N,3) and to each other
+    (Duff et al. 2017, branchless)."""
+    n = np.atleast_2d(np.asarray(n, np.float64))
+    sign = np.where(n[:, 2] >= 0.0, 1.0, -1.0)
+    a = -1.0 / (sign + n[:, 2])
+    b = n[:, 0] * n[:, 1] * a
+    t1 = np.stack([1.0 + sign * n[:, 0] ** 2 * a, sign * b, -sign * n[:, 0]], axis=1)
+    t2 = np.stack([b, sign + n[:, 1] ** 2 * a, -n[:, 1]], axis=1)
+    return t1, t2

@@ -1,0 +1,182 @@
+"""Per-light and world-light precompute on each medium's voxel grid.
+
+For every medium we build one *field* array (X, Y, Z, C) float32 on the medium's padded grid,
+read by the march with a single trilinear fetch per step:
+
+* channel 0: density (dimensionless);
+* for each lit light l, 3 channels: RGB optical depth tau_l from the voxel point to the light
+  through *all* media (transmittance exp(-tau_l));
+* 3 channels of world light: the RGB radiance the constant world background brings to the
+  voxel *after* the phase function towards the camera and the attenuation through all media:
+  A(x) = L_world * integral p(w_in . w_cam(x)) T(x, -w_in) dw_in, estimated with directions
+  drawn from the phase lobe (so the estimate is the mean transmittance).  w_cam(x) points
+  from x to the camera, which is exact for camera rays through x.
+
+Only voxels whose trilinear support touches non-zero density are computed; the rest stay 0.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, List, Optional
+
+import numpy as np
+
+from . import kernels
+from .lights import is_dark
+from .media import PreparedMedium, union_interval
+from .phase import sample_hg
+from .scene import Camera, Light, World
+
+
+@dataclass
+class FieldLayout:
+    """Channel offsets in a medium's field array.  ``light_channels[i]`` is the offset of
+    light i's optical depth, or None when the light is skipped (dark)."""
+
+    light_channels: List[Optional[int]]
+    ambient_channel: Optional[int]
+    channels: int
+
+
+@dataclass
+class Precomputed:
+    fields: List[np.ndarray]
+    layout: FieldLayout
+    seconds: float = 0.0
+    stats: dict = field(default_factory=dict)
+
+
+def needed_points(pm: PreparedMedium):
+    """Flat indices and world positions of the padded grid points whose trilinear
+    neighbourhood holds non-zero density."""
+    occ = pm.grid > 0.0
+    dil = occ.copy()
+    for ax in range(3):  # one-voxel dilation: any neighbour cell with density counts
+        for s in (1, -1):
+            dil |= np.roll(occ, s, axis=ax)
+    flat = np.flatnonzero(dil)
+    ijk = np.stack(np.unravel_index(flat, pm.grid.shape), axis=1).astype(np.float64)
+    world = ijk @ pm.i2w[:3, :3].T + pm.i2w[:3, 3]
+    return flat, world
+
+
+def _exit_distance(media, points, dirs, limit):
+    t0, t1 = union_interval(media, points, dirs, np.zeros(len(points)), limit)
+    return np.where(t1 > 0.0, np.minimum(t1, limit), 0.0)
+
+
+def light_optical_depth(media: List[PreparedMedium], light: Light, points, step,
+                        chunk=1 << 16, should_cancel=None):
+    """RGB optical depth (N,3) from world ``points`` to ``light`` (its centre) through media."""
+    od = kernels.get("optical_depth")
+    grids = [pm.grid for pm in media]
+    w2is = [pm.w2i for pm in media]
+    sts = [pm.sigma_t for pm in media]
+    thr = [pm.threshold for pm in media]
+    out = np.zeros((len(points), 3))
+    for a in range(0, len(points), chunk):
+        if should_cancel and should_cancel():
+            return None
+        p = points[a:a + chunk]
+        if light.kind == "SUN":
+            d = -np.asarray(light.direction, np.float64)
+            d = np.broadcast_to(d / np.linalg.norm(d), p.shape).copy()
+            limit = np.full(len(p), np.inf)
+        else:
+            pos = np.asarray(light.position if light.kind != "AREA" else
+                             np.asarray(light.matrix)[:3, 3], np.float64)
+            v = pos - p
+            dist = np.linalg.norm(v, axis=1)
+            d = v / np.maximum(dist, 1e-30)[:, None]
+            limit = dist
+        t = _exit_distance(media, p, d, limit)
+        out[a:a + chunk] = od(p, d, t, grids, w2is, sts, thr, float(step), 0.5)
+    return out
+
+
+def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, camera: Camera,
+                points, n_dirs, step, seed=0, chunk=1 << 14, should_cancel=None):
+    """A(x) (N,3): world radiance scattered towards the camera per unit sigma_s, attenuated."""
+    colour = np.asarray(world.color, np.float64)
+    n = len(points)
+    if n == 0 or not np.any(colour > 0):
+        return np.zeros((n, 3))
+    od = kernels.get("optical_depth")
+    grids = [m.grid for m in media]
+    w2is = [m.w2i for m in media]
+    sts = [m.sigma_t for m in media]
+    thr = [m.threshold for m in media]
+    c2w = np.asarray(camera.cam_to_world, np.float64)
+    rng = np.random.default_rng([seed, 7919])
+    out = np.zeros((n, 3))
+    golden = 0.6180339887498949
+    j = np.arange(n_dirs)
+    for a in range(0, n, chunk):
+        if should_cancel and should_cancel():
+            return None
+        p = points[a:a + chunk]
+        m = len(p)
+        if camera.projection == "ORTHO":
+            to_cam = np.broadcast_to(c2w[:3, 2], (m, 3))
+        else:
+            to_cam = c2w[:3, 3] - p
+            to_cam = to_cam / np.maximum(np.linalg.norm(to_cam, axis=1, keepdims=True), 1e-30)
+        r = rng.random((m, 2))
+        u1 = np.mod((j[None, :] + 0.5) / n_dirs + r[:, :1], 1.0).ravel()
+        u2 = np.mod(j[None, :] * golden + r[:, 1:], 1.0).ravel()
+        axis = np.repeat(to_cam, n_dirs, axis=0)
+        w_in = sample_hg(u1, u2, pm.g, axis)  # propagation directions of the arriving light
+        d = -w_in  # march towards where the light comes from
+        pp = np.repeat(p, n_dirs, axis=0)
+        t = _exit_distance(media, pp, d, np.full(len(pp), np.inf))
+        tau = od(pp, d, t, grids, w2is, sts, thr, float(step), 0.5)
+        out[a:a + chunk] = np.exp(-tau).reshape(m, n_dirs, 3).mean(axis=1) * colour
+    return out
+
+
+def precompute(media: List[PreparedMedium], lights: List[Light], world: World, camera: Camera,
+               n_dirs: int = 64, step_factor: float = 1.0, seed: int = 0,
+               should_cancel: Optional[Callable[[], bool]] = None,
+               progress: Optional[Callable[[float, str], None]] = None) -> Optional[Precomputed]:
+    """Field arrays for every medium; None when cancelled."""
+    import time
+    t_start = time.perf_counter()
+    chans = [None] * len(lights)
+    c = 1
+    for i, light in enumerate(lights):
+        if not is_dark(light):
+            chans[i] = c
+            c += 3
+    amb = c if np.any(np.asarray(world.color) > 0) else None
+    if amb is not None:
+        c += 3
+    layout = FieldLayout(chans, amb, c)
+    step = step_factor * min(pm.voxel_size for pm in media) if media else 1.0
+    fields = []
+    n_pts = 0
+    for mi, pm in enumerate(media):
+        f = np.zeros(pm.grid.shape + (c,), np.float32)
+        f[..., 0] = pm.grid
+        flat, pts = needed_points(pm)
+        n_pts += len(pts)
+        view = f.reshape(-1, c)
+        for li, light in enumerate(lights):
+            if chans[li] is None:
+                continue
+            if progress:
+                progress(0.0, f"Light attenuation: {light.name} on {pm.medium.name}")
+            tau = light_optical_depth(media, light, pts, step, should_cancel=should_cancel)
+            if tau is None:
+                return None
+            view[flat, chans[li]:chans[li] + 3] = tau
+        if amb is not None:
+            if progress:
+                progress(0.0, f"World light on {pm.medium.name}")
+            a = world_light(media, pm, world, camera, pts, n_dirs, 2.0 * step, seed=seed + mi,
+                            should_cancel=should_cancel)
+            if a is None:
+                return None
+            view[flat, amb:amb + 3] = a
+        fields.append(f)
+    return Precomputed(fields, layout, time.perf_counter() - t_start,
+                       {"points": n_pts, "backend": kernels.backend()})
