@@ -103,6 +103,22 @@ class Medium:
 
 
 @dataclass
+class Surface:
+    """An opaque triangle mesh: stops camera rays and shadows the media.
+
+    ``vertices``: float64 (N, 3) world metres; ``triangles``: int64 (M, 3) vertex indices.
+    ``base_color``: RGB diffuse albedo (Lambertian shading of the Principled BSDF base colour);
+    ``emission``: RGB emitted radiance W/(m^2 sr).  ``name``: the object's name.
+    """
+
+    name: str
+    vertices: np.ndarray
+    triangles: np.ndarray
+    base_color: np.ndarray = field(default_factory=lambda: np.full(3, 0.8))
+    emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+
+@dataclass
 class World:
     """Constant background radiance ``color`` (RGB, W/(m^2 sr)), seen by rays that leave the
     scene and lighting the media from every direction."""
@@ -142,6 +158,7 @@ class SceneDescription:
     camera: Camera
     lights: List[Light] = field(default_factory=list)
     media: List[Medium] = field(default_factory=list)
+    surfaces: List[Surface] = field(default_factory=list)
     world: World = field(default_factory=World)
     settings: Settings = field(default_factory=Settings)
     warnings: List[str] = field(default_factory=list)

@@ -1,0 +1,25 @@
+"""Shared fixtures for the tests that need the bpy module."""
+import os
+import pathlib
+
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+REPO = pathlib.Path(__file__).resolve().parents[2]
+SCENES = (REPO.parent / "shared" / "scenes").resolve()
+
+
+@pytest.fixture
+def empty_scene():
+    """A factory-empty file with a world; returns bpy.context.scene."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    sc = bpy.context.scene
+    sc.world = bpy.data.worlds.new("World")
+    return sc
+
+
+@pytest.fixture
+def scenes_dir():
+    assert SCENES.is_dir(), f"public scene suite missing at {SCENES}"
+    return SCENES
