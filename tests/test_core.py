@@ -116,8 +116,8 @@ def slab_scene(width=24, height=16, samples=4, film_transparent=False, **medium)
     cam = Camera("ORTHO", np.eye(4), width, height, (-1.5, 1.5, -1.0, 1.0))
     cam.cam_to_world[:3, 3] = [0, 0, 5]
     med = box_medium(**medium)
-    return SceneDescription(cam, [], [med], World(np.array([0.5, 1.0, 2.0])),
-                            Settings(samples=samples, film_transparent=film_transparent))
+    return SceneDescription(cam, [], [med], world=World(np.array([0.5, 1.0, 2.0])),
+                            settings=Settings(samples=samples, film_transparent=film_transparent))
 
 
 def test_render_transmittance_of_a_cube_is_beer_lambert():
