@@ -26,6 +26,7 @@ from .lights import is_dark
 from .media import PreparedMedium, union_interval
 from .phase import sample_hg
 from .scene import Camera, Light, World
+from .surfaces import occluded
 
 
 @dataclass
@@ -65,9 +66,14 @@ def _exit_distance(media, points, dirs, limit):
     return np.where(t1 > 0.0, np.minimum(t1, limit), 0.0)
 
 
+SHADOW_TAU = 50.0  # optical depth standing for "blocked by an opaque surface" (T ~ 2e-22)
+
+
 def light_optical_depth(media: List[PreparedMedium], light: Light, points, step,
-                        chunk=1 << 16, should_cancel=None):
-    """RGB optical depth (N,3) from world ``points`` to ``light`` (its centre) through media."""
+                        chunk=1 << 16, should_cancel=None, surfaces=None):
+    """RGB optical depth (N,3) from world ``points`` to ``light`` (its centre) through media;
+    ``SHADOW_TAU`` is added where an opaque surface (``surfaces``, a SurfaceSet) blocks the
+    way, so surfaces cast volumetric shadows."""
     od = kernels.get("optical_depth")
     grids = [pm.grid for pm in media]
     w2is = [pm.w2i for pm in media]
@@ -91,11 +97,13 @@ def light_optical_depth(media: List[PreparedMedium], light: Light, points, step,
             limit = dist
         t = _exit_distance(media, p, d, limit)
         out[a:a + chunk] = od(p, d, t, grids, w2is, sts, thr, float(step), 0.5)
+        if surfaces is not None and not surfaces.empty:
+            out[a:a + chunk] += SHADOW_TAU * occluded(surfaces, p, d, limit)[:, None]
     return out
 
 
 def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, camera: Camera,
-                points, n_dirs, step, seed=0, chunk=1 << 14, should_cancel=None):
+                points, n_dirs, step, seed=0, chunk=1 << 14, should_cancel=None, surfaces=None):
     """A(x) (N,3): world radiance scattered towards the camera per unit sigma_s, attenuated."""
     colour = np.asarray(world.color, np.float64)
     n = len(points)
@@ -130,6 +138,8 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
         pp = np.repeat(p, n_dirs, axis=0)
         t = _exit_distance(media, pp, d, np.full(len(pp), np.inf))
         tau = od(pp, d, t, grids, w2is, sts, thr, float(step), 0.5)
+        if surfaces is not None and not surfaces.empty:
+            tau += SHADOW_TAU * occluded(surfaces, pp, d, np.full(len(pp), np.inf))[:, None]
         out[a:a + chunk] = np.exp(-tau).reshape(m, n_dirs, 3).mean(axis=1) * colour
     return out
 
@@ -137,8 +147,10 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
 def precompute(media: List[PreparedMedium], lights: List[Light], world: World, camera: Camera,
                n_dirs: int = 64, step_factor: float = 1.0, seed: int = 0,
                should_cancel: Optional[Callable[[], bool]] = None,
-               progress: Optional[Callable[[float, str], None]] = None) -> Optional[Precomputed]:
-    """Field arrays for every medium; None when cancelled."""
+               progress: Optional[Callable[[float, str], None]] = None,
+               surfaces=None) -> Optional[Precomputed]:
+    """Field arrays for every medium; None when cancelled.  ``surfaces`` (a SurfaceSet or
+    None) shadow the lights and the sky."""
     import time
     t_start = time.perf_counter()
     chans = [None] * len(lights)
@@ -165,7 +177,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                 continue
             if progress:
                 progress(0.0, f"Light attenuation: {light.name} on {pm.medium.name}")
-            tau = light_optical_depth(media, light, pts, step, should_cancel=should_cancel)
+            tau = light_optical_depth(media, light, pts, step, should_cancel=should_cancel,
+                                      surfaces=surfaces)
             if tau is None:
                 return None
             view[flat, chans[li]:chans[li] + 3] = tau
@@ -173,7 +186,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
             if progress:
                 progress(0.0, f"World light on {pm.medium.name}")
             a = world_light(media, pm, world, camera, pts, n_dirs, 2.0 * step, seed=seed + mi,
-                            should_cancel=should_cancel)
+                            should_cancel=should_cancel, surfaces=surfaces)
             if a is None:
                 return None
             view[flat, amb:amb + 3] = a

@@ -23,6 +23,7 @@ from .media import prepare, union_interval
 from .passes import DEPTH_MISS, enabled_passes
 from .precompute import precompute
 from .scene import SceneDescription
+from .surfaces import intersect, prepare_surfaces, shade
 
 TILE = 32
 
@@ -80,11 +81,13 @@ def render(desc: SceneDescription,
         out["Depth"][:] = DEPTH_MISS
     cancel = should_cancel or (lambda: False)
 
+    surf = prepare_surfaces(desc.surfaces)
     t_pre = time.perf_counter()
     pre = None
     if media:
         pre = precompute(media, desc.lights, desc.world, cam, n_dirs=st.ambient_directions,
-                         seed=st.seed, should_cancel=cancel, progress=progress)
+                         seed=st.seed, should_cancel=cancel, progress=progress,
+                         surfaces=None if surf.empty else surf)
         if pre is None:
             return RenderOutput(out, {"precompute": time.perf_counter() - t_pre}, warnings, True)
     timings["precompute"] = time.perf_counter() - t_pre
@@ -93,6 +96,16 @@ def render(desc: SceneDescription,
     step = auto_step(desc, media)
     ctx = MarchContext(media, pre.fields if pre else [], pre.layout if pre else None,
                        desc.lights, step) if media else None
+    od = kernels.get("optical_depth")
+    step_light = step
+
+    def media_optical_depth(p, d, t_max):
+        if not media:
+            return np.zeros((len(p), 3))
+        t0, t1 = union_interval(media, p, d, np.zeros(len(p)), t_max)
+        return od(p, d, np.maximum(t1, 0.0), [m.grid for m in media], [m.w2i for m in media],
+                  [m.sigma_t for m in media], [m.threshold for m in media], step_light, 0.5)
+
     tiles = [(x0, y0) for y0 in range(0, H, TILE) for x0 in range(0, W, TILE)]
     spp = max(1, int(st.samples))
 
@@ -106,22 +119,34 @@ def render(desc: SceneDescription,
         py = (yy.reshape(-1, 1) + offs[None, :, 1]).ravel()
         o, d, tmin, tmax, axial = primary_rays(cam, px, py)
         n = len(o)
+        t_hit, tri = intersect(surf, o, d, tmax)
+        hit = tri >= 0
         if ctx is not None:
-            t0, t1 = union_interval(media, o, d, tmin, tmax)
+            t0, t1 = union_interval(media, o, d, tmin, t_hit)
             r = march_rays(ctx, o, d, t0, t1, axial, rng)
         else:
             r = {"single": np.zeros((n, 3)), "T": np.ones((n, 3)), "depth": np.full(n, DEPTH_MISS)}
+        behind = np.broadcast_to(bg, (n, 3)).copy()
+        if hit.any():
+            ph = o[hit] + d[hit] * t_hit[hit, None]
+            behind[hit] = shade(surf, tri[hit], ph, d[hit], desc.lights, bg,
+                                media_optical_depth, rng)
+            dh = t_hit[hit] * axial[hit]
+            r["depth"][hit] = np.minimum(r["depth"][hit], dh)
         res = {}
         single = r["single"].reshape(th * tw, spp, 3).mean(axis=1)
         T = r["T"].reshape(th * tw, spp, 3).mean(axis=1)
+        seen = (r["T"] * behind).reshape(th * tw, spp, 3).mean(axis=1)
         res["Volume Single"] = single
         res["Transmittance"] = T
         comb = np.empty((th * tw, 4))
         if st.film_transparent:
-            comb[:, :3] = single
-            comb[:, 3] = 1.0 - T.mean(axis=1)
+            surf_seen = (r["T"] * np.where(hit[:, None], behind, 0.0)).reshape(th * tw, spp, 3).mean(axis=1)
+            comb[:, :3] = single + surf_seen
+            t_miss = np.where(hit[:, None], 0.0, r["T"]).reshape(th * tw, spp, 3).mean(axis=1)
+            comb[:, 3] = 1.0 - t_miss.mean(axis=1)
         else:
-            comb[:, :3] = single + T * bg
+            comb[:, :3] = single + seen
             comb[:, 3] = 1.0
         res["Combined"] = comb
         dep = r["depth"].reshape(th * tw, spp)
