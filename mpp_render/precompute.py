@@ -16,6 +16,9 @@ Only voxels whose trilinear support touches non-zero density are computed; the r
 """
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import TimeoutError as FuturesTimeout
 from dataclasses import dataclass, field
 from typing import Callable, List, Optional
 
@@ -23,10 +26,13 @@ import numpy as np
 
 from . import kernels
 from .lights import is_dark
-from .media import PreparedMedium, union_interval
+from .media import PreparedMedium, trilinear, union_interval
 from .phase import sample_hg
 from .scene import Camera, Light, World
 from .surfaces import occluded
+
+
+AMBIENT_RESOLUTION = 40  # lattice points along the longest side for the world light
 
 
 @dataclass
@@ -69,21 +75,53 @@ def _exit_distance(media, points, dirs, limit):
 SHADOW_TAU = 50.0  # optical depth standing for "blocked by an opaque surface" (T ~ 2e-22)
 
 
+def run_chunks(n, chunk, work, threads=0, should_cancel=None) -> bool:
+    """Call ``work(a, b)`` for consecutive ranges [a, b) of ``range(n)`` on a thread pool
+    (``threads`` <= 0: one per core).  The kernels release the GIL, so chunks run in parallel;
+    each chunk must write only its own slice.  Returns False when ``should_cancel`` stopped it."""
+    starts = list(range(0, n, chunk))
+    threads = threads if threads > 0 else (os.cpu_count() or 1)
+    if threads == 1 or len(starts) <= 1:
+        for a in starts:
+            if should_cancel and should_cancel():
+                return False
+            work(a, min(n, a + chunk))
+        return True
+    cancelled = False
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        futures = [pool.submit(work, a, min(n, a + chunk)) for a in starts]
+        for f in futures:
+            while True:
+                try:
+                    f.result(timeout=0.05)
+                    break
+                except FuturesTimeout:
+                    if should_cancel and should_cancel():
+                        cancelled = True
+                        for g in futures:
+                            g.cancel()
+                        break
+            if cancelled:
+                break
+    return not cancelled
+
+
+def _media_arrays(media):
+    return ([m.grid for m in media], [m.w2i for m in media], [m.sigma_t for m in media],
+            [m.threshold for m in media])
+
+
 def light_optical_depth(media: List[PreparedMedium], light: Light, points, step,
-                        chunk=1 << 16, should_cancel=None, surfaces=None):
+                        chunk=1 << 14, should_cancel=None, surfaces=None, threads=0):
     """RGB optical depth (N,3) from world ``points`` to ``light`` (its centre) through media;
     ``SHADOW_TAU`` is added where an opaque surface (``surfaces``, a SurfaceSet) blocks the
-    way, so surfaces cast volumetric shadows."""
+    way, so surfaces cast volumetric shadows.  None when cancelled."""
     od = kernels.get("optical_depth")
-    grids = [pm.grid for pm in media]
-    w2is = [pm.w2i for pm in media]
-    sts = [pm.sigma_t for pm in media]
-    thr = [pm.threshold for pm in media]
+    arrays = _media_arrays(media)
     out = np.zeros((len(points), 3))
-    for a in range(0, len(points), chunk):
-        if should_cancel and should_cancel():
-            return None
-        p = points[a:a + chunk]
+
+    def work(a, b):
+        p = points[a:b]
         if light.kind == "SUN":
             d = -np.asarray(light.direction, np.float64)
             d = np.broadcast_to(d / np.linalg.norm(d), p.shape).copy()
@@ -96,33 +134,36 @@ def light_optical_depth(media: List[PreparedMedium], light: Light, points, step,
             d = v / np.maximum(dist, 1e-30)[:, None]
             limit = dist
         t = _exit_distance(media, p, d, limit)
-        out[a:a + chunk] = od(p, d, t, grids, w2is, sts, thr, float(step), 0.5)
+        tau = od(p, d, t, *arrays, float(step), 0.5)
         if surfaces is not None and not surfaces.empty:
-            out[a:a + chunk] += SHADOW_TAU * occluded(surfaces, p, d, limit)[:, None]
+            tau += SHADOW_TAU * occluded(surfaces, p, d, limit)[:, None]
+        out[a:b] = tau
+
+    if not run_chunks(len(points), chunk, work, threads, should_cancel):
+        return None
     return out
 
 
 def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, camera: Camera,
-                points, n_dirs, step, seed=0, chunk=1 << 14, should_cancel=None, surfaces=None):
-    """A(x) (N,3): world radiance scattered towards the camera per unit sigma_s, attenuated."""
+                points, n_dirs, step, seed=0, chunk=1 << 11, should_cancel=None, surfaces=None,
+                threads=0):
+    """A(x) (N,3): world radiance scattered towards the camera per unit sigma_s, attenuated.
+    Each chunk draws from its own stream seeded by (seed, chunk start), so the result does not
+    depend on the thread count.  None when cancelled."""
     colour = np.asarray(world.color, np.float64)
     n = len(points)
     if n == 0 or not np.any(colour > 0):
         return np.zeros((n, 3))
     od = kernels.get("optical_depth")
-    grids = [m.grid for m in media]
-    w2is = [m.w2i for m in media]
-    sts = [m.sigma_t for m in media]
-    thr = [m.threshold for m in media]
+    arrays = _media_arrays(media)
     c2w = np.asarray(camera.cam_to_world, np.float64)
-    rng = np.random.default_rng([seed, 7919])
     out = np.zeros((n, 3))
     golden = 0.6180339887498949
     j = np.arange(n_dirs)
-    for a in range(0, n, chunk):
-        if should_cancel and should_cancel():
-            return None
-        p = points[a:a + chunk]
+
+    def work(a, b):
+        rng = np.random.default_rng([seed, 7919, a])
+        p = points[a:b]
         m = len(p)
         if camera.projection == "ORTHO":
             to_cam = np.broadcast_to(c2w[:3, 2], (m, 3))
@@ -137,18 +178,41 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
         d = -w_in  # march towards where the light comes from
         pp = np.repeat(p, n_dirs, axis=0)
         t = _exit_distance(media, pp, d, np.full(len(pp), np.inf))
-        tau = od(pp, d, t, grids, w2is, sts, thr, float(step), 0.5)
+        tau = od(pp, d, t, *arrays, float(step), 0.5)
         if surfaces is not None and not surfaces.empty:
             tau += SHADOW_TAU * occluded(surfaces, pp, d, np.full(len(pp), np.inf))[:, None]
-        out[a:a + chunk] = np.exp(-tau).reshape(m, n_dirs, 3).mean(axis=1) * colour
+        out[a:b] = np.exp(-tau).reshape(m, n_dirs, 3).mean(axis=1) * colour
+
+    if not run_chunks(n, chunk, work, threads, should_cancel):
+        return None
     return out
+
+
+def coarse_lattice(pm: PreparedMedium, stride: int):
+    """Index points of ``pm``'s padded grid taken every ``stride`` voxels (covering the whole
+    grid) whose neighbourhood of radius ``stride`` holds density.  Returns (shape, flat
+    indices into that coarse shape, world positions (K,3))."""
+    shape = tuple((s - 1 + stride - 1) // stride + 1 for s in pm.grid.shape)
+    occ = pm.grid > 0.0
+    dil = occ.copy()
+    for ax in range(3):
+        acc = dil.copy()
+        for s in range(1, stride + 1):
+            acc |= np.roll(dil, s, axis=ax) | np.roll(dil, -s, axis=ax)
+        dil = acc
+    sub = np.zeros(shape, bool)
+    picked = dil[::stride, ::stride, ::stride]
+    sub[:picked.shape[0], :picked.shape[1], :picked.shape[2]] = picked
+    flat = np.flatnonzero(sub)
+    ijk = np.stack(np.unravel_index(flat, shape), axis=1).astype(np.float64) * stride
+    return shape, flat, ijk @ pm.i2w[:3, :3].T + pm.i2w[:3, 3]
 
 
 def precompute(media: List[PreparedMedium], lights: List[Light], world: World, camera: Camera,
                n_dirs: int = 64, step_factor: float = 1.0, seed: int = 0,
                should_cancel: Optional[Callable[[], bool]] = None,
                progress: Optional[Callable[[float, str], None]] = None,
-               surfaces=None) -> Optional[Precomputed]:
+               surfaces=None, threads: int = 0) -> Optional[Precomputed]:
     """Field arrays for every medium; None when cancelled.  ``surfaces`` (a SurfaceSet or
     None) shadow the lights and the sky."""
     import time
@@ -166,6 +230,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
     step = step_factor * min(pm.voxel_size for pm in media) if media else 1.0
     fields = []
     n_pts = 0
+    n_ambient = 0
     for mi, pm in enumerate(media):
         f = np.zeros(pm.grid.shape + (c,), np.float32)
         f[..., 0] = pm.grid
@@ -178,18 +243,27 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
             if progress:
                 progress(0.0, f"Light attenuation: {light.name} on {pm.medium.name}")
             tau = light_optical_depth(media, light, pts, step, should_cancel=should_cancel,
-                                      surfaces=surfaces)
+                                      surfaces=surfaces, threads=threads)
             if tau is None:
                 return None
             view[flat, chans[li]:chans[li] + 3] = tau
         if amb is not None:
             if progress:
                 progress(0.0, f"World light on {pm.medium.name}")
-            a = world_light(media, pm, world, camera, pts, n_dirs, 2.0 * step, seed=seed + mi,
-                            should_cancel=should_cancel, surfaces=surfaces)
+            # the world light is smooth: compute it on a lattice ``stride`` voxels apart and
+            # interpolate trilinearly to the needed points
+            stride = max(1, int(round(max(pm.grid.shape) / AMBIENT_RESOLUTION)))
+            cshape, cflat, cpts = coarse_lattice(pm, stride)
+            a = world_light(media, pm, world, camera, cpts, n_dirs, 2.0 * step, seed=seed + mi,
+                            should_cancel=should_cancel, surfaces=surfaces, threads=threads)
             if a is None:
                 return None
-            view[flat, amb:amb + 3] = a
+            coarse = np.zeros((int(np.prod(cshape)), 3), np.float32)
+            coarse[cflat] = a
+            ijk = np.stack(np.unravel_index(flat, pm.grid.shape), axis=1) / float(stride)
+            view[flat, amb:amb + 3] = trilinear(coarse.reshape(cshape + (3,)), ijk)
+            n_ambient += len(cpts)
         fields.append(f)
     return Precomputed(fields, layout, time.perf_counter() - t_start,
-                       {"points": n_pts, "backend": kernels.backend()})
+                       {"points": n_pts, "ambient_points": n_ambient,
+                        "backend": kernels.backend()})

@@ -87,7 +87,7 @@ def render(desc: SceneDescription,
     if media:
         pre = precompute(media, desc.lights, desc.world, cam, n_dirs=st.ambient_directions,
                          seed=st.seed, should_cancel=cancel, progress=progress,
-                         surfaces=None if surf.empty else surf)
+                         surfaces=None if surf.empty else surf, threads=st.threads)
         if pre is None:
             return RenderOutput(out, {"precompute": time.perf_counter() - t_pre}, warnings, True)
     timings["precompute"] = time.perf_counter() - t_pre
