@@ -11,6 +11,9 @@
 #include <string.h>
 
 #define MAX_MEDIA 64
+#ifndef M_PI
+#define M_PI 3.14159265358979323846
+#endif
 
 typedef struct {
     Py_buffer view;
@@ -35,7 +38,8 @@ static int get_buf(PyObject *obj, Buf *b, char fmt, int ndim, Py_ssize_t *shape,
     if (f[0] == '<' || f[0] == '=' || f[0] == '@') f++;
     Py_ssize_t item = (fmt == 'd') ? 8 : 4;
     if (f[0] != fmt || f[1] != '\0' || b->view.itemsize != item) {
-        PyErr_Format(PyExc_ValueError, "%s: expected %s", what, fmt == 'd' ? "float64" : "float32");
+        PyErr_Format(PyExc_ValueError, "%s: expected %s", what,
+                     fmt == 'd' ? "float64" : (fmt == 'f' ? "float32" : "uint32"));
         buf_release(b);
         return -1;
     }
@@ -203,7 +207,346 @@ done:
     return result;
 }
 
+
+/* ------------------------------------------------------------------------------------------
+ * The camera-ray march (twin of kernels_np.march).  Layout constants mirror kernels_np.
+ */
+#define MAX_LIGHTS 64
+#define MAX_CH 256
+#define LIGHT_FIELDS 40
+#define L_KIND 0
+#define L_STRENGTH 1
+#define L_POS 4
+#define L_DIR 7
+#define L_INV 10
+#define L_COSHALF 19
+#define L_BLEND 20
+#define L_RADIUS 21
+#define L_AX 22
+#define L_AY 25
+#define L_AREA 28
+#define L_NORMAL 29
+#define L_NORMALIZE 32
+#define L_ROUND 33
+#define L_CHANNEL 34
+#define KIND_POINT 0
+#define KIND_SPOT 1
+#define KIND_SUN 2
+#define KIND_AREA 3
+#define DIM_JITTER 1000
+#define REFINE_STEPS 8
+#define EDGE_EPS 1e-6
+#define T_MIN 1e-6
+#define MAX_STEPS 50000000L
+
+static inline uint32_t hash32(uint32_t x) {
+    x ^= x >> 16; x *= 0x7FEB352Du; x ^= x >> 15; x *= 0x846CA68Bu; x ^= x >> 16;
+    return x;
+}
+
+static inline double uniform01(uint32_t key, long step, long dim) {
+    uint32_t salt = hash32((uint32_t)((uint64_t)step * 0x9E3779B1u + (uint64_t)dim * 0x85EBCA77u));
+    return (double)(hash32(key ^ salt) >> 8) * (1.0 / 16777216.0);
+}
+
+static inline void disc_map(double u1, double u2, int round_shape, double *pa, double *pb) {
+    double a = 2.0 * u1 - 1.0, b = 2.0 * u2 - 1.0;
+    if (!round_shape) { *pa = a; *pb = b; return; }
+    int big = fabs(a) > fabs(b);
+    double r = big ? a : b, phi;
+    if (a == 0.0 && b == 0.0) phi = 0.0;
+    else if (big) phi = (M_PI / 4) * b / (a == 0.0 ? 1.0 : a);
+    else phi = M_PI / 2 - (M_PI / 4) * a / (b == 0.0 ? 1.0 : b);
+    *pa = r * cos(phi); *pb = r * sin(phi);
+}
+
+static inline void basis(const double n[3], double t1[3], double t2[3]) {
+    double sign = n[2] >= 0.0 ? 1.0 : -1.0;
+    double a = -1.0 / (sign + n[2]);
+    double b = n[0] * n[1] * a;
+    t1[0] = 1.0 + sign * n[0] * n[0] * a; t1[1] = sign * b; t1[2] = -sign * n[0];
+    t2[0] = b; t2[1] = sign + n[1] * n[1] * a; t2[2] = -n[1];
+}
+
+/* Light record `L` at point x: propagation direction d, irradiance e, unit direction to the
+ * centre wc and its distance dc (INFINITY for the sun). */
+static void light_sample(const double *L, const double x[3], double u1, double u2,
+                         double d[3], double e[3], double wc[3], double *dc) {
+    int kind = (int)L[L_KIND];
+    if (kind == KIND_SUN) {
+        for (int a = 0; a < 3; a++) { d[a] = L[L_DIR + a]; e[a] = L[L_STRENGTH + a]; wc[a] = -d[a]; }
+        *dc = INFINITY;
+        return;
+    }
+    const double *c = L + L_POS;
+    double vc[3] = {c[0] - x[0], c[1] - x[1], c[2] - x[2]};
+    double dcc = sqrt(vc[0] * vc[0] + vc[1] * vc[1] + vc[2] * vc[2]);
+    double inv_dc = 1.0 / (dcc > 1e-30 ? dcc : 1e-30);
+    for (int a = 0; a < 3; a++) wc[a] = vc[a] * inv_dc;
+    *dc = dcc;
+    double pa, pb;
+    disc_map(u1, u2, kind != KIND_AREA || L[L_ROUND] > 0, &pa, &pb);
+    if (kind == KIND_POINT || kind == KIND_SPOT) {
+        double radius = L[L_RADIUS], src[3] = {c[0], c[1], c[2]};
+        if (radius > 0.0) {
+            double nn[3] = {-wc[0], -wc[1], -wc[2]}, t1[3], t2[3];
+            basis(nn, t1, t2);
+            for (int a = 0; a < 3; a++) src[a] = c[a] + radius * (t1[a] * pa + t2[a] * pb);
+        }
+        double v[3] = {x[0] - src[0], x[1] - src[1], x[2] - src[2]};
+        double dist = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+        double id = 1.0 / (dist > 1e-30 ? dist : 1e-30);
+        for (int a = 0; a < 3; a++) d[a] = v[a] * id;
+        double rmin = radius > 1e-4 ? radius : 1e-4;
+        double r2 = dist * dist > rmin * rmin ? dist * dist : rmin * rmin;
+        double att = 1.0;
+        if (kind == KIND_SPOT) {
+            const double *M = L + L_INV;
+            double loc[3];
+            for (int r = 0; r < 3; r++) loc[r] = M[3 * r] * d[0] + M[3 * r + 1] * d[1] + M[3 * r + 2] * d[2];
+            double ln = sqrt(loc[0] * loc[0] + loc[1] * loc[1] + loc[2] * loc[2]);
+            double cos_t = -loc[2] / (ln > 1e-30 ? ln : 1e-30);
+            double ch = L[L_COSHALF], bl = L[L_BLEND];
+            if (bl <= 0.0) att = cos_t > ch ? 1.0 : 0.0;
+            else {
+                double q = (cos_t - ch) / ((1.0 - ch) * bl);
+                q = q < 0.0 ? 0.0 : (q > 1.0 ? 1.0 : q);
+                att = q * q * (3.0 - 2.0 * q);
+            }
+        }
+        for (int a = 0; a < 3; a++) e[a] = L[L_STRENGTH + a] / (4.0 * M_PI) / r2 * att;
+        return;
+    }
+    /* AREA */
+    double src[3], v[3];
+    for (int a = 0; a < 3; a++) src[a] = c[a] + L[L_AX + a] * pa + L[L_AY + a] * pb;
+    for (int a = 0; a < 3; a++) v[a] = x[a] - src[a];
+    double dist2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+    if (!(dist2 > 1e-8)) dist2 = 1e-8;
+    double dist = sqrt(dist2);
+    for (int a = 0; a < 3; a++) d[a] = v[a] / dist;
+    double cos_l = d[0] * L[L_NORMAL] + d[1] * L[L_NORMAL + 1] + d[2] * L[L_NORMAL + 2];
+    if (cos_l < 0.0) cos_l = 0.0;
+    double area = L[L_AREA];
+    double norm = (L[L_NORMALIZE] > 0 && area > 0) ? area : 1.0;
+    for (int a = 0; a < 3; a++) e[a] = L[L_STRENGTH + a] / M_PI / norm * (cos_l * area / dist2);
+}
+
+static inline double hg_phase(double c, double g) {
+    double denom = 1.0 + g * g - 2.0 * g * c;
+    if (denom < 1e-12) denom = 1e-12;
+    return (1.0 - g * g) / (4.0 * M_PI * denom * sqrt(denom));
+}
+
+static inline double fetch0(const Grid *g, const double x[3]) {
+    double idx[3], v;
+    to_index(g, x, idx);
+    trilinear(g, idx, 0, 1, &v);
+    return v;
+}
+
+static void refined_tau(const Grid *f, int nm, int mi, int c, const double x[3], const double w[3],
+                        double dist, double delta, double tau[3]) {
+    double end[3] = {x[0], x[1], x[2]};
+    tau[0] = tau[1] = tau[2] = 0.0;
+    for (int k = 1; k <= REFINE_STEPS; k++) {
+        double seg = dist - (k - 1) * delta;
+        seg = seg < 0.0 ? 0.0 : (seg > delta ? delta : seg);
+        double s_mid = (k - 1) * delta + 0.5 * seg, s_end = (k - 1) * delta + seg, mid[3];
+        for (int a = 0; a < 3; a++) { mid[a] = x[a] + w[a] * s_mid; end[a] = x[a] + w[a] * s_end; }
+        for (int m = 0; m < nm; m++) {
+            double rho = density_from(&f[m], fetch0(&f[m], mid));
+            for (int a = 0; a < 3; a++) tau[a] += rho * seg * f[m].sig[a];
+        }
+        double occ = fetch0(&f[mi], end);
+        if (occ <= EDGE_EPS || occ >= 1.0 - EDGE_EPS || seg < delta) break;
+    }
+    double idx[3], v[3];
+    to_index(&f[mi], end, idx);
+    trilinear(&f[mi], idx, c, 3, v);
+    for (int a = 0; a < 3; a++) tau[a] += v[a];
+}
+
+static int parse_doubles(PyObject *list, Py_ssize_t n, double *out, const char *what) {
+    if (!PyList_Check(list) || PyList_GET_SIZE(list) != n) {
+        PyErr_Format(PyExc_ValueError, "%s: expected a list of %zd numbers", what, n);
+        return -1;
+    }
+    for (Py_ssize_t i = 0; i < n; i++) {
+        out[i] = PyFloat_AsDouble(PyList_GET_ITEM(list, i));
+        if (out[i] == -1.0 && PyErr_Occurred()) return -1;
+    }
+    return 0;
+}
+
+static const char march_doc[] =
+    "march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs, thresholds,\n"
+    "      voxels, lights, ambient, step, depth_opacity, depth_miss) -> (single, T, depth) bytes\n"
+    "Twin of kernels_np.march.";
+
+static PyObject *march(PyObject *self, PyObject *args) {
+    PyObject *po, *pd, *pt0, *pt1, *pax, *pk, *fields, *w2is, *sss, *sts, *gsl, *thrs, *vox, *plights;
+    int ambient;
+    double step, depth_opacity, depth_miss;
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOiddd", &po, &pd, &pt0, &pt1, &pax, &pk, &fields,
+                          &w2is, &sss, &sts, &gsl, &thrs, &vox, &plights, &ambient, &step,
+                          &depth_opacity, &depth_miss))
+        return NULL;
+    if (!(step > 0.0) || !isfinite(step)) {
+        PyErr_SetString(PyExc_ValueError, "step must be a positive finite length");
+        return NULL;
+    }
+    Buf bo = {0}, bd = {0}, b0 = {0}, b1 = {0}, bax = {0}, bk = {0}, bl = {0}, gb[MAX_MEDIA];
+    Grid g[MAX_MEDIA];
+    double sig_s[MAX_MEDIA][3], gg[MAX_MEDIA], voxel[MAX_MEDIA];
+    int ng = 0;
+    PyObject *o_s = NULL, *o_t = NULL, *o_d = NULL, *result = NULL;
+    Py_ssize_t s_o[2] = {-1, 3};
+    if (get_buf(po, &bo, 'd', 2, s_o, "origins") < 0) goto done;
+    Py_ssize_t n = s_o[0];
+    Py_ssize_t s_d[2] = {n, 3}, s_n[1] = {n}, s_n2[1] = {n}, s_n3[1] = {n}, s_n4[1] = {n};
+    if (get_buf(pd, &bd, 'd', 2, s_d, "dirs") < 0) goto done;
+    if (get_buf(pt0, &b0, 'd', 1, s_n, "t0") < 0) goto done;
+    if (get_buf(pt1, &b1, 'd', 1, s_n2, "t1") < 0) goto done;
+    if (get_buf(pax, &bax, 'd', 1, s_n3, "axial") < 0) goto done;
+    if (get_buf(pk, &bk, 'I', 1, s_n4, "keys") < 0) goto done;
+    if (parse_grids(fields, w2is, sts, thrs, g, gb, &ng, 1) < 0) goto done;
+    if (!PyList_Check(sss) || PyList_GET_SIZE(sss) != ng) {
+        PyErr_SetString(PyExc_ValueError, "sigma_ss: one RGB array per medium");
+        goto done;
+    }
+    for (int m = 0; m < ng; m++) {
+        Buf sb;
+        Py_ssize_t s3[1] = {3};
+        if (get_buf(PyList_GET_ITEM(sss, m), &sb, 'd', 1, s3, "sigma_s") < 0) goto done;
+        memcpy(sig_s[m], sb.view.buf, 3 * sizeof(double));
+        buf_release(&sb);
+        if (g[m].nc > MAX_CH) {
+            PyErr_SetString(PyExc_ValueError, "fields: too many channels");
+            goto done;
+        }
+    }
+    if (parse_doubles(gsl, ng, gg, "gs") < 0 || parse_doubles(vox, ng, voxel, "voxels") < 0) goto done;
+    for (int m = 0; m < ng; m++) {
+        if (!(gg[m] > -1.0 && gg[m] < 1.0) || !(voxel[m] > 0.0) || !isfinite(voxel[m])) {
+            PyErr_SetString(PyExc_ValueError, "gs must lie in (-1, 1) and voxels be positive");
+            goto done;
+        }
+    }
+    Py_ssize_t s_l[2] = {-1, LIGHT_FIELDS};
+    if (get_buf(plights, &bl, 'd', 2, s_l, "lights") < 0) goto done;
+    Py_ssize_t nl = s_l[0];
+    if (nl > MAX_LIGHTS) {
+        PyErr_SetString(PyExc_ValueError, "lights: at most 64 per call");
+        goto done;
+    }
+    const double *LR = (const double *)bl.view.buf;
+    int chan[MAX_LIGHTS];
+    for (Py_ssize_t l = 0; l < nl; l++) {
+        double cf = LR[l * LIGHT_FIELDS + L_CHANNEL], kf = LR[l * LIGHT_FIELDS + L_KIND];
+        if (!(kf == 0 || kf == 1 || kf == 2 || kf == 3)) {
+            PyErr_SetString(PyExc_ValueError, "lights: unknown kind");
+            goto done;
+        }
+        chan[l] = cf < 0 ? -1 : (int)cf;
+        for (int m = 0; m < ng; m++)
+            if (chan[l] >= 0 && (chan[l] < 1 || chan[l] + 3 > g[m].nc)) {
+                PyErr_SetString(PyExc_ValueError, "lights: channel outside the fields");
+                goto done;
+            }
+    }
+    for (int m = 0; m < ng; m++)
+        if (ambient >= 0 && (ambient < 1 || ambient + 3 > g[m].nc)) {
+            PyErr_SetString(PyExc_ValueError, "ambient channel outside the fields");
+            goto done;
+        }
+    o_s = PyByteArray_FromStringAndSize(NULL, (Py_ssize_t)(n * 3 * sizeof(double)));
+    o_t = PyByteArray_FromStringAndSize(NULL, (Py_ssize_t)(n * 3 * sizeof(double)));
+    o_d = PyByteArray_FromStringAndSize(NULL, (Py_ssize_t)(n * sizeof(double)));
+    if (!o_s || !o_t || !o_d) goto done;
+    double *OS = (double *)PyByteArray_AS_STRING(o_s), *OT = (double *)PyByteArray_AS_STRING(o_t),
+           *OD = (double *)PyByteArray_AS_STRING(o_d);
+    const double *O = (const double *)bo.view.buf, *D = (const double *)bd.view.buf,
+                 *T0 = (const double *)b0.view.buf, *T1 = (const double *)b1.view.buf,
+                 *AX = (const double *)bax.view.buf;
+    const uint32_t *K = (const uint32_t *)bk.view.buf;
+    const double thr_op = 1.0 - depth_opacity;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t r = 0; r < n; r++) {
+        const double *o = O + 3 * r, *d = D + 3 * r;
+        double T[3] = {1, 1, 1}, S[3] = {0, 0, 0}, depth = depth_miss;
+        double t1 = T1[r], seg = T0[r];
+        uint32_t key = K[r];
+        double t = seg + uniform01(key, 0, DIM_JITTER) * step;
+        long k = 0;
+        while (seg < t1 && k < MAX_STEPS) {
+            double hl = t1 - seg < step ? t1 - seg : step;
+            double ts = t < seg + hl ? t : seg + hl, x[3];
+            for (int a = 0; a < 3; a++) x[a] = o[a] + d[a] * ts;
+            double wi[MAX_LIGHTS][3], e[MAX_LIGHTS][3], wc[MAX_LIGHTS][3], dc[MAX_LIGHTS];
+            for (Py_ssize_t l = 0; l < nl; l++)
+                light_sample(LR + l * LIGHT_FIELDS, x, uniform01(key, k, 2 * l),
+                             uniform01(key, k, 2 * l + 1), wi[l], e[l], wc[l], &dc[l]);
+            double sig_t[3] = {0, 0, 0}, src[3] = {0, 0, 0};
+            for (int m = 0; m < ng; m++) {
+                double idx[3], v[MAX_CH];
+                to_index(&g[m], x, idx);
+                if (!trilinear(&g[m], idx, 0, (int)g[m].nc, v)) continue;
+                double rho = density_from(&g[m], v[0]);
+                if (!(rho > 0.0)) continue;
+                for (int a = 0; a < 3; a++) sig_t[a] += rho * g[m].sig[a];
+                int edge = g[m].thr >= 0.0 && v[0] > EDGE_EPS && v[0] < 1.0 - EDGE_EPS;
+                double inc[3] = {0, 0, 0};
+                for (Py_ssize_t l = 0; l < nl; l++) {
+                    int c = chan[l];
+                    if (c < 0) continue;
+                    double tau[3] = {v[c], v[c + 1], v[c + 2]};
+                    if (edge) refined_tau(g, ng, m, c, x, wc[l], dc[l], 0.5 * voxel[m], tau);
+                    double cs = -(wi[l][0] * d[0] + wi[l][1] * d[1] + wi[l][2] * d[2]);
+                    double p = hg_phase(cs, gg[m]);
+                    for (int a = 0; a < 3; a++) inc[a] += p * e[l][a] * exp(-tau[a]);
+                }
+                if (ambient >= 0)
+                    for (int a = 0; a < 3; a++) inc[a] += v[ambient + a];
+                for (int a = 0; a < 3; a++) src[a] += rho * sig_s[m][a] * inc[a];
+            }
+            double Tb[3] = {T[0], T[1], T[2]};
+            for (int a = 0; a < 3; a++) {
+                double xt = sig_t[a] * hl;
+                double frac = xt > 1e-7 ? -expm1(-xt) / xt : 1.0 - 0.5 * xt;
+                S[a] += Tb[a] * src[a] * (frac * hl);
+                T[a] = Tb[a] * exp(-xt);
+            }
+            double tb = (Tb[0] + Tb[1] + Tb[2]) / 3.0, ta = (T[0] + T[1] + T[2]) / 3.0;
+            if (depth >= depth_miss && ta <= thr_op && tb > thr_op) {
+                double fr = log(tb / thr_op) / log(tb / (ta > 1e-300 ? ta : 1e-300));
+                fr = fr < 0.0 ? 0.0 : (fr > 1.0 ? 1.0 : fr);
+                depth = (seg + fr * hl) * AX[r];
+            }
+            double next = seg + hl;
+            if (!(next > seg)) break;  /* the step no longer advances t: stop, never spin */
+            seg = next;
+            k++;
+            t = seg + uniform01(key, k, DIM_JITTER) * step;
+            double tmax = T[0] > T[1] ? T[0] : T[1];
+            tmax = tmax > T[2] ? tmax : T[2];
+            if (!(tmax > T_MIN)) break;
+        }
+        for (int a = 0; a < 3; a++) { OS[3 * r + a] = S[a]; OT[3 * r + a] = T[a]; }
+        OD[r] = depth;
+    }
+    Py_END_ALLOW_THREADS
+    result = PyTuple_Pack(3, o_s, o_t, o_d);
+done:
+    Py_XDECREF(o_s); Py_XDECREF(o_t); Py_XDECREF(o_d);
+    buf_release(&bo); buf_release(&bd); buf_release(&b0); buf_release(&b1); buf_release(&bax);
+    buf_release(&bk); buf_release(&bl);
+    for (int m = 0; m < ng; m++) buf_release(&gb[m]);
+    return result;
+}
+
 static PyMethodDef methods[] = {
+    {"march", march, METH_VARARGS, march_doc},
     {"optical_depth", optical_depth, METH_VARARGS, optical_depth_doc},
     {NULL, NULL, 0, NULL},
 };

@@ -41,7 +41,22 @@ def c_optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step
     return np.frombuffer(buf, np.float64).reshape(n, 3)
 
 
-_C_WRAPPERS = {"optical_depth": c_optical_depth}
+def c_march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs,
+            thresholds, voxels, lights, ambient, step, depth_opacity, depth_miss):
+    n = len(origins)
+    s, t, d = _c.march(_f64(origins).reshape(n, 3), _f64(dirs).reshape(n, 3),
+                       _f64(t0).reshape(n), _f64(t1).reshape(n), _f64(axial).reshape(n),
+                       np.ascontiguousarray(keys, np.uint32).reshape(n), [_f32(f) for f in fields],
+                       [_f64(w) for w in w2is], [_f64(x).reshape(3) for x in sigma_ss],
+                       [_f64(x).reshape(3) for x in sigma_ts], [float(g) for g in gs],
+                       [float(x) for x in thresholds], [float(v) for v in voxels],
+                       _f64(lights).reshape(-1, kernels_np.LIGHT_FIELDS), int(ambient),
+                       float(step), float(depth_opacity), float(depth_miss))
+    return (np.frombuffer(s, np.float64).reshape(n, 3), np.frombuffer(t, np.float64).reshape(n, 3),
+            np.frombuffer(d, np.float64).reshape(n))
+
+
+_C_WRAPPERS = {"optical_depth": c_optical_depth, "march": c_march}
 
 
 def get(name: str):

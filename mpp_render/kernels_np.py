@@ -36,3 +36,230 @@ def optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, 
             acc += density_from(trilinear(g, idx), thr)[:, None] * st[None, :]
         tau[live] += acc * h[live][:, None]
     return tau
+
+
+# ---------------------------------------------------------------------------------------------
+# Counter-based random numbers shared by both twins: u = hash(key, step, dim) in [0, 1).
+# ``lowbias32`` (C. Wellons' integer hash); all arithmetic wraps modulo 2^32.
+
+_M32 = 0xFFFFFFFF
+
+
+def hash32(x):
+    """lowbias32 of uint32 array ``x`` (wrapping arithmetic)."""
+    x = np.asarray(x, np.uint32).copy()
+    x ^= x >> np.uint32(16)
+    x *= np.uint32(0x7FEB352D)
+    x ^= x >> np.uint32(15)
+    x *= np.uint32(0x846CA68B)
+    x ^= x >> np.uint32(16)
+    return x
+
+
+def uniform(keys, step: int, dim: int):
+    """Uniform [0, 1) numbers for ray ``keys`` (uint32) at march step ``step`` and dimension
+    ``dim``: 24 bits of hash(key ^ hash(step * 0x9E3779B1 + dim * 0x85EBCA77))."""
+    salt = hash32(np.uint32(((step * 0x9E3779B1) + (dim * 0x85EBCA77)) & _M32))
+    h = hash32(np.asarray(keys, np.uint32) ^ salt)
+    return (h >> np.uint32(8)).astype(np.float64) * (1.0 / 16777216.0)
+
+
+# Light records for the march: one float64 row of LIGHT_FIELDS per light.
+LIGHT_FIELDS = 40
+L_KIND, L_STRENGTH, L_POS, L_DIR, L_INV, L_COSHALF, L_BLEND, L_RADIUS = 0, 1, 4, 7, 10, 19, 20, 21
+L_AX, L_AY, L_AREA, L_NORMAL, L_NORMALIZE, L_ROUND, L_CHANNEL = 22, 25, 28, 29, 32, 33, 34
+KIND_POINT, KIND_SPOT, KIND_SUN, KIND_AREA = 0, 1, 2, 3
+DIM_JITTER = 1000       # random dimension of the step jitter; lights use 2*i, 2*i + 1
+REFINE_STEPS = 8
+EDGE_EPS = 1e-6        # occupancies within this of 0 or 1 count as outside / inside
+T_MIN = 1e-6
+
+
+def _disc(a, b, round_shape):
+    """Square [-1,1]^2 (identity) or concentric map to the unit disc."""
+    if not round_shape:
+        return a, b
+    big = np.abs(a) > np.abs(b)
+    r = np.where(big, a, b)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        phi = np.where(big, (np.pi / 4) * b / np.where(a == 0, 1, a),
+                       np.pi / 2 - (np.pi / 4) * a / np.where(b == 0, 1, b))
+    phi = np.where((a == 0) & (b == 0), 0.0, phi)
+    return r * np.cos(phi), r * np.sin(phi)
+
+
+def _basis(n):
+    sign = np.where(n[:, 2] >= 0.0, 1.0, -1.0)
+    a = -1.0 / (sign + n[:, 2])
+    b = n[:, 0] * n[:, 1] * a
+    t1 = np.stack([1.0 + sign * n[:, 0] ** 2 * a, sign * b, -sign * n[:, 0]], axis=1)
+    t2 = np.stack([b, sign + n[:, 1] ** 2 * a, -n[:, 1]], axis=1)
+    return t1, t2
+
+
+def light_sample(rec, x, u1, u2):
+    """(propagation direction (N,3), irradiance (N,3), unit direction to the light centre
+    (N,3), distance to the centre (N,)) of packed light ``rec`` at points ``x``."""
+    kind = int(rec[L_KIND])
+    s = rec[L_STRENGTH:L_STRENGTH + 3]
+    n = len(x)
+    if kind == KIND_SUN:
+        d = np.broadcast_to(rec[L_DIR:L_DIR + 3], (n, 3)).copy()
+        return d, np.broadcast_to(s, (n, 3)).copy(), -d, np.full(n, np.inf)
+    centre = rec[L_POS:L_POS + 3]
+    vc = centre - x
+    dc = np.sqrt(np.einsum("ij,ij->i", vc, vc))
+    wc = vc / np.maximum(dc, 1e-30)[:, None]
+    a, b = _disc(2.0 * u1 - 1.0, 2.0 * u2 - 1.0, kind != KIND_AREA or rec[L_ROUND] > 0)
+    if kind in (KIND_POINT, KIND_SPOT):
+        radius = rec[L_RADIUS]
+        src = np.broadcast_to(centre, (n, 3))
+        if radius > 0.0:
+            t1, t2 = _basis(-wc)
+            src = centre + radius * (t1 * a[:, None] + t2 * b[:, None])
+        v = x - src
+        dist = np.sqrt(np.einsum("ij,ij->i", v, v))
+        d = v / np.maximum(dist, 1e-30)[:, None]
+        r2 = np.maximum(dist * dist, max(radius, 1e-4) ** 2)
+        e = s[None, :] / (4.0 * np.pi) / r2[:, None]
+        if kind == KIND_SPOT:
+            inv = rec[L_INV:L_INV + 9].reshape(3, 3)
+            loc = d @ inv.T
+            loc = loc / np.maximum(np.sqrt(np.einsum("ij,ij->i", loc, loc)), 1e-30)[:, None]
+            cos_t = -loc[:, 2]
+            ch, bl = rec[L_COSHALF], rec[L_BLEND]
+            if bl <= 0.0:
+                att = (cos_t > ch).astype(np.float64)
+            else:
+                q = np.clip((cos_t - ch) / ((1.0 - ch) * bl), 0.0, 1.0)
+                att = q * q * (3.0 - 2.0 * q)
+            e = e * att[:, None]
+        return d, e, wc, dc
+    # AREA
+    src = centre + rec[L_AX:L_AX + 3] * a[:, None] + rec[L_AY:L_AY + 3] * b[:, None]
+    v = x - src
+    dist2 = np.maximum(np.einsum("ij,ij->i", v, v), 1e-8)
+    d = v / np.sqrt(dist2)[:, None]
+    cos_l = np.maximum(d @ rec[L_NORMAL:L_NORMAL + 3], 0.0)
+    area = rec[L_AREA]
+    radiance = s / np.pi / (area if (rec[L_NORMALIZE] > 0 and area > 0) else 1.0)
+    return d, radiance[None, :] * (cos_l * area / dist2)[:, None], wc, dc
+
+
+def _hg(c, g):
+    denom = np.maximum(1.0 + g * g - 2.0 * g * c, 1e-12)
+    return (1.0 - g * g) / (4.0 * np.pi * denom * np.sqrt(denom))
+
+
+def _fetch(field, w2i, x, c0, nc):
+    idx = x @ w2i[:, :3].T + w2i[:, 3]
+    v = trilinear(field, idx) if field.ndim == 4 else trilinear(field, idx)[:, None]
+    return v[:, c0:c0 + nc]
+
+
+def _refined_tau(fields, w2is, thrs, sig_ts, mi, c, x, w, dist, delta):
+    """Optical depth from points x near medium mi's sharp surface towards a light: exact over
+    up to REFINE_STEPS half-voxel steps, then medium mi's precomputed field channel c."""
+    n = len(x)
+    tau = np.zeros((n, 3))
+    end = x.copy()
+    done = np.zeros(n, bool)
+    for k in range(1, REFINE_STEPS + 1):
+        todo = np.flatnonzero(~done)
+        if not todo.size:
+            break
+        seg = np.clip(dist[todo] - (k - 1) * delta, 0.0, delta)
+        mid = x[todo] + w[todo] * ((k - 1) * delta + 0.5 * seg)[:, None]
+        for f, w2i, thr, st in zip(fields, w2is, thrs, sig_ts):
+            rho = density_from(_fetch(f, w2i, mid, 0, 1)[:, 0], thr)
+            tau[todo] += (rho * seg)[:, None] * st[None, :]
+        pk = x[todo] + w[todo] * ((k - 1) * delta + seg)[:, None]
+        occ = _fetch(fields[mi], w2is[mi], pk, 0, 1)[:, 0]
+        end[todo] = pk
+        fin = (occ <= EDGE_EPS) | (occ >= 1.0 - EDGE_EPS) | (seg < delta)
+        done[todo[fin]] = True
+    return tau + _fetch(fields[mi], w2is[mi], end, c, 3)
+
+
+def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs, thresholds,
+          voxels, lights, ambient, step, depth_opacity, depth_miss):
+    """March camera rays through media fields: the numpy twin of ``_kernels.march``.
+
+    Rays ``origins + t dirs`` (N,3), t in [t0, t1] (N,) metres; ``axial`` (N,) turns t into
+    axial depth; ``keys`` (N,) uint32 seed the per-ray random numbers (``uniform``).
+    Per medium: ``fields`` (X,Y,Z,C) float32 (channel 0 density, then per-light optical
+    depths and the world light, see precompute.FieldLayout), ``w2is`` (3,4), ``sigma_ss`` /
+    ``sigma_ts`` RGB 1/m per unit density, ``gs`` HG anisotropy, ``thresholds`` (sharp
+    boundary, < 0 smooth), ``voxels`` voxel size in metres.  ``lights`` (L, LIGHT_FIELDS)
+    packed records; ``ambient`` the world-light channel or -1.  ``step`` metres.
+
+    Each step of length h adds T S (1 - exp(-sigma_t h)) / sigma_t with S the in-scattered
+    radiance at one jittered point of the step, then T *= exp(-sigma_t h).  Returns
+    (single (N,3), T (N,3), depth (N,)) float64."""
+    n = len(origins)
+    single = np.zeros((n, 3))
+    trans = np.ones((n, 3))
+    depth = np.full(n, float(depth_miss))
+    keys = np.asarray(keys, np.uint32)
+    lights = np.asarray(lights, np.float64).reshape(-1, LIGHT_FIELDS)
+    h = float(step)
+    t = t0 + uniform(keys, 0, DIM_JITTER) * h
+    seg_start = t0.astype(np.float64).copy()
+    alive = np.flatnonzero(seg_start < t1)
+    k = 0
+    while alive.size:
+        o, d = origins[alive], dirs[alive]
+        hl = np.minimum(h, t1[alive] - seg_start[alive])
+        ts = np.minimum(t[alive], seg_start[alive] + hl)
+        x = o + d * ts[:, None]
+        m = len(alive)
+        sig_t = np.zeros((m, 3))
+        src = np.zeros((m, 3))
+        ka = keys[alive]
+        emit = []
+        for li, rec in enumerate(lights):
+            emit.append(light_sample(rec, x, uniform(ka, k, 2 * li), uniform(ka, k, 2 * li + 1)))
+        for mi in range(len(fields)):
+            f = fields[mi]
+            v = _fetch(f, w2is[mi], x, 0, f.shape[3])
+            rho = density_from(v[:, 0], thresholds[mi])
+            sig_t += rho[:, None] * sigma_ts[mi][None, :]
+            edge = np.flatnonzero((v[:, 0] > EDGE_EPS) & (v[:, 0] < 1.0 - EDGE_EPS) & (rho > 0)) \
+                if thresholds[mi] >= 0 else np.zeros(0, np.int64)
+            inc = np.zeros((m, 3))
+            for li, rec in enumerate(lights):
+                c = int(rec[L_CHANNEL])
+                if c < 0:
+                    continue
+                wi, e, wc, dc = emit[li]
+                tau = v[:, c:c + 3]
+                if edge.size:
+                    tau = tau.copy()
+                    tau[edge] = _refined_tau(fields, w2is, thresholds, sigma_ts, mi, c, x[edge],
+                                             wc[edge], dc[edge], 0.5 * voxels[mi])
+                cos = -np.einsum("ij,ij->i", wi, d)
+                inc += (_hg(cos, gs[mi])[:, None] * e) * np.exp(-tau)
+            if ambient >= 0:
+                inc += v[:, ambient:ambient + 3]
+            src += rho[:, None] * sigma_ss[mi][None, :] * inc
+        x_t = sig_t * hl[:, None]
+        frac = np.where(x_t > 1e-7, -np.expm1(-x_t) / np.maximum(x_t, 1e-300), 1.0 - 0.5 * x_t)
+        T_before = trans[alive]
+        single[alive] += T_before * src * (frac * hl[:, None])
+        T_after = T_before * np.exp(-x_t)
+        trans[alive] = T_after
+        tb, ta = T_before.mean(axis=1), T_after.mean(axis=1)
+        thr = 1.0 - depth_opacity
+        hit = (depth[alive] >= depth_miss) & (ta <= thr) & (tb > thr)
+        if hit.any():
+            with np.errstate(divide="ignore", invalid="ignore"):
+                fr = np.clip(np.log(tb[hit] / thr) / np.log(tb[hit] / np.maximum(ta[hit], 1e-300)), 0, 1)
+            depth[alive[hit]] = (seg_start[alive[hit]] + fr * hl[hit]) * axial[alive[hit]]
+        nxt = seg_start[alive] + hl
+        advanced = nxt > seg_start[alive]   # a step that no longer moves t stops the ray
+        seg_start[alive] = nxt
+        k += 1
+        t[alive] = seg_start[alive] + uniform(ka, k, DIM_JITTER) * h
+        keep = advanced & (seg_start[alive] < t1[alive]) & (T_after.max(axis=1) > T_MIN)
+        alive = alive[keep]
+    return single, trans, depth

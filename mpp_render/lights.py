@@ -21,25 +21,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from .kernels_np import (KIND_AREA, KIND_POINT, KIND_SPOT, KIND_SUN, L_AREA, L_AX, L_AY,
+                         L_BLEND, L_CHANNEL, L_COSHALF, L_DIR, L_INV, L_KIND, L_NORMAL,
+                         L_NORMALIZE, L_POS, L_RADIUS, L_ROUND, L_STRENGTH, LIGHT_FIELDS,
+                         light_sample)
 from .scene import Light
-
-
-def smoothstep01(x):
-    x = np.clip(x, 0.0, 1.0)
-    return x * x * (3.0 - 2.0 * x)
-
-
-def spot_attenuation(light: Light, from_light):
-    """Cone factor for propagation directions ``from_light`` (N,3) (light -> point)."""
-    m = np.asarray(light.matrix, np.float64)[:3, :3]
-    local = from_light @ np.linalg.inv(m).T  # into the light's local frame, scale undone
-    local /= np.maximum(np.linalg.norm(local, axis=1, keepdims=True), 1e-30)
-    cos_t = -local[:, 2]  # the light shines along local -Z
-    cos_half = np.cos(0.5 * light.spot_size)
-    blend = max(light.spot_blend, 0.0)
-    if blend <= 0.0:
-        return (cos_t > cos_half).astype(np.float64)
-    return smoothstep01((cos_t - cos_half) / ((1.0 - cos_half) * blend))
 
 
 def area_geometry(light: Light):
@@ -55,66 +41,59 @@ def area_geometry(light: Light):
     return m[:3, 3], ax, ay, area
 
 
-def _disc_point(u, shape_round):
-    """Map u in [0,1)^2 to the square [-1,1]^2 or the unit disc (concentric mapping)."""
-    a = 2.0 * u[:, 0] - 1.0
-    b = 2.0 * u[:, 1] - 1.0
-    if not shape_round:
-        return a, b
-    r = np.where(np.abs(a) > np.abs(b), a, b)
-    phi = np.where(np.abs(a) > np.abs(b), (np.pi / 4) * b / np.where(a == 0, 1, a),
-                   np.pi / 2 - (np.pi / 4) * a / np.where(b == 0, 1, b))
-    phi = np.where((a == 0) & (b == 0), 0.0, phi)
-    return r * np.cos(phi), r * np.sin(phi)
+_KINDS = {"POINT": KIND_POINT, "SPOT": KIND_SPOT, "SUN": KIND_SUN, "AREA": KIND_AREA}
+
+
+def pack_light(light: Light, channel: int = -1) -> np.ndarray:
+    """The light as one float64 record of ``LIGHT_FIELDS`` (layout in kernels_np), the form
+    the kernels read; ``channel`` is its optical-depth channel in the media fields or -1."""
+    if light.kind not in _KINDS:
+        raise ValueError(f"unsupported light type {light.kind!r}")
+    r = np.zeros(LIGHT_FIELDS)
+    r[L_KIND] = _KINDS[light.kind]
+    r[L_STRENGTH:L_STRENGTH + 3] = np.asarray(light.strength, np.float64).reshape(3)
+    d = np.asarray(light.direction, np.float64)
+    r[L_DIR:L_DIR + 3] = d / max(np.linalg.norm(d), 1e-30)
+    m = np.asarray(light.matrix, np.float64)
+    r[L_POS:L_POS + 3] = m[:3, 3] if light.kind == "AREA" else np.asarray(light.position, np.float64)
+    try:
+        r[L_INV:L_INV + 9] = np.linalg.inv(m[:3, :3]).ravel()
+    except np.linalg.LinAlgError:  # a zero-scaled light: its cone is measured unscaled
+        r[L_INV:L_INV + 9] = np.eye(3).ravel()
+    r[L_COSHALF] = np.cos(0.5 * light.spot_size)
+    r[L_BLEND] = max(light.spot_blend, 0.0)
+    r[L_RADIUS] = max(light.radius, 0.0)
+    if light.kind == "AREA":
+        _, ax, ay, area = area_geometry(light)
+        r[L_AX:L_AX + 3], r[L_AY:L_AY + 3], r[L_AREA] = ax, ay, area
+        nrm = -m[:3, 2]
+        r[L_NORMAL:L_NORMAL + 3] = nrm / max(np.linalg.norm(nrm), 1e-30)
+        r[L_NORMALIZE] = 1.0 if light.normalize else 0.0
+        r[L_ROUND] = 1.0 if light.shape in ("DISK", "ELLIPSE") else 0.0
+    r[L_CHANNEL] = channel
+    return r
 
 
 def incident(light: Light, points, u=None):
     """(direction (N,3), irradiance RGB (N,3)) of ``light`` at world ``points`` (N,3).
 
     ``u`` (N,2) in [0,1): jitter for lights with an extent (sphere radius, area emitters)."""
-    points = np.asarray(points, np.float64)
-    n = len(points)
-    strength = np.asarray(light.strength, np.float64).reshape(1, 3)
+    points = np.asarray(points, np.float64).reshape(-1, 3)
     if u is None:
-        u = np.full((n, 2), 0.5)
-    if light.kind == "SUN":
-        d = np.asarray(light.direction, np.float64)
-        d = d / np.linalg.norm(d)
-        return np.broadcast_to(d, (n, 3)).copy(), np.broadcast_to(strength, (n, 3)).copy()
-    if light.kind in ("POINT", "SPOT"):
-        centre = np.asarray(light.position, np.float64)
-        v = points - centre
-        dist = np.linalg.norm(v, axis=1)
-        src = np.broadcast_to(centre, (n, 3))
-        if light.radius > 0.0:
-            axis = v / np.maximum(dist, 1e-30)[:, None]
-            from .phase import orthonormal_basis
-            t1, t2 = orthonormal_basis(axis)
-            a, b = _disc_point(u, True)
-            src = centre + light.radius * (t1 * a[:, None] + t2 * b[:, None])
-            v = points - src
-            dist = np.linalg.norm(v, axis=1)
-        d = v / np.maximum(dist, 1e-30)[:, None]
-        r2 = np.maximum(dist * dist, max(light.radius, 1e-4) ** 2)
-        e = strength / (4.0 * np.pi) / r2[:, None]
-        if light.kind == "SPOT":
-            e = e * spot_attenuation(light, d)[:, None]
-        return d, e
-    if light.kind == "AREA":
-        centre, ax, ay, area = area_geometry(light)
-        a, b = _disc_point(u, light.shape in ("DISK", "ELLIPSE"))
-        src = centre + ax * a[:, None] + ay * b[:, None]
-        v = points - src
-        dist2 = np.maximum(np.einsum("ij,ij->i", v, v), 1e-8)
-        dist = np.sqrt(dist2)
-        d = v / dist[:, None]
-        normal = -np.asarray(light.matrix, np.float64)[:3, 2]
-        normal = normal / np.linalg.norm(normal)
-        cos_l = np.maximum(d @ normal, 0.0)
-        radiance = strength / np.pi / (area if (light.normalize and area > 0) else 1.0)
-        e = radiance * (cos_l * area / dist2)[:, None]
-        return d, e
-    raise ValueError(f"unsupported light type {light.kind!r}")
+        u = np.full((len(points), 2), 0.5)
+    d, e, _, _ = light_sample(pack_light(light), points, u[:, 0], u[:, 1])
+    return d, e
+
+
+def spot_attenuation(light: Light, from_light):
+    """Cone factor (N,) for propagation directions ``from_light`` (N,3) of a SPOT light."""
+    pts = np.asarray(light.position, np.float64) + np.asarray(from_light, np.float64)
+    unit = Light("SPOT", light.name, np.full(3, 4.0 * np.pi), position=light.position,
+                 direction=light.direction, matrix=light.matrix, spot_size=light.spot_size,
+                 spot_blend=light.spot_blend)
+    _, e = incident(unit, pts)
+    dist2 = np.einsum("ij,ij->i", pts - unit.position, pts - unit.position)
+    return e[:, 0] * np.maximum(dist2, 1e-8)
 
 
 def is_dark(light: Light) -> bool:

@@ -12,6 +12,7 @@ from typing import List
 
 import numpy as np
 
+from .phase import clamp_g
 from .scene import Medium
 
 
@@ -59,7 +60,7 @@ def prepare(medium: Medium) -> PreparedMedium:
     sa = np.asarray(medium.sigma_a, np.float64).reshape(3)
     thr = 0.5 if medium.source == "MESH" else -1.0
     return PreparedMedium(medium, np.ascontiguousarray(grid), np.ascontiguousarray(w2i), i2w,
-                          ss, sa, ss + sa, float(medium.g), voxel, thr)
+                          ss, sa, ss + sa, clamp_g(float(medium.g)), voxel, thr)
 
 
 def density_from(value, threshold: float):

@@ -18,7 +18,7 @@ import numpy as np
 
 from . import kernels
 from .camera import primary_rays
-from .march import MarchContext, march_rays
+from .march import MarchContext, march_rays, ray_keys
 from .media import prepare, union_interval
 from .passes import DEPTH_MISS, enabled_passes
 from .precompute import precompute
@@ -123,7 +123,7 @@ def render(desc: SceneDescription,
         hit = tri >= 0
         if ctx is not None:
             t0, t1 = union_interval(media, o, d, tmin, t_hit)
-            r = march_rays(ctx, o, d, t0, t1, axial, rng)
+            r = march_rays(ctx, o, d, t0, t1, axial, ray_keys(st.seed, index, n))
         else:
             r = {"single": np.zeros((n, 3)), "T": np.ones((n, 3)), "depth": np.full(n, DEPTH_MISS)}
         behind = np.broadcast_to(bg, (n, 3)).copy()

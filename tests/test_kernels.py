@@ -1,0 +1,90 @@
+"""The compiled kernels agree with their numpy twins (relative difference <= 1e-4)."""
+import numpy as np
+import pytest
+
+from mpp_render import kernels, kernels_np
+from mpp_render.march import pack_lights
+from mpp_render.media import prepare
+from mpp_render.precompute import precompute
+from mpp_render.scene import Camera, Light, Medium, World
+
+needs_c = pytest.mark.skipif(kernels.backend() != "c" and kernels._c is None,
+                             reason="compiled kernels not built")
+
+
+def random_media(rng):
+    a = rng.random((10, 9, 8)).astype(np.float32) * 2
+    i2w = np.eye(4)
+    i2w[:3, :3] = np.diag([0.3, 0.35, 0.4])
+    i2w[:3, 3] = [-1.4, -1.3, -1.5]
+    smooth = Medium("smoke", a, i2w, np.array([2.0, 1.5, 1.0]), np.array([0.2, 0.3, 0.4]), 0.6)
+    i2w2 = np.eye(4)
+    i2w2[:3, :3] *= 0.2
+    i2w2[:3, 3] = [-0.5, -0.6, -0.4]
+    sharp = Medium("box", np.ones((6, 7, 5), np.float32), i2w2, np.full(3, 3.0), np.full(3, 0.5),
+                   -0.3, source="MESH")
+    return [prepare(smooth), prepare(sharp)]
+
+
+def all_lights():
+    spot_m = np.eye(4)
+    spot_m[:3, 3] = [0.3, 0.2, 3.0]
+    area_m = np.diag([1.0, 2.0, 1.0, 1.0])
+    area_m[:3, 3] = [-0.5, 0.5, 2.5]
+    return [Light("SUN", "sun", np.array([3.0, 2.5, 2.0]), direction=np.array([0.3, 0.2, -0.93])),
+            Light("POINT", "pt", np.array([50.0, 40.0, 30.0]), position=np.array([1.5, -1.0, 0.5]), radius=0.2),
+            Light("SPOT", "spot", np.array([300.0, 300, 300]), position=spot_m[:3, 3],
+                  direction=np.array([0, 0, -1.0]), matrix=spot_m, spot_size=0.8, spot_blend=0.3),
+            Light("AREA", "area", np.array([80.0, 80, 80]), matrix=area_m, shape="ELLIPSE",
+                  size_x=0.5, size_y=0.3),
+            Light("POINT", "dark", np.zeros(3), position=np.zeros(3))]
+
+
+@needs_c
+def test_march_twins_agree_on_random_rays():
+    rng = np.random.default_rng(5)
+    media = random_media(rng)
+    lights = all_lights()
+    cam = Camera("PERSP", np.eye(4), 8, 8, (-0.5, 0.5, -0.5, 0.5))
+    cam.cam_to_world[:3, 3] = [0, 0, 6]
+    pre = precompute(media, lights, World(np.array([0.2, 0.3, 0.5])), cam, n_dirs=8)
+    n = 3000
+    o = rng.uniform(-2, 2, (n, 3))
+    o[:, 2] = 4.0
+    d = rng.normal(size=(n, 3)) * [0.3, 0.3, 0.0]
+    d[:, 2] = -1
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    t0 = rng.uniform(0.5, 2.5, n)
+    t1 = t0 + rng.uniform(0, 6, n)
+    args = (o, d, t0, t1, rng.uniform(0.5, 1, n), rng.integers(0, 2**32, n, dtype=np.uint32),
+            pre.fields, [m.w2i for m in media], [m.sigma_s for m in media],
+            [m.sigma_t for m in media], [m.g for m in media], [m.threshold for m in media],
+            [m.voxel_size for m in media], pack_lights(lights, pre.layout),
+            pre.layout.ambient_channel, 0.07, 0.01, 1e10)
+    a = kernels_np.march(*args)
+    b = kernels.c_march(*args)
+    for x, y, name in zip(a, b, ("single", "T", "depth")):
+        assert np.all(np.isfinite(y)), name
+        assert np.all(np.abs(x - y) <= 1e-4 * np.maximum(np.abs(x), 1e-6)), name
+    assert a[0].max() > 0.01 and a[1].min() < 0.5   # the rays did see the media
+
+
+@needs_c
+def test_march_rejects_bad_input():
+    rng = np.random.default_rng(0)
+    media = random_media(rng)
+    f = [np.zeros(m.grid.shape + (4,), np.float32) for m in media]
+    base = [np.zeros((2, 3)), np.tile([0, 0, -1.0], (2, 1)), np.zeros(2), np.ones(2), np.ones(2),
+            np.zeros(2, np.uint32), f, [m.w2i for m in media], [m.sigma_s for m in media],
+            [m.sigma_t for m in media], [0.0, 0.0], [-1.0, 0.5], [0.1, 0.1],
+            np.zeros((0, kernels_np.LIGHT_FIELDS)), -1, 0.1, 0.01, 1e10]
+    kernels._c.march(*[kernels._f64(x) if i in (0, 1, 2, 3, 4) else x for i, x in enumerate(base)])
+    bad_light = np.zeros((1, kernels_np.LIGHT_FIELDS))
+    bad_light[0, kernels_np.L_CHANNEL] = 7   # beyond the 4 channels
+    cases = {13: bad_light, 14: 2, 15: 0.0, 10: [1.5, 0.0], 5: np.zeros(3, np.uint32),
+             6: [np.zeros((3, 3, 3, 1), np.float64)] * 2}
+    for i, bad in cases.items():
+        args = list(base)
+        args[i] = bad
+        with pytest.raises(ValueError):
+            kernels._c.march(*args)
