@@ -42,7 +42,7 @@ def c_optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step
 
 
 def c_march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs,
-            thresholds, voxels, lights, ambient, step, depth_opacity, depth_miss):
+            thresholds, voxels, lights, ambient, step, depth_opacity, depth_miss, multiple=None):
     n = len(origins)
     s, t, d = _c.march(_f64(origins).reshape(n, 3), _f64(dirs).reshape(n, 3),
                        _f64(t0).reshape(n), _f64(t1).reshape(n), _f64(axial).reshape(n),
@@ -53,14 +53,19 @@ def c_march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts
                        _f64(lights).reshape(-1, kernels_np.LIGHT_FIELDS), int(ambient),
                        float(step), float(depth_opacity), float(depth_miss))
     return (np.frombuffer(s, np.float64).reshape(n, 3), np.frombuffer(t, np.float64).reshape(n, 3),
-            np.frombuffer(d, np.float64).reshape(n))
+            np.frombuffer(d, np.float64).reshape(n), np.zeros((n, 3)))
 
 
 _C_WRAPPERS = {"optical_depth": c_optical_depth, "march": c_march}
 
 
-def get(name: str):
-    """The kernel ``name`` from the active backend."""
-    if backend() == "c" and name in _C_WRAPPERS and hasattr(_c, name):
+_C_LACKS = {"march": ("multiple",)}  # features a compiled twin does not have yet
+
+
+def get(name: str, **features):
+    """The kernel ``name`` from the active backend.  ``features`` (flag=True) that the
+    compiled twin lacks send the call to the numpy twin."""
+    lacking = any(features.get(f) for f in _C_LACKS.get(name, ()))
+    if backend() == "c" and not lacking and name in _C_WRAPPERS and hasattr(_c, name):
         return _C_WRAPPERS[name]
     return getattr(kernels_np, name)

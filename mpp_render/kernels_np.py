@@ -69,6 +69,7 @@ LIGHT_FIELDS = 40
 L_KIND, L_STRENGTH, L_POS, L_DIR, L_INV, L_COSHALF, L_BLEND, L_RADIUS = 0, 1, 4, 7, 10, 19, 20, 21
 L_AX, L_AY, L_AREA, L_NORMAL, L_NORMALIZE, L_ROUND, L_CHANNEL = 22, 25, 28, 29, 32, 33, 34
 KIND_POINT, KIND_SPOT, KIND_SUN, KIND_AREA = 0, 1, 2, 3
+SPREAD_MODEL = "exact"  # w(s) from HG's exact moments ('exact') or <theta^2> ('paper')
 DIM_JITTER = 1000       # random dimension of the step jitter; lights use 2*i, 2*i + 1
 REFINE_STEPS = 8
 EDGE_EPS = 1e-6        # occupancies within this of 0 or 1 count as outside / inside
@@ -181,8 +182,36 @@ def _refined_tau(fields, w2is, thrs, sig_ts, mi, c, x, w, dist, delta):
     return tau + _fetch(fields[mi], w2is[mi], end, c, 3)
 
 
+def multiple_source(ms_fields, theta2, g, idx, cos):
+    """Multiply scattered radiance per unit sigma_s (N,3) arriving at points of padded index
+    coords ``idx`` (N,3) of one medium and scattered towards the camera, summed over lights.
+
+    ``ms_fields``: per light None or (levels, path, stride, h) of precompute.MultipleField;
+    ``cos`` (L, N): cosine between each light's propagation direction and the direction to
+    the camera.  Per light: the path data give the spread width w (mpp.spread_width_sq), the
+    light pyramid gives the collided irradiance blurred to w, and the collided light's own
+    angular spread (mean cosine g_c) widens the phase function to HG(g g_c)."""
+    from . import mpp, pyramid
+    out = np.zeros((len(idx), 3))
+    for li, msf in enumerate(ms_fields):
+        if msf is None:
+            continue
+        levels, path, stride, h = msf
+        cidx = idx / float(stride)
+        pth = trilinear(path, cidx)
+        tau_s, tau_a, s = pth[:, 0], pth[:, 1], np.maximum(pth[:, 2], 1e-9)
+        if SPREAD_MODEL == "paper":
+            w2 = mpp.spread_width_sq(s, tau_s / s, tau_a / s, theta2=theta2)
+        else:
+            w2 = mpp.spread_width_sq(s, tau_s / s, tau_a / s, g=g)
+        ec = pyramid.lookup(levels, cidx, np.sqrt(w2), h)
+        p = _hg(cos[li], g * mpp.mean_cosine(1.0, tau_s, g, min_order=1))
+        out += ec * p[:, None]
+    return out
+
+
 def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs, thresholds,
-          voxels, lights, ambient, step, depth_opacity, depth_miss):
+          voxels, lights, ambient, step, depth_opacity, depth_miss, multiple=None):
     """March camera rays through media fields: the numpy twin of ``_kernels.march``.
 
     Rays ``origins + t dirs`` (N,3), t in [t0, t1] (N,) metres; ``axial`` (N,) turns t into
@@ -192,12 +221,15 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
     ``sigma_ts`` RGB 1/m per unit density, ``gs`` HG anisotropy, ``thresholds`` (sharp
     boundary, < 0 smooth), ``voxels`` voxel size in metres.  ``lights`` (L, LIGHT_FIELDS)
     packed records; ``ambient`` the world-light channel or -1.  ``step`` metres.
+    ``multiple``: None, or (ambient_ms channel or -1, per medium: (theta2, per light None or
+    a MultipleField tuple, see multiple_source)) to accumulate multiple scattering too.
 
     Each step of length h adds T S (1 - exp(-sigma_t h)) / sigma_t with S the in-scattered
     radiance at one jittered point of the step, then T *= exp(-sigma_t h).  Returns
-    (single (N,3), T (N,3), depth (N,)) float64."""
+    (single (N,3), T (N,3), depth (N,), multiple (N,3)) float64."""
     n = len(origins)
     single = np.zeros((n, 3))
+    multi = np.zeros((n, 3))
     trans = np.ones((n, 3))
     depth = np.full(n, float(depth_miss))
     keys = np.asarray(keys, np.uint32)
@@ -215,6 +247,7 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
         m = len(alive)
         sig_t = np.zeros((m, 3))
         src = np.zeros((m, 3))
+        src_ms = np.zeros((m, 3))
         ka = keys[alive]
         emit = []
         for li, rec in enumerate(lights):
@@ -242,10 +275,23 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
             if ambient >= 0:
                 inc += v[:, ambient:ambient + 3]
             src += rho[:, None] * sigma_ss[mi][None, :] * inc
+            if multiple is not None and multiple[1][mi] is not None:
+                amb_ms, per_medium = multiple
+                theta2, ms_fields = per_medium[mi]
+                live = np.flatnonzero(rho > 0)
+                if live.size:
+                    cos = np.stack([-np.einsum("ij,ij->i", emit[li][0][live], d[live])
+                                    for li in range(len(lights))]) if len(lights) else np.zeros((0, live.size))
+                    idx = x[live] @ w2is[mi][:, :3].T + w2is[mi][:, 3]
+                    ms_inc = multiple_source(ms_fields, theta2, gs[mi], idx, cos)
+                    if amb_ms >= 0:
+                        ms_inc += v[live, amb_ms:amb_ms + 3]
+                    src_ms[live] += rho[live, None] * sigma_ss[mi][None, :] * ms_inc
         x_t = sig_t * hl[:, None]
         frac = np.where(x_t > 1e-7, -np.expm1(-x_t) / np.maximum(x_t, 1e-300), 1.0 - 0.5 * x_t)
         T_before = trans[alive]
         single[alive] += T_before * src * (frac * hl[:, None])
+        multi[alive] += T_before * src_ms * (frac * hl[:, None])
         T_after = T_before * np.exp(-x_t)
         trans[alive] = T_after
         tb, ta = T_before.mean(axis=1), T_after.mean(axis=1)
@@ -262,4 +308,4 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
         t[alive] = seg_start[alive] + uniform(ka, k, DIM_JITTER) * h
         keep = advanced & (seg_start[alive] < t1[alive]) & (T_after.max(axis=1) > T_MIN)
         alive = alive[keep]
-    return single, trans, depth
+    return single, trans, depth, multi

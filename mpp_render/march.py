@@ -26,7 +26,7 @@ hash of (ray key, step, dimension), so both twins draw the same ones.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import List
+from typing import List, Optional
 
 import numpy as np
 
@@ -57,24 +57,42 @@ def ray_keys(seed: int, tile: int, n: int) -> np.ndarray:
 
 @dataclass
 class MarchContext:
+    """What the march reads: prepared media, their fields and layout, the lights, the step
+    (m) and, for multiple scattering, the per-medium per-light MultipleFields (or None)."""
+
     media: List[PreparedMedium]
     fields: List[np.ndarray]
     layout: FieldLayout
     lights: List[Light]
     step: float
+    multiple_fields: Optional[list] = None
 
     def __post_init__(self):
         self.packed = pack_lights(self.lights, self.layout)
+        self.multiple = None
+        if self.multiple_fields:
+            from .mpp import mean_sq_angle
+            amb = self.layout.ambient_multiple_channel
+            per_medium = []
+            for pm, mfs in zip(self.media, self.multiple_fields):
+                if mfs is None or all(m is None for m in mfs):
+                    per_medium.append(None)
+                    continue
+                per_medium.append((float(mean_sq_angle(pm.g)),
+                                   [None if m is None else (m.levels, m.path, m.stride, m.h)
+                                    for m in mfs]))
+            if any(p is not None for p in per_medium) or amb is not None:
+                self.multiple = (-1 if amb is None else amb, per_medium)
 
 
 def march_rays(ctx: MarchContext, origins, dirs, t0, t1, axial, keys):
     """March rays; returns dict of per-ray arrays: 'single' (N,3), 'T' (N,3), 'depth' (N,)."""
-    fn = kernels.get("march")
+    fn = kernels.get("march", multiple=ctx.multiple is not None)
     amb = ctx.layout.ambient_channel
-    single, T, depth = fn(
+    single, T, depth, multi = fn(
         origins, dirs, t0, t1, axial, keys, ctx.fields, [m.w2i for m in ctx.media],
         [m.sigma_s for m in ctx.media], [m.sigma_t for m in ctx.media],
         [float(m.g) for m in ctx.media], [m.threshold for m in ctx.media],
         [m.voxel_size for m in ctx.media], ctx.packed, -1 if amb is None else amb,
-        ctx.step, DEPTH_OPACITY, DEPTH_MISS)
-    return {"single": single, "T": T, "depth": depth}
+        ctx.step, DEPTH_OPACITY, DEPTH_MISS, ctx.multiple)
+    return {"single": single, "T": T, "depth": depth, "multiple": multi}

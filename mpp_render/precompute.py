@@ -32,7 +32,8 @@ from .scene import Camera, Light, World
 from .surfaces import occluded
 
 
-AMBIENT_RESOLUTION = 40  # lattice points along the longest side for the world light
+AMBIENT_RESOLUTION = 32  # lattice points along the longest side for the world light
+MULTIPLE_RESOLUTION = 64  # lattice points along the longest side for the light pyramid
 
 
 @dataclass
@@ -43,12 +44,17 @@ class FieldLayout:
     light_channels: List[Optional[int]]
     ambient_channel: Optional[int]
     channels: int
+    ambient_multiple_channel: Optional[int] = None
 
 
 @dataclass
 class Precomputed:
+    """``fields``: per medium (X,Y,Z,C) float32 (layout above); ``multiple``: per medium, per
+    light, a MultipleField or None (multiple scattering off, dark light, or no scattering)."""
+
     fields: List[np.ndarray]
     layout: FieldLayout
+    multiple: list = field(default_factory=list)
     seconds: float = 0.0
     stats: dict = field(default_factory=dict)
 
@@ -111,13 +117,31 @@ def _media_arrays(media):
             [m.threshold for m in media])
 
 
+def _media_arrays_for(media, coefficient):
+    """Kernel arrays integrating ``coefficient``: 'sigma_t' or 'sigma_s' (RGB optical depth)
+    or 'length' (metres inside non-zero density, in all three channels)."""
+    if coefficient == "sigma_t":
+        return _media_arrays(media)
+    if coefficient == "sigma_s":
+        return ([m.grid for m in media], [m.w2i for m in media], [m.sigma_s for m in media],
+                [m.threshold for m in media])
+    if coefficient == "length":
+        return ([(m.grid > 0).astype(np.float32) for m in media], [m.w2i for m in media],
+                [np.ones(3) for _ in media], [-1.0 for _ in media])
+    raise ValueError(coefficient)
+
+
 def light_optical_depth(media: List[PreparedMedium], light: Light, points, step,
-                        chunk=1 << 14, should_cancel=None, surfaces=None, threads=0):
+                        chunk=1 << 14, should_cancel=None, surfaces=None, threads=0,
+                        coefficient="sigma_t"):
     """RGB optical depth (N,3) from world ``points`` to ``light`` (its centre) through media;
     ``SHADOW_TAU`` is added where an opaque surface (``surfaces``, a SurfaceSet) blocks the
-    way, so surfaces cast volumetric shadows.  None when cancelled."""
+    way, so surfaces cast volumetric shadows.  ``coefficient`` (see _media_arrays_for) picks
+    what is integrated; shadows are added to 'sigma_t' only.  None when cancelled."""
     od = kernels.get("optical_depth")
-    arrays = _media_arrays(media)
+    arrays = _media_arrays_for(media, coefficient)
+    if coefficient != "sigma_t":
+        surfaces = None
     out = np.zeros((len(points), 3))
 
     def work(a, b):
@@ -146,18 +170,22 @@ def light_optical_depth(media: List[PreparedMedium], light: Light, points, step,
 
 def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, camera: Camera,
                 points, n_dirs, step, seed=0, chunk=1 << 11, should_cancel=None, surfaces=None,
-                threads=0):
-    """A(x) (N,3): world radiance scattered towards the camera per unit sigma_s, attenuated.
-    Each chunk draws from its own stream seeded by (seed, chunk start), so the result does not
-    depend on the thread count.  None when cancelled."""
+                threads=0, multiple=False):
+    """A(x) (N,3): world radiance scattered towards the camera per unit sigma_s, attenuated;
+    with ``multiple`` also A_ms(x) (N,3), the same for the sky light that has scattered on
+    its way in (the collided part exp(-tau_a) (1 - exp(-tau_s)), see docs/method.md), and the
+    pair is returned.  Each chunk draws from its own stream seeded by (seed, chunk start), so
+    the result does not depend on the thread count.  None when cancelled."""
     colour = np.asarray(world.color, np.float64)
     n = len(points)
     if n == 0 or not np.any(colour > 0):
-        return np.zeros((n, 3))
+        return (np.zeros((n, 3)), np.zeros((n, 3))) if multiple else np.zeros((n, 3))
     od = kernels.get("optical_depth")
     arrays = _media_arrays(media)
+    arrays_s = _media_arrays_for(media, "sigma_s")
     c2w = np.asarray(camera.cam_to_world, np.float64)
     out = np.zeros((n, 3))
+    out_ms = np.zeros((n, 3))
     golden = 0.6180339887498949
     j = np.arange(n_dirs)
 
@@ -182,10 +210,53 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
         if surfaces is not None and not surfaces.empty:
             tau += SHADOW_TAU * occluded(surfaces, pp, d, np.full(len(pp), np.inf))[:, None]
         out[a:b] = np.exp(-tau).reshape(m, n_dirs, 3).mean(axis=1) * colour
+        if multiple:
+            tau_s = np.minimum(od(pp, d, t, *arrays_s, float(step), 0.5), tau)
+            collided = np.exp(-(tau - tau_s)) * -np.expm1(-tau_s)
+            out_ms[a:b] = collided.reshape(m, n_dirs, 3).mean(axis=1) * colour
 
     if not run_chunks(n, chunk, work, threads, should_cancel):
         return None
-    return out
+    return (out, out_ms) if multiple else out
+
+
+@dataclass
+class MultipleField:
+    """Multiple-scattering data of one light on one medium, on a lattice ``stride`` voxels
+    apart (spacing ``h`` metres).  ``levels``: the light pyramid (pyramid.py) of the collided
+    irradiance E_c = E exp(-tau_a) (1 - exp(-tau_s)) (RGB, W/m^2).  ``path``: (X,Y,Z,3) of
+    the mean-RGB scattering and absorption optical depths and the length (m) inside the media
+    along the straight path from the light: the inputs of the spread width w(s)."""
+
+    stride: int
+    h: float
+    levels: list
+    path: np.ndarray
+
+
+def multiple_field(media, pm: PreparedMedium, light: Light, step, surfaces=None, threads=0,
+                   should_cancel=None, max_levels=8) -> Optional[MultipleField]:
+    """The light pyramid and path data of ``light`` on medium ``pm`` (see MultipleField)."""
+    from . import pyramid
+    from .lights import incident
+    stride = max(1, int(np.ceil(max(pm.grid.shape) / MULTIPLE_RESOLUTION)))
+    shape = tuple((s - 1 + stride - 1) // stride + 1 for s in pm.grid.shape)
+    ijk = np.stack(np.unravel_index(np.arange(int(np.prod(shape))), shape), axis=1) * float(stride)
+    pts = ijk @ pm.i2w[:3, :3].T + pm.i2w[:3, 3]
+    kw = dict(should_cancel=should_cancel, threads=threads)
+    tau = light_optical_depth(media, light, pts, step, surfaces=surfaces, **kw)
+    tau_s = light_optical_depth(media, light, pts, step, coefficient="sigma_s", **kw) if tau is not None else None
+    length = light_optical_depth(media, light, pts, step, coefficient="length", **kw) if tau_s is not None else None
+    if length is None:
+        return None
+    tau_s = np.minimum(tau_s, tau)
+    tau_a = tau - tau_s
+    _, e = incident(light, pts)
+    collided = e * np.exp(-tau_a) * -np.expm1(-tau_s)
+    path = np.stack([tau_s.mean(axis=1), tau_a.mean(axis=1), length[:, 0]], axis=1)
+    h = stride * float(np.cbrt(abs(np.linalg.det(pm.i2w[:3, :3]))))
+    levels = pyramid.build(collided.reshape(shape + (3,)), max_levels)
+    return MultipleField(stride, h, levels, np.ascontiguousarray(path.reshape(shape + (3,)), np.float32))
 
 
 def coarse_lattice(pm: PreparedMedium, stride: int):
@@ -212,9 +283,10 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                n_dirs: int = 64, step_factor: float = 1.0, seed: int = 0,
                should_cancel: Optional[Callable[[], bool]] = None,
                progress: Optional[Callable[[float, str], None]] = None,
-               surfaces=None, threads: int = 0) -> Optional[Precomputed]:
-    """Field arrays for every medium; None when cancelled.  ``surfaces`` (a SurfaceSet or
-    None) shadow the lights and the sky."""
+               surfaces=None, threads: int = 0, multiple: bool = False) -> Optional[Precomputed]:
+    """Field arrays for every medium, and with ``multiple`` the light pyramids; None when
+    cancelled.  ``surfaces`` (a SurfaceSet or None) shadow the lights and the sky.  Media
+    that cannot scatter (sigma_s = 0) get no multiple-scattering data."""
     import time
     t_start = time.perf_counter()
     chans = [None] * len(lights)
@@ -224,9 +296,14 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
             chans[i] = c
             c += 3
     amb = c if np.any(np.asarray(world.color) > 0) else None
+    amb_ms = None
     if amb is not None:
         c += 3
-    layout = FieldLayout(chans, amb, c)
+        if multiple:
+            amb_ms = c
+            c += 3
+    layout = FieldLayout(chans, amb, c, amb_ms)
+    ms_all = []
     step = step_factor * min(pm.voxel_size for pm in media) if media else 1.0
     fields = []
     n_pts = 0
@@ -255,15 +332,28 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
             stride = max(1, int(round(max(pm.grid.shape) / AMBIENT_RESOLUTION)))
             cshape, cflat, cpts = coarse_lattice(pm, stride)
             a = world_light(media, pm, world, camera, cpts, n_dirs, 2.0 * step, seed=seed + mi,
-                            should_cancel=should_cancel, surfaces=surfaces, threads=threads)
+                            should_cancel=should_cancel, surfaces=surfaces, threads=threads,
+                            multiple=amb_ms is not None)
             if a is None:
                 return None
-            coarse = np.zeros((int(np.prod(cshape)), 3), np.float32)
-            coarse[cflat] = a
             ijk = np.stack(np.unravel_index(flat, pm.grid.shape), axis=1) / float(stride)
-            view[flat, amb:amb + 3] = trilinear(coarse.reshape(cshape + (3,)), ijk)
+            for ch, vals in zip((amb, amb_ms), a if amb_ms is not None else (a,)):
+                coarse = np.zeros((int(np.prod(cshape)), 3), np.float32)
+                coarse[cflat] = vals
+                view[flat, ch:ch + 3] = trilinear(coarse.reshape(cshape + (3,)), ijk)
             n_ambient += len(cpts)
+        ms = [None] * len(lights)
+        if multiple and np.any(pm.sigma_s > 0):
+            for li, light in enumerate(lights):
+                if chans[li] is None:
+                    continue
+                if progress:
+                    progress(0.0, f"Light pyramid: {light.name} on {pm.medium.name}")
+                ms[li] = multiple_field(media, pm, light, step, surfaces, threads, should_cancel)
+                if ms[li] is None:
+                    return None
+        ms_all.append(ms)
         fields.append(f)
-    return Precomputed(fields, layout, time.perf_counter() - t_start,
+    return Precomputed(fields, layout, ms_all, time.perf_counter() - t_start,
                        {"points": n_pts, "ambient_points": n_ambient,
                         "backend": kernels.backend()})

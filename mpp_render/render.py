@@ -87,7 +87,8 @@ def render(desc: SceneDescription,
     if media:
         pre = precompute(media, desc.lights, desc.world, cam, n_dirs=st.ambient_directions,
                          seed=st.seed, should_cancel=cancel, progress=progress,
-                         surfaces=None if surf.empty else surf, threads=st.threads)
+                         surfaces=None if surf.empty else surf, threads=st.threads,
+                         multiple=st.multiple)
         if pre is None:
             return RenderOutput(out, {"precompute": time.perf_counter() - t_pre}, warnings, True)
     timings["precompute"] = time.perf_counter() - t_pre
@@ -95,7 +96,7 @@ def render(desc: SceneDescription,
     bg = np.asarray(desc.world.color, np.float64)
     step = auto_step(desc, media)
     ctx = MarchContext(media, pre.fields if pre else [], pre.layout if pre else None,
-                       desc.lights, step) if media else None
+                       desc.lights, step, pre.multiple if st.multiple else None) if media else None
     od = kernels.get("optical_depth")
     step_light = step
 
@@ -125,7 +126,8 @@ def render(desc: SceneDescription,
             t0, t1 = union_interval(media, o, d, tmin, t_hit)
             r = march_rays(ctx, o, d, t0, t1, axial, ray_keys(st.seed, index, n))
         else:
-            r = {"single": np.zeros((n, 3)), "T": np.ones((n, 3)), "depth": np.full(n, DEPTH_MISS)}
+            r = {"single": np.zeros((n, 3)), "T": np.ones((n, 3)), "depth": np.full(n, DEPTH_MISS),
+                 "multiple": np.zeros((n, 3))}
         behind = np.broadcast_to(bg, (n, 3)).copy()
         if hit.any():
             ph = o[hit] + d[hit] * t_hit[hit, None]
@@ -137,16 +139,18 @@ def render(desc: SceneDescription,
         single = r["single"].reshape(th * tw, spp, 3).mean(axis=1)
         T = r["T"].reshape(th * tw, spp, 3).mean(axis=1)
         seen = (r["T"] * behind).reshape(th * tw, spp, 3).mean(axis=1)
+        multi = r["multiple"].reshape(th * tw, spp, 3).mean(axis=1)
         res["Volume Single"] = single
+        res["Volume Multiple"] = multi
         res["Transmittance"] = T
         comb = np.empty((th * tw, 4))
         if st.film_transparent:
             surf_seen = (r["T"] * np.where(hit[:, None], behind, 0.0)).reshape(th * tw, spp, 3).mean(axis=1)
-            comb[:, :3] = single + surf_seen
+            comb[:, :3] = single + multi + surf_seen
             t_miss = np.where(hit[:, None], 0.0, r["T"]).reshape(th * tw, spp, 3).mean(axis=1)
             comb[:, 3] = 1.0 - t_miss.mean(axis=1)
         else:
-            comb[:, :3] = single + seen
+            comb[:, :3] = single + multi + seen
             comb[:, 3] = 1.0
         res["Combined"] = comb
         dep = r["depth"].reshape(th * tw, spp)

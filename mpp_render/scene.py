@@ -145,7 +145,7 @@ class Settings:
     multiple: bool = True
     film_transparent: bool = False
     seed: int = 0
-    ambient_directions: int = 64
+    ambient_directions: int = 32
     passes: Optional[List[str]] = None
     threads: int = 0
     voxel_resolution: int = 128

@@ -1,0 +1,164 @@
+"""The MPP ``RenderEngine``: a thin adapter from Blender's render loop to ``mpp_render.render``.
+
+One frame of one view layer flows one way::
+
+    depsgraph --translate.scene_from_depsgraph--> SceneDescription
+              --mpp_render.render.render-------> RenderOutput (passes, row 0 at the top)
+              --write_result-------------------> Blender render result (row 0 at the bottom)
+
+The engine class only forwards to the plain functions below.  ``LAST_RENDER`` keeps the last
+frame's ``RenderOutput`` with the translation and write times, for the command line.
+
+``MPP_TEST_BREAK_AFTER_S`` (environment, seconds): when set, the render behaves as if Esc was
+pressed that many seconds after it started (used by the tests; Blender's background mode has
+no Esc).
+"""
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass
+from typing import Callable, Optional
+
+import bpy
+import numpy as np
+
+from ..passes import enabled_passes
+from .properties import settings_from_scene
+
+TEST_BREAK_ENV = "MPP_TEST_BREAK_AFTER_S"
+NO_MEDIA_MESSAGE = "MPP: no volumes in the scene; rendering the background and surfaces only"
+
+
+@dataclass
+class LastRender:
+    """The last frame rendered by the engine.  ``output``: the core's ``RenderOutput``;
+    ``translate_s``: seconds from depsgraph to scene description; ``write_s``: seconds to
+    copy the passes into Blender's render result; ``view_layer``: the layer's name."""
+
+    output: object
+    translate_s: float
+    write_s: float
+    view_layer: str
+
+
+LAST_RENDER: Optional[LastRender] = None
+
+
+def cancel_check(test_break: Callable[[], bool], start: float) -> Callable[[], bool]:
+    """``should_cancel`` for the core: Blender's ``test_break`` (Esc), or true once
+    ``MPP_TEST_BREAK_AFTER_S`` seconds have passed since ``start`` (``time.perf_counter``)."""
+    after = os.environ.get(TEST_BREAK_ENV)
+    deadline = start + float(after) if after not in (None, "") else None
+
+    def should_cancel() -> bool:
+        if deadline is not None and time.perf_counter() >= deadline:
+            return True
+        return bool(test_break())
+
+    return should_cancel
+
+
+def register_passes(engine, scene, renderlayer) -> None:
+    """Register exactly the passes ``render_frame`` fills: Combined, Volume Single, Volume
+    Multiple (only with multiple scattering on), Transmittance, Depth."""
+    multiple = scene.mpp.multiple if hasattr(scene, "mpp") else True
+    for p in enabled_passes(multiple):
+        engine.register_pass(scene, renderlayer, p.name, p.channels, p.chan_id, p.kind)
+
+
+def write_result(engine, passes: dict, layer_name: str, width: int, height: int) -> None:
+    """Copy ``passes`` (name -> (H, W, C) float, row 0 at the top) into a new render result of
+    view layer ``layer_name``; rows are flipped to Blender's bottom-up order.  Passes the
+    result does not hold (not registered) are skipped."""
+    result = engine.begin_result(0, 0, width, height, layer=layer_name)
+    try:
+        layer = result.layers[0]
+        for name, arr in passes.items():
+            rp = layer.passes.find_by_name(name, "")
+            if rp is None:
+                continue
+            if arr.shape[:2] != (height, width) or arr.shape[2] != rp.channels:
+                raise ValueError(f"pass {name}: got {arr.shape}, result wants "
+                                 f"({height}, {width}, {rp.channels})")
+            rp.rect.foreach_set(np.ascontiguousarray(arr[::-1], np.float32).ravel())
+    finally:
+        engine.end_result(result)
+
+
+def progress_reporter(engine) -> Callable[[float, str], None]:
+    """``progress(fraction, message)`` for the core: Blender's progress bar and stats line."""
+
+    def progress(fraction: float, message: str) -> None:
+        engine.update_progress(float(min(max(fraction, 0.0), 1.0)))
+        engine.update_stats("MPP", message)
+
+    return progress
+
+
+def render_frame(engine, depsgraph) -> Optional[LastRender]:
+    """Render one frame of ``depsgraph``'s view layer into ``engine``'s result, reporting
+    every warning.  Returns (and stores in ``LAST_RENDER``) the frame's record; None when the
+    scene could not be translated (an error is reported)."""
+    global LAST_RENDER
+    from ..render import render
+    from .translate import scene_from_depsgraph
+
+    start = time.perf_counter()
+    should_cancel = cancel_check(engine.test_break, start)
+    scene = depsgraph.scene_eval
+    width, height = int(engine.resolution_x), int(engine.resolution_y)
+    layer_name = depsgraph.view_layer.name
+
+    engine.update_stats("MPP", "Translating scene")
+    try:
+        desc = scene_from_depsgraph(depsgraph, settings_from_scene(scene),
+                                    camera_override=engine.camera_override,
+                                    width=width, height=height)
+    except Exception as e:  # a scene we cannot read at all: say why instead of a black frame
+        engine.report({'ERROR'}, f"MPP: cannot translate the scene: {e}")
+        return None
+    translate_s = time.perf_counter() - start
+    if not desc.media:
+        desc.warnings.append(NO_MEDIA_MESSAGE)
+
+    out = render(desc, progress=progress_reporter(engine), should_cancel=should_cancel)
+    for msg in out.warnings:
+        engine.report({'WARNING'}, msg)
+
+    t_write = time.perf_counter()
+    write_result(engine, out.passes, layer_name, width, height)
+    write_s = time.perf_counter() - t_write
+    if out.cancelled:
+        engine.report({'INFO'}, "MPP: render cancelled; the passes hold the finished tiles")
+    engine.update_progress(1.0)
+    LAST_RENDER = LastRender(out, translate_s, write_s, layer_name)
+    return LAST_RENDER
+
+
+class MPPRenderEngine(bpy.types.RenderEngine):
+    """Volumes (smoke, clouds, fog) by ray marching with most-probable-path multiple
+    scattering.  Final renders only; no viewport or material preview."""
+
+    bl_idname = "MPP_RENDER"
+    bl_label = "MPP"
+    bl_use_preview = False
+    bl_use_postprocess = True
+    bl_use_shading_nodes_custom = False
+
+    def render(self, depsgraph):
+        render_frame(self, depsgraph)
+
+    def update_render_passes(self, scene=None, renderlayer=None):
+        register_passes(self, scene, renderlayer)
+
+
+def register():
+    """Register the engine class (a second call does nothing)."""
+    if not MPPRenderEngine.is_registered:
+        bpy.utils.register_class(MPPRenderEngine)
+
+
+def unregister():
+    if MPPRenderEngine.is_registered:
+        bpy.utils.unregister_class(MPPRenderEngine)

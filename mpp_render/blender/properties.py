@@ -1,0 +1,80 @@
+"""The engine's settings as Blender properties: ``scene.mpp`` (a PropertyGroup), and
+``settings_from_scene`` that copies them into the bpy-free ``mpp_render.scene.Settings``.
+
+Defaults match ``Settings``'s, so a file that never touched the panel renders as the core's
+defaults do.
+"""
+from __future__ import annotations
+
+import bpy
+from bpy.props import BoolProperty, FloatProperty, IntProperty, PointerProperty
+
+from ..scene import Settings
+
+
+class MPPRenderSettings(bpy.types.PropertyGroup):
+    """Per-scene settings of the MPP engine (``scene.mpp``)."""
+
+    samples: IntProperty(
+        name="Samples", default=16, min=1, soft_max=1024,
+        description="Camera rays per pixel, jittered over the pixel square (1 px box filter). "
+                    "More samples: less noise and aliasing, proportionally longer march")
+    step_size: FloatProperty(
+        name="Step Size", default=0.0, min=0.0, soft_max=1.0, precision=4, subtype='DISTANCE',
+        unit='LENGTH',
+        description="Ray-march step along camera rays, in metres (scene units). "
+                    "0 = automatic: half the finest voxel of the volumes in the scene")
+    voxel_resolution: IntProperty(
+        name="Voxel Resolution", default=128, min=8, soft_max=512,
+        description="Voxels along the longest side when a mesh volume (an object with a "
+                    "volume material) is turned into a density grid. Dimensionless count")
+    multiple: BoolProperty(
+        name="Multiple Scattering", default=True,
+        description="Add light scattered more than once (most-probable-path approximation), "
+                    "filling the Volume Multiple pass. Off: single scattering only")
+    ambient_directions: IntProperty(
+        name="Ambient Directions", default=64, min=1, soft_max=512,
+        description="Directions (count) per voxel used to integrate the world light's "
+                    "transmittance through the volumes. More: smoother sky lighting, slower "
+                    "precompute")
+    threads: IntProperty(
+        name="Threads", default=0, min=0, soft_max=256,
+        description="Worker threads (count) for precompute and march. 0 = one per CPU core")
+    seed: IntProperty(
+        name="Seed", default=0, min=0,
+        description="Seed of the pixel jitter and sampled directions (integer): the same "
+                    "seed gives the same image")
+
+
+def settings_from_scene(scene) -> Settings:
+    """A ``Settings`` from ``scene.mpp`` and ``scene.render.film_transparent``; every pass the
+    engine has is filled (``passes`` None)."""
+    p = scene.mpp
+    return Settings(
+        samples=int(p.samples),
+        step_size=float(p.step_size),
+        multiple=bool(p.multiple),
+        film_transparent=bool(scene.render.film_transparent),
+        seed=int(p.seed),
+        ambient_directions=int(p.ambient_directions),
+        passes=None,
+        threads=int(p.threads),
+        voxel_resolution=int(p.voxel_resolution),
+    )
+
+
+def register():
+    """Register the settings group and ``Scene.mpp`` (a second call does nothing)."""
+    if MPPRenderSettings.is_registered:
+        return
+    bpy.utils.register_class(MPPRenderSettings)
+    bpy.types.Scene.mpp = PointerProperty(type=MPPRenderSettings, name="MPP Render",
+                                          description="Settings of the MPP render engine")
+
+
+def unregister():
+    if not MPPRenderSettings.is_registered:
+        return
+    if hasattr(bpy.types.Scene, "mpp"):
+        del bpy.types.Scene.mpp
+    bpy.utils.unregister_class(MPPRenderSettings)

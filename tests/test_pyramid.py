@@ -1,0 +1,41 @@
+"""The light pyramid blurs with Gaussians of doubling width and looks up any width."""
+import numpy as np
+
+from mpp_render import pyramid
+
+
+def test_levels_blur_a_point_with_doubling_widths():
+    n = 65
+    base = np.zeros((n, n, n, 1), np.float32)
+    base[32, 32, 32] = 1.0
+    levels = pyramid.build(base, max_levels=4)
+    assert [lv.shape[0] for lv in levels] == [65, 33, 17, 9]
+    for k in (1, 2, 3):
+        lv = levels[k][..., 0].astype(np.float64)
+        c = 32 // 2 ** k
+        # along one axis the blurred point is a Gaussian of sd 2^k base spacings
+        x = (np.arange(lv.shape[0]) - c) * 2.0 ** k
+        prof = lv[:, c, c]
+        var = np.sum(prof * x ** 2) / np.sum(prof)
+        assert abs(np.sqrt(var) - 2.0 ** k) < 0.08 * 2.0 ** k, (k, np.sqrt(var))
+        # the blur keeps the integral (sum times cell volume)
+        assert abs(lv.sum() * 8.0 ** k - 1.0) < 0.02
+
+
+def test_lookup_interpolates_between_levels_and_keeps_constants():
+    rng = np.random.default_rng(0)
+    base = np.full((33, 33, 33, 3), 2.0, np.float32)
+    levels = pyramid.build(base, max_levels=5)
+    idx = rng.uniform(12, 20, (50, 3))
+    for w in (0.5, 1.0, 3.0, 7.0, 100.0):
+        v = pyramid.lookup(levels, idx, np.full(50, w), 1.0)
+        # interior points of a constant field stay constant at every width up to the edge
+        # losses of the coarsest levels
+        if w <= 3.0:
+            assert np.allclose(v, 2.0, rtol=5e-3)
+        assert np.all(np.isfinite(v)) and np.all(v <= 2.0 + 1e-5)
+    # widths below the spacing read the base exactly
+    base = rng.random((9, 9, 9, 1)).astype(np.float32)
+    levels = pyramid.build(base)
+    v = pyramid.lookup(levels, np.array([[4.0, 4.0, 4.0]]), np.array([0.1]), 1.0)
+    assert np.isclose(v[0, 0], base[4, 4, 4, 0])
