@@ -79,7 +79,7 @@ class MarchContext:
                     per_medium.append(None)
                     continue
                 per_medium.append((float(mean_sq_angle(pm.g)),
-                                   [None if m is None else (m.levels, m.path, m.stride, m.h)
+                                   [None if m is None else (m.levels, m.stride, m.h)
                                     for m in mfs]))
             if any(p is not None for p in per_medium) or amb is not None:
                 self.multiple = (-1 if amb is None else amb, per_medium)

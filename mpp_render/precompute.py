@@ -222,41 +222,35 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
 
 @dataclass
 class MultipleField:
-    """Multiple-scattering data of one light on one medium, on a lattice ``stride`` voxels
-    apart (spacing ``h`` metres).  ``levels``: the light pyramid (pyramid.py) of the collided
-    irradiance E_c = E exp(-tau_a) (1 - exp(-tau_s)) (RGB, W/m^2).  ``path``: (X,Y,Z,3) of
-    the mean-RGB scattering and absorption optical depths and the length (m) inside the media
-    along the straight path from the light: the inputs of the spread width w(s)."""
+    """Multiple-scattering data of one light on one medium: the light pyramid (pyramid.py) of
+    the first-scattering source and the medium's occupancy, on a lattice ``stride`` voxels
+    apart (spacing ``h`` metres).  Level channels: 0-2 the RGB power per volume (W/m^3) that
+    the light's unscattered beam scatters, Q = sigma_s E exp(-tau) (the start of every
+    multiply scattered path); 3 the fraction of space inside the medium (density > 0)."""
 
     stride: int
     h: float
     levels: list
-    path: np.ndarray
 
 
-def multiple_field(media, pm: PreparedMedium, light: Light, step, surfaces=None, threads=0,
-                   should_cancel=None, max_levels=8) -> Optional[MultipleField]:
-    """The light pyramid and path data of ``light`` on medium ``pm`` (see MultipleField)."""
+def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int,
+                   max_levels=8) -> Optional[MultipleField]:
+    """The light pyramid of ``light`` on medium ``pm`` from its precomputed field ``fld``
+    (optical depth at ``channel``), see MultipleField."""
     from . import pyramid
     from .lights import incident
     stride = max(1, int(np.ceil(max(pm.grid.shape) / MULTIPLE_RESOLUTION)))
     shape = tuple((s - 1 + stride - 1) // stride + 1 for s in pm.grid.shape)
     ijk = np.stack(np.unravel_index(np.arange(int(np.prod(shape))), shape), axis=1) * float(stride)
     pts = ijk @ pm.i2w[:3, :3].T + pm.i2w[:3, 3]
-    kw = dict(should_cancel=should_cancel, threads=threads)
-    tau = light_optical_depth(media, light, pts, step, surfaces=surfaces, **kw)
-    tau_s = light_optical_depth(media, light, pts, step, coefficient="sigma_s", **kw) if tau is not None else None
-    length = light_optical_depth(media, light, pts, step, coefficient="length", **kw) if tau_s is not None else None
-    if length is None:
-        return None
-    tau_s = np.minimum(tau_s, tau)
-    tau_a = tau - tau_s
+    v = trilinear(fld, ijk)
+    from .media import density_from
+    rho = density_from(v[:, 0], pm.threshold)
     _, e = incident(light, pts)
-    collided = e * np.exp(-tau_a) * -np.expm1(-tau_s)
-    path = np.stack([tau_s.mean(axis=1), tau_a.mean(axis=1), length[:, 0]], axis=1)
+    base = (rho[:, None] * pm.sigma_s[None, :]) * e * np.exp(-v[:, channel:channel + 3])
     h = stride * float(np.cbrt(abs(np.linalg.det(pm.i2w[:3, :3]))))
-    levels = pyramid.build(collided.reshape(shape + (3,)), max_levels)
-    return MultipleField(stride, h, levels, np.ascontiguousarray(path.reshape(shape + (3,)), np.float32))
+    levels = pyramid.build(base.astype(np.float32).reshape(shape + (3,)), max_levels)
+    return MultipleField(stride, h, levels)
 
 
 def coarse_lattice(pm: PreparedMedium, stride: int):
@@ -349,9 +343,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                     continue
                 if progress:
                     progress(0.0, f"Light pyramid: {light.name} on {pm.medium.name}")
-                ms[li] = multiple_field(media, pm, light, step, surfaces, threads, should_cancel)
-                if ms[li] is None:
-                    return None
+                ms[li] = multiple_field(pm, f, light, chans[li])
         ms_all.append(ms)
         fields.append(f)
     return Precomputed(fields, layout, ms_all, time.perf_counter() - t_start,
