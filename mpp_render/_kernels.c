@@ -8,6 +8,7 @@
 #include <Python.h>
 #include <math.h>
 #include <stdint.h>
+#include <stdlib.h>
 #include <string.h>
 
 #define MAX_MEDIA 64
@@ -367,6 +368,76 @@ static void refined_tau(const Grid *f, int nm, int mi, int c, const double x[3],
     for (int a = 0; a < 3; a++) tau[a] += v[a];
 }
 
+
+/* ---- multiple scattering (twin of kernels_np.multiple_source) ---- */
+#define MAX_LEVELS 16
+typedef struct {
+    int first[MAX_MEDIA][MAX_LIGHTS];   /* index of level 0 in `lv`, or -1 */
+    int nlev[MAX_MEDIA][MAX_LIGHTS];
+    double stride[MAX_MEDIA][MAX_LIGHTS], h[MAX_MEDIA][MAX_LIGHTS];
+    const double *logf;                 /* (M, nu) log walk_width_sq table per medium */
+    const double *logu;                 /* (nu,) log u */
+    Py_ssize_t nu;
+    int amb;                            /* world-light multiple channel or -1 */
+} MS;
+
+static inline double phi1(double z) { return z > 1e-12 ? -expm1(-z) / z : 1.0 - 0.5 * z; }
+
+/* np.interp(x, xp, fp) for increasing xp (clamped at both ends). */
+static double interp(double x, const double *xp, const double *fp, Py_ssize_t n) {
+    if (!(x > xp[0])) return fp[0];
+    if (!(x < xp[n - 1])) return fp[n - 1];
+    Py_ssize_t lo = 0, hi = n - 1;
+    while (hi - lo > 1) {
+        Py_ssize_t mid = (lo + hi) / 2;
+        if (xp[mid] <= x) lo = mid; else hi = mid;
+    }
+    return fp[lo] + (x - xp[lo]) * (fp[hi] - fp[lo]) / (xp[hi] - xp[lo]);
+}
+
+static double path_length_for_width(double w2, double l_tr, double g, const double *logf,
+                                    const double *logu, Py_ssize_t nu) {
+    double one_g2 = 1.0 - g * g;
+    double ballistic = sqrt(w2 * 3.0 / (one_g2 > 1e-6 ? one_g2 : 1e-6));
+    if (!isfinite(l_tr)) return ballistic;
+    double ratio = w2 / (l_tr * l_tr);
+    if (ratio < exp(logf[0])) return ballistic;
+    double lr = log(ratio > 1e-300 ? ratio : 1e-300);
+    return exp(interp(lr, logf, logu, nu)) * l_tr;
+}
+
+static void multiple_source_c(const MS *ms, const Grid *lv, int m, int nl, const double *cosl,
+                              double g, double sig_s, double sig_a, const double x[3],
+                              const double *w2i, double out[3]) {
+    double b1 = 1.0 - g > 1e-6 ? 1.0 - g : 1e-6;
+    double l_tr = sig_s > 0.0 ? 1.0 / (sig_s * b1) : INFINITY;
+    double idx_w[3];
+    for (int r = 0; r < 3; r++)
+        idx_w[r] = w2i[4 * r] * x[0] + w2i[4 * r + 1] * x[1] + w2i[4 * r + 2] * x[2] + w2i[4 * r + 3];
+    out[0] = out[1] = out[2] = 0.0;
+    for (int l = 0; l < nl; l++) {
+        int f0 = ms->first[m][l], K = ms->nlev[m][l];
+        if (f0 < 0 || K <= 0) continue;
+        double h = ms->h[m][l], stride = ms->stride[m][l];
+        double lo = 0.0;
+        for (int k = 0; k < K; k++) {
+            double wk = h * pow(2.0, k + 0.5);
+            double hi = path_length_for_width(wk * wk, l_tr, g, ms->logf + (Py_ssize_t)m * ms->nu,
+                                              ms->logu, ms->nu);
+            double lk = k ? sqrt(lo * hi) : 0.5 * hi;
+            double weight = exp(-sig_a * lo) * (hi - lo) * phi1(sig_a * (hi - lo));
+            double decay = isfinite(l_tr) ? exp(-lk / l_tr) : 1.0;
+            double scale = stride * pow(2.0, k), idx[3], q[3];
+            for (int a = 0; a < 3; a++) idx[a] = idx_w[a] / scale;
+            if (trilinear(&lv[f0 + k], idx, 0, 3, q)) {
+                double p = weight * hg_phase(cosl[l], g * g * decay);
+                for (int a = 0; a < 3; a++) out[a] += q[a] * p;
+            }
+            lo = hi;
+        }
+    }
+}
+
 static int parse_doubles(PyObject *list, Py_ssize_t n, double *out, const char *what) {
     if (!PyList_Check(list) || PyList_GET_SIZE(list) != n) {
         PyErr_Format(PyExc_ValueError, "%s: expected a list of %zd numbers", what, n);
@@ -386,21 +457,28 @@ static const char march_doc[] =
 
 static PyObject *march(PyObject *self, PyObject *args) {
     PyObject *po, *pd, *pt0, *pt1, *pax, *pk, *fields, *w2is, *sss, *sts, *gsl, *thrs, *vox, *plights;
+    PyObject *pms = Py_None;
     int ambient;
     double step, depth_opacity, depth_miss;
-    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOiddd", &po, &pd, &pt0, &pt1, &pax, &pk, &fields,
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOiddd|O", &po, &pd, &pt0, &pt1, &pax, &pk, &fields,
                           &w2is, &sss, &sts, &gsl, &thrs, &vox, &plights, &ambient, &step,
-                          &depth_opacity, &depth_miss))
+                          &depth_opacity, &depth_miss, &pms))
         return NULL;
     if (!(step > 0.0) || !isfinite(step)) {
         PyErr_SetString(PyExc_ValueError, "step must be a positive finite length");
         return NULL;
     }
     Buf bo = {0}, bd = {0}, b0 = {0}, b1 = {0}, bax = {0}, bk = {0}, bl = {0}, gb[MAX_MEDIA];
+    Buf btab = {0}, blf = {0}, blu = {0};
+    Buf *lvb = NULL;
+    Grid *lv = NULL;
+    int nlv = 0, use_ms = 0;
+    MS ms;
+    memset(&ms, 0, sizeof ms);
     Grid g[MAX_MEDIA];
     double sig_s[MAX_MEDIA][3], gg[MAX_MEDIA], voxel[MAX_MEDIA];
     int ng = 0;
-    PyObject *o_s = NULL, *o_t = NULL, *o_d = NULL, *result = NULL;
+    PyObject *o_s = NULL, *o_t = NULL, *o_d = NULL, *o_m = NULL, *result = NULL;
     Py_ssize_t s_o[2] = {-1, 3};
     if (get_buf(po, &bo, 'd', 2, s_o, "origins") < 0) goto done;
     Py_ssize_t n = s_o[0];
@@ -460,10 +538,71 @@ static PyObject *march(PyObject *self, PyObject *args) {
             PyErr_SetString(PyExc_ValueError, "ambient channel outside the fields");
             goto done;
         }
+    if (pms != Py_None) {
+        /* (amb_ms, levels list, table (M, L, 4) [first, count, stride, h], logf (M, nu), logu (nu,)) */
+        PyObject *plv, *ptab, *plf, *plu;
+        int amb_ms;
+        if (!PyTuple_Check(pms) || !PyArg_ParseTuple(pms, "iOOOO", &amb_ms, &plv, &ptab, &plf, &plu)) {
+            PyErr_SetString(PyExc_ValueError, "multiple: expected (amb, levels, table, logf, logu)");
+            goto done;
+        }
+        if (!PyList_Check(plv) || PyList_GET_SIZE(plv) > 100000) {
+            PyErr_SetString(PyExc_ValueError, "multiple: levels must be a list");
+            goto done;
+        }
+        nlv = (int)PyList_GET_SIZE(plv);
+        lvb = (Buf *)calloc((size_t)(nlv > 0 ? nlv : 1), sizeof(Buf));
+        lv = (Grid *)calloc((size_t)(nlv > 0 ? nlv : 1), sizeof(Grid));
+        if (!lvb || !lv) { PyErr_NoMemory(); goto done; }
+        for (int i = 0; i < nlv; i++) {
+            Py_ssize_t sh[4] = {-1, -1, -1, 3};
+            if (get_buf(PyList_GET_ITEM(plv, i), &lvb[i], 'f', 4, sh, "pyramid level") < 0) goto done;
+            if (sh[0] < 2 || sh[1] < 2 || sh[2] < 2) {
+                PyErr_SetString(PyExc_ValueError, "pyramid level: every extent must be >= 2");
+                goto done;
+            }
+            lv[i].data = (const float *)lvb[i].view.buf;
+            lv[i].nx = sh[0]; lv[i].ny = sh[1]; lv[i].nz = sh[2]; lv[i].nc = 3;
+            lv[i].thr = -1.0;
+        }
+        Py_ssize_t s_tab[3] = {ng, nl, 4};
+        if (get_buf(ptab, &btab, 'd', 3, s_tab, "multiple table") < 0) goto done;
+        Py_ssize_t s_lu[1] = {-1};
+        if (get_buf(plu, &blu, 'd', 1, s_lu, "logu") < 0) goto done;
+        if (s_lu[0] < 2) { PyErr_SetString(PyExc_ValueError, "logu: too short"); goto done; }
+        Py_ssize_t s_lf[2] = {ng, s_lu[0]};
+        if (get_buf(plf, &blf, 'd', 2, s_lf, "logf") < 0) goto done;
+        const double *T = (const double *)btab.view.buf;
+        for (int m = 0; m < ng; m++)
+            for (Py_ssize_t l = 0; l < nl; l++) {
+                const double *r = T + ((Py_ssize_t)m * nl + l) * 4;
+                int first = (int)r[0], cnt = (int)r[1];
+                if (cnt <= 0 || first < 0) { ms.first[m][l] = -1; ms.nlev[m][l] = 0; continue; }
+                if (cnt > MAX_LEVELS || first > nlv - cnt || !(r[2] >= 1.0) || !(r[3] > 0.0) ||
+                    !isfinite(r[3])) {
+                    PyErr_SetString(PyExc_ValueError, "multiple table: bad level range, stride or h");
+                    goto done;
+                }
+                ms.first[m][l] = first; ms.nlev[m][l] = cnt;
+                ms.stride[m][l] = r[2]; ms.h[m][l] = r[3];
+            }
+        for (int m = 0; m < ng; m++)
+            if (amb_ms >= 0 && (amb_ms < 1 || amb_ms + 3 > g[m].nc)) {
+                PyErr_SetString(PyExc_ValueError, "ambient multiple channel outside the fields");
+                goto done;
+            }
+        ms.logf = (const double *)blf.view.buf;
+        ms.logu = (const double *)blu.view.buf;
+        ms.nu = s_lu[0];
+        ms.amb = amb_ms;
+        use_ms = 1;
+    }
     o_s = PyByteArray_FromStringAndSize(NULL, (Py_ssize_t)(n * 3 * sizeof(double)));
     o_t = PyByteArray_FromStringAndSize(NULL, (Py_ssize_t)(n * 3 * sizeof(double)));
     o_d = PyByteArray_FromStringAndSize(NULL, (Py_ssize_t)(n * sizeof(double)));
-    if (!o_s || !o_t || !o_d) goto done;
+    o_m = PyByteArray_FromStringAndSize(NULL, (Py_ssize_t)(n * 3 * sizeof(double)));
+    if (!o_s || !o_t || !o_d || !o_m) goto done;
+    double *OM = (double *)PyByteArray_AS_STRING(o_m);
     double *OS = (double *)PyByteArray_AS_STRING(o_s), *OT = (double *)PyByteArray_AS_STRING(o_t),
            *OD = (double *)PyByteArray_AS_STRING(o_d);
     const double *O = (const double *)bo.view.buf, *D = (const double *)bd.view.buf,
@@ -474,7 +613,7 @@ static PyObject *march(PyObject *self, PyObject *args) {
     Py_BEGIN_ALLOW_THREADS
     for (Py_ssize_t r = 0; r < n; r++) {
         const double *o = O + 3 * r, *d = D + 3 * r;
-        double T[3] = {1, 1, 1}, S[3] = {0, 0, 0}, depth = depth_miss;
+        double T[3] = {1, 1, 1}, S[3] = {0, 0, 0}, M3[3] = {0, 0, 0}, depth = depth_miss;
         double t1 = T1[r], seg = T0[r];
         uint32_t key = K[r];
         double t = seg + uniform01(key, 0, DIM_JITTER) * step;
@@ -487,7 +626,7 @@ static PyObject *march(PyObject *self, PyObject *args) {
             for (Py_ssize_t l = 0; l < nl; l++)
                 light_sample(LR + l * LIGHT_FIELDS, x, uniform01(key, k, 2 * l),
                              uniform01(key, k, 2 * l + 1), wi[l], e[l], wc[l], &dc[l]);
-            double sig_t[3] = {0, 0, 0}, src[3] = {0, 0, 0};
+            double sig_t[3] = {0, 0, 0}, src[3] = {0, 0, 0}, src_ms[3] = {0, 0, 0};
             for (int m = 0; m < ng; m++) {
                 double idx[3], v[MAX_CH];
                 to_index(&g[m], x, idx);
@@ -509,12 +648,25 @@ static PyObject *march(PyObject *self, PyObject *args) {
                 if (ambient >= 0)
                     for (int a = 0; a < 3; a++) inc[a] += v[ambient + a];
                 for (int a = 0; a < 3; a++) src[a] += rho * sig_s[m][a] * inc[a];
+                if (use_ms) {
+                    double cosl[MAX_LIGHTS], msi[3];
+                    for (Py_ssize_t l = 0; l < nl; l++)
+                        cosl[l] = -(wi[l][0] * d[0] + wi[l][1] * d[1] + wi[l][2] * d[2]);
+                    double ss_m = rho * ((sig_s[m][0] + sig_s[m][1] + sig_s[m][2]) / 3.0);
+                    double sa_m = rho * (((g[m].sig[0] - sig_s[m][0]) + (g[m].sig[1] - sig_s[m][1]) +
+                                          (g[m].sig[2] - sig_s[m][2])) / 3.0);
+                    multiple_source_c(&ms, lv, m, (int)nl, cosl, gg[m], ss_m, sa_m, x, g[m].w2i, msi);
+                    if (ms.amb >= 0)
+                        for (int a = 0; a < 3; a++) msi[a] += v[ms.amb + a];
+                    for (int a = 0; a < 3; a++) src_ms[a] += rho * sig_s[m][a] * msi[a];
+                }
             }
             double Tb[3] = {T[0], T[1], T[2]};
             for (int a = 0; a < 3; a++) {
                 double xt = sig_t[a] * hl;
                 double frac = xt > 1e-7 ? -expm1(-xt) / xt : 1.0 - 0.5 * xt;
                 S[a] += Tb[a] * src[a] * (frac * hl);
+                M3[a] += Tb[a] * src_ms[a] * (frac * hl);
                 T[a] = Tb[a] * exp(-xt);
             }
             double tb = (Tb[0] + Tb[1] + Tb[2]) / 3.0, ta = (T[0] + T[1] + T[2]) / 3.0;
@@ -532,13 +684,16 @@ static PyObject *march(PyObject *self, PyObject *args) {
             tmax = tmax > T[2] ? tmax : T[2];
             if (!(tmax > T_MIN)) break;
         }
-        for (int a = 0; a < 3; a++) { OS[3 * r + a] = S[a]; OT[3 * r + a] = T[a]; }
+        for (int a = 0; a < 3; a++) { OS[3 * r + a] = S[a]; OT[3 * r + a] = T[a]; OM[3 * r + a] = M3[a]; }
         OD[r] = depth;
     }
     Py_END_ALLOW_THREADS
-    result = PyTuple_Pack(3, o_s, o_t, o_d);
+    result = PyTuple_Pack(4, o_s, o_t, o_d, o_m);
 done:
-    Py_XDECREF(o_s); Py_XDECREF(o_t); Py_XDECREF(o_d);
+    Py_XDECREF(o_s); Py_XDECREF(o_t); Py_XDECREF(o_d); Py_XDECREF(o_m);
+    buf_release(&btab); buf_release(&blf); buf_release(&blu);
+    if (lvb) for (int i = 0; i < nlv; i++) buf_release(&lvb[i]);
+    free(lvb); free(lv);
     buf_release(&bo); buf_release(&bd); buf_release(&b0); buf_release(&b1); buf_release(&bax);
     buf_release(&bk); buf_release(&bl);
     for (int m = 0; m < ng; m++) buf_release(&gb[m]);

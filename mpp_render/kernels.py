@@ -44,28 +44,40 @@ def c_optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step
 def c_march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs,
             thresholds, voxels, lights, ambient, step, depth_opacity, depth_miss, multiple=None):
     n = len(origins)
-    s, t, d = _c.march(_f64(origins).reshape(n, 3), _f64(dirs).reshape(n, 3),
+    nl = len(np.asarray(lights).reshape(-1, kernels_np.LIGHT_FIELDS))
+    packed = None
+    if multiple is not None:
+        amb_ms, per_medium = multiple
+        levels, table, logf = [], np.zeros((len(fields), nl, 4)), []
+        table[:, :, 0] = -1
+        for m, mfs in enumerate(per_medium):
+            logf.append(kernels_np.width_table(float(gs[m]))[0])
+            for li, msf in enumerate(mfs or []):
+                if msf is None:
+                    continue
+                lv, stride, h = msf
+                table[m, li] = (len(levels), len(lv), stride, h)
+                levels.extend(_f32(x) for x in lv)
+        logu = kernels_np.width_table(0.0)[1]
+        packed = (int(amb_ms), levels, table,
+                  _f64(np.array(logf).reshape(len(fields), len(logu))), _f64(logu))
+    s, t, d, m = _c.march(_f64(origins).reshape(n, 3), _f64(dirs).reshape(n, 3),
                        _f64(t0).reshape(n), _f64(t1).reshape(n), _f64(axial).reshape(n),
                        np.ascontiguousarray(keys, np.uint32).reshape(n), [_f32(f) for f in fields],
                        [_f64(w) for w in w2is], [_f64(x).reshape(3) for x in sigma_ss],
                        [_f64(x).reshape(3) for x in sigma_ts], [float(g) for g in gs],
                        [float(x) for x in thresholds], [float(v) for v in voxels],
                        _f64(lights).reshape(-1, kernels_np.LIGHT_FIELDS), int(ambient),
-                       float(step), float(depth_opacity), float(depth_miss))
+                       float(step), float(depth_opacity), float(depth_miss), packed)
     return (np.frombuffer(s, np.float64).reshape(n, 3), np.frombuffer(t, np.float64).reshape(n, 3),
-            np.frombuffer(d, np.float64).reshape(n), np.zeros((n, 3)))
+            np.frombuffer(d, np.float64).reshape(n), np.frombuffer(m, np.float64).reshape(n, 3))
 
 
 _C_WRAPPERS = {"optical_depth": c_optical_depth, "march": c_march}
 
 
-_C_LACKS = {"march": ("multiple",)}  # features a compiled twin does not have yet
-
-
-def get(name: str, **features):
-    """The kernel ``name`` from the active backend.  ``features`` (flag=True) that the
-    compiled twin lacks send the call to the numpy twin."""
-    lacking = any(features.get(f) for f in _C_LACKS.get(name, ()))
-    if backend() == "c" and not lacking and name in _C_WRAPPERS and hasattr(_c, name):
+def get(name: str):
+    """The kernel ``name`` from the active backend."""
+    if backend() == "c" and name in _C_WRAPPERS and hasattr(_c, name):
         return _C_WRAPPERS[name]
     return getattr(kernels_np, name)

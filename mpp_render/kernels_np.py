@@ -181,6 +181,12 @@ def _refined_tau(fields, w2is, thrs, sig_ts, mi, c, x, w, dist, delta):
     return tau + _fetch(fields[mi], w2is[mi], end, c, 3)
 
 
+def width_table(g):
+    """(log walk_width_sq(u), log u) on the table path_length_for_width inverts (both twins
+    read the same numbers)."""
+    return np.log(np.maximum(walk_width_sq(_U_TABLE, g), 1e-300)), np.log(_U_TABLE)
+
+
 def walk_width_sq(u, g):
     """Per-axis variance, in units of the transport length l_tr = 1/(sigma_s (1 - g)) squared,
     of the position of a photon after path length u l_tr since its first scattering, about
@@ -261,8 +267,8 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
     ``sigma_ts`` RGB 1/m per unit density, ``gs`` HG anisotropy, ``thresholds`` (sharp
     boundary, < 0 smooth), ``voxels`` voxel size in metres.  ``lights`` (L, LIGHT_FIELDS)
     packed records; ``ambient`` the world-light channel or -1.  ``step`` metres.
-    ``multiple``: None, or (ambient_ms channel or -1, per medium: (theta2, per light None or
-    a MultipleField tuple, see multiple_source)) to accumulate multiple scattering too.
+    ``multiple``: None, or (ambient_ms channel or -1, per medium a list with, per light, None
+    or the (levels, stride, h) of its MultipleField) to accumulate multiple scattering too.
 
     Each step of length h adds T S (1 - exp(-sigma_t h)) / sigma_t with S the in-scattered
     radiance at one jittered point of the step, then T *= exp(-sigma_t h).  Returns
@@ -315,9 +321,9 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
             if ambient >= 0:
                 inc += v[:, ambient:ambient + 3]
             src += rho[:, None] * sigma_ss[mi][None, :] * inc
-            if multiple is not None and multiple[1][mi] is not None:
+            if multiple is not None:
                 amb_ms, per_medium = multiple
-                theta2, ms_fields = per_medium[mi]
+                ms_fields = per_medium[mi]
                 live = np.flatnonzero(rho > 0)
                 if live.size:
                     wd = np.stack([emit[li][0][live] for li in range(len(lights))]) \

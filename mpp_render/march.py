@@ -70,24 +70,16 @@ class MarchContext:
     def __post_init__(self):
         self.packed = pack_lights(self.lights, self.layout)
         self.multiple = None
-        if self.multiple_fields:
-            from .mpp import mean_sq_angle
+        if self.multiple_fields is not None:
             amb = self.layout.ambient_multiple_channel
-            per_medium = []
-            for pm, mfs in zip(self.media, self.multiple_fields):
-                if mfs is None or all(m is None for m in mfs):
-                    per_medium.append(None)
-                    continue
-                per_medium.append((float(mean_sq_angle(pm.g)),
-                                   [None if m is None else (m.levels, m.stride, m.h)
-                                    for m in mfs]))
-            if any(p is not None for p in per_medium) or amb is not None:
-                self.multiple = (-1 if amb is None else amb, per_medium)
+            per_medium = [[None if m is None else (m.levels, m.stride, m.h) for m in mfs]
+                          for mfs in self.multiple_fields]
+            self.multiple = (-1 if amb is None else amb, per_medium)
 
 
 def march_rays(ctx: MarchContext, origins, dirs, t0, t1, axial, keys):
     """March rays; returns dict of per-ray arrays: 'single' (N,3), 'T' (N,3), 'depth' (N,)."""
-    fn = kernels.get("march", multiple=ctx.multiple is not None)
+    fn = kernels.get("march")
     amb = ctx.layout.ambient_channel
     single, T, depth, multi = fn(
         origins, dirs, t0, t1, axial, keys, ctx.fields, [m.w2i for m in ctx.media],

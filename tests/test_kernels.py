@@ -47,7 +47,11 @@ def test_march_twins_agree_on_random_rays():
     lights = all_lights()
     cam = Camera("PERSP", np.eye(4), 8, 8, (-0.5, 0.5, -0.5, 0.5))
     cam.cam_to_world[:3, 3] = [0, 0, 6]
-    pre = precompute(media, lights, World(np.array([0.2, 0.3, 0.5])), cam, n_dirs=8)
+    pre = precompute(media, lights, World(np.array([0.2, 0.3, 0.5])), cam, n_dirs=8,
+                     multiple=True)
+    multiple = (pre.layout.ambient_multiple_channel,
+                [[None if m is None else (m.levels, m.stride, m.h) for m in mfs]
+                 for mfs in pre.multiple])
     n = 3000
     o = rng.uniform(-2, 2, (n, 3))
     o[:, 2] = 4.0
@@ -60,13 +64,14 @@ def test_march_twins_agree_on_random_rays():
             pre.fields, [m.w2i for m in media], [m.sigma_s for m in media],
             [m.sigma_t for m in media], [m.g for m in media], [m.threshold for m in media],
             [m.voxel_size for m in media], pack_lights(lights, pre.layout),
-            pre.layout.ambient_channel, 0.07, 0.01, 1e10)
+            pre.layout.ambient_channel, 0.07, 0.01, 1e10, multiple)
     a = kernels_np.march(*args)
     b = kernels.c_march(*args)
-    for x, y, name in zip(a, b, ("single", "T", "depth")):
+    for x, y, name in zip(a, b, ("single", "T", "depth", "multiple")):
         assert np.all(np.isfinite(y)), name
         assert np.all(np.abs(x - y) <= 1e-4 * np.maximum(np.abs(x), 1e-6)), name
     assert a[0].max() > 0.01 and a[1].min() < 0.5   # the rays did see the media
+    assert a[3].max() > 0.01                         # and multiple scattering
 
 
 @needs_c
