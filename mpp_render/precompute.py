@@ -253,6 +253,67 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
     return MultipleField(stride, h, levels)
 
 
+BAND = 3           # voxels from a sharp surface whose optical depth is computed exactly
+INTERIOR_MIN = 1 << 17  # needed points from which a sharp medium's interior goes coarse
+
+
+def interior_plan(pm: PreparedMedium, flat):
+    """For a large sharp (mesh) medium: which needed points lie deeper than ``BAND`` voxels
+    inside (their optical depth to a light is smooth there: piecewise linear, read from a
+    lattice two voxels apart) and the lattice itself.  None when everything is exact."""
+    if not pm.sharp or len(flat) < INTERIOR_MIN:
+        return None
+    occ = pm.grid >= pm.threshold
+    near_out = ~occ
+    for ax in range(3):
+        acc = near_out.copy()
+        for sft in range(1, BAND + 1):
+            acc |= np.roll(near_out, sft, axis=ax) | np.roll(near_out, -sft, axis=ax)
+        near_out = acc
+    deep = (occ & ~near_out).reshape(-1)[flat]
+    if deep.sum() < len(flat) // 4:
+        return None
+    return deep, coarse_lattice(pm, 2)
+
+
+def light_field(media, pm, light, flat, pts, step, plan, **kw):
+    """Optical depth (N,3) of ``light`` at the needed points ``pts``: exact, except in a
+    large sharp medium's interior (interior_plan), where it is interpolated from a lattice
+    two voxels apart.  None when cancelled."""
+    if plan is None:
+        return light_optical_depth(media, light, pts, step, **kw)
+    deep, (cshape, cflat, cpts) = plan
+    out = np.zeros((len(pts), 3))
+    band = np.flatnonzero(~deep)
+    exact = light_optical_depth(media, light, pts[band], step, **kw)
+    coarse = light_optical_depth(media, light, cpts, step, **kw) if exact is not None else None
+    if coarse is None:
+        return None
+    out[band] = exact
+    lattice = np.zeros((int(np.prod(cshape)), 3), np.float32)
+    lattice[cflat] = coarse
+    fine = upsample(lattice.reshape(cshape + (3,)), 2, pm.grid.shape).reshape(-1, 3)
+    out[deep] = fine[flat[deep]]
+    return out
+
+
+def upsample(lattice: np.ndarray, stride: int, shape) -> np.ndarray:
+    """Trilinear upsampling of a lattice (cx,cy,cz,C) whose point j sits at fine index
+    j * stride, onto the fine grid ``shape`` (X,Y,Z): separable linear interpolation, one
+    vectorised pass per axis (the same values as media.trilinear at those points)."""
+    out = lattice.astype(np.float32)
+    for ax in range(3):
+        i = np.arange(shape[ax])
+        lo = np.minimum(i // stride, out.shape[ax] - 1)
+        hi = np.minimum(lo + 1, out.shape[ax] - 1)
+        f = ((i - lo * stride) / float(stride)).astype(np.float32)
+        sh = [1] * out.ndim
+        sh[ax] = -1
+        out = (np.take(out, lo, axis=ax) * (1 - f).reshape(sh)
+               + np.take(out, hi, axis=ax) * f.reshape(sh))
+    return out
+
+
 def coarse_lattice(pm: PreparedMedium, stride: int):
     """Index points of ``pm``'s padded grid taken every ``stride`` voxels (covering the whole
     grid) whose neighbourhood of radius ``stride`` holds density.  Returns (shape, flat
@@ -307,14 +368,15 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
         f[..., 0] = pm.grid
         flat, pts = needed_points(pm)
         n_pts += len(pts)
+        plan = interior_plan(pm, flat)
         view = f.reshape(-1, c)
         for li, light in enumerate(lights):
             if chans[li] is None:
                 continue
             if progress:
                 progress(0.0, f"Light attenuation: {light.name} on {pm.medium.name}")
-            tau = light_optical_depth(media, light, pts, step, should_cancel=should_cancel,
-                                      surfaces=surfaces, threads=threads)
+            tau = light_field(media, pm, light, flat, pts, step, plan, should_cancel=should_cancel,
+                              surfaces=surfaces, threads=threads)
             if tau is None:
                 return None
             view[flat, chans[li]:chans[li] + 3] = tau
@@ -330,11 +392,11 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                             multiple=amb_ms is not None)
             if a is None:
                 return None
-            ijk = np.stack(np.unravel_index(flat, pm.grid.shape), axis=1) / float(stride)
             for ch, vals in zip((amb, amb_ms), a if amb_ms is not None else (a,)):
                 coarse = np.zeros((int(np.prod(cshape)), 3), np.float32)
                 coarse[cflat] = vals
-                view[flat, ch:ch + 3] = trilinear(coarse.reshape(cshape + (3,)), ijk)
+                fine = upsample(coarse.reshape(cshape + (3,)), stride, pm.grid.shape)
+                view[flat, ch:ch + 3] = fine.reshape(-1, 3)[flat]
             n_ambient += len(cpts)
         ms = [None] * len(lights)
         if multiple and np.any(pm.sigma_s > 0):

@@ -39,3 +39,18 @@ def test_lookup_interpolates_between_levels_and_keeps_constants():
     levels = pyramid.build(base)
     v = pyramid.lookup(levels, np.array([[4.0, 4.0, 4.0]]), np.array([0.1]), 1.0)
     assert np.isclose(v[0, 0], base[4, 4, 4, 0])
+
+
+def test_upsample_matches_trilinear():
+    from mpp_render.media import trilinear
+    from mpp_render.precompute import upsample
+    rng = np.random.default_rng(2)
+    lat = rng.random((5, 6, 4, 3)).astype(np.float32)
+    for stride in (1, 2, 3):
+        shape = ((5 - 1) * stride + 1, (6 - 1) * stride + 1, (4 - 1) * stride + 1)
+        up = upsample(lat, stride, shape)
+        ijk = np.stack(np.meshgrid(*[np.arange(n) for n in shape], indexing="ij"), -1).reshape(-1, 3)
+        want = trilinear(lat, ijk / float(stride))
+        # the last lattice point along each axis: trilinear() is zero exactly on the far edge
+        inner = np.all(ijk < np.array(shape) - 1, axis=1)
+        assert np.allclose(up.reshape(-1, 3)[inner], want[inner], atol=1e-6)
