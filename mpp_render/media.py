@@ -45,15 +45,36 @@ class PreparedMedium:
         return self.grid.shape
 
 
-def prepare(medium: Medium) -> PreparedMedium:
-    d = np.asarray(medium.density, dtype=np.float32)
+def sanitise(density) -> tuple:
+    """(float32 copy of ``density`` with NaN, inf and negative values set to 0, how many)."""
+    d = np.asarray(density, dtype=np.float32)
+    bad = ~np.isfinite(d) | (d < 0)
+    count = int(np.count_nonzero(bad))
+    if count:
+        d = np.where(bad, np.float32(0.0), d)
+    return d, count
+
+
+def prepare(medium: Medium, warnings=None) -> PreparedMedium:
+    """Pad and map ``medium`` for sampling.  Raises ValueError (with a message for the user)
+    when it cannot be rendered: not a 3-D grid, non-finite or degenerate (zero-scale)
+    transform.  NaN, inf and negative voxels are set to 0 and counted in ``warnings``."""
+    d, bad = sanitise(medium.density)
     if d.ndim != 3 or min(d.shape) < 1:
         raise ValueError(f"medium '{medium.name}': density must be a non-empty 3-D array")
+    if bad and warnings is not None:
+        warnings.append(f"medium '{medium.name}': {bad} voxels were NaN, infinite or negative "
+                        "and were set to 0")
+    m = np.asarray(medium.index_to_world, np.float64)
+    if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+        raise ValueError(f"medium '{medium.name}': non-finite transform; skipped")
+    if abs(np.linalg.det(m[:3, :3])) < 1e-30 or np.linalg.cond(m[:3, :3]) > 1e12:
+        raise ValueError(f"medium '{medium.name}': degenerate transform (zero scale); skipped")
     grid = np.zeros(tuple(s + 2 for s in d.shape), np.float32)
-    grid[1:-1, 1:-1, 1:-1] = np.nan_to_num(np.maximum(d, 0.0), nan=0.0, posinf=0.0)
+    grid[1:-1, 1:-1, 1:-1] = d
     shift = np.eye(4)
     shift[:3, 3] = -1.0
-    i2w = np.asarray(medium.index_to_world, np.float64) @ shift
+    i2w = m @ shift
     w2i = np.linalg.inv(i2w)[:3, :]
     voxel = float(np.min(np.linalg.norm(i2w[:3, :3], axis=0)))
     ss = np.asarray(medium.sigma_s, np.float64).reshape(3)

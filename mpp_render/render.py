@@ -72,7 +72,7 @@ def render(desc: SceneDescription,
     media = []
     for m in desc.media:
         try:
-            media.append(prepare(m))
+            media.append(prepare(m, warnings))
         except ValueError as e:
             warnings.append(str(e))
     passes_on = [p.name for p in enabled_passes(st.multiple, st.passes)]
