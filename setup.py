@@ -11,7 +11,8 @@ from setuptools import Extension, setup
 cflags = ["-O3", "-std=c99", "-Wall", "-Wextra", "-Wno-unused-parameter", "-fno-math-errno"]
 ldflags = []
 if os.environ.get("MPP_SANITIZE"):
-    cflags = ["-O1", "-g", "-std=c99", "-fsanitize=address,undefined", "-fno-omit-frame-pointer"]
+    cflags = ["-O1", "-g", "-std=c99", "-fsanitize=address,undefined", "-fno-sanitize-recover=undefined",
+              "-fno-omit-frame-pointer"]
     ldflags = ["-fsanitize=address,undefined"]
 
 setup(

@@ -1,0 +1,84 @@
+"""Bounded fuzz of the compiled kernels: random sizes, NaN, inf and huge values never crash.
+
+Run in-process here; ``tests/test_sanitizers.py`` runs this same file against a build with
+AddressSanitizer and UndefinedBehaviorSanitizer."""
+import os
+
+import numpy as np
+import pytest
+
+from mpp_render import kernels, kernels_np
+
+pytestmark = pytest.mark.skipif(kernels._c is None, reason="compiled kernels not built")
+ROUNDS = int(os.environ.get("MPP_FUZZ_ROUNDS", "60"))
+SPECIAL = np.array([np.nan, np.inf, -np.inf, 1e300, -1e300, 0.0, -0.0, 1e-300])
+
+
+def spoil(a, rng, frac=0.05):
+    a = np.array(a, dtype=np.float64 if a.dtype == np.float64 else a.dtype)
+    if a.size:
+        m = rng.random(a.shape) < frac
+        a[m] = rng.choice(SPECIAL, m.sum()).astype(a.dtype)
+    return a
+
+
+def random_case(rng):
+    n = int(rng.integers(0, 40))
+    nm = int(rng.integers(0, 3))
+    nl = int(rng.integers(0, 4))
+    chans = 1 + 3 * nl + 3
+    fields, w2is, ss, st, gs, thr, vox = [], [], [], [], [], [], []
+    for _ in range(nm):
+        shape = tuple(int(x) for x in rng.integers(2, 7, 3)) + (chans,)
+        f = (rng.random(shape) * 3).astype(np.float32)
+        fields.append(spoil(f, rng, 0.01).astype(np.float32))
+        w = np.hstack([np.diag(rng.uniform(0.5, 3, 3)), rng.uniform(-3, 3, (3, 1))])
+        w2is.append(spoil(w, rng, 0.02) if rng.random() < 0.3 else w)
+        ss.append(rng.uniform(0, 5, 3))
+        st.append(ss[-1] + rng.uniform(0, 1, 3))
+        gs.append(float(rng.uniform(-0.99, 0.99)))
+        thr.append(float(rng.choice([-1.0, 0.5])))
+        vox.append(float(rng.uniform(0.01, 1)))
+    lights = rng.normal(size=(nl, kernels_np.LIGHT_FIELDS)) * 3
+    lights[:, kernels_np.L_KIND] = rng.integers(0, 4, nl)
+    lights[:, kernels_np.L_CHANNEL] = 1 + 3 * np.arange(nl)
+    lights = spoil(lights, rng, 0.03)
+    lights[:, kernels_np.L_KIND] = np.clip(np.nan_to_num(lights[:, kernels_np.L_KIND]), 0, 3).round()
+    lights[:, kernels_np.L_CHANNEL] = 1 + 3 * np.arange(nl)
+    o = spoil(rng.uniform(-4, 4, (n, 3)), rng)
+    d = spoil(rng.normal(size=(n, 3)), rng)
+    t0 = spoil(rng.uniform(0, 2, n), rng)
+    t1 = spoil(t0 + rng.uniform(0, 6, n), rng)
+    return (o, d, t0, t1, np.ones(n), rng.integers(0, 2 ** 32, n, dtype=np.uint32), fields, w2is,
+            ss, st, gs, thr, vox, lights, 1 + 3 * nl, float(rng.choice([0.05, 0.3, 1e-3])), 0.01, 1e10)
+
+
+def test_fuzz_march_and_optical_depth():
+    rng = np.random.default_rng(12345)
+    for _ in range(ROUNDS):
+        args = random_case(rng)
+        try:
+            s, t, dep = kernels._c.march(*args)[:3]
+        except ValueError:
+            continue   # rejected input is fine; a crash is not
+        n = len(args[0])
+        assert len(s) == 24 * n and len(t) == 24 * n and len(dep) == 8 * n
+        fields, w2is, st, thr = args[6], args[7], args[9], args[11]
+        try:
+            kernels._c.optical_depth(args[0], args[1], args[3], [np.ascontiguousarray(f[..., 0]) for f in fields],
+                                     w2is, st, thr, args[15], 0.5)
+        except ValueError:
+            pass
+
+
+def test_wrong_types_and_shapes_raise():
+    c = kernels._c
+    with pytest.raises(ValueError):
+        c.optical_depth(np.zeros((2, 2)), np.zeros((2, 3)), np.zeros(2), [], [], [], [], 0.1, 0.5)
+    with pytest.raises(ValueError):
+        c.optical_depth(np.zeros((2, 3), np.float32), np.zeros((2, 3)), np.zeros(2), [], [], [], [], 0.1, 0.5)
+    with pytest.raises(ValueError):
+        c.optical_depth(np.zeros((2, 3)), np.zeros((2, 3)), np.zeros(2), [np.zeros((1, 4, 4), np.float32)],
+                        [np.zeros((3, 4))], [np.ones(3)], [-1.0], 0.1, 0.5)
+    with pytest.raises(ValueError):
+        c.optical_depth(np.zeros((2, 3)), np.zeros((2, 3)), np.zeros(2), [], [], [], [], float("nan"), 0.5)
