@@ -452,7 +452,8 @@ static int parse_doubles(PyObject *list, Py_ssize_t n, double *out, const char *
 
 static const char march_doc[] =
     "march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs, thresholds,\n"
-    "      voxels, lights, ambient, step, depth_opacity, depth_miss) -> (single, T, depth) bytes\n"
+    "      voxels, lights, ambient, step, depth_opacity, depth_miss[, multiple])\n"
+    "  -> (single, T, depth, multiple, steps) as bytes of float64\n"
     "Twin of kernels_np.march.";
 
 static PyObject *march(PyObject *self, PyObject *args) {
@@ -478,7 +479,7 @@ static PyObject *march(PyObject *self, PyObject *args) {
     Grid g[MAX_MEDIA];
     double sig_s[MAX_MEDIA][3], gg[MAX_MEDIA], voxel[MAX_MEDIA];
     int ng = 0;
-    PyObject *o_s = NULL, *o_t = NULL, *o_d = NULL, *o_m = NULL, *result = NULL;
+    PyObject *o_s = NULL, *o_t = NULL, *o_d = NULL, *o_m = NULL, *o_k = NULL, *result = NULL;
     Py_ssize_t s_o[2] = {-1, 3};
     if (get_buf(po, &bo, 'd', 2, s_o, "origins") < 0) goto done;
     Py_ssize_t n = s_o[0];
@@ -601,7 +602,9 @@ static PyObject *march(PyObject *self, PyObject *args) {
     o_t = PyByteArray_FromStringAndSize(NULL, (Py_ssize_t)(n * 3 * sizeof(double)));
     o_d = PyByteArray_FromStringAndSize(NULL, (Py_ssize_t)(n * sizeof(double)));
     o_m = PyByteArray_FromStringAndSize(NULL, (Py_ssize_t)(n * 3 * sizeof(double)));
-    if (!o_s || !o_t || !o_d || !o_m) goto done;
+    o_k = PyByteArray_FromStringAndSize(NULL, (Py_ssize_t)(n * sizeof(double)));
+    if (!o_s || !o_t || !o_d || !o_m || !o_k) goto done;
+    double *OK = (double *)PyByteArray_AS_STRING(o_k);
     double *OM = (double *)PyByteArray_AS_STRING(o_m);
     double *OS = (double *)PyByteArray_AS_STRING(o_s), *OT = (double *)PyByteArray_AS_STRING(o_t),
            *OD = (double *)PyByteArray_AS_STRING(o_d);
@@ -685,12 +688,13 @@ static PyObject *march(PyObject *self, PyObject *args) {
             if (!(tmax > T_MIN)) break;
         }
         for (int a = 0; a < 3; a++) { OS[3 * r + a] = S[a]; OT[3 * r + a] = T[a]; OM[3 * r + a] = M3[a]; }
+        OK[r] = (double)k;
         OD[r] = depth;
     }
     Py_END_ALLOW_THREADS
-    result = PyTuple_Pack(4, o_s, o_t, o_d, o_m);
+    result = PyTuple_Pack(5, o_s, o_t, o_d, o_m, o_k);
 done:
-    Py_XDECREF(o_s); Py_XDECREF(o_t); Py_XDECREF(o_d); Py_XDECREF(o_m);
+    Py_XDECREF(o_s); Py_XDECREF(o_t); Py_XDECREF(o_d); Py_XDECREF(o_m); Py_XDECREF(o_k);
     buf_release(&btab); buf_release(&blf); buf_release(&blu);
     if (lvb) for (int i = 0; i < nlv; i++) buf_release(&lvb[i]);
     free(lvb); free(lv);

@@ -61,7 +61,7 @@ def c_march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts
         logu = kernels_np.width_table(0.0)[1]
         packed = (int(amb_ms), levels, table,
                   _f64(np.array(logf).reshape(len(fields), len(logu))), _f64(logu))
-    s, t, d, m = _c.march(_f64(origins).reshape(n, 3), _f64(dirs).reshape(n, 3),
+    s, t, d, m, k = _c.march(_f64(origins).reshape(n, 3), _f64(dirs).reshape(n, 3),
                        _f64(t0).reshape(n), _f64(t1).reshape(n), _f64(axial).reshape(n),
                        np.ascontiguousarray(keys, np.uint32).reshape(n), [_f32(f) for f in fields],
                        [_f64(w) for w in w2is], [_f64(x).reshape(3) for x in sigma_ss],
@@ -70,7 +70,8 @@ def c_march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts
                        _f64(lights).reshape(-1, kernels_np.LIGHT_FIELDS), int(ambient),
                        float(step), float(depth_opacity), float(depth_miss), packed)
     return (np.frombuffer(s, np.float64).reshape(n, 3), np.frombuffer(t, np.float64).reshape(n, 3),
-            np.frombuffer(d, np.float64).reshape(n), np.frombuffer(m, np.float64).reshape(n, 3))
+            np.frombuffer(d, np.float64).reshape(n), np.frombuffer(m, np.float64).reshape(n, 3),
+            np.frombuffer(k, np.float64).reshape(n))
 
 
 _C_WRAPPERS = {"optical_depth": c_optical_depth, "march": c_march}

@@ -272,10 +272,12 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
 
     Each step of length h adds T S (1 - exp(-sigma_t h)) / sigma_t with S the in-scattered
     radiance at one jittered point of the step, then T *= exp(-sigma_t h).  Returns
-    (single (N,3), T (N,3), depth (N,), multiple (N,3)) float64."""
+    (single (N,3), T (N,3), depth (N,), multiple (N,3), steps (N,)) float64, steps being the
+    number of samples each ray took."""
     n = len(origins)
     single = np.zeros((n, 3))
     multi = np.zeros((n, 3))
+    steps = np.zeros(n)
     trans = np.ones((n, 3))
     depth = np.full(n, float(depth_miss))
     keys = np.asarray(keys, np.uint32)
@@ -353,7 +355,8 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
         advanced = nxt > seg_start[alive]   # a step that no longer moves t stops the ray
         seg_start[alive] = nxt
         k += 1
+        steps[alive] = k
         t[alive] = seg_start[alive] + uniform(ka, k, DIM_JITTER) * h
         keep = advanced & (seg_start[alive] < t1[alive]) & (T_after.max(axis=1) > T_MIN)
         alive = alive[keep]
-    return single, trans, depth, multi
+    return single, trans, depth, multi, steps

@@ -127,7 +127,7 @@ def render(desc: SceneDescription,
             r = march_rays(ctx, o, d, t0, t1, axial, ray_keys(st.seed, index, n))
         else:
             r = {"single": np.zeros((n, 3)), "T": np.ones((n, 3)), "depth": np.full(n, DEPTH_MISS),
-                 "multiple": np.zeros((n, 3))}
+                 "multiple": np.zeros((n, 3)), "steps": np.zeros(n)}
         behind = np.broadcast_to(bg, (n, 3)).copy()
         if hit.any():
             ph = o[hit] + d[hit] * t_hit[hit, None]
@@ -156,11 +156,12 @@ def render(desc: SceneDescription,
         dep = r["depth"].reshape(th * tw, spp)
         hitd = dep < DEPTH_MISS
         res["Depth"] = np.where(hitd.any(axis=1), np.where(hitd, dep, np.inf).min(axis=1), DEPTH_MISS)[:, None]
-        return index, (x0, y0, tw, th), res
+        return index, (x0, y0, tw, th), res, float(r["steps"].sum())
 
     t_march = time.perf_counter()
     threads = st.threads if st.threads > 0 else (os.cpu_count() or 1)
     done = 0
+    march_samples = 0.0
     cancelled = False
     with ThreadPoolExecutor(max_workers=threads) as pool:
         pending = set()
@@ -175,7 +176,8 @@ def render(desc: SceneDescription,
             from concurrent.futures import FIRST_COMPLETED, wait
             fin, pending = wait(pending, return_when=FIRST_COMPLETED)
             for f in fin:
-                index, (x0, y0, tw, th), res = f.result()
+                index, (x0, y0, tw, th), res, n_steps = f.result()
+                march_samples += n_steps
                 for name, arr in res.items():
                     if name in out:
                         out[name][y0:y0 + th, x0:x0 + tw] = arr.reshape(th, tw, -1)
@@ -192,7 +194,8 @@ def render(desc: SceneDescription,
             if progress:
                 progress(done / len(tiles), f"Tiles {done}/{len(tiles)}")
     timings["march"] = time.perf_counter() - t_march
-    stats = {"backend": kernels.backend(), "step": step, "tiles": len(tiles), "passes": passes_on}
+    stats = {"backend": kernels.backend(), "step": step, "tiles": len(tiles), "passes": passes_on,
+             "march_samples": march_samples, "threads": threads}
     if pre is not None:
         stats.update(pre.stats)
     return RenderOutput(out, timings, warnings, cancelled, stats)

@@ -67,7 +67,7 @@ def test_march_twins_agree_on_random_rays():
             pre.layout.ambient_channel, 0.07, 0.01, 1e10, multiple)
     a = kernels_np.march(*args)
     b = kernels.c_march(*args)
-    for x, y, name in zip(a, b, ("single", "T", "depth", "multiple")):
+    for x, y, name in zip(a, b, ("single", "T", "depth", "multiple", "steps")):
         assert np.all(np.isfinite(y)), name
         assert np.all(np.abs(x - y) <= 1e-4 * np.maximum(np.abs(x), 1e-6)), name
     assert a[0].max() > 0.01 and a[1].min() < 0.5   # the rays did see the media
