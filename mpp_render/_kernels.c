@@ -375,65 +375,41 @@ typedef struct {
     int first[MAX_MEDIA][MAX_LIGHTS];   /* index of level 0 in `lv`, or -1 */
     int nlev[MAX_MEDIA][MAX_LIGHTS];
     double stride[MAX_MEDIA][MAX_LIGHTS], h[MAX_MEDIA][MAX_LIGHTS];
-    const double *logf;                 /* (M, nu) log walk_width_sq table per medium */
-    const double *logu;                 /* (nu,) log u */
-    Py_ssize_t nu;
+    const double *tab[MAX_MEDIA];       /* per medium (K, nr, 2): weight, anisotropy per level */
+    int tabk[MAX_MEDIA];
+    Py_ssize_t nr;
+    double lr0, dlr;                    /* log density of table entry 0, spacing */
     int amb;                            /* world-light multiple channel or -1 */
 } MS;
 
-static inline double phi1(double z) { return z > 1e-12 ? -expm1(-z) / z : 1.0 - 0.5 * z; }
-
-/* np.interp(x, xp, fp) for increasing xp (clamped at both ends). */
-static double interp(double x, const double *xp, const double *fp, Py_ssize_t n) {
-    if (!(x > xp[0])) return fp[0];
-    if (!(x < xp[n - 1])) return fp[n - 1];
-    Py_ssize_t lo = 0, hi = n - 1;
-    while (hi - lo > 1) {
-        Py_ssize_t mid = (lo + hi) / 2;
-        if (xp[mid] <= x) lo = mid; else hi = mid;
-    }
-    return fp[lo] + (x - xp[lo]) * (fp[hi] - fp[lo]) / (xp[hi] - xp[lo]);
-}
-
-static double path_length_for_width(double w2, double l_tr, double g, const double *logf,
-                                    const double *logu, Py_ssize_t nu) {
-    double one_g2 = 1.0 - g * g;
-    double ballistic = sqrt(w2 * 3.0 / (one_g2 > 1e-6 ? one_g2 : 1e-6));
-    if (!isfinite(l_tr)) return ballistic;
-    double ratio = w2 / (l_tr * l_tr);
-    if (ratio < exp(logf[0])) return ballistic;
-    double lr = log(ratio > 1e-300 ? ratio : 1e-300);
-    return exp(interp(lr, logf, logu, nu)) * l_tr;
-}
-
 static void multiple_source_c(const MS *ms, const Grid *lv, int m, int nl, const double *cosl,
-                              double g, double sig_s, double sig_a, const double x[3],
-                              const double *w2i, double out[3]) {
-    double b1 = 1.0 - g > 1e-6 ? 1.0 - g : 1e-6;
-    double l_tr = sig_s > 0.0 ? 1.0 / (sig_s * b1) : INFINITY;
+                              double rho, const double x[3], const double *w2i, double out[3]) {
     double idx_w[3];
     for (int r = 0; r < 3; r++)
         idx_w[r] = w2i[4 * r] * x[0] + w2i[4 * r + 1] * x[1] + w2i[4 * r + 2] * x[2] + w2i[4 * r + 3];
     out[0] = out[1] = out[2] = 0.0;
+    double f = (log(rho > 1e-300 ? rho : 1e-300) - ms->lr0) / ms->dlr;
+    double fmax = (double)(ms->nr - 1);
+    f = f < 0.0 ? 0.0 : (f > fmax ? fmax : f);
+    Py_ssize_t i = (Py_ssize_t)floor(f);
+    if (i > ms->nr - 2) i = ms->nr - 2;
+    double t = f - (double)i;
+    const double *tab = ms->tab[m];
     for (int l = 0; l < nl; l++) {
         int f0 = ms->first[m][l], K = ms->nlev[m][l];
         if (f0 < 0 || K <= 0) continue;
-        double h = ms->h[m][l], stride = ms->stride[m][l];
-        double lo = 0.0;
+        if (K > ms->tabk[m]) K = ms->tabk[m];
+        double stride = ms->stride[m][l];
         for (int k = 0; k < K; k++) {
-            double wk = h * pow(2.0, k + 0.5);
-            double hi = path_length_for_width(wk * wk, l_tr, g, ms->logf + (Py_ssize_t)m * ms->nu,
-                                              ms->logu, ms->nu);
-            double lk = k ? sqrt(lo * hi) : 0.5 * hi;
-            double weight = exp(-sig_a * lo) * (hi - lo) * phi1(sig_a * (hi - lo));
-            double decay = isfinite(l_tr) ? exp(-lk / l_tr) : 1.0;
-            double scale = stride * pow(2.0, k), idx[3], q[3];
+            const double *e0 = tab + ((Py_ssize_t)k * ms->nr + i) * 2, *e1 = e0 + 2;
+            double weight = e0[0] * (1.0 - t) + e1[0] * t;
+            double gk = e0[1] * (1.0 - t) + e1[1] * t;
+            double scale = stride * ldexp(1.0, k), idx[3], q[3];
             for (int a = 0; a < 3; a++) idx[a] = idx_w[a] / scale;
             if (trilinear(&lv[f0 + k], idx, 0, 3, q)) {
-                double p = weight * hg_phase(cosl[l], g * g * decay);
+                double p = weight * hg_phase(cosl[l], gk);
                 for (int a = 0; a < 3; a++) out[a] += q[a] * p;
             }
-            lo = hi;
         }
     }
 }
@@ -470,7 +446,8 @@ static PyObject *march(PyObject *self, PyObject *args) {
         return NULL;
     }
     Buf bo = {0}, bd = {0}, b0 = {0}, b1 = {0}, bax = {0}, bk = {0}, bl = {0}, gb[MAX_MEDIA];
-    Buf btab = {0}, blf = {0}, blu = {0};
+    Buf btab = {0}, btabs[MAX_MEDIA];
+    int ntabs = 0;
     Buf *lvb = NULL;
     Grid *lv = NULL;
     int nlv = 0, use_ms = 0;
@@ -540,15 +517,22 @@ static PyObject *march(PyObject *self, PyObject *args) {
             goto done;
         }
     if (pms != Py_None) {
-        /* (amb_ms, levels list, table (M, L, 4) [first, count, stride, h], logf (M, nu), logu (nu,)) */
-        PyObject *plv, *ptab, *plf, *plu;
+        /* (amb_ms, levels list, table (M, L, 4) [first, count, stride, h],
+         *  per-medium level tables [(K, nr, 2)], log density of entry 0, spacing) */
+        PyObject *plv, *ptab, *ptabs;
         int amb_ms;
-        if (!PyTuple_Check(pms) || !PyArg_ParseTuple(pms, "iOOOO", &amb_ms, &plv, &ptab, &plf, &plu)) {
-            PyErr_SetString(PyExc_ValueError, "multiple: expected (amb, levels, table, logf, logu)");
+        double lr0, dlr;
+        if (!PyTuple_Check(pms) || !PyArg_ParseTuple(pms, "iOOOdd", &amb_ms, &plv, &ptab, &ptabs, &lr0, &dlr)) {
+            PyErr_SetString(PyExc_ValueError, "multiple: expected (amb, levels, table, tables, lr0, dlr)");
             goto done;
         }
         if (!PyList_Check(plv) || PyList_GET_SIZE(plv) > 100000) {
             PyErr_SetString(PyExc_ValueError, "multiple: levels must be a list");
+            goto done;
+        }
+        if (!PyList_Check(ptabs) || PyList_GET_SIZE(ptabs) != ng || !(dlr > 0.0) || !isfinite(lr0) ||
+            !isfinite(dlr)) {
+            PyErr_SetString(PyExc_ValueError, "multiple: one level table per medium, dlr > 0");
             goto done;
         }
         nlv = (int)PyList_GET_SIZE(plv);
@@ -566,21 +550,32 @@ static PyObject *march(PyObject *self, PyObject *args) {
             lv[i].nx = sh[0]; lv[i].ny = sh[1]; lv[i].nz = sh[2]; lv[i].nc = 3;
             lv[i].thr = -1.0;
         }
+        Py_ssize_t nr = -1;
+        for (int m = 0; m < ng; m++) {
+            Py_ssize_t st[3] = {-1, nr, 2};
+            if (get_buf(PyList_GET_ITEM(ptabs, m), &btabs[m], 'd', 3, st, "level table") < 0) goto done;
+            ntabs = m + 1;
+            if (st[0] < 1 || st[0] > MAX_LEVELS || st[1] < 2) {
+                PyErr_SetString(PyExc_ValueError, "level table: 1..16 levels and >= 2 densities");
+                goto done;
+            }
+            nr = st[1];
+            ms.tab[m] = (const double *)btabs[m].view.buf;
+            ms.tabk[m] = (int)st[0];
+        }
+        ms.nr = nr;
+        ms.lr0 = lr0;
+        ms.dlr = dlr;
         Py_ssize_t s_tab[3] = {ng, nl, 4};
         if (get_buf(ptab, &btab, 'd', 3, s_tab, "multiple table") < 0) goto done;
-        Py_ssize_t s_lu[1] = {-1};
-        if (get_buf(plu, &blu, 'd', 1, s_lu, "logu") < 0) goto done;
-        if (s_lu[0] < 2) { PyErr_SetString(PyExc_ValueError, "logu: too short"); goto done; }
-        Py_ssize_t s_lf[2] = {ng, s_lu[0]};
-        if (get_buf(plf, &blf, 'd', 2, s_lf, "logf") < 0) goto done;
         const double *T = (const double *)btab.view.buf;
         for (int m = 0; m < ng; m++)
             for (Py_ssize_t l = 0; l < nl; l++) {
                 const double *r = T + ((Py_ssize_t)m * nl + l) * 4;
                 int first = (int)r[0], cnt = (int)r[1];
-                if (cnt <= 0 || first < 0) { ms.first[m][l] = -1; ms.nlev[m][l] = 0; continue; }
-                if (cnt > MAX_LEVELS || first > nlv - cnt || !(r[2] >= 1.0) || !(r[3] > 0.0) ||
-                    !isfinite(r[3])) {
+                if (!(r[1] >= 1.0) || !(r[0] >= 0.0)) { ms.first[m][l] = -1; ms.nlev[m][l] = 0; continue; }
+                if (cnt > MAX_LEVELS || first > nlv - cnt || !(r[2] >= 1.0) || !(r[2] < 1e9) ||
+                    !(r[3] > 0.0) || !isfinite(r[3])) {
                     PyErr_SetString(PyExc_ValueError, "multiple table: bad level range, stride or h");
                     goto done;
                 }
@@ -592,9 +587,6 @@ static PyObject *march(PyObject *self, PyObject *args) {
                 PyErr_SetString(PyExc_ValueError, "ambient multiple channel outside the fields");
                 goto done;
             }
-        ms.logf = (const double *)blf.view.buf;
-        ms.logu = (const double *)blu.view.buf;
-        ms.nu = s_lu[0];
         ms.amb = amb_ms;
         use_ms = 1;
     }
@@ -655,10 +647,7 @@ static PyObject *march(PyObject *self, PyObject *args) {
                     double cosl[MAX_LIGHTS], msi[3];
                     for (Py_ssize_t l = 0; l < nl; l++)
                         cosl[l] = -(wi[l][0] * d[0] + wi[l][1] * d[1] + wi[l][2] * d[2]);
-                    double ss_m = rho * ((sig_s[m][0] + sig_s[m][1] + sig_s[m][2]) / 3.0);
-                    double sa_m = rho * (((g[m].sig[0] - sig_s[m][0]) + (g[m].sig[1] - sig_s[m][1]) +
-                                          (g[m].sig[2] - sig_s[m][2])) / 3.0);
-                    multiple_source_c(&ms, lv, m, (int)nl, cosl, gg[m], ss_m, sa_m, x, g[m].w2i, msi);
+                    multiple_source_c(&ms, lv, m, (int)nl, cosl, rho, x, g[m].w2i, msi);
                     if (ms.amb >= 0)
                         for (int a = 0; a < 3; a++) msi[a] += v[ms.amb + a];
                     for (int a = 0; a < 3; a++) src_ms[a] += rho * sig_s[m][a] * msi[a];
@@ -695,7 +684,8 @@ static PyObject *march(PyObject *self, PyObject *args) {
     result = PyTuple_Pack(5, o_s, o_t, o_d, o_m, o_k);
 done:
     Py_XDECREF(o_s); Py_XDECREF(o_t); Py_XDECREF(o_d); Py_XDECREF(o_m); Py_XDECREF(o_k);
-    buf_release(&btab); buf_release(&blf); buf_release(&blu);
+    buf_release(&btab);
+    for (int m = 0; m < ntabs; m++) buf_release(&btabs[m]);
     if (lvb) for (int i = 0; i < nlv; i++) buf_release(&lvb[i]);
     free(lvb); free(lv);
     buf_release(&bo); buf_release(&bd); buf_release(&b0); buf_release(&b1); buf_release(&bax);

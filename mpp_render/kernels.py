@@ -47,20 +47,18 @@ def c_march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts
     nl = len(np.asarray(lights).reshape(-1, kernels_np.LIGHT_FIELDS))
     packed = None
     if multiple is not None:
-        amb_ms, per_medium = multiple
-        levels, table, logf = [], np.zeros((len(fields), nl, 4)), []
+        amb_ms, per_medium, tables = multiple
+        levels, table = [], np.zeros((len(fields), nl, 4))
         table[:, :, 0] = -1
         for m, mfs in enumerate(per_medium):
-            logf.append(kernels_np.width_table(float(gs[m]))[0])
             for li, msf in enumerate(mfs or []):
                 if msf is None:
                     continue
                 lv, stride, h = msf
                 table[m, li] = (len(levels), len(lv), stride, h)
                 levels.extend(_f32(x) for x in lv)
-        logu = kernels_np.width_table(0.0)[1]
-        packed = (int(amb_ms), levels, table,
-                  _f64(np.array(logf).reshape(len(fields), len(logu))), _f64(logu))
+        packed = (int(amb_ms), levels, table, [_f64(t) for t in tables],
+                  kernels_np.LOG_RHO0, kernels_np.DLOG_RHO)
     s, t, d, m, k = _c.march(_f64(origins).reshape(n, 3), _f64(dirs).reshape(n, 3),
                        _f64(t0).reshape(n), _f64(t1).reshape(n), _f64(axial).reshape(n),
                        np.ascontiguousarray(keys, np.uint32).reshape(n), [_f32(f) for f in fields],

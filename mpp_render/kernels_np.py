@@ -213,39 +213,67 @@ def path_length_for_width(width_sq, l_tr, g):
     return np.where(small, ballistic, u * np.where(np.isfinite(l_tr), l_tr, 0.0))
 
 
-def multiple_source(ms_fields, g, sig_s, sig_a, x, w2i, cos):
-    """Multiply scattered radiance (N,3), W/(m^2 sr), arriving at world points ``x`` (N,3)
-    of one medium and scattered towards the camera (before the final sigma_s), summed over
-    lights: the path-length integral of docs/method.md evaluated on the light pyramid.
+# Density axis of the per-medium level tables: log-spaced relative densities.
+RHO_TABLE = np.logspace(-4, 4, 257)
+LOG_RHO0 = float(np.log(RHO_TABLE[0]))
+DLOG_RHO = float(np.log(RHO_TABLE[1]) - np.log(RHO_TABLE[0]))
 
-    ``ms_fields``: per light None or (levels, stride, h) of precompute.MultipleField;
-    ``sig_s``, ``sig_a`` (N,): local mean scattering / absorption coefficients (1/m); ``g``
-    the medium's anisotropy; ``w2i`` world -> padded index map; ``cos`` (L,N) the cosine
-    between each light's propagation direction and the direction to the camera.  Pyramid level k (width W_k = h 2^k, k >= 1; level 0 unblurred) stands for the
-    paths whose spread width w(l) lies within a factor sqrt(2) of W_k; their path lengths
-    weigh the level by int e^(-sigma_a l) dl; the photons keep mean cosine g e^(-l/l_tr)
-    about the beam, so the last scattering sees HG(g^2 e^(-l/l_tr)).  The blur is centred
-    on the sample (no drift along the beam) and ignores the medium's surface (no image
-    term): both were tried and measured worse, see docs/method.md."""
-    out = np.zeros((len(x), 3))
+
+def level_table(g, sigma_s, sigma_a, h, levels):
+    """Per pyramid level k and density rho (RHO_TABLE), the path-length weight
+    int e^(-sigma_a rho l) dl (m) over the paths the level stands for, and the anisotropy
+    g^2 e^(-l_k / l_tr) of the last scattering: (levels, len(RHO_TABLE), 2) float64.
+
+    ``sigma_s``, ``sigma_a``: the medium's mean coefficients per unit density (1/m); ``h``
+    the pyramid's lattice spacing (m).  Level k (width W_k = h 2^k, level 0 unblurred)
+    stands for the paths whose spread w(l) lies within a factor sqrt(2) of W_k."""
+    rho = RHO_TABLE
+    ss, sa = rho * sigma_s, rho * sigma_a
     b1 = max(1.0 - g, 1e-6)
     with np.errstate(divide="ignore"):
-        l_tr = np.where(sig_s > 0, 1.0 / (sig_s * b1), np.inf)
+        l_tr = np.where(ss > 0, 1.0 / (ss * b1), np.inf)
+    out = np.zeros((levels, len(rho), 2))
+    lo = np.zeros(len(rho))
+    for k in range(levels):
+        hi = path_length_for_width((h * 2.0 ** (k + 0.5)) ** 2, l_tr, g)
+        l_k = np.sqrt(lo * hi) if k else 0.5 * hi
+        out[k, :, 0] = np.exp(-sa * lo) * (hi - lo) * _phi1(sa * (hi - lo))
+        out[k, :, 1] = g * g * np.exp(-l_k / l_tr)
+        lo = hi
+    return out
+
+
+def table_lookup(table, rho):
+    """Linear interpolation of ``table`` (levels, R, 2) in log density; (levels, N, 2)."""
+    f = (np.log(np.maximum(rho, 1e-300)) - LOG_RHO0) / DLOG_RHO
+    f = np.clip(f, 0.0, table.shape[1] - 1.0)
+    i = np.minimum(np.floor(f).astype(np.int64), table.shape[1] - 2)
+    t = (f - i)[None, :, None]
+    return table[:, i] * (1.0 - t) + table[:, i + 1] * t
+
+
+def multiple_source(ms_fields, table, rho, x, w2i, cos):
+    """Multiply scattered radiance (N,3), W/(m^2 sr), arriving at world points ``x`` (N,3)
+    of one medium of density ``rho`` (N,) and scattered towards the camera (before the final
+    sigma_s), summed over lights: the path-length integral of docs/method.md on the light
+    pyramid.
+
+    ``ms_fields``: per light None or (levels, stride, h) of precompute.MultipleField;
+    ``table``: the medium's level_table; ``w2i`` world -> padded index map; ``cos`` (L,N)
+    the cosine between each light's propagation direction and the direction to the camera.
+    Level k adds pyramid_k(x) weight_k HG(cos; g_k).  The blur is centred on the sample (no
+    drift along the beam) and ignores the medium's surface (no image term): both were tried
+    and measured worse, see docs/method.md."""
+    out = np.zeros((len(x), 3))
+    tab = table_lookup(table, rho)
     for li, msf in enumerate(ms_fields):
         if msf is None:
             continue
         levels, stride, h = msf
-        K = len(levels)
         idx0 = (x @ w2i[:, :3].T + w2i[:, 3]) / float(stride)
-        edges = [np.zeros(len(x))] + [path_length_for_width((h * 2.0 ** (k + 0.5)) ** 2, l_tr, g)
-                                      for k in range(K)]
-        for k in range(K):
-            lo, hi = edges[k], edges[k + 1]
-            l_k = np.sqrt(lo * hi) if k else 0.5 * hi
-            weight = np.exp(-sig_a * lo) * (hi - lo) * _phi1(sig_a * (hi - lo))
-            decay = np.exp(-l_k / np.where(np.isfinite(l_tr), l_tr, np.inf))
+        for k in range(min(len(levels), len(tab))):
             q = trilinear(levels[k], idx0 / float(2 ** k))
-            out += q[:, :3] * (weight * _hg(cos[li], g * g * decay))[:, None]
+            out += q[:, :3] * (tab[k, :, 0] * _hg(cos[li], tab[k, :, 1]))[:, None]
     return out
 
 
@@ -268,7 +296,8 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
     boundary, < 0 smooth), ``voxels`` voxel size in metres.  ``lights`` (L, LIGHT_FIELDS)
     packed records; ``ambient`` the world-light channel or -1.  ``step`` metres.
     ``multiple``: None, or (ambient_ms channel or -1, per medium a list with, per light, None
-    or the (levels, stride, h) of its MultipleField) to accumulate multiple scattering too.
+    or the (levels, stride, h) of its MultipleField, per medium its level_table) to
+    accumulate multiple scattering too.
 
     Each step of length h adds T S (1 - exp(-sigma_t h)) / sigma_t with S the in-scattered
     radiance at one jittered point of the step, then T *= exp(-sigma_t h).  Returns
@@ -324,16 +353,14 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
                 inc += v[:, ambient:ambient + 3]
             src += rho[:, None] * sigma_ss[mi][None, :] * inc
             if multiple is not None:
-                amb_ms, per_medium = multiple
+                amb_ms, per_medium, tables = multiple
                 ms_fields = per_medium[mi]
                 live = np.flatnonzero(rho > 0)
                 if live.size:
                     wd = np.stack([emit[li][0][live] for li in range(len(lights))]) \
                         if len(lights) else np.zeros((0, live.size, 3))
                     cos = -np.einsum("lij,ij->li", wd, d[live])
-                    ss_l = rho[live] * float(np.mean(sigma_ss[mi]))
-                    sa_l = rho[live] * float(np.mean(sigma_ts[mi] - sigma_ss[mi]))
-                    ms_inc = multiple_source(ms_fields, gs[mi], ss_l, sa_l, x[live], w2is[mi], cos)
+                    ms_inc = multiple_source(ms_fields, tables[mi], rho[live], x[live], w2is[mi], cos)
                     if amb_ms >= 0:
                         ms_inc += v[live, amb_ms:amb_ms + 3]
                     src_ms[live] += rho[live, None] * sigma_ss[mi][None, :] * ms_inc

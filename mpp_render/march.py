@@ -31,7 +31,7 @@ from typing import List, Optional
 import numpy as np
 
 from . import kernels
-from .kernels_np import LIGHT_FIELDS, REFINE_STEPS, T_MIN, hash32
+from .kernels_np import LIGHT_FIELDS, REFINE_STEPS, RHO_TABLE, T_MIN, hash32
 from .lights import pack_light
 from .media import PreparedMedium
 from .passes import DEPTH_MISS, DEPTH_OPACITY
@@ -72,9 +72,15 @@ class MarchContext:
         self.multiple = None
         if self.multiple_fields is not None:
             amb = self.layout.ambient_multiple_channel
-            per_medium = [[None if m is None else (m.levels, m.stride, m.h) for m in mfs]
-                          for mfs in self.multiple_fields]
-            self.multiple = (-1 if amb is None else amb, per_medium)
+            from .kernels_np import level_table
+            per_medium, tables = [], []
+            for pm, mfs in zip(self.media, self.multiple_fields):
+                per_medium.append([None if m is None else (m.levels, m.stride, m.h) for m in mfs])
+                ref = next((m for m in mfs if m is not None), None)
+                tables.append(np.zeros((1, len(RHO_TABLE), 2)) if ref is None else
+                              level_table(pm.g, float(np.mean(pm.sigma_s)),
+                                          float(np.mean(pm.sigma_a)), ref.h, len(ref.levels)))
+            self.multiple = (-1 if amb is None else amb, per_medium, tables)
 
 
 def march_rays(ctx: MarchContext, origins, dirs, t0, t1, axial, keys):

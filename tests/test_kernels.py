@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from mpp_render import kernels, kernels_np
-from mpp_render.march import pack_lights
+from mpp_render.march import MarchContext, pack_lights
 from mpp_render.media import prepare
 from mpp_render.precompute import precompute
 from mpp_render.scene import Camera, Light, Medium, World
@@ -49,9 +49,7 @@ def test_march_twins_agree_on_random_rays():
     cam.cam_to_world[:3, 3] = [0, 0, 6]
     pre = precompute(media, lights, World(np.array([0.2, 0.3, 0.5])), cam, n_dirs=8,
                      multiple=True)
-    multiple = (pre.layout.ambient_multiple_channel,
-                [[None if m is None else (m.levels, m.stride, m.h) for m in mfs]
-                 for mfs in pre.multiple])
+    multiple = MarchContext(media, pre.fields, pre.layout, lights, 0.07, pre.multiple).multiple
     n = 3000
     o = rng.uniform(-2, 2, (n, 3))
     o[:, 2] = 4.0
