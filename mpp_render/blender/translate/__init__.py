@@ -1,0 +1,126 @@
+"""Translate Blender's evaluated depsgraph into the bpy-free :class:`SceneDescription`.
+
+Everything is copied into numpy arrays and dataclasses, because the evaluated objects are
+freed when ``RenderEngine.render`` returns.  Scene content that cannot be rendered (an
+unsupported node, light type or camera, a missing .vdb, bad voxel values, ...) never raises:
+it is skipped or approximated and explained by a message in ``SceneDescription.warnings``.
+
+Modules: ``camera`` (view plane, camera matrix), ``lights``, ``materials`` (volume and surface
+shaders to constant coefficients, built on ``nodes``), ``meshes`` (volume meshes voxelised by
+``voxelise``, opaque meshes as surfaces), ``vdb`` (Volume objects), ``world``.
+"""
+from __future__ import annotations
+
+from typing import Optional
+
+from ...scene import SceneDescription, Settings
+from .camera import camera_from_object, default_camera, render_size
+from .convert import matrix
+from .lights import light_from_object
+from .meshes import MeshTranslator
+from .vdb import VolumeTranslator
+from .world import world_from_scene
+
+__all__ = ["scene_from_depsgraph"]
+
+# Object types Cycles renders as geometry but this engine does not (yet).
+UNSUPPORTED_GEOMETRY = {"CURVES": "hair curves", "POINTCLOUD": "point clouds"}
+# Object types whose evaluated geometry is a mesh reached through ``to_mesh``.
+MESH_LIKE = ("CURVE", "SURFACE", "META", "FONT")
+
+
+def scene_from_depsgraph(depsgraph, settings: Settings, camera_override=None,
+                         width: Optional[int] = None, height: Optional[int] = None
+                         ) -> SceneDescription:
+    """The :class:`~mpp_render.scene.SceneDescription` of one frame of ``depsgraph``'s view
+    layer.
+
+    ``settings``: already filled by the caller (``voxel_resolution`` is used here).
+    ``camera_override``: the evaluated camera object to render from (the RenderEngine's), else
+    ``depsgraph.scene_eval.camera``.  ``width``/``height``: image size in pixels, by default
+    the scene's render resolution x percentage."""
+    scene = depsgraph.scene_eval
+    warnings = []
+    if width is None or height is None:
+        w, h = render_size(scene)
+        width, height = width or w, height or h
+    cam_ob = camera_override if camera_override is not None else scene.camera
+    if cam_ob is None:
+        warnings.append("the scene has no camera; rendering from the origin looking down -Z")
+        camera = default_camera(width, height)
+    else:
+        camera = camera_from_object(cam_ob, scene, width, height, warnings)
+    desc = SceneDescription(camera=camera, settings=settings, warnings=warnings)
+    try:
+        desc.world = world_from_scene(scene, warnings)
+    except Exception as e:  # safety net, as for objects
+        warnings.append(f"the world could not be translated ({type(e).__name__}: {e}); "
+                        "using black")
+    _objects(depsgraph, desc, settings)
+    desc.warnings = list(dict.fromkeys(warnings))  # instances repeat the same message
+    return desc
+
+
+def _objects(depsgraph, desc: SceneDescription, settings: Settings) -> None:
+    """Lights, media and surfaces of every render-visible object instance.  An instance that
+    fails to translate is skipped with a warning naming it, so one bad object never costs the
+    whole frame."""
+    meshes = MeshTranslator(settings.voxel_resolution, desc.warnings)
+    volumes = VolumeTranslator(desc.warnings)
+    for inst in depsgraph.object_instances:
+        if not getattr(inst, "show_self", True):
+            continue
+        ob = inst.object
+        try:
+            _instance(ob, matrix(inst.matrix_world), meshes, volumes, desc)
+        except Exception as e:  # safety net: report, keep the rest of the scene
+            desc.warnings.append(f"object '{ob.name}' could not be translated "
+                                 f"({type(e).__name__}: {e}); skipped")
+
+
+def _instance(ob, world_matrix, meshes: MeshTranslator, volumes: VolumeTranslator,
+              desc: SceneDescription) -> None:
+    """Translate one evaluated object placed by ``world_matrix`` into ``desc``."""
+    kind = ob.type
+    if kind == "LIGHT":
+        light = light_from_object(ob, world_matrix, desc.warnings)
+        if light is not None:
+            desc.lights.append(light)
+    elif kind == "MESH":
+        if _is_fluid_domain(ob):
+            desc.warnings.append(f"object '{ob.name}': fluid domains not supported yet; skipped")
+            return
+        media, surfaces = meshes.translate(ob, ob.data, world_matrix,
+                                           cache_key=ob.data.as_pointer())
+        desc.media.extend(media)
+        desc.surfaces.extend(surfaces)
+    elif kind in MESH_LIKE:
+        _mesh_like(ob, world_matrix, meshes, desc)
+    elif kind == "VOLUME":
+        desc.media.extend(volumes.translate(ob, world_matrix))
+    elif kind in UNSUPPORTED_GEOMETRY:
+        desc.warnings.append(f"object '{ob.name}': {UNSUPPORTED_GEOMETRY[kind]} are not "
+                             "supported; skipped")
+
+
+def _mesh_like(ob, world_matrix, meshes: MeshTranslator, desc: SceneDescription) -> None:
+    """Curves, surfaces, metaballs and text through their evaluated mesh."""
+    try:
+        mesh = ob.to_mesh()
+    except RuntimeError:
+        mesh = None
+    if mesh is None:
+        return
+    try:
+        media, surfaces = meshes.translate(ob, mesh, world_matrix)
+        desc.media.extend(media)
+        desc.surfaces.extend(surfaces)
+    finally:
+        ob.to_mesh_clear()
+
+
+def _is_fluid_domain(ob) -> bool:
+    for mod in ob.modifiers:
+        if mod.type == "FLUID" and getattr(mod, "fluid_type", "") == "DOMAIN":
+            return True
+    return False

@@ -1,0 +1,261 @@
+"""Volume and surface shading of Blender materials, reduced to constant coefficients.
+
+Volume shaders follow Cycles (``svm_closure.h``); for a closure reached with weight ``w``
+(Mix Shader factors) and a density ``d`` (the Density input, >= 0):
+
+* Principled Volume: sigma_s = Color * d,
+  sigma_a = max(1 - Color, 0) * max(1 - sqrt(Absorption Color), 0) * d,
+  emission = Emission Color * Emission Strength (not scaled by density); the grid named by
+  'Density Attribute' multiplies d where it exists (VDB volumes), so the coefficients are
+  returned *per unit of that grid*.
+* Volume Scatter: sigma_s = Color * d.  Volume Absorption: sigma_a = max(1 - Color, 0) * d.
+* Volume Coefficients: sigma_a, sigma_s and emission are the node's coefficient vectors.
+* Emission (in a Volume output): emission = Color * Strength.
+
+Coefficients are in 1/m, emission in W/(m^3 sr).  Closures that read the same density source
+add; their anisotropies combine as the mean weighted by each closure's mean sigma_s.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Dict, List, Optional, Tuple
+
+import numpy as np
+
+from .convert import fmt, rgb, scalar
+from .nodes import Closure, closures, describe, output_node, resolve
+
+DEFAULT_SURFACE_COLOR = np.full(3, 0.8)   # Cycles' default surface: 0.8 grey diffuse
+HG = "HENYEY_GREENSTEIN"
+
+
+@dataclass
+class VolumeCoefficients:
+    """Constant coefficients of the closures that share one density source.
+
+    ``attribute``: the grid (geometry attribute) whose value multiplies the coefficients, or
+    None for a uniform density.  ``from_attribute_node``: the attribute comes from an
+    Attribute node linked into a Density input (rather than Principled Volume's 'Density
+    Attribute').  ``sigma_s``, ``sigma_a``: RGB 1/m per unit density; ``g``: anisotropy;
+    ``emission``: RGB W/(m^3 sr), not scaled by density."""
+
+    attribute: Optional[str]
+    sigma_s: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    sigma_a: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    g: float = 0.0
+    emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    from_attribute_node: bool = False
+
+
+def principled_volume(color, density, anisotropy, absorption_color, emission=(0.0, 0.0, 0.0),
+                      attribute: Optional[str] = "density") -> VolumeCoefficients:
+    """Cycles' Principled Volume coefficients (see the module docstring)."""
+    c = rgb(color)
+    d = max(float(density), 0.0)
+    ac = np.sqrt(np.maximum(rgb(absorption_color), 0.0))
+    absorption = np.maximum(1.0 - c, 0.0) * np.maximum(1.0 - ac, 0.0)
+    return VolumeCoefficients(attribute, np.maximum(c * d, 0.0), absorption * d,
+                              float(anisotropy), rgb(emission))
+
+
+def default_volume() -> VolumeCoefficients:
+    """What a Volume object without a material renders like: a default Principled Volume
+    (Color 0.5, Density 1 x the 'density' grid, no absorption colour, anisotropy 0)."""
+    return principled_volume((0.5, 0.5, 0.5), 1.0, 0.0, (0.0, 0.0, 0.0))
+
+
+class ClosureInputs:
+    """Constant inputs of one closure node; warns about inputs that are not constant."""
+
+    def __init__(self, closure: Closure, where: str, warnings: List[str]):
+        self.closure, self.where, self.warnings = closure, where, warnings
+
+    def raw(self, name, allow_attribute=False):
+        """``(value, attribute)`` of input ``name``; non-constant inputs fall back to the
+        socket's own value with a warning (an attribute is returned when allowed)."""
+        node = self.closure.node
+        socket = node.inputs.get(name)
+        if socket is None:
+            return None, None
+        res = resolve(socket, self.closure.stack)
+        if res.attribute is not None and allow_attribute:
+            return 1.0, res.attribute
+        if res.value is None:
+            culprit = _culprit(res)
+            self.warnings.append(
+                f"{self.where}: {culprit} linked into '{name}' of {describe(node)} is not "
+                f"supported; using the input's value {fmt(socket.default_value)}")
+            return _plain(socket.default_value), None
+        return res.value, None
+
+    def color(self, name) -> np.ndarray:
+        return rgb(self.raw(name)[0])
+
+    def number(self, name) -> float:
+        return scalar(self.raw(name)[0])
+
+
+def _plain(v):
+    return v if isinstance(v, (int, float, str)) else tuple(v)
+
+
+def _phase_g(node, inputs: ClosureInputs, where, warnings) -> float:
+    """Anisotropy of a scattering node; other phase functions become Henyey-Greenstein."""
+    phase = getattr(node, "phase", HG)
+    if phase == HG:
+        return inputs.number("Anisotropy")
+    g = 0.0 if phase == "RAYLEIGH" else inputs.number("Anisotropy")
+    warnings.append(f"{where}: phase function {phase} of {describe(node)} is not supported; "
+                    f"using Henyey-Greenstein with anisotropy {g:g}")
+    return g
+
+
+def _volume_closure(c: Closure, where, warnings):
+    """The :class:`VolumeCoefficients` of one closure (before its Mix weight), or None (with
+    a warning) when the node is not a volume shader."""
+    node, kind = c.node, c.node.bl_idname
+    inp = ClosureInputs(c, where, warnings)
+    if kind == "ShaderNodeVolumePrincipled":
+        dens, linked_attr = inp.raw("Density", allow_attribute=True)
+        attr = inp.raw("Density Attribute")[0] or None
+        if linked_attr is not None and attr is not None:
+            warnings.append(f"{where}: attribute '{linked_attr}' linked into 'Density' of "
+                            f"{describe(node)} is not supported together with its Density "
+                            f"Attribute '{attr}'; using Density 1")
+            linked_attr = None
+        if inp.number("Blackbody Intensity") > 0.0:
+            warnings.append(f"{where}: blackbody emission of {describe(node)} is not supported "
+                            "yet; ignored")
+        color_attr = inp.raw("Color Attribute")[0]
+        if color_attr:
+            warnings.append(f"{where}: Color Attribute '{color_attr}' of {describe(node)} is not "
+                            "supported; using its Color")
+        co = principled_volume(inp.color("Color"), scalar(dens), inp.number("Anisotropy"),
+                               inp.color("Absorption Color"),
+                               inp.color("Emission Color") * inp.number("Emission Strength"),
+                               attribute=linked_attr or attr)
+        co.from_attribute_node = linked_attr is not None
+        return co
+    if kind in ("ShaderNodeVolumeScatter", "ShaderNodeVolumeAbsorption"):
+        dens, attr = inp.raw("Density", allow_attribute=True)
+        d = max(scalar(dens), 0.0)
+        co = VolumeCoefficients(attr, from_attribute_node=attr is not None)
+        if kind == "ShaderNodeVolumeScatter":
+            co.sigma_s = np.maximum(inp.color("Color"), 0.0) * d
+            co.g = _phase_g(node, inp, where, warnings)
+        else:
+            co.sigma_a = np.maximum(1.0 - inp.color("Color"), 0.0) * d
+        return co
+    if kind == "ShaderNodeVolumeCoefficients":
+        return VolumeCoefficients(
+            None, np.maximum(inp.color("Scatter Coefficients"), 0.0),
+            np.maximum(inp.color("Absorption Coefficients"), 0.0),
+            _phase_g(node, inp, where, warnings), inp.color("Emission Coefficients"))
+    if kind == "ShaderNodeEmission":
+        return VolumeCoefficients(None, emission=inp.color("Color") * inp.number("Strength"))
+    warnings.append(f"{where}: {describe(node)} is not a supported volume shader; ignored")
+    return None
+
+
+def _culprit(res) -> str:
+    """What makes a resolved input non-constant, for messages."""
+    if res.attribute is not None:
+        return f"attribute '{res.attribute}'"
+    if res.unsupported is not None:
+        return f"node {describe(res.unsupported)}"
+    return "a link"
+
+
+def _mix_warning(where, warnings):
+    def warn(node, res):
+        culprit = _culprit(res)
+        warnings.append(f"{where}: {culprit} linked into the factor of {describe(node)} is not "
+                        f"supported; using its value {fmt(node.inputs[0].default_value)}")
+    return warn
+
+
+def output_closures(tree, socket_name, where, warnings) -> List[Closure]:
+    out = output_node(tree)
+    if out is None:
+        return []
+    socket = out.inputs.get(socket_name)
+    return closures(socket, on_unsupported=_mix_warning(where, warnings))
+
+
+def is_linked(tree, socket_name) -> bool:
+    """Whether the active output of ``tree`` has something linked into ``socket_name``."""
+    out = output_node(tree)
+    socket = out.inputs.get(socket_name) if out is not None else None
+    return bool(socket is not None and socket.is_linked)
+
+
+def volume_shading(material, where: str, warnings: List[str]) -> Optional[List[VolumeCoefficients]]:
+    """The volume coefficients of ``material``, one entry per density source; None when the
+    material has no volume shader (nothing linked into its output's 'Volume')."""
+    tree = getattr(material, "node_tree", None)
+    if tree is None or not is_linked(tree, "Volume"):
+        return None
+    groups: Dict[Tuple, VolumeCoefficients] = {}
+    g_weight: Dict[Tuple, float] = {}
+    for c in output_closures(tree, "Volume", where, warnings):
+        co = _volume_closure(c, where, warnings)
+        if co is None:
+            continue
+        key = (co.attribute, co.from_attribute_node)
+        acc = groups.setdefault(key, VolumeCoefficients(co.attribute,
+                                                        from_attribute_node=co.from_attribute_node))
+        w = c.weight
+        acc.sigma_s = acc.sigma_s + w * co.sigma_s
+        acc.sigma_a = acc.sigma_a + w * co.sigma_a
+        acc.emission = acc.emission + w * co.emission
+        s = w * float(np.mean(co.sigma_s))
+        acc.g += s * co.g
+        g_weight[key] = g_weight.get(key, 0.0) + s
+    for key, acc in groups.items():
+        acc.g = acc.g / g_weight[key] if g_weight[key] > 0.0 else 0.0
+    return list(groups.values())
+
+
+def merge(groups: List[VolumeCoefficients]) -> VolumeCoefficients:
+    """All density sources of a material added into one uniform set of coefficients."""
+    out = VolumeCoefficients(None)
+    sw = 0.0
+    for co in groups:
+        out.sigma_s = out.sigma_s + co.sigma_s
+        out.sigma_a = out.sigma_a + co.sigma_a
+        out.emission = out.emission + co.emission
+        s = float(np.mean(co.sigma_s))
+        out.g += s * co.g
+        sw += s
+    out.g = out.g / sw if sw > 0.0 else 0.0
+    return out
+
+
+def surface_shading(material, where: str, warnings: List[str]):
+    """``(base_color, emission)`` RGB of an opaque material: the weighted sum of its Principled
+    BSDF 'Base Color' / Diffuse BSDF 'Color' closures (Lambertian albedo) and of its emission
+    (Principled 'Emission Color' x 'Emission Strength', Emission 'Color' x 'Strength',
+    W/(m^2 sr)).  No material: 0.8 grey."""
+    if material is None:
+        return DEFAULT_SURFACE_COLOR.copy(), np.zeros(3)
+    tree = getattr(material, "node_tree", None)
+    if tree is None:
+        return rgb(material.diffuse_color), np.zeros(3)
+    found = output_closures(tree, "Surface", where, warnings)
+    base, emission = np.zeros(3), np.zeros(3)
+    if not found:
+        warnings.append(f"{where}: no surface or volume shader is connected; rendered black")
+    for c in found:
+        inp = ClosureInputs(c, where, warnings)
+        kind = c.node.bl_idname
+        if kind == "ShaderNodeBsdfPrincipled":
+            base += c.weight * inp.color("Base Color")
+            emission += c.weight * inp.color("Emission Color") * inp.number("Emission Strength")
+        elif kind == "ShaderNodeBsdfDiffuse":
+            base += c.weight * inp.color("Color")
+        elif kind == "ShaderNodeEmission":
+            emission += c.weight * inp.color("Color") * inp.number("Strength")
+        else:
+            warnings.append(f"{where}: surface shader {describe(c.node)} is not supported; "
+                            "ignored (black)")
+    return base, emission

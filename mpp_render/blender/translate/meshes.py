@@ -1,0 +1,124 @@
+"""Mesh objects: volume materials become voxelised media, other materials opaque surfaces."""
+from __future__ import annotations
+
+from typing import Dict, List
+
+import numpy as np
+
+from ...scene import Medium, Surface
+from .materials import is_linked, merge, surface_shading, volume_shading
+from .voxelise import inside, is_closed, lattice
+
+
+def mesh_arrays(mesh):
+    """``(vertices (N,3) float64 object space, triangles (M,3) int64, material_index (M,)
+    int64)`` copied from a Blender mesh."""
+    n = len(mesh.vertices)
+    co = np.empty(n * 3, np.float32)
+    mesh.vertices.foreach_get("co", co)
+    if len(mesh.loop_triangles) == 0 and len(mesh.polygons) > 0:
+        mesh.calc_loop_triangles()
+    m = len(mesh.loop_triangles)
+    tri = np.empty(m * 3, np.int32)
+    mat = np.zeros(m, np.int32)
+    if m:
+        mesh.loop_triangles.foreach_get("vertices", tri)
+        mesh.loop_triangles.foreach_get("material_index", mat)
+    return (co.reshape(n, 3).astype(np.float64), tri.reshape(m, 3).astype(np.int64),
+            mat.astype(np.int64))
+
+
+def slot_materials(ob, mesh) -> list:
+    """The material of each slot of ``ob`` (None for an empty slot)."""
+    mats = [slot.material for slot in ob.material_slots]
+    if not mats:
+        mats = list(getattr(mesh, "materials", []))
+    return mats
+
+
+class MeshTranslator:
+    """Turns evaluated mesh instances into media and surfaces.
+
+    ``resolution``: voxels along the longest world side of a volume mesh.  Voxelisations are
+    cached per mesh and lattice shape, so instances of one mesh are voxelised once."""
+
+    def __init__(self, resolution: int, warnings: List[str]):
+        self.resolution = int(resolution)
+        self.warnings = warnings
+        self._cache: Dict[tuple, np.ndarray] = {}
+
+    def translate(self, ob, mesh, world_matrix: np.ndarray, cache_key=None):
+        """``(media, surfaces)`` for the evaluated object ``ob`` with geometry ``mesh`` placed
+        by ``world_matrix`` (4x4)."""
+        verts, tris, mat_index = mesh_arrays(mesh)
+        if tris.size == 0:
+            return [], []
+        mats = slot_materials(ob, mesh)
+        slot_of = np.clip(mat_index, 0, max(len(mats) - 1, 0))
+        per_slot = {int(s): (mats[s] if s < len(mats) else None) for s in np.unique(slot_of)}
+        volumes = {}
+        for s, mat in per_slot.items():
+            where = self._where(ob, mat)
+            shading = volume_shading(mat, where, self.warnings) if mat is not None else None
+            if shading is not None:
+                volumes[s] = (mat, shading)
+        if volumes:
+            return self._medium(ob, verts, tris, per_slot, volumes, world_matrix, cache_key), []
+        return [], self._surfaces(ob, verts, tris, slot_of, per_slot, world_matrix)
+
+    @staticmethod
+    def _where(ob, mat) -> str:
+        return f"material '{mat.name}' on object '{ob.name}'" if mat is not None else f"object '{ob.name}'"
+
+    def _medium(self, ob, verts, tris, per_slot, volumes, world_matrix, cache_key) -> List[Medium]:
+        slot, (mat, shading) = next(iter(volumes.items()))
+        where = self._where(ob, mat)
+        others = [m.name for s, m in per_slot.items() if s != slot and m is not None]
+        if others:
+            self.warnings.append(f"object '{ob.name}': only its first volume material "
+                                 f"'{mat.name}' is used for the whole mesh; ignoring "
+                                 + ", ".join(f"'{n}'" for n in others))
+        if is_linked(mat.node_tree, "Surface"):
+            self.warnings.append(f"{where}: the surface shader of a volume material is not "
+                                 "supported; only its volume is rendered")
+        for co in shading:
+            if co.from_attribute_node:
+                self.warnings.append(f"{where}: attribute '{co.attribute}' has no values inside a "
+                                     "mesh; using a uniform density")
+        if not shading:
+            return []
+        coeff = merge(shading)
+        if not is_closed(tris):
+            self.warnings.append(f"object '{ob.name}': the mesh is not closed, so its volume "
+                                 "interior is approximate")
+        lat = lattice(verts, world_matrix, self.resolution)
+        if lat is None:
+            self.warnings.append(f"object '{ob.name}': the mesh is flat and has no interior; "
+                                 "its volume is skipped")
+            return []
+        shape, i2o = lat
+        key = (cache_key, shape) if cache_key is not None else None
+        density = self._cache.get(key) if key is not None else None
+        if density is None:
+            density = inside(verts, tris, i2o, shape).astype(np.float32)
+            if key is not None:
+                self._cache[key] = density
+        return [Medium(name=ob.name, density=density, index_to_world=world_matrix @ i2o,
+                       sigma_s=coeff.sigma_s, sigma_a=coeff.sigma_a, g=float(coeff.g),
+                       emission=coeff.emission, source="MESH")]
+
+    def _surfaces(self, ob, verts, tris, slot_of, per_slot, world_matrix) -> List[Surface]:
+        world = verts @ world_matrix[:3, :3].T + world_matrix[:3, 3]
+        if len(per_slot) == 1:
+            mat = next(iter(per_slot.values()))
+            base, emission = surface_shading(mat, self._where(ob, mat), self.warnings)
+            return [Surface(ob.name, world, tris.copy(), base, emission)]
+        out = []
+        for s, mat in per_slot.items():
+            sel = tris[slot_of == s]
+            used, local = np.unique(sel, return_inverse=True)
+            base, emission = surface_shading(mat, self._where(ob, mat), self.warnings)
+            name = f"{ob.name} [{mat.name if mat is not None else 'no material'}]"
+            out.append(Surface(name, world[used], local.reshape(-1, 3).astype(np.int64),
+                               base, emission))
+        return out

@@ -1,0 +1,206 @@
+"""Volume objects (OpenVDB grids) as media.
+
+Blender does not expose voxel values through RNA, so the *evaluated* grids (after modifiers
+such as Volume Displace) are written to a scratch .vdb with ``grids.save`` and read back with
+the openvdb module bundled with Blender.  Each grid a material reads becomes one medium whose
+density is the grid's values (NaN, inf and negatives set to 0; values below the volume's
+render clipping set to 0) and whose coefficients are the material's, per unit grid value.
+``index_to_world`` = object world matrix @ grid index->object matrix @ offset of the dense
+block, so integer ijk of the array are voxel centres, as in OpenVDB.
+"""
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+from typing import Dict, List, Optional
+
+import numpy as np
+
+from ...media import sanitise
+from ...scene import Medium
+from .convert import matrix
+from .materials import VolumeCoefficients, default_volume, merge, volume_shading
+
+SCALAR_TYPES = {"FLOAT": np.float32, "DOUBLE": np.float64}
+
+
+def openvdb_module():
+    """The openvdb Python module shipped inside Blender (None when unavailable)."""
+    try:
+        import openvdb  # noqa: F401
+        return openvdb
+    except ImportError:
+        pass
+    import bpy
+    ver = f"python{sys.version_info.major}.{sys.version_info.minor}"
+    path = os.path.join(bpy.utils.system_resource("PYTHON"), "lib", ver, "site-packages")
+    if path not in sys.path:
+        sys.path.append(path)
+    try:
+        import openvdb
+        return openvdb
+    except ImportError:
+        return None
+
+
+def read_dense(vdb, path: str, name: str, dtype):
+    """``(values (nx,ny,nz) float32, ijk of values[0,0,0], background)`` of the active
+    bounding box of grid ``name`` in the file ``path``; None when the grid is empty."""
+    grid = vdb.read(path, name)
+    if grid.activeVoxelCount() == 0:
+        return None
+    lo, hi = grid.evalActiveVoxelBoundingBox()
+    shape = tuple(int(h) - int(l) + 1 for l, h in zip(lo, hi))
+    a = np.zeros(shape, dtype)
+    grid.copyToArray(a, ijk=tuple(int(v) for v in lo))
+    return a.astype(np.float32, copy=False), tuple(int(v) for v in lo), float(grid.background)
+
+
+class VolumeTranslator:
+    """Turns evaluated Volume objects into media.  Grids are read once per volume datablock,
+    so instances of one volume share their density arrays."""
+
+    def __init__(self, warnings: List[str]):
+        self.warnings = warnings
+        self._cache: Dict[tuple, Optional[tuple]] = {}
+
+    def translate(self, ob, world_matrix: np.ndarray) -> List[Medium]:
+        vol = ob.data
+        where = f"volume object '{ob.name}'"
+        shading = self._shading(ob, where)
+        if not shading:
+            return []
+        grids = {g.name: g for g in vol.grids}
+        if not grids:
+            self.warnings.append(self._no_grids_message(vol, where))
+            return []
+        wanted = [grids[co.attribute] for co in shading if co.attribute in grids]
+        blocks = self._blocks(vol, wanted, where)
+        media: List[Medium] = []
+        uniform: List[VolumeCoefficients] = []
+        for co in shading:
+            if co.attribute not in grids:
+                uniform.append(co)
+            elif blocks.get(co.attribute) is not None:
+                block = blocks[co.attribute]
+                media.append(self._medium(ob, co, block, grids[co.attribute], world_matrix,
+                                          len(shading) > 1))
+        if uniform:
+            self._uniform(ob, where, uniform, media, grids)
+        return media
+
+    # -- pieces -----------------------------------------------------------------------------
+
+    def _shading(self, ob, where) -> List[VolumeCoefficients]:
+        mats = [s.material for s in ob.material_slots if s.material is not None]
+        if not mats:
+            mats = [m for m in getattr(ob.data, "materials", []) if m is not None]
+        if not mats:
+            return [default_volume()]
+        mat = mats[0]
+        mwhere = f"material '{mat.name}' on {where}"
+        shading = volume_shading(mat, mwhere, self.warnings)
+        if shading is None:
+            self.warnings.append(f"{mwhere}: no volume shader is connected, so the volume "
+                                 "renders nothing; skipped")
+            return []
+        return shading
+
+    def _no_grids_message(self, vol, where) -> str:
+        import bpy
+        path = bpy.path.abspath(vol.grids.frame_filepath or vol.filepath)
+        if vol.filepath and not os.path.exists(path):
+            return f"{where}: VDB file '{path}' not found; skipped"
+        err = vol.grids.error_message
+        return f"{where}: no grids could be loaded from '{path}'" + (f" ({err})" if err else "") \
+            + "; skipped"
+
+    def _blocks(self, vol, wanted, where) -> dict:
+        """``{grid name: (values, ijk origin, index->object 4x4) or None}`` for the grids in
+        ``wanted``, read once per volume datablock: the evaluated grids are saved to one
+        scratch file and each wanted grid is read back, sanitised and clipped."""
+        out, todo = {}, []
+        for g in wanted:
+            key = (vol.as_pointer(), g.name)
+            if key in self._cache:
+                out[g.name] = self._cache[key]
+            elif g.name not in (t.name for t in todo):
+                todo.append(g)
+        if not todo:
+            return out
+        vdb = openvdb_module()
+        if vdb is None:
+            self.warnings.append(f"{where}: Blender's openvdb module is not available; skipped")
+            return out
+        with tempfile.TemporaryDirectory(prefix="mpp_vdb_") as tmp:
+            path = os.path.join(tmp, "grids.vdb")
+            try:
+                vol.grids.save(path)
+            except Exception as e:  # RuntimeError from Blender when the grids cannot be written
+                self.warnings.append(f"{where}: its grids could not be saved for reading ({e}); "
+                                     "skipped")
+                return out
+            for g in todo:
+                out[g.name] = self._cache[(vol.as_pointer(), g.name)] = \
+                    self._read(vdb, path, vol, g, where)
+        return out
+
+    def _read(self, vdb, path, vol, g, where):
+        """The sanitised, clipped dense block of grid ``g`` from the scratch file, or None."""
+        dtype = SCALAR_TYPES.get(g.data_type)
+        if dtype is None:
+            self.warnings.append(f"{where}: grid '{g.name}' has type {g.data_type}; only float "
+                                 "grids can be used as density; skipped")
+            return None
+        try:
+            block = read_dense(vdb, path, g.name, dtype)
+        except Exception as e:  # openvdb raises plain exceptions for bad grids
+            self.warnings.append(f"{where}: grid '{g.name}' could not be read ({e}); skipped")
+            return None
+        if block is None:
+            self.warnings.append(f"{where}: grid '{g.name}' has no active voxels; skipped")
+            return None
+        values, origin, background = block
+        values, bad = sanitise(values)
+        if bad:
+            self.warnings.append(f"{where}: {bad} voxels of grid '{g.name}' were NaN, infinite or "
+                                 "negative; set to 0")
+        clip = float(getattr(vol.render, "clipping", 0.0))
+        if clip > 0.0:
+            values = np.where(values < clip, np.float32(0.0), values)
+        if background != 0.0:
+            self.warnings.append(f"{where}: the background value {background:g} of grid "
+                                 f"'{g.name}' is ignored (0 outside the active voxels)")
+        return values, origin, matrix(g.matrix_object)
+
+    def _medium(self, ob, co, block, g, world_matrix, several) -> Medium:
+        values, origin, index_to_object = block
+        offset = np.eye(4)
+        offset[:3, 3] = origin
+        return Medium(name=f"{ob.name}:{g.name}" if several else ob.name, density=values,
+                      index_to_world=np.asarray(world_matrix) @ index_to_object @ offset,
+                      sigma_s=co.sigma_s, sigma_a=co.sigma_a, g=float(co.g),
+                      emission=co.emission, source="VDB")
+
+    def _uniform(self, ob, where, uniform, media, grids):
+        """Closures with a uniform density: Cycles fills the hull of the grids the material
+        reads with them; that hull is approximated by the voxels where those grids are
+        non-zero.  A material that reads no grid renders nothing in Cycles."""
+        names = ", ".join(f"'{n}'" for n in grids)
+        if not media:
+            wanted = sorted({co.attribute for co in uniform if co.attribute})
+            what = (f"reads grid {', '.join(repr(w) for w in wanted)}, which the volume lacks"
+                    if wanted else "reads no grid of the volume")
+            self.warnings.append(f"{where}: its material {what} (grids: {names}); without a "
+                                 "density grid it renders nothing; skipped")
+            return
+        base = media[0]
+        coeff = merge(uniform)
+        self.warnings.append(f"{where}: shaders with a uniform density are approximated inside "
+                             f"the non-zero voxels of '{base.name}'")
+        media.append(Medium(name=f"{ob.name}:uniform", density=(base.density > 0).astype(np.float32),
+                            index_to_world=base.index_to_world, sigma_s=coeff.sigma_s,
+                            sigma_a=coeff.sigma_a, g=coeff.g, emission=coeff.emission,
+                            source="VDB"))
+
