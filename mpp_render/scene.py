@@ -107,8 +107,11 @@ class Surface:
     """An opaque triangle mesh: stops camera rays and shadows the media.
 
     ``vertices``: float64 (N, 3) world metres; ``triangles``: int64 (M, 3) vertex indices.
-    ``base_color``: RGB diffuse albedo (Lambertian shading of the Principled BSDF base colour);
+    ``base_color``: RGB diffuse albedo (the Principled BSDF base colour);
     ``emission``: RGB emitted radiance W/(m^2 sr).  ``name``: the object's name.
+    ``specular``: reflectance at normal incidence F0 of the dielectric coat of a Principled
+    BSDF (0.04 for IOR 1.5; 0 for a purely diffuse material); ``roughness``: its GGX
+    roughness in [0, 1] (alpha = roughness^2), as Blender's Roughness input.
     """
 
     name: str
@@ -116,6 +119,8 @@ class Surface:
     triangles: np.ndarray
     base_color: np.ndarray = field(default_factory=lambda: np.full(3, 0.8))
     emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    specular: float = 0.0
+    roughness: float = 0.5
 
 
 @dataclass

@@ -69,3 +69,14 @@ def test_surface_casts_volumetric_shadow():
     b = render(top_down_scene([quad(2.0, 1.0, albedo=0.0, name="roof")], [med],
                               sun_dir=tilt)).passes["Volume Single"]
     assert np.all(b[10, 16] < 0.8 * a[10, 16])
+
+
+def test_principled_coat_adds_gloss_towards_the_mirror_direction():
+    tilt = (np.sin(0.3), 0.0, -np.cos(0.3))
+    matte = render(top_down_scene([quad(0.0, 3.0)], sun_dir=tilt)).passes["Combined"]
+    coated = quad(0.0, 3.0)
+    coated.specular, coated.roughness = 0.04, 0.3
+    glossy = render(top_down_scene([coated], sun_dir=tilt)).passes["Combined"]
+    # half vector 0.15 rad from the normal: a clear highlight, and never darker than matte
+    assert np.all(glossy[..., :3] >= matte[..., :3] - 1e-7)
+    assert glossy[10, 10, 0] > 1.05 * matte[10, 10, 0]

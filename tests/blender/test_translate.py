@@ -765,3 +765,14 @@ def test_public_colored_sphere(scenes_dir):
     assert m.g == pytest.approx(0.5)
     voxel = abs(np.linalg.det(m.index_to_world[:3, :3]))
     assert m.density.sum() * voxel == pytest.approx(4 / 3 * math.pi * 1.2 ** 3, rel=0.03)
+
+
+def test_principled_surface_coat_parameters(scenes_dir):
+    from mpp_render.blender.translate import scene_from_depsgraph
+    from mpp_render.scene import Settings
+    bpy.ops.wm.open_mainfile(filepath=str(scenes_dir / "smoke_plume" / "scene.blend"))
+    desc = scene_from_depsgraph(bpy.context.evaluated_depsgraph_get(), Settings())
+    (ground,) = desc.surfaces
+    assert abs(ground.specular - 0.04) < 1e-6       # IOR 1.5, Specular IOR Level 0.5
+    assert abs(ground.roughness - 1.0) < 1e-6       # as the file sets it
+    assert np.allclose(ground.base_color, 0.5, atol=1e-6)

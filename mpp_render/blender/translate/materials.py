@@ -232,17 +232,19 @@ def merge(groups: List[VolumeCoefficients]) -> VolumeCoefficients:
 
 
 def surface_shading(material, where: str, warnings: List[str]):
-    """``(base_color, emission)`` RGB of an opaque material: the weighted sum of its Principled
-    BSDF 'Base Color' / Diffuse BSDF 'Color' closures (Lambertian albedo) and of its emission
-    (Principled 'Emission Color' x 'Emission Strength', Emission 'Color' x 'Strength',
-    W/(m^2 sr)).  No material: 0.8 grey."""
+    """``(base_color, emission, specular, roughness)`` of an opaque material: the weighted sum
+    of its Principled BSDF 'Base Color' / Diffuse BSDF 'Color' closures (diffuse albedo), of
+    its emission (Principled 'Emission Color' x 'Emission Strength', Emission 'Color' x
+    'Strength', W/(m^2 sr)), and the Principled coat's F0 = ((IOR-1)/(IOR+1))^2 x 2 x
+    'Specular IOR Level' and 'Roughness' (see scene.Surface).  No material: 0.8 grey."""
     if material is None:
-        return DEFAULT_SURFACE_COLOR.copy(), np.zeros(3)
+        return DEFAULT_SURFACE_COLOR.copy(), np.zeros(3), 0.0, 0.5
     tree = getattr(material, "node_tree", None)
     if tree is None:
-        return rgb(material.diffuse_color), np.zeros(3)
+        return rgb(material.diffuse_color), np.zeros(3), 0.0, 0.5
     found = output_closures(tree, "Surface", where, warnings)
     base, emission = np.zeros(3), np.zeros(3)
+    specular, roughness, spec_w = 0.0, 0.0, 0.0
     if not found:
         warnings.append(f"{where}: no surface or volume shader is connected; rendered black")
     for c in found:
@@ -251,6 +253,11 @@ def surface_shading(material, where: str, warnings: List[str]):
         if kind == "ShaderNodeBsdfPrincipled":
             base += c.weight * inp.color("Base Color")
             emission += c.weight * inp.color("Emission Color") * inp.number("Emission Strength")
+            ior = max(inp.number("IOR"), 1.0)
+            f0 = ((ior - 1.0) / (ior + 1.0)) ** 2 * 2.0 * max(inp.number("Specular IOR Level"), 0.0)
+            specular += c.weight * min(f0, 1.0)
+            roughness += c.weight * float(np.clip(inp.number("Roughness"), 0.0, 1.0))
+            spec_w += c.weight
         elif kind == "ShaderNodeBsdfDiffuse":
             base += c.weight * inp.color("Color")
         elif kind == "ShaderNodeEmission":
@@ -258,4 +265,4 @@ def surface_shading(material, where: str, warnings: List[str]):
         else:
             warnings.append(f"{where}: surface shader {describe(c.node)} is not supported; "
                             "ignored (black)")
-    return base, emission
+    return base, emission, specular, (roughness / spec_w if spec_w > 0 else 0.5)
