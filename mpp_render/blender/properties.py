@@ -12,6 +12,13 @@ from bpy.props import BoolProperty, FloatProperty, IntProperty, PointerProperty
 from ..scene import Settings
 
 
+def _refresh_passes(self, context):
+    """Multiple scattering on/off adds/removes the Volume Multiple pass: let every view layer
+    of the scene (and the compositor's Render Layers node) see the new list."""
+    for view_layer in self.id_data.view_layers:
+        view_layer.update_render_passes()
+
+
 class MPPRenderSettings(bpy.types.PropertyGroup):
     """Per-scene settings of the MPP engine (``scene.mpp``)."""
 
@@ -29,11 +36,11 @@ class MPPRenderSettings(bpy.types.PropertyGroup):
         description="Voxels along the longest side when a mesh volume (an object with a "
                     "volume material) is turned into a density grid. Dimensionless count")
     multiple: BoolProperty(
-        name="Multiple Scattering", default=True,
+        name="Multiple Scattering", default=True, update=_refresh_passes,
         description="Add light scattered more than once (most-probable-path approximation), "
                     "filling the Volume Multiple pass. Off: single scattering only")
     ambient_directions: IntProperty(
-        name="Ambient Directions", default=64, min=1, soft_max=512,
+        name="Ambient Directions", default=32, min=1, soft_max=512,
         description="Directions (count) per voxel used to integrate the world light's "
                     "transmittance through the volumes. More: smoother sky lighting, slower "
                     "precompute")

@@ -1,0 +1,46 @@
+"""``python -m mpp_render render|compare`` in a subprocess, on the public slab scene."""
+import json
+import math
+import os
+import subprocess
+import sys
+
+import numpy as np
+
+from mpp_render import exr
+
+from conftest import REPO
+
+TIMING_KEYS = ("translate", "precompute", "march", "write", "total")
+
+
+def run_cli(*args, timeout=120):
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
+    env.pop("MPP_TEST_BREAK_AFTER_S", None)
+    p = subprocess.run([sys.executable, "-m", "mpp_render", *map(str, args)], cwd=str(REPO),
+                       env=env, capture_output=True, text=True, timeout=timeout)
+    assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-2000:]
+    return json.loads(p.stdout.strip().splitlines()[-1])
+
+
+def test_cli_render_and_compare(scenes_dir, tmp_path):
+    scene = scenes_dir / "slab_forward"
+    out = tmp_path / "slab.exr"
+    rec = run_cli("render", scene / "scene.blend", "-o", out, "--resolution-percentage", 25,
+                  "--samples", 1, "--no-multiple")
+    for key in TIMING_KEYS:
+        assert isinstance(rec[key], float) and rec[key] >= 0.0, key
+    assert rec["total"] >= rec["march"] and isinstance(rec["warnings"], list)
+    assert rec["resolution"] == [40, 30]
+
+    passes = exr.read_passes(str(out))
+    assert set(passes) == {"Combined", "Volume Single", "Transmittance", "Depth"}
+    assert passes["Combined"].shape == (30, 40, 4)
+    assert np.all(np.isfinite(passes["Combined"]))
+    assert (tmp_path / "slab.png").is_file()
+
+    m = run_cli("compare", out, scene, "--single")
+    assert not m["failed"] and m["ref_downsample"] == 4
+    for key in ("rel_rmse", "floor", "bias", "rel_rmse_4", "floor_4"):
+        assert isinstance(m[key], float) and math.isfinite(m[key]), key
