@@ -7,7 +7,21 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 REPO = pathlib.Path(__file__).resolve().parents[2]
-SCENES = (REPO.parent / "shared" / "scenes").resolve()
+
+
+def find_scenes():
+    """The public scene suite: $MPP_SCENES, else ``shared/scenes`` beside the checkout (or
+    beside one of its parents)."""
+    if os.environ.get("MPP_SCENES"):
+        return pathlib.Path(os.environ["MPP_SCENES"]).resolve()
+    for parent in REPO.parents:
+        cand = parent / "shared" / "scenes"
+        if cand.is_dir():
+            return cand.resolve()
+    return (REPO.parent / "shared" / "scenes").resolve()
+
+
+SCENES = find_scenes()
 
 
 @pytest.fixture
