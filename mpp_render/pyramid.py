@@ -50,6 +50,10 @@ def build(base: np.ndarray, max_levels: int = 8) -> List[np.ndarray]:
     while len(levels) < max_levels and min(levels[-1].shape[:3]) > 2:
         k = len(levels)
         src = levels[-1]
+        # an odd count keeps the last point on the coarser lattice (j * 2 covers n - 1);
+        # the extra point beyond the field is zero before the blur, like the field outside
+        pad = [(0, (n + 1) % 2) for n in src.shape[:3]] + [(0, 0)] * (src.ndim - 3)
+        src = np.pad(src, pad)
         sigma = SQRT3 if k > 1 else 2.0  # level 1: from the unblurred base to 2h
         blurred = gaussian_blur(src, sigma)
         levels.append(np.ascontiguousarray(blurred[::2, ::2, ::2]))

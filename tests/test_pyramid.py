@@ -54,3 +54,13 @@ def test_upsample_matches_trilinear():
         # the last lattice point along each axis: trilinear() is zero exactly on the far edge
         inner = np.all(ijk < np.array(shape) - 1, axis=1)
         assert np.allclose(up.reshape(-1, 3)[inner], want[inner], atol=1e-6)
+
+
+def test_every_level_covers_the_whole_base_lattice():
+    # an even count (50) used to drop the last point at each halving: the coarsest level
+    # then ended short of the field and a seam appeared where its coverage stopped
+    base = np.ones((50, 37, 64, 1), np.float32)
+    levels = pyramid.build(base, max_levels=8)
+    for k, lv in enumerate(levels):
+        for ax in range(3):
+            assert (lv.shape[ax] - 1) * 2 ** k >= base.shape[ax] - 1, (k, ax, lv.shape)
