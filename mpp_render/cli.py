@@ -9,7 +9,8 @@
 * ``compare OUT.exr SCENE_DIR [--single]`` scores OUT.exr's Combined pass against the scene's
   ``ref_s*.exr`` (``ss_s*.exr`` with ``--single``) and prints the metrics as JSON.
 * ``demo [-o out/demo]`` builds the demo cloud in code, renders it with MPP and writes
-  ``out/demo.exr`` and ``out/demo.png``.
+  ``out/demo.exr`` and ``out/demo.png``, then renders it with Cycles (reference settings,
+  32 spp) to ``out/demo_cycles.exr`` and prints our error against that render.
 
 ``render`` and ``demo`` print one JSON line last on stdout, times in seconds::
 
@@ -165,14 +166,27 @@ def cmd_render(args) -> dict:
 
 
 def cmd_demo(args) -> dict:
+    """Build the demo cloud, render it with MPP, then with Cycles at the reference settings
+    (``cycles_samples`` spp, 0 to skip) and score ours against it (one Cycles run: the
+    metrics of metrics.md without the noise correction, so the error includes Cycles' noise)."""
     _bpy()
     from .blender.demo import build_demo_scene
+    from .metrics import compare
 
     stem = args.output[:-4] if args.output.endswith(".exr") else args.output
     scene = build_demo_scene(os.path.dirname(os.path.abspath(stem)))
     set_mpp(scene, args.samples, not args.no_multiple)
     rec = render_current(scene, stem + ".exr")
-    rec["image"] = image_stats(rec.pop("_passes"))
+    ours = rec.pop("_passes")
+    rec["image"] = image_stats(ours)
+    spp = int(getattr(args, "cycles_samples", 32) or 0)
+    if spp > 0:
+        set_cycles_reference(scene, spp, not args.no_multiple, seed=1)
+        ref = render_current(scene, stem + "_cycles.exr")
+        m = compare(ours["Combined"], [ref.pop("_passes")["Combined"]])
+        rec["cycles"] = {"samples": spp, "seconds": ref["render"], "exr": ref["exr"],
+                         "rel_rmse": m["rel_rmse"], "rel_rmse_4": m["rel_rmse_4"], "bias": m["bias"]}
+        set_mpp(scene, args.samples, not args.no_multiple)
     return rec
 
 
