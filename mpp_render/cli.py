@@ -1,4 +1,4 @@
-"""Command line: ``python -m mpp_render render|compare|demo``.
+"""Command line: ``python -m mpp_render render|compare|demo|package``.
 
 * ``render FILE.blend -o OUT.exr [--frame N] [--samples N] [--no-multiple] [--seed N]
   [--engine mpp|cycles] [--resolution-percentage P]`` renders one frame of the file's active
@@ -224,6 +224,13 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--samples", type=int, help="samples per pixel (default 16)")
     d.add_argument("--no-multiple", action="store_true", help="single scattering only")
     d.set_defaults(func=cmd_demo)
+
+    from .package import cmd_package  # stdlib only: cheap to import here
+
+    k = sub.add_parser("package", help="build the installable extension zip (kernels as a wheel)")
+    k.add_argument("--output-dir", default="dist", help="folder for the zip (default dist)")
+    k.add_argument("--source-dir", help="extension source (default: this checkout's root)")
+    k.set_defaults(func=cmd_package)
     return ap
 
 

@@ -13,9 +13,12 @@ import numpy as np
 from . import kernels_np
 
 try:  # pragma: no cover - depends on the build
-    from . import _kernels as _c
-except ImportError:  # the engine still renders, on numpy
-    _c = None
+    from . import _kernels as _c  # built in place (setup.py build_ext --inplace)
+except ImportError:
+    try:  # the installed extension: the wheel of ``python -m mpp_render package``
+        from mpp_render_kernels import _kernels as _c
+    except ImportError:  # the engine still renders, on numpy
+        _c = None
 
 _FORCE_NUMPY = os.environ.get("MPP_KERNELS", "").lower() == "numpy"
 
