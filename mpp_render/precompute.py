@@ -93,23 +93,24 @@ def run_chunks(n, chunk, work, threads=0, should_cancel=None) -> bool:
                 return False
             work(a, min(n, a + chunk))
         return True
-    cancelled = False
     with ThreadPoolExecutor(max_workers=threads) as pool:
         futures = [pool.submit(work, a, min(n, a + chunk)) for a in starts]
-        for f in futures:
-            while True:
-                try:
-                    f.result(timeout=0.05)
-                    break
-                except FuturesTimeout:
+        try:
+            for f in futures:
+                # poll before every wait, not only when one times out: chunks shorter than
+                # the timeout would otherwise never look at Esc
+                while True:
                     if should_cancel and should_cancel():
-                        cancelled = True
-                        for g in futures:
-                            g.cancel()
+                        return False
+                    try:
+                        f.result(timeout=0.05)
                         break
-            if cancelled:
-                break
-    return not cancelled
+                    except FuturesTimeout:
+                        pass
+        finally:  # cancelled or failed: drop the chunks not started (leaving the pool
+            for g in futures:  # waits only for the running ones)
+                g.cancel()
+    return True
 
 
 def _media_arrays(media):
@@ -168,14 +169,44 @@ def light_optical_depth(media: List[PreparedMedium], light: Light, points, step,
     return out
 
 
+WORLD_RNG_BLOCK = 1 << 11  # points sharing one random stream in world_light
+WORLD_CHUNK_RAYS = 1 << 14  # rays (points x directions) per world-light chunk, for a quick Esc
+
+
+def world_chunk(n_dirs: int) -> int:
+    """Points per world-light chunk: at most ``WORLD_CHUNK_RAYS`` rays, a power of two that
+    divides ``WORLD_RNG_BLOCK`` (at least 16 points)."""
+    chunk = WORLD_RNG_BLOCK
+    while chunk > 16 and chunk * max(1, int(n_dirs)) > WORLD_CHUNK_RAYS:
+        chunk //= 2
+    return chunk
+
+
+def _block_uniforms(seed, a, b):
+    """(b - a, 2) uniforms for points a..b-1: point i takes row i mod WORLD_RNG_BLOCK of the
+    stream seeded by (seed, 7919, start of its block), so the numbers do not depend on how
+    the points are cut into chunks."""
+    parts = []
+    s = a
+    while s < b:
+        block = s - s % WORLD_RNG_BLOCK
+        e = min(b, block + WORLD_RNG_BLOCK)
+        rows = np.random.default_rng([seed, 7919, block]).random((e - block, 2))
+        parts.append(rows[s - block:])
+        s = e
+    return parts[0] if len(parts) == 1 else np.concatenate(parts)
+
+
 def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, camera: Camera,
-                points, n_dirs, step, seed=0, chunk=1 << 11, should_cancel=None, surfaces=None,
+                points, n_dirs, step, seed=0, chunk=None, should_cancel=None, surfaces=None,
                 threads=0, multiple=False):
     """A(x) (N,3): world radiance scattered towards the camera per unit sigma_s, attenuated;
     with ``multiple`` also A_ms(x) (N,3), the same for the sky light that has scattered on
     its way in (the collided part exp(-tau_a) (1 - exp(-tau_s)), see docs/method.md), and the
-    pair is returned.  Each chunk draws from its own stream seeded by (seed, chunk start), so
-    the result does not depend on the thread count.  None when cancelled."""
+    pair is returned.  Points draw their jitter from streams seeded by (seed, block of
+    ``WORLD_RNG_BLOCK`` points), so the result depends on neither the thread count nor the
+    chunk size (by default ``world_chunk(n_dirs)``, short enough to serve Esc quickly).
+    None when cancelled."""
     colour = np.asarray(world.color, np.float64)
     n = len(points)
     if n == 0 or not np.any(colour > 0):
@@ -188,9 +219,9 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
     out_ms = np.zeros((n, 3))
     golden = 0.6180339887498949
     j = np.arange(n_dirs)
+    chunk = world_chunk(n_dirs) if chunk is None else int(chunk)
 
     def work(a, b):
-        rng = np.random.default_rng([seed, 7919, a])
         p = points[a:b]
         m = len(p)
         if camera.projection == "ORTHO":
@@ -198,7 +229,7 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
         else:
             to_cam = c2w[:3, 3] - p
             to_cam = to_cam / np.maximum(np.linalg.norm(to_cam, axis=1, keepdims=True), 1e-30)
-        r = rng.random((m, 2))
+        r = _block_uniforms(seed, a, b)
         u1 = np.mod((j[None, :] + 0.5) / n_dirs + r[:, :1], 1.0).ravel()
         u2 = np.mod(j[None, :] * golden + r[:, 1:], 1.0).ravel()
         axis = np.repeat(to_cam, n_dirs, axis=0)
@@ -406,6 +437,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                 if progress:
                     progress(0.0, f"Light pyramid: {light.name} on {pm.medium.name}")
                 ms[li] = multiple_field(pm, f, light, chans[li])
+                if should_cancel and should_cancel():  # a pyramid is not cut into chunks
+                    return None
         ms_all.append(ms)
         fields.append(f)
     return Precomputed(fields, layout, ms_all, time.perf_counter() - t_start,

@@ -68,6 +68,8 @@ def render(desc: SceneDescription,
     cam = desc.camera
     W, H = int(cam.width), int(cam.height)
     warnings = list(desc.warnings)
+    from .budget import apply_budget  # large grids are downsampled to fit the memory budget
+    desc = apply_budget(desc, warnings)
     timings = {}
     media = []
     for m in desc.media:

@@ -143,6 +143,8 @@ class Settings:
     ``passes``: names of the passes to fill; None means every pass the engine has.
     ``voxel_resolution``: voxels along the longest side when a mesh volume is voxelised.
     ``threads``: worker threads for the march; 0 means one per core.
+    ``memory_budget_mb``: megabytes (2^20 bytes) the precompute fields may take; larger grids
+    are box-downsampled with a warning (budget.py); 0 means unlimited.
     """
 
     samples: int = 16
@@ -154,6 +156,7 @@ class Settings:
     passes: Optional[List[str]] = None
     threads: int = 0
     voxel_resolution: int = 128
+    memory_budget_mb: int = 2048
 
 
 @dataclass

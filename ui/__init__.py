@@ -91,6 +91,7 @@ class MPP_PT_performance(MPPPanel, bpy.types.Panel):
         layout.use_property_split = True
         layout.use_property_decorate = False
         layout.prop(context.scene.mpp, "threads")
+        layout.prop(context.scene.mpp, "memory_budget_mb")
 
 
 CLASSES = (MPP_PT_sampling, MPP_PT_volumes, MPP_PT_light_paths, MPP_PT_film, MPP_PT_performance)

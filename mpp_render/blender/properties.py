@@ -47,6 +47,11 @@ class MPPRenderSettings(bpy.types.PropertyGroup):
     threads: IntProperty(
         name="Threads", default=0, min=0, soft_max=256,
         description="Worker threads (count) for precompute and march. 0 = one per CPU core")
+    memory_budget_mb: IntProperty(
+        name="Memory Budget", default=2048, min=0, soft_max=65536,
+        description="Memory in MB (megabytes, 2^20 bytes) the precomputed light fields of the "
+                    "volumes may take. A larger grid is downsampled (coarser voxels) with a "
+                    "warning giving the factor. 0 = unlimited")
     seed: IntProperty(
         name="Seed", default=0, min=0,
         description="Seed of the pixel jitter and sampled directions (integer): the same "
@@ -67,6 +72,7 @@ def settings_from_scene(scene) -> Settings:
         passes=None,
         threads=int(p.threads),
         voxel_resolution=int(p.voxel_resolution),
+        memory_budget_mb=int(p.memory_budget_mb),
     )
 
 

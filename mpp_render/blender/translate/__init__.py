@@ -13,6 +13,9 @@ from __future__ import annotations
 
 from typing import Optional
 
+import numpy as np
+
+from ...lights import is_dark
 from ...scene import SceneDescription, Settings
 from .camera import camera_from_object, default_camera, render_size
 from .convert import matrix
@@ -57,6 +60,9 @@ def scene_from_depsgraph(depsgraph, settings: Settings, camera_override=None,
         warnings.append(f"the world could not be translated ({type(e).__name__}: {e}); "
                         "using black")
     _objects(depsgraph, desc, settings)
+    unlit = _unlit_message(desc)
+    if unlit:
+        desc.warnings.append(unlit)
     desc.warnings = list(dict.fromkeys(warnings))  # instances repeat the same message
     return desc
 
@@ -85,6 +91,9 @@ def _instance(ob, world_matrix, meshes: MeshTranslator, volumes: VolumeTranslato
     if kind == "LIGHT":
         light = light_from_object(ob, world_matrix, desc.warnings)
         if light is not None:
+            if np.any(np.asarray(light.strength) < 0):
+                desc.warnings.append(f"light '{ob.name}': negative power is not supported; "
+                                     "the light emits nothing")
             desc.lights.append(light)
     elif kind == "MESH":
         if _is_fluid_domain(ob):
@@ -101,6 +110,20 @@ def _instance(ob, world_matrix, meshes: MeshTranslator, volumes: VolumeTranslato
     elif kind in UNSUPPORTED_GEOMETRY:
         desc.warnings.append(f"object '{ob.name}': {UNSUPPORTED_GEOMETRY[kind]} are not "
                              "supported; skipped")
+
+
+def _unlit_message(desc: SceneDescription) -> Optional[str]:
+    """A warning when volumes are in the frame but nothing lights them (no light with
+    positive power, a black world, no emission): the frame would be black without a word."""
+    if not desc.media or any(not is_dark(light) for light in desc.lights):
+        return None
+    if np.any(np.asarray(desc.world.color) > 0):
+        return None
+    if any(np.any(np.asarray(m.emission) > 0) for m in desc.media):
+        return None
+    what = ("the scene has no lights" if not desc.lights else
+            "no light of the scene has positive power")
+    return f"{what} and the world is black: the volumes receive no light and render black"
 
 
 def _mesh_like(ob, world_matrix, meshes: MeshTranslator, desc: SceneDescription) -> None:

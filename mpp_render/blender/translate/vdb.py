@@ -7,6 +7,10 @@ density is the grid's values (NaN, inf and negatives set to 0; values below the 
 render clipping set to 0) and whose coefficients are the material's, per unit grid value.
 ``index_to_world`` = object world matrix @ grid index->object matrix @ offset of the dense
 block, so integer ijk of the array are voxel centres, as in OpenVDB.
+
+A bad file never stops the frame: a missing, truncated or corrupt .vdb, a grid the material
+reads but the file lacks, or bad voxel values are reported by object and file name and the
+volume is skipped (or sanitised); the rest of the scene renders.
 """
 from __future__ import annotations
 
@@ -107,9 +111,20 @@ class VolumeTranslator:
             return []
         return shading
 
-    def _no_grids_message(self, vol, where) -> str:
+    @staticmethod
+    def _path(vol) -> str:
+        """The absolute path of the .vdb the volume shows at this frame ('' for a volume made
+        by nodes or modifiers without a file)."""
         import bpy
-        path = bpy.path.abspath(vol.grids.frame_filepath or vol.filepath)
+        return bpy.path.abspath(vol.grids.frame_filepath or vol.filepath) if vol.filepath else ""
+
+    def _in_file(self, vol) -> str:
+        """`` of '<file>'`` for messages, or '' when the volume has no file."""
+        path = self._path(vol)
+        return f" of '{path}'" if path else ""
+
+    def _no_grids_message(self, vol, where) -> str:
+        path = self._path(vol)
         if vol.filepath and not os.path.exists(path):
             return f"{where}: VDB file '{path}' not found; skipped"
         err = vol.grids.error_message
@@ -156,16 +171,25 @@ class VolumeTranslator:
         try:
             block = read_dense(vdb, path, g.name, dtype)
         except Exception as e:  # openvdb raises plain exceptions for bad grids
-            self.warnings.append(f"{where}: grid '{g.name}' could not be read ({e}); skipped")
-            return None
+            block, error = None, e
+        else:
+            error = None
         if block is None:
-            self.warnings.append(f"{where}: grid '{g.name}' has no active voxels; skipped")
+            problem = self._file_problem(vol, g)
+            if problem:
+                self.warnings.append(f"{where}: grid '{g.name}' {problem}; skipped")
+            elif error is not None:
+                self.warnings.append(f"{where}: grid '{g.name}'{self._in_file(vol)} could not be "
+                                     f"read ({error}); skipped")
+            else:
+                self.warnings.append(f"{where}: grid '{g.name}'{self._in_file(vol)} has no active "
+                                     "voxels; skipped")
             return None
         values, origin, background = block
         values, bad = sanitise(values)
         if bad:
-            self.warnings.append(f"{where}: {bad} voxels of grid '{g.name}' were NaN, infinite or "
-                                 "negative; set to 0")
+            self.warnings.append(f"{where}: {bad} voxels of grid '{g.name}'{self._in_file(vol)} "
+                                 "were NaN, infinite or negative; set to 0")
         clip = float(getattr(vol.render, "clipping", 0.0))
         if clip > 0.0:
             values = np.where(values < clip, np.float32(0.0), values)
@@ -173,6 +197,23 @@ class VolumeTranslator:
             self.warnings.append(f"{where}: the background value {background:g} of grid "
                                  f"'{g.name}' is ignored (0 outside the active voxels)")
         return values, origin, matrix(g.matrix_object)
+
+    def _file_problem(self, vol, g) -> str:
+        """Why grid ``g`` came out empty when its file is at fault: Blender reads a truncated
+        or corrupt file as an empty grid without an error message, but its ``load()`` then
+        fails.  '' when the grid loads (it is really empty) or the volume has no file.  The
+        file itself is not opened here: the openvdb module aborts the process on some
+        corrupt files."""
+        path = self._path(vol)
+        if not path:
+            return ""
+        try:
+            loaded = bool(g.load())
+        except Exception:  # RuntimeError from Blender: not loadable either
+            loaded = False
+        if loaded:
+            return ""
+        return f"of '{path}' could not be loaded; the file may be truncated or corrupt"
 
     def _medium(self, ob, co, block, g, world_matrix, several) -> Medium:
         values, origin, index_to_object = block
@@ -192,8 +233,8 @@ class VolumeTranslator:
             wanted = sorted({co.attribute for co in uniform if co.attribute})
             what = (f"reads grid {', '.join(repr(w) for w in wanted)}, which the volume lacks"
                     if wanted else "reads no grid of the volume")
-            self.warnings.append(f"{where}: its material {what} (grids: {names}); without a "
-                                 "density grid it renders nothing; skipped")
+            self.warnings.append(f"{where}: its material {what} (grids{self._in_file(ob.data)}: "
+                                 f"{names}); without a density grid it renders nothing; skipped")
             return
         base = media[0]
         coeff = merge(uniform)
