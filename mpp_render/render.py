@@ -25,7 +25,13 @@ from .precompute import precompute
 from .scene import SceneDescription
 from .surfaces import intersect, prepare_surfaces, shade
 
-TILE = 32
+TILE = 32            # largest tile side (pixels)
+TILE_RAYS = 4096     # rays per tile at most: Esc and progress are served between tiles
+
+
+def tile_size(samples: int) -> int:
+    """Tile side (pixels) so that a tile holds at most TILE_RAYS rays (4 to TILE)."""
+    return int(np.clip(int(math.sqrt(TILE_RAYS / max(1, samples))), 4, TILE))
 
 
 @dataclass
@@ -109,12 +115,13 @@ def render(desc: SceneDescription,
         return od(p, d, np.maximum(t1, 0.0), [m.grid for m in media], [m.w2i for m in media],
                   [m.sigma_t for m in media], [m.threshold for m in media], step_light, 0.5)
 
-    tiles = [(x0, y0) for y0 in range(0, H, TILE) for x0 in range(0, W, TILE)]
     spp = max(1, int(st.samples))
+    ts = tile_size(spp)
+    tiles = [(x0, y0) for y0 in range(0, H, ts) for x0 in range(0, W, ts)]
 
     def do_tile(index):
         x0, y0 = tiles[index]
-        tw, th = min(TILE, W - x0), min(TILE, H - y0)
+        tw, th = min(ts, W - x0), min(ts, H - y0)
         rng = np.random.default_rng([st.seed, index])
         offs = pixel_offsets(spp, rng)
         yy, xx = np.mgrid[y0:y0 + th, x0:x0 + tw]
