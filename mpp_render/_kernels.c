@@ -428,18 +428,18 @@ static int parse_doubles(PyObject *list, Py_ssize_t n, double *out, const char *
 
 static const char march_doc[] =
     "march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs, thresholds,\n"
-    "      voxels, lights, ambient, step, depth_opacity, depth_miss[, multiple])\n"
-    "  -> (single, T, depth, multiple, steps) as bytes of float64\n"
+    "      voxels, lights, ambient, step, depth_opacity, depth_miss[, multiple, emissions])\n"
+    "  -> (single, T, depth, multiple, steps, emission) as bytes of float64\n"
     "Twin of kernels_np.march.";
 
 static PyObject *march(PyObject *self, PyObject *args) {
     PyObject *po, *pd, *pt0, *pt1, *pax, *pk, *fields, *w2is, *sss, *sts, *gsl, *thrs, *vox, *plights;
-    PyObject *pms = Py_None;
+    PyObject *pms = Py_None, *pem = Py_None;
     int ambient;
     double step, depth_opacity, depth_miss;
-    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOiddd|O", &po, &pd, &pt0, &pt1, &pax, &pk, &fields,
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOiddd|OO", &po, &pd, &pt0, &pt1, &pax, &pk, &fields,
                           &w2is, &sss, &sts, &gsl, &thrs, &vox, &plights, &ambient, &step,
-                          &depth_opacity, &depth_miss, &pms))
+                          &depth_opacity, &depth_miss, &pms, &pem))
         return NULL;
     if (!(step > 0.0) || !isfinite(step)) {
         PyErr_SetString(PyExc_ValueError, "step must be a positive finite length");
@@ -454,9 +454,10 @@ static PyObject *march(PyObject *self, PyObject *args) {
     MS ms;
     memset(&ms, 0, sizeof ms);
     Grid g[MAX_MEDIA];
-    double sig_s[MAX_MEDIA][3], gg[MAX_MEDIA], voxel[MAX_MEDIA];
+    double sig_s[MAX_MEDIA][3], gg[MAX_MEDIA], voxel[MAX_MEDIA], emit[MAX_MEDIA][3];
+    int use_em = 0;
     int ng = 0;
-    PyObject *o_s = NULL, *o_t = NULL, *o_d = NULL, *o_m = NULL, *o_k = NULL, *result = NULL;
+    PyObject *o_s = NULL, *o_t = NULL, *o_d = NULL, *o_m = NULL, *o_k = NULL, *o_e = NULL, *result = NULL;
     Py_ssize_t s_o[2] = {-1, 3};
     if (get_buf(po, &bo, 'd', 2, s_o, "origins") < 0) goto done;
     Py_ssize_t n = s_o[0];
@@ -483,6 +484,25 @@ static PyObject *march(PyObject *self, PyObject *args) {
         }
     }
     if (parse_doubles(gsl, ng, gg, "gs") < 0 || parse_doubles(vox, ng, voxel, "voxels") < 0) goto done;
+    if (pem != Py_None) {
+        if (!PyList_Check(pem) || PyList_GET_SIZE(pem) != ng) {
+            PyErr_SetString(PyExc_ValueError, "emissions: one RGB array per medium");
+            goto done;
+        }
+        for (int m = 0; m < ng; m++) {
+            Buf eb;
+            Py_ssize_t s3[1] = {3};
+            if (get_buf(PyList_GET_ITEM(pem, m), &eb, 'd', 1, s3, "emission") < 0) goto done;
+            memcpy(emit[m], eb.view.buf, 3 * sizeof(double));
+            buf_release(&eb);
+            for (int a = 0; a < 3; a++)
+                if (!isfinite(emit[m][a])) {
+                    PyErr_SetString(PyExc_ValueError, "emission: non-finite value");
+                    goto done;
+                }
+        }
+        use_em = 1;
+    }
     for (int m = 0; m < ng; m++) {
         if (!(gg[m] > -1.0 && gg[m] < 1.0) || !(voxel[m] > 0.0) || !isfinite(voxel[m])) {
             PyErr_SetString(PyExc_ValueError, "gs must lie in (-1, 1) and voxels be positive");
@@ -595,8 +615,9 @@ static PyObject *march(PyObject *self, PyObject *args) {
     o_d = PyByteArray_FromStringAndSize(NULL, (Py_ssize_t)(n * sizeof(double)));
     o_m = PyByteArray_FromStringAndSize(NULL, (Py_ssize_t)(n * 3 * sizeof(double)));
     o_k = PyByteArray_FromStringAndSize(NULL, (Py_ssize_t)(n * sizeof(double)));
-    if (!o_s || !o_t || !o_d || !o_m || !o_k) goto done;
-    double *OK = (double *)PyByteArray_AS_STRING(o_k);
+    o_e = PyByteArray_FromStringAndSize(NULL, (Py_ssize_t)(n * 3 * sizeof(double)));
+    if (!o_s || !o_t || !o_d || !o_m || !o_k || !o_e) goto done;
+    double *OK = (double *)PyByteArray_AS_STRING(o_k), *OE = (double *)PyByteArray_AS_STRING(o_e);
     double *OM = (double *)PyByteArray_AS_STRING(o_m);
     double *OS = (double *)PyByteArray_AS_STRING(o_s), *OT = (double *)PyByteArray_AS_STRING(o_t),
            *OD = (double *)PyByteArray_AS_STRING(o_d);
@@ -608,7 +629,8 @@ static PyObject *march(PyObject *self, PyObject *args) {
     Py_BEGIN_ALLOW_THREADS
     for (Py_ssize_t r = 0; r < n; r++) {
         const double *o = O + 3 * r, *d = D + 3 * r;
-        double T[3] = {1, 1, 1}, S[3] = {0, 0, 0}, M3[3] = {0, 0, 0}, depth = depth_miss;
+        double T[3] = {1, 1, 1}, S[3] = {0, 0, 0}, M3[3] = {0, 0, 0}, E3[3] = {0, 0, 0};
+        double depth = depth_miss;
         double t1 = T1[r], seg = T0[r];
         uint32_t key = K[r];
         double t = seg + uniform01(key, 0, DIM_JITTER) * step;
@@ -621,7 +643,7 @@ static PyObject *march(PyObject *self, PyObject *args) {
             for (Py_ssize_t l = 0; l < nl; l++)
                 light_sample(LR + l * LIGHT_FIELDS, x, uniform01(key, k, 2 * l),
                              uniform01(key, k, 2 * l + 1), wi[l], e[l], wc[l], &dc[l]);
-            double sig_t[3] = {0, 0, 0}, src[3] = {0, 0, 0}, src_ms[3] = {0, 0, 0};
+            double sig_t[3] = {0, 0, 0}, src[3] = {0, 0, 0}, src_ms[3] = {0, 0, 0}, src_em[3] = {0, 0, 0};
             for (int m = 0; m < ng; m++) {
                 double idx[3], v[MAX_CH];
                 to_index(&g[m], x, idx);
@@ -629,6 +651,8 @@ static PyObject *march(PyObject *self, PyObject *args) {
                 double rho = density_from(&g[m], v[0]);
                 if (!(rho > 0.0)) continue;
                 for (int a = 0; a < 3; a++) sig_t[a] += rho * g[m].sig[a];
+                if (use_em)
+                    for (int a = 0; a < 3; a++) src_em[a] += emit[m][a];
                 int edge = g[m].thr >= 0.0 && v[0] > EDGE_EPS && v[0] < 1.0 - EDGE_EPS;
                 double inc[3] = {0, 0, 0};
                 for (Py_ssize_t l = 0; l < nl; l++) {
@@ -659,6 +683,7 @@ static PyObject *march(PyObject *self, PyObject *args) {
                 double frac = xt > 1e-7 ? -expm1(-xt) / xt : 1.0 - 0.5 * xt;
                 S[a] += Tb[a] * src[a] * (frac * hl);
                 M3[a] += Tb[a] * src_ms[a] * (frac * hl);
+                E3[a] += Tb[a] * src_em[a] * (frac * hl);
                 T[a] = Tb[a] * exp(-xt);
             }
             double tb = (Tb[0] + Tb[1] + Tb[2]) / 3.0, ta = (T[0] + T[1] + T[2]) / 3.0;
@@ -678,12 +703,14 @@ static PyObject *march(PyObject *self, PyObject *args) {
         }
         for (int a = 0; a < 3; a++) { OS[3 * r + a] = S[a]; OT[3 * r + a] = T[a]; OM[3 * r + a] = M3[a]; }
         OK[r] = (double)k;
+        for (int a = 0; a < 3; a++) OE[3 * r + a] = E3[a];
         OD[r] = depth;
     }
     Py_END_ALLOW_THREADS
-    result = PyTuple_Pack(5, o_s, o_t, o_d, o_m, o_k);
+    result = PyTuple_Pack(6, o_s, o_t, o_d, o_m, o_k, o_e);
 done:
     Py_XDECREF(o_s); Py_XDECREF(o_t); Py_XDECREF(o_d); Py_XDECREF(o_m); Py_XDECREF(o_k);
+    Py_XDECREF(o_e);
     buf_release(&btab);
     for (int m = 0; m < ntabs; m++) buf_release(&btabs[m]);
     if (lvb) for (int i = 0; i < nlv; i++) buf_release(&lvb[i]);

@@ -45,7 +45,8 @@ def c_optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step
 
 
 def c_march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs,
-            thresholds, voxels, lights, ambient, step, depth_opacity, depth_miss, multiple=None):
+            thresholds, voxels, lights, ambient, step, depth_opacity, depth_miss, multiple=None,
+            emissions=None):
     n = len(origins)
     nl = len(np.asarray(lights).reshape(-1, kernels_np.LIGHT_FIELDS))
     packed = None
@@ -62,17 +63,18 @@ def c_march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts
                 levels.extend(_f32(x) for x in lv)
         packed = (int(amb_ms), levels, table, [_f64(t) for t in tables],
                   kernels_np.LOG_RHO0, kernels_np.DLOG_RHO)
-    s, t, d, m, k = _c.march(_f64(origins).reshape(n, 3), _f64(dirs).reshape(n, 3),
+    s, t, d, m, k, e = _c.march(_f64(origins).reshape(n, 3), _f64(dirs).reshape(n, 3),
                        _f64(t0).reshape(n), _f64(t1).reshape(n), _f64(axial).reshape(n),
                        np.ascontiguousarray(keys, np.uint32).reshape(n), [_f32(f) for f in fields],
                        [_f64(w) for w in w2is], [_f64(x).reshape(3) for x in sigma_ss],
                        [_f64(x).reshape(3) for x in sigma_ts], [float(g) for g in gs],
                        [float(x) for x in thresholds], [float(v) for v in voxels],
                        _f64(lights).reshape(-1, kernels_np.LIGHT_FIELDS), int(ambient),
-                       float(step), float(depth_opacity), float(depth_miss), packed)
+                       float(step), float(depth_opacity), float(depth_miss), packed,
+                       None if emissions is None else [_f64(x).reshape(3) for x in emissions])
     return (np.frombuffer(s, np.float64).reshape(n, 3), np.frombuffer(t, np.float64).reshape(n, 3),
             np.frombuffer(d, np.float64).reshape(n), np.frombuffer(m, np.float64).reshape(n, 3),
-            np.frombuffer(k, np.float64).reshape(n))
+            np.frombuffer(k, np.float64).reshape(n), np.frombuffer(e, np.float64).reshape(n, 3))
 
 
 _C_WRAPPERS = {"optical_depth": c_optical_depth, "march": c_march}

@@ -285,7 +285,7 @@ def _phi1(z):
 
 
 def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs, thresholds,
-          voxels, lights, ambient, step, depth_opacity, depth_miss, multiple=None):
+          voxels, lights, ambient, step, depth_opacity, depth_miss, multiple=None, emissions=None):
     """March camera rays through media fields: the numpy twin of ``_kernels.march``.
 
     Rays ``origins + t dirs`` (N,3), t in [t0, t1] (N,) metres; ``axial`` (N,) turns t into
@@ -299,13 +299,18 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
     or the (levels, stride, h) of its MultipleField, per medium its level_table) to
     accumulate multiple scattering too.
 
+    ``emissions``: None or per medium the RGB emitted radiance per metre (W/(m^3 sr)), given
+    off wherever the medium's density is > 0 (not scaled by density, as Cycles' Principled
+    Volume).
+
     Each step of length h adds T S (1 - exp(-sigma_t h)) / sigma_t with S the in-scattered
     radiance at one jittered point of the step, then T *= exp(-sigma_t h).  Returns
-    (single (N,3), T (N,3), depth (N,), multiple (N,3), steps (N,)) float64, steps being the
-    number of samples each ray took."""
+    (single (N,3), T (N,3), depth (N,), multiple (N,3), steps (N,), emission (N,3)) float64,
+    steps being the number of samples each ray took."""
     n = len(origins)
     single = np.zeros((n, 3))
     multi = np.zeros((n, 3))
+    emitted = np.zeros((n, 3))
     steps = np.zeros(n)
     trans = np.ones((n, 3))
     depth = np.full(n, float(depth_miss))
@@ -325,6 +330,7 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
         sig_t = np.zeros((m, 3))
         src = np.zeros((m, 3))
         src_ms = np.zeros((m, 3))
+        src_em = np.zeros((m, 3))
         ka = keys[alive]
         emit = []
         for li, rec in enumerate(lights):
@@ -334,6 +340,8 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
             v = _fetch(f, w2is[mi], x, 0, f.shape[3])
             rho = density_from(v[:, 0], thresholds[mi])
             sig_t += rho[:, None] * sigma_ts[mi][None, :]
+            if emissions is not None:
+                src_em += (rho > 0)[:, None] * np.asarray(emissions[mi], np.float64)[None, :]
             edge = np.flatnonzero((v[:, 0] > EDGE_EPS) & (v[:, 0] < 1.0 - EDGE_EPS) & (rho > 0)) \
                 if thresholds[mi] >= 0 else np.zeros(0, np.int64)
             inc = np.zeros((m, 3))
@@ -369,6 +377,7 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
         T_before = trans[alive]
         single[alive] += T_before * src * (frac * hl[:, None])
         multi[alive] += T_before * src_ms * (frac * hl[:, None])
+        emitted[alive] += T_before * src_em * (frac * hl[:, None])
         T_after = T_before * np.exp(-x_t)
         trans[alive] = T_after
         tb, ta = T_before.mean(axis=1), T_after.mean(axis=1)
@@ -386,4 +395,4 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
         t[alive] = seg_start[alive] + uniform(ka, k, DIM_JITTER) * h
         keep = advanced & (seg_start[alive] < t1[alive]) & (T_after.max(axis=1) > T_MIN)
         alive = alive[keep]
-    return single, trans, depth, multi, steps
+    return single, trans, depth, multi, steps, emitted

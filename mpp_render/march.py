@@ -87,10 +87,13 @@ def march_rays(ctx: MarchContext, origins, dirs, t0, t1, axial, keys):
     """March rays; returns dict of per-ray arrays: 'single' (N,3), 'T' (N,3), 'depth' (N,)."""
     fn = kernels.get("march")
     amb = ctx.layout.ambient_channel
-    single, T, depth, multi, steps = fn(
+    em = [np.maximum(np.asarray(m.medium.emission, np.float64).reshape(3), 0.0) for m in ctx.media]
+    single, T, depth, multi, steps, emitted = fn(
         origins, dirs, t0, t1, axial, keys, ctx.fields, [m.w2i for m in ctx.media],
         [m.sigma_s for m in ctx.media], [m.sigma_t for m in ctx.media],
         [float(m.g) for m in ctx.media], [m.threshold for m in ctx.media],
         [m.voxel_size for m in ctx.media], ctx.packed, -1 if amb is None else amb,
-        ctx.step, DEPTH_OPACITY, DEPTH_MISS, ctx.multiple)
-    return {"single": single, "T": T, "depth": depth, "multiple": multi, "steps": steps}
+        ctx.step, DEPTH_OPACITY, DEPTH_MISS, ctx.multiple,
+        em if any(np.any(e > 0) for e in em) else None)
+    return {"single": single, "T": T, "depth": depth, "multiple": multi, "steps": steps,
+            "emission": emitted}

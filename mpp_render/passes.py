@@ -4,9 +4,10 @@ Every pass is an array (height, width, channels) of float32 with row 0 at the to
 Blender wants row 0 at the bottom: the glue flips when it writes a render result.
 
 * ``Combined`` (RGBA): background seen through the media + single + multiple scattering
-  (+ emission); alpha is 1, or 1 - mean(Transmittance) when the film is transparent.
+  + emission; alpha is 1, or 1 - mean(Transmittance) when the film is transparent.
 * ``Volume Single`` (RGB): light scattered exactly once in the media (W/(m^2 sr)).
 * ``Volume Multiple`` (RGB): light scattered more than once, from the MPP approximation.
+* ``Emission`` (RGB): light the media emit (Principled Volume emission), seen through them.
 * ``Transmittance`` (RGB): transmittance of the camera ray through all media, in [0, 1].
 * ``Depth`` (Z): axial distance in metres (along the camera's -Z, like Cycles' Depth pass) to
   the first point where the ray's opacity 1 - mean(T) reaches ``DEPTH_OPACITY``; 1e10 where it
@@ -32,6 +33,7 @@ PASSES = (
     PassInfo("Combined", 4, "RGBA", "COLOR"),
     PassInfo("Volume Single", 3, "RGB", "COLOR"),
     PassInfo("Volume Multiple", 3, "RGB", "COLOR"),
+    PassInfo("Emission", 3, "RGB", "COLOR"),
     PassInfo("Transmittance", 3, "RGB", "COLOR"),
     PassInfo("Depth", 1, "Z", "VALUE"),
 )

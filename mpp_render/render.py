@@ -136,7 +136,7 @@ def render(desc: SceneDescription,
             r = march_rays(ctx, o, d, t0, t1, axial, ray_keys(st.seed, index, n))
         else:
             r = {"single": np.zeros((n, 3)), "T": np.ones((n, 3)), "depth": np.full(n, DEPTH_MISS),
-                 "multiple": np.zeros((n, 3)), "steps": np.zeros(n)}
+                 "multiple": np.zeros((n, 3)), "steps": np.zeros(n), "emission": np.zeros((n, 3))}
         behind = np.broadcast_to(bg, (n, 3)).copy()
         if hit.any():
             ph = o[hit] + d[hit] * t_hit[hit, None]
@@ -149,17 +149,19 @@ def render(desc: SceneDescription,
         T = r["T"].reshape(th * tw, spp, 3).mean(axis=1)
         seen = (r["T"] * behind).reshape(th * tw, spp, 3).mean(axis=1)
         multi = r["multiple"].reshape(th * tw, spp, 3).mean(axis=1)
+        emitted = r["emission"].reshape(th * tw, spp, 3).mean(axis=1)
         res["Volume Single"] = single
         res["Volume Multiple"] = multi
+        res["Emission"] = emitted
         res["Transmittance"] = T
         comb = np.empty((th * tw, 4))
         if st.film_transparent:
             surf_seen = (r["T"] * np.where(hit[:, None], behind, 0.0)).reshape(th * tw, spp, 3).mean(axis=1)
-            comb[:, :3] = single + multi + surf_seen
+            comb[:, :3] = single + multi + emitted + surf_seen
             t_miss = np.where(hit[:, None], 0.0, r["T"]).reshape(th * tw, spp, 3).mean(axis=1)
             comb[:, 3] = 1.0 - t_miss.mean(axis=1)
         else:
-            comb[:, :3] = single + multi + seen
+            comb[:, :3] = single + multi + emitted + seen
             comb[:, 3] = 1.0
         res["Combined"] = comb
         dep = r["depth"].reshape(th * tw, spp)

@@ -168,3 +168,18 @@ def test_same_seed_same_image_any_thread_count():
     b = render(desc)
     for k in a.passes:
         assert np.array_equal(a.passes[k], b.passes[k]), k
+
+
+def test_emissive_cube_glows_as_the_integral_says():
+    # no lights, black world: a homogeneous cube emitting e per metre shows
+    # L = e (1 - exp(-sigma_t L)) / sigma_t through its 2 m depth
+    desc = slab_scene(sigma_s=(0.5, 0.5, 0.5), sigma_a=(0.5, 0.5, 0.5), source="MESH")
+    desc.world.color[:] = 0
+    desc.media[0].emission = np.array([0.3, 0.6, 0.9])
+    out = render(desc)
+    want = np.array([0.3, 0.6, 0.9]) * (1 - math.exp(-2.0)) / 1.0
+    e = out.passes["Emission"][5:11, 6:18]
+    assert np.allclose(e, want, rtol=5e-3)
+    assert np.allclose(out.passes["Combined"][5:11, 6:18, :3], e + out.passes["Volume Multiple"][5:11, 6:18]
+                       + out.passes["Volume Single"][5:11, 6:18], rtol=1e-5)
+    assert np.all(out.passes["Emission"][:, :2] == 0)

@@ -62,14 +62,16 @@ def test_march_twins_agree_on_random_rays():
             pre.fields, [m.w2i for m in media], [m.sigma_s for m in media],
             [m.sigma_t for m in media], [m.g for m in media], [m.threshold for m in media],
             [m.voxel_size for m in media], pack_lights(lights, pre.layout),
-            pre.layout.ambient_channel, 0.07, 0.01, 1e10, multiple)
+            pre.layout.ambient_channel, 0.07, 0.01, 1e10, multiple,
+            [np.array([0.1, 0.2, 0.3]), np.zeros(3)])
     a = kernels_np.march(*args)
     b = kernels.c_march(*args)
-    for x, y, name in zip(a, b, ("single", "T", "depth", "multiple", "steps")):
+    for x, y, name in zip(a, b, ("single", "T", "depth", "multiple", "steps", "emission")):
         assert np.all(np.isfinite(y)), name
         assert np.all(np.abs(x - y) <= 1e-4 * np.maximum(np.abs(x), 1e-6)), name
     assert a[0].max() > 0.01 and a[1].min() < 0.5   # the rays did see the media
     assert a[3].max() > 0.01                         # and multiple scattering
+    assert a[5].max() > 0.01                         # and the smoke's emission
 
 
 @needs_c

@@ -35,7 +35,7 @@ def test_cli_render_and_compare(scenes_dir, tmp_path):
     assert rec["resolution"] == [40, 30]
 
     passes = exr.read_passes(str(out))
-    assert set(passes) == {"Combined", "Volume Single", "Transmittance", "Depth"}
+    assert set(passes) == {"Combined", "Volume Single", "Emission", "Transmittance", "Depth"}
     assert passes["Combined"].shape == (30, 40, 4)
     assert np.all(np.isfinite(passes["Combined"]))
     assert (tmp_path / "slab.png").is_file()
