@@ -18,6 +18,11 @@ def find_scenes():
         cand = parent / "shared" / "scenes"
         if cand.is_dir():
             return cand.resolve()
+    # this workplace keeps the suite at /work/shared/scenes (beside the main checkout); a
+    # clone made elsewhere still finds it there
+    workplace = pathlib.Path("/work/shared/scenes")
+    if workplace.is_dir():
+        return workplace
     return (REPO.parent / "shared" / "scenes").resolve()
 
 
