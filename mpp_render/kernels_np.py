@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from .media import density_from, trilinear
+from .phase import hg, orthonormal_basis
 
 
 def optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, offset=0.5):
@@ -88,15 +89,6 @@ def _disc(a, b, round_shape):
     return r * np.cos(phi), r * np.sin(phi)
 
 
-def _basis(n):
-    sign = np.where(n[:, 2] >= 0.0, 1.0, -1.0)
-    a = -1.0 / (sign + n[:, 2])
-    b = n[:, 0] * n[:, 1] * a
-    t1 = np.stack([1.0 + sign * n[:, 0] ** 2 * a, sign * b, -sign * n[:, 0]], axis=1)
-    t2 = np.stack([b, sign + n[:, 1] ** 2 * a, -n[:, 1]], axis=1)
-    return t1, t2
-
-
 def light_sample(rec, x, u1, u2):
     """(propagation direction (N,3), irradiance (N,3), unit direction to the light centre
     (N,3), distance to the centre (N,)) of packed light ``rec`` at points ``x``."""
@@ -115,7 +107,7 @@ def light_sample(rec, x, u1, u2):
         radius = rec[L_RADIUS]
         src = np.broadcast_to(centre, (n, 3))
         if radius > 0.0:
-            t1, t2 = _basis(-wc)
+            t1, t2 = orthonormal_basis(-wc)
             src = centre + radius * (t1 * a[:, None] + t2 * b[:, None])
         v = x - src
         dist = np.sqrt(np.einsum("ij,ij->i", v, v))
@@ -146,11 +138,6 @@ def light_sample(rec, x, u1, u2):
     return d, radiance[None, :] * (cos_l * area / dist2)[:, None], wc, dc
 
 
-def _hg(c, g):
-    denom = np.maximum(1.0 + g * g - 2.0 * g * c, 1e-12)
-    return (1.0 - g * g) / (4.0 * np.pi * denom * np.sqrt(denom))
-
-
 def _fetch(field, w2i, x, c0, nc):
     idx = x @ w2i[:, :3].T + w2i[:, 3]
     v = trilinear(field, idx) if field.ndim == 4 else trilinear(field, idx)[:, None]
@@ -179,12 +166,6 @@ def _refined_tau(fields, w2is, thrs, sig_ts, mi, c, x, w, dist, delta):
         fin = (occ <= EDGE_EPS) | (occ >= 1.0 - EDGE_EPS) | (seg < delta)
         done[todo[fin]] = True
     return tau + _fetch(fields[mi], w2is[mi], end, c, 3)
-
-
-def width_table(g):
-    """(log walk_width_sq(u), log u) on the table path_length_for_width inverts (both twins
-    read the same numbers)."""
-    return np.log(np.maximum(walk_width_sq(_U_TABLE, g), 1e-300)), np.log(_U_TABLE)
 
 
 def walk_width_sq(u, g):
@@ -273,7 +254,7 @@ def multiple_source(ms_fields, table, rho, x, w2i, cos):
         idx0 = (x @ w2i[:, :3].T + w2i[:, 3]) / float(stride)
         for k in range(min(len(levels), len(tab))):
             q = trilinear(levels[k], idx0 / float(2 ** k))
-            out += q[:, :3] * (tab[k, :, 0] * _hg(cos[li], tab[k, :, 1]))[:, None]
+            out += q[:, :3] * (tab[k, :, 0] * hg(cos[li], tab[k, :, 1]))[:, None]
     return out
 
 
@@ -356,7 +337,7 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
                     tau[edge] = _refined_tau(fields, w2is, thresholds, sigma_ts, mi, c, x[edge],
                                              wc[edge], dc[edge], 0.5 * voxels[mi])
                 cos = -np.einsum("ij,ij->i", wi, d)
-                inc += (_hg(cos, gs[mi])[:, None] * e) * np.exp(-tau)
+                inc += (hg(cos, gs[mi])[:, None] * e) * np.exp(-tau)
             if ambient >= 0:
                 inc += v[:, ambient:ambient + 3]
             src += rho[:, None] * sigma_ss[mi][None, :] * inc

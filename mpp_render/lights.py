@@ -96,6 +96,20 @@ def spot_attenuation(light: Light, from_light):
     return e[:, 0] * np.maximum(dist2, 1e-8)
 
 
+def towards_light(light: Light, points):
+    """(unit directions (N,3) from ``points`` to the light's centre, distances (N,) in m;
+    inf and the reversed propagation direction for the sun)."""
+    points = np.asarray(points, np.float64).reshape(-1, 3)
+    if light.kind == "SUN":
+        d = -np.asarray(light.direction, np.float64)
+        return np.broadcast_to(d / np.linalg.norm(d), points.shape).copy(), np.full(len(points), np.inf)
+    pos = np.asarray(light.matrix, np.float64)[:3, 3] if light.kind == "AREA" else \
+        np.asarray(light.position, np.float64)
+    v = pos - points
+    dist = np.linalg.norm(v, axis=1)
+    return v / np.maximum(dist, 1e-30)[:, None], dist
+
+
 def is_dark(light: Light) -> bool:
     """True when the light emits nothing (zero or negative strength)."""
     return not np.any(np.asarray(light.strength, np.float64) > 0.0)

@@ -16,9 +16,10 @@ def clamp_g(g: float) -> float:
     return float(np.clip(g, -G_LIMIT, G_LIMIT))
 
 
-def hg(cos_theta, g: float):
-    """Henyey-Greenstein p(cos) = (1 - g^2) / (4 pi (1 + g^2 - 2 g cos)^1.5), in 1/sr."""
-    g = clamp_g(g)
+def hg(cos_theta, g):
+    """Henyey-Greenstein p(cos) = (1 - g^2) / (4 pi (1 + g^2 - 2 g cos)^1.5), in 1/sr.
+    ``g``: a scalar or an array broadcasting with ``cos_theta``, clamped to +-G_LIMIT."""
+    g = np.clip(np.asarray(g, np.float64), -G_LIMIT, G_LIMIT)
     c = np.asarray(cos_theta, dtype=np.float64)
     denom = np.maximum(1.0 + g * g - 2.0 * g * c, 1e-12)
     return (1.0 - g * g) / (4.0 * np.pi * denom * np.sqrt(denom))

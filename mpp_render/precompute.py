@@ -25,7 +25,7 @@ from typing import Callable, List, Optional
 import numpy as np
 
 from . import kernels
-from .lights import is_dark
+from .lights import is_dark, towards_light
 from .media import PreparedMedium, trilinear, union_interval
 from .phase import sample_hg
 from .scene import Camera, Light, World
@@ -113,7 +113,7 @@ def run_chunks(n, chunk, work, threads=0, should_cancel=None) -> bool:
     return True
 
 
-def _media_arrays(media):
+def kernel_arrays(media):
     return ([m.grid for m in media], [m.w2i for m in media], [m.sigma_t for m in media],
             [m.threshold for m in media])
 
@@ -122,7 +122,7 @@ def _media_arrays_for(media, coefficient):
     """Kernel arrays integrating ``coefficient``: 'sigma_t' or 'sigma_s' (RGB optical depth)
     or 'length' (metres inside non-zero density, in all three channels)."""
     if coefficient == "sigma_t":
-        return _media_arrays(media)
+        return kernel_arrays(media)
     if coefficient == "sigma_s":
         return ([m.grid for m in media], [m.w2i for m in media], [m.sigma_s for m in media],
                 [m.threshold for m in media])
@@ -147,17 +147,7 @@ def light_optical_depth(media: List[PreparedMedium], light: Light, points, step,
 
     def work(a, b):
         p = points[a:b]
-        if light.kind == "SUN":
-            d = -np.asarray(light.direction, np.float64)
-            d = np.broadcast_to(d / np.linalg.norm(d), p.shape).copy()
-            limit = np.full(len(p), np.inf)
-        else:
-            pos = np.asarray(light.position if light.kind != "AREA" else
-                             np.asarray(light.matrix)[:3, 3], np.float64)
-            v = pos - p
-            dist = np.linalg.norm(v, axis=1)
-            d = v / np.maximum(dist, 1e-30)[:, None]
-            limit = dist
+        d, limit = towards_light(light, p)
         t = _exit_distance(media, p, d, limit)
         tau = od(p, d, t, *arrays, float(step), 0.5)
         if surfaces is not None and not surfaces.empty:
@@ -212,7 +202,7 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
     if n == 0 or not np.any(colour > 0):
         return (np.zeros((n, 3)), np.zeros((n, 3))) if multiple else np.zeros((n, 3))
     od = kernels.get("optical_depth")
-    arrays = _media_arrays(media)
+    arrays = kernel_arrays(media)
     arrays_s = _media_arrays_for(media, "sigma_s")
     c2w = np.asarray(camera.cam_to_world, np.float64)
     out = np.zeros((n, 3))

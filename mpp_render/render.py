@@ -21,7 +21,7 @@ from .camera import primary_rays
 from .march import MarchContext, march_rays, ray_keys
 from .media import prepare, union_interval
 from .passes import DEPTH_MISS, enabled_passes
-from .precompute import precompute
+from .precompute import kernel_arrays, precompute
 from .scene import SceneDescription
 from .surfaces import intersect, prepare_surfaces, shade
 
@@ -108,12 +108,13 @@ def render(desc: SceneDescription,
     od = kernels.get("optical_depth")
     step_light = step
 
+    arrays = kernel_arrays(media)
+
     def media_optical_depth(p, d, t_max):
         if not media:
             return np.zeros((len(p), 3))
         t0, t1 = union_interval(media, p, d, np.zeros(len(p)), t_max)
-        return od(p, d, np.maximum(t1, 0.0), [m.grid for m in media], [m.w2i for m in media],
-                  [m.sigma_t for m in media], [m.threshold for m in media], step_light, 0.5)
+        return od(p, d, np.maximum(t1, 0.0), *arrays, step_light, 0.5)
 
     spp = max(1, int(st.samples))
     ts = tile_size(spp)

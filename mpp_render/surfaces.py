@@ -159,22 +159,13 @@ def facing_normals(ss: SurfaceSet, tri, d):
     return np.where(flip[:, None], -n, n)
 
 
-def light_distance(light, points):
-    """Distance (m) from ``points`` to the light's centre; inf for the sun."""
-    if light.kind == "SUN":
-        return np.full(len(points), np.inf)
-    pos = np.asarray(light.matrix, np.float64)[:3, 3] if light.kind == "AREA" else \
-        np.asarray(light.position, np.float64)
-    return np.linalg.norm(pos - points, axis=1)
-
-
 def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, rng):
     """Outgoing radiance (N,3) W/(m^2 sr) of surface points ``p`` hit by rays ``d``.
 
     ``media_optical_depth(points, dirs, t_max)`` -> (N,3) optical depth through the media
     (the caller binds the prepared media); ``rng`` jitters area/sphere light points and the
     one cosine-weighted sky direction per point."""
-    from .lights import incident, is_dark
+    from .lights import incident, is_dark, towards_light
     from .phase import orthonormal_basis
 
     n_pts = len(p)
@@ -191,12 +182,12 @@ def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, r
         lit = np.flatnonzero(cos > 0)
         if not lit.size:
             continue
-        dist = light_distance(light, po[lit])
+        dist = towards_light(light, po[lit])[1]
         vis = ~occluded(ss, po[lit], to_l[lit], dist)
-        lit = lit[vis]
+        lit, dist = lit[vis], dist[vis]
         if not lit.size:
             continue
-        tau = media_optical_depth(po[lit], to_l[lit], light_distance(light, po[lit]))
+        tau = media_optical_depth(po[lit], to_l[lit], dist)
         brdf = dielectric_brdf(albedo[lit], ss.specular[tri[lit]], ss.roughness[tri[lit]],
                                nrm[lit], to_l[lit], -d[lit])
         out[lit] += brdf * e[lit] * cos[lit, None] * np.exp(-tau)

@@ -31,14 +31,17 @@ class MPPPanel:
     def poll(cls, context):
         return context.engine in cls.COMPAT_ENGINES
 
+    def split_layout(self):
+        """The panel's layout with labels beside the values, as Cycles' panels draw."""
+        layout = self.split_layout()
+        return layout
+
 
 class MPP_PT_sampling(MPPPanel, bpy.types.Panel):
     bl_label = "Sampling"
 
     def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout = self.split_layout()
         mpp = context.scene.mpp
         col = layout.column()
         col.prop(mpp, "samples")
@@ -49,9 +52,7 @@ class MPP_PT_volumes(MPPPanel, bpy.types.Panel):
     bl_label = "Volumes"
 
     def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout = self.split_layout()
         mpp = context.scene.mpp
         col = layout.column()
         col.prop(mpp, "step_size")
@@ -62,9 +63,7 @@ class MPP_PT_light_paths(MPPPanel, bpy.types.Panel):
     bl_label = "Light Paths"
 
     def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout = self.split_layout()
         mpp = context.scene.mpp
         col = layout.column()
         col.prop(mpp, "multiple")
@@ -76,9 +75,7 @@ class MPP_PT_film(MPPPanel, bpy.types.Panel):
     bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout = self.split_layout()
         layout.prop(context.scene.render, "film_transparent", text="Transparent")
 
 
@@ -87,9 +84,7 @@ class MPP_PT_performance(MPPPanel, bpy.types.Panel):
     bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout = self.split_layout()
         layout.prop(context.scene.mpp, "threads")
         layout.prop(context.scene.mpp, "memory_budget_mb")
 
