@@ -10,8 +10,6 @@ line renders without them).
 """
 import importlib
 
-from .mpp_render.blender import engine, properties
-
 OPTIONAL = ("ui", "operators")
 
 
@@ -28,7 +26,16 @@ def _optional_modules():
     return found
 
 
+def _glue():
+    """The engine and settings modules, imported when Blender registers the extension (not at
+    import, so that this file also imports on its own, e.g. when a test runner that finds it
+    at the root of a checkout imports it without its package)."""
+    from .mpp_render.blender import engine, properties
+    return engine, properties
+
+
 def register():
+    engine, properties = _glue()
     properties.register()
     engine.register()
     for mod in _optional_modules():
@@ -38,5 +45,6 @@ def register():
 def unregister():
     for mod in reversed(_optional_modules()):
         mod.unregister()
+    engine, properties = _glue()
     engine.unregister()
     properties.unregister()
