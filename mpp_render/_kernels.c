@@ -146,6 +146,37 @@ static int parse_grids(PyObject *grids, PyObject *w2is, PyObject *sigs, PyObject
     return 0;
 }
 
+/* Channel 0 of grid g, trilinear, at world point p + s d (0 outside the grid). */
+static inline double fetch_at(const Grid *g, const double *p, const double *d, double s) {
+    double x[3] = {p[0] + d[0] * s, p[1] + d[1] * s, p[2] + d[2] * s}, idx[3], v;
+    to_index(g, x, idx);
+    trilinear(g, idx, 0, 1, &v);
+    return v;
+}
+
+#define CROSSING_HALVINGS 6
+
+/* Twin of kernels_np.inside_fraction: the part of the segment [sa, sb] of ray p + s d with
+ * occupancy >= thr, given the occupancy va, vb at its ends; a crossing is bracketed by
+ * CROSSING_HALVINGS bisections, then interpolated linearly. */
+static inline double inside_fraction(const Grid *g, const double *p, const double *d, double sa,
+                                     double sb, double va, double vb, double thr) {
+    int ia = va >= thr, ib = vb >= thr;
+    if (ia && ib) return 1.0;
+    if (!ia && !ib) return 0.0;
+    double lo = sa, hi = sb, vlo = va, vhi = vb;
+    for (int it = 0; it < CROSSING_HALVINGS; it++) {
+        double mid = 0.5 * (lo + hi), vm = fetch_at(g, p, d, mid);
+        if ((vm >= thr) == (vlo >= thr)) { lo = mid; vlo = vm; }
+        else { hi = mid; vhi = vm; }
+    }
+    double f = (thr - vlo) / (vhi - vlo);
+    if (!isfinite(f)) f = 0.5;
+    f = f < 0.0 ? 0.0 : (f > 1.0 ? 1.0 : f);
+    double cross = lo + f * (hi - lo), len = sb - sa > 1e-300 ? sb - sa : 1e-300;
+    return (ia ? cross - sa : sb - cross) / len;
+}
+
 static const char optical_depth_doc[] =
     "optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, offset) -> (N,3) float64\n"
     "Twin of kernels_np.optical_depth.";
@@ -184,15 +215,22 @@ static PyObject *optical_depth(PyObject *self, PyObject *args) {
             if (cnt > 1e6) cnt = 1e6;  /* a bounded loop whatever the caller passes */
             long ns = (long)cnt;
             double h = tm / (double)ns;
+            double prev[MAX_MEDIA];  /* sharp grids: occupancy at the segment's start */
+            for (int m = 0; m < ng; m++)
+                if (g[m].thr >= 0.0) prev[m] = fetch_at(&g[m], P + 3 * r, D + 3 * r, 0.0);
             for (long j = 0; j < ns; j++) {
-                double s = ((double)j + offset) * h, x[3], idx[3], v;
-                for (int a = 0; a < 3; a++) x[a] = P[3 * r + a] + D[3 * r + a] * s;
+                double s = ((double)j + offset) * h;
                 for (int m = 0; m < ng; m++) {
-                    to_index(&g[m], x, idx);
-                    if (trilinear(&g[m], idx, 0, 1, &v)) {
-                        v = density_from(&g[m], v);
-                        for (int c = 0; c < 3; c++) tau[c] += v * g[m].sig[c] * h;
+                    double rho;
+                    if (g[m].thr >= 0.0) {
+                        double vb = fetch_at(&g[m], P + 3 * r, D + 3 * r, (double)(j + 1) * h);
+                        rho = inside_fraction(&g[m], P + 3 * r, D + 3 * r, (double)j * h,
+                                              (double)(j + 1) * h, prev[m], vb, g[m].thr);
+                        prev[m] = vb;
+                    } else {
+                        rho = fetch_at(&g[m], P + 3 * r, D + 3 * r, s);
                     }
+                    for (int c = 0; c < 3; c++) tau[c] += rho * g[m].sig[c] * h;
                 }
             }
         }

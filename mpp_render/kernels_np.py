@@ -11,14 +11,53 @@ from .media import density_from, trilinear
 from .phase import hg, orthonormal_basis
 
 
+CROSSING_HALVINGS = 6  # bisection steps that bracket a sharp surface inside a segment
+
+
+def inside_fraction(value, s_a, s_b, va, vb, threshold):
+    """Fraction of the segments [s_a, s_b] (arrays, metres along their rays) inside a sharp
+    medium, given the interpolated occupancy ``value(s)`` (a function of the same rays'
+    positions) and its values ``va``, ``vb`` at the ends; the medium is where the occupancy is
+    >= ``threshold`` (media.density_from).  A segment with one end in and one out is halved
+    ``CROSSING_HALVINGS`` times around the crossing and the crossing is then interpolated
+    linearly in the last bracket, so a surface anywhere within the segment is placed where
+    the trilinear occupancy crosses the threshold (exactly, for a flat face)."""
+    va = np.asarray(va, np.float64)
+    vb = np.asarray(vb, np.float64)
+    ia, ib = va >= threshold, vb >= threshold
+    out = np.where(ia & ib, 1.0, 0.0)
+    mixed = np.flatnonzero(ia != ib)
+    if mixed.size:
+        lo, hi = np.asarray(s_a, np.float64)[mixed], np.asarray(s_b, np.float64)[mixed]
+        vlo, vhi = va[mixed], vb[mixed]
+        for _ in range(CROSSING_HALVINGS):
+            mid = 0.5 * (lo + hi)
+            vm = value(mid, mixed)
+            same_as_lo = (vm >= threshold) == (vlo >= threshold)
+            lo, vlo = np.where(same_as_lo, mid, lo), np.where(same_as_lo, vm, vlo)
+            hi, vhi = np.where(same_as_lo, hi, mid), np.where(same_as_lo, vhi, vm)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            f = np.clip((threshold - vlo) / (vhi - vlo), 0.0, 1.0)
+        f = np.where(np.isfinite(f), f, 0.5)
+        cross = lo + f * (hi - lo)
+        s0, s1 = np.asarray(s_a, np.float64)[mixed], np.asarray(s_b, np.float64)[mixed]
+        length = np.maximum(s1 - s0, 1e-300)
+        out[mixed] = np.where(ia[mixed], cross - s0, s1 - cross) / length
+    return out
+
+
 def optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, offset=0.5):
     """RGB optical depth (N,3) along rays p + s*dir, s in [0, t_max], through every medium.
 
     ``points`` (N,3), ``dirs`` (N,3) unit, ``t_max`` (N,) metres; ``grids`` padded float32
     density arrays, ``w2is`` their (3,4) world->index maps, ``sigma_ts`` their RGB extinction
     per unit density (1/m), ``thresholds`` their sharp-boundary thresholds (-1: smooth; see
-    media.density_from).  Each ray is cut into n = ceil(t_max/step) equal segments and the
-    density is read at the fraction ``offset`` of each segment (midpoint rule for 0.5)."""
+    media.density_from).  Each ray is cut into n = ceil(t_max/step) equal segments.  A smooth
+    grid is read at the fraction ``offset`` of each segment (midpoint rule for 0.5); a sharp
+    grid is read at both ends of each segment and the segment counts by the fraction of it
+    inside (``inside_fraction``, which brackets a crossing), so a surface lying anywhere within a segment is placed
+    where it is rather than rounded to a whole segment (a midpoint that lands on the
+    surface would otherwise drop or add up to half a segment on every ray)."""
     points = np.asarray(points, np.float64)
     dirs = np.asarray(dirs, np.float64)
     t_max = np.maximum(np.asarray(t_max, np.float64), 0.0)
@@ -29,13 +68,19 @@ def optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, 
         live = n > j
         if not live.any():
             break
-        s = (j + offset) * h[live]
-        x = points[live] + dirs[live] * s[:, None]
-        acc = np.zeros((len(x), 3))
+        p, dl, hl = points[live], dirs[live], h[live]
+        acc = np.zeros((len(p), 3))
         for g, w2i, st, thr in zip(grids, w2is, sigma_ts, thresholds):
-            idx = x @ w2i[:, :3].T + w2i[:, 3]
-            acc += density_from(trilinear(g, idx), thr)[:, None] * st[None, :]
-        tau[live] += acc * h[live][:, None]
+            def value(s, rows=slice(None)):
+                x = p[rows] + dl[rows] * s[:, None]
+                return trilinear(g, x @ w2i[:, :3].T + w2i[:, 3])
+            if thr >= 0.0:
+                sa, sb = j * hl, (j + 1) * hl
+                rho = inside_fraction(value, sa, sb, value(sa), value(sb), thr)
+            else:
+                rho = value((j + offset) * hl)
+            acc += rho[:, None] * st[None, :]
+        tau[live] += acc * hl[:, None]
     return tau
 
 
