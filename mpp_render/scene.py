@@ -104,14 +104,28 @@ class Medium:
 
 @dataclass
 class Surface:
-    """An opaque triangle mesh: stops camera rays and shadows the media.
+    """An opaque triangle mesh: stops camera rays and shadows the media.  Shaded as Cycles'
+    Principled BSDF (surfaces.py); the defaults are a plain Lambertian 0.8 grey, Cycles' look
+    for a mesh without material.
 
     ``vertices``: float64 (N, 3) world metres; ``triangles``: int64 (M, 3) vertex indices.
-    ``base_color``: RGB diffuse albedo (the Principled BSDF base colour);
-    ``emission``: RGB emitted radiance W/(m^2 sr).  ``name``: the object's name.
-    ``specular``: reflectance at normal incidence F0 of the dielectric coat of a Principled
-    BSDF (0.04 for IOR 1.5; 0 for a purely diffuse material); ``roughness``: its GGX
-    roughness in [0, 1] (alpha = roughness^2), as Blender's Roughness input.
+    ``name``: the object's name.  ``emission``: RGB emitted radiance W/(m^2 sr).
+    ``base_color``: RGB, dimensionless: the diffuse albedo under the specular layer, and the
+    reflectance at normal incidence of the metal (Principled 'Base Color').
+    ``specular``: the dielectric specular layer's reflectance at normal incidence F0,
+    dimensionless in [0, 1]: ((IOR - 1) / (IOR + 1))^2 x 2 x 'Specular IOR Level' (0.04 for
+    IOR 1.5 at level 0.5); 0 means no specular layer (a Diffuse BSDF).  An IOR below 1 acts as
+    its reciprocal.  ``roughness``: 'Roughness' in [0, 1] of the specular layer and of the
+    metal (GGX alpha = roughness^2).  ``metallic``: 'Metallic' in [0, 1].
+    ``specular_tint``: RGB 'Specular Tint': scales the dielectric F0 and is the metal's
+    F82 edge tint.
+    ``coat_weight`` (>= 0), ``coat_roughness`` ([0, 1]), ``coat_ior`` (>= 1), ``coat_tint``
+    (RGB): the Principled coat layer; ``coat_weight`` 0 means none.
+    ``diffuse_roughness``: 'Diffuse Roughness' in [0, 1] (0: Lambert, above: Oren-Nayar as
+    Cycles' energy-preserving variant).  ``multiscatter``: the node's distribution is
+    'Multiscatter GGX' (energy compensation of the GGX lobes) rather than 'GGX'.
+    ``weight``: the BSDF's share in [0, 1] of the material (Mix Shader factors; the rest is
+    emission or shaders we leave out), scaling all reflected light.
     """
 
     name: str
@@ -121,6 +135,15 @@ class Surface:
     emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
     specular: float = 0.0
     roughness: float = 0.5
+    metallic: float = 0.0
+    specular_tint: np.ndarray = field(default_factory=lambda: np.ones(3))
+    coat_weight: float = 0.0
+    coat_roughness: float = 0.03
+    coat_ior: float = 1.5
+    coat_tint: np.ndarray = field(default_factory=lambda: np.ones(3))
+    diffuse_roughness: float = 0.0
+    multiscatter: bool = True
+    weight: float = 1.0
 
 
 @dataclass

@@ -111,14 +111,14 @@ class MeshTranslator:
         world = verts @ world_matrix[:3, :3].T + world_matrix[:3, 3]
         if len(per_slot) == 1:
             mat = next(iter(per_slot.values()))
-            base, emission, spec, rough = surface_shading(mat, self._where(ob, mat), self.warnings)
-            return [Surface(ob.name, world, tris.copy(), base, emission, spec, rough)]
+            shading = surface_shading(mat, self._where(ob, mat), self.warnings)
+            return [Surface(ob.name, world, tris.copy(), **shading)]
         out = []
         for s, mat in per_slot.items():
             sel = tris[slot_of == s]
             used, local = np.unique(sel, return_inverse=True)
-            base, emission, spec, rough = surface_shading(mat, self._where(ob, mat), self.warnings)
+            shading = surface_shading(mat, self._where(ob, mat), self.warnings)
             name = f"{ob.name} [{mat.name if mat is not None else 'no material'}]"
             out.append(Surface(name, world[used], local.reshape(-1, 3).astype(np.int64),
-                               base, emission, spec, rough))
+                               **shading))
         return out
