@@ -59,7 +59,7 @@ from .scene import Surface
 EPS = 1e-6          # relative offset (m per m of scene extent) for shadow-ray origins
 RAY_CHUNK = 4096    # rays per block in the ray x triangle tests
 WEIGHT_CUTOFF = 1e-5        # Cycles' CLOSURE_WEIGHT_CUTOFF: lighter closures are left out
-SINGULAR_ALPHA2 = 2e-10     # Cycles' BSDF_ROUGHNESS_SQ_THRESH: alpha_x alpha_y at or below is a mirror
+SINGULAR_ALPHA2 = 2e-10     # Cycles' BSDF_ROUGHNESS_SQ_THRESH: alpha^2 at or below is a mirror
 
 # per-surface parameters (scene.Surface fields) and their shapes
 _SCALARS = ("specular", "roughness", "metallic", "coat_weight", "coat_roughness", "coat_ior",
@@ -402,7 +402,8 @@ class Principled:
 
     def albedo(self, idx=slice(None)):
         """Directional albedo (RGB) at the view direction: the fraction of a uniform sky's
-        radiance the surface reflects (Cycles' layer albedo estimates)."""
+        radiance the surface reflects (from the albedo tables, the dielectric layers as Cycles
+        estimates them)."""
         return (self.coat_alb + self.metal_alb + self.spec_alb + self.diff_alb)[idx]
 
     def eval(self, wl, idx=None):
