@@ -25,8 +25,6 @@ SHORTFALL = {
     "fog_beam": ((0.09, 0.01), "our own noise at 16 spp on the narrow, bright beam (0.078 "
                               "rel_rmse_4 between two seeds; the two ss references' floor_4 is "
                               "0.028); the bias is gone since the sharp-surface fix"),
-    "smoke_plume": ((0.07, 0.02), "the ground plane's Principled BSDF is approximated "
-                                  "(diffuse + GGX coat); the smoke itself matches to 0.1 %"),
 }
 # full render (multiple scattering on): measured rel_rmse_4 at 4 spp plus 15 %
 FULL_BOUND = {"cloud_vdb": 0.107, "colored_sphere": 0.31, "fog_beam": 1.39,
