@@ -11,6 +11,9 @@ read by the march with a single trilinear fetch per step:
   A(x) = L_world * integral p(w_in . w_cam(x)) T(x, -w_in) dw_in, estimated with directions
   drawn from the phase lobe (so the estimate is the mean transmittance).  w_cam(x) points
   from x to the camera, which is exact for camera rays through x.
+* last, for a medium with an emission grid (scene.Medium.emission_grid) only, 3 channels of
+  its emitted radiance per metre (W/(m^3 sr)), copied from the grid
+  (``FieldLayout.emission_channels``); the march adds them to the Emission pass.
 
 Only voxels whose trilinear support touches non-zero density are computed; the rest stay 0.
 """
@@ -39,12 +42,15 @@ MULTIPLE_RESOLUTION = 64  # lattice points along the longest side for the light 
 @dataclass
 class FieldLayout:
     """Channel offsets in a medium's field array.  ``light_channels[i]`` is the offset of
-    light i's optical depth, or None when the light is skipped (dark)."""
+    light i's optical depth, or None when the light is skipped (dark).  ``channels``: the
+    channels every medium's field has; ``emission_channels[m]``: the offset of medium m's
+    emission grid (its field then has ``channels + 3``), or None."""
 
     light_channels: List[Optional[int]]
     ambient_channel: Optional[int]
     channels: int
     ambient_multiple_channel: Optional[int] = None
+    emission_channels: Optional[List[Optional[int]]] = None
 
 
 @dataclass
@@ -378,19 +384,23 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
         if multiple:
             amb_ms = c
             c += 3
-    layout = FieldLayout(chans, amb, c, amb_ms)
+    layout = FieldLayout(chans, amb, c, amb_ms,
+                         [c if pm.emission_grid is not None else None for pm in media])
     ms_all = []
     step = step_factor * min(pm.voxel_size for pm in media) if media else 1.0
     fields = []
     n_pts = 0
     n_ambient = 0
     for mi, pm in enumerate(media):
-        f = np.zeros(pm.grid.shape + (c,), np.float32)
+        cm = c if pm.emission_grid is None else c + 3
+        f = np.zeros(pm.grid.shape + (cm,), np.float32)
         f[..., 0] = pm.grid
+        if pm.emission_grid is not None:
+            f[..., c:c + 3] = pm.emission_grid
         flat, pts = needed_points(pm)
         n_pts += len(pts)
         plan = interior_plan(pm, flat)
-        view = f.reshape(-1, c)
+        view = f.reshape(-1, cm)
         for li, light in enumerate(lights):
             if chans[li] is None:
                 continue
