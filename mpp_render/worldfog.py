@@ -22,7 +22,8 @@ camera's clip end.  Here (``World.volume``, a Medium with source 'WORLD'):
 * *Beyond the box* (``tail``): a camera ray leaving the box continues through homogeneous fog
   to its surface hit or to infinity.  That stretch is integrated semi-analytically: the
   emission exactly, e (1 - e^(-sigma_t L)) / sigma_t, and the single scattering of every
-  point, spot and area light by a TAIL_NODES-point quadrature in the fog's transmittance,
+  point, spot and area light by TAIL_NODES-point Gauss-Legendre quadrature in the fog's
+  transmittance,
   with each light's irradiance, phase function and attenuation exp(-sigma_t r) through the
   fog alone: shadows of surfaces and other media beyond the box are not traced there.  The
   background behind it is attenuated by exp(-sigma_t L) (0 for L = infinity).  Measured on
@@ -49,7 +50,7 @@ TAU_VIEW = 7.0          # camera optical depth through the fog where the grid ma
 CONTENT_MARGIN = 1.25   # the grid reaches this factor beyond the farthest content seen
 PROBES = 17             # probe rays per image side that find the content's depth
 MARGIN_VOXELS = 2.0     # voxels of fog kept beyond the frustum on every side
-TAIL_NODES = 16         # quadrature points of the single-scattering tail per ray
+TAIL_NODES = 16         # Gauss-Legendre points of the single-scattering tail per ray
 FOG_TAU_MAX = 50.0      # optical depth standing for "infinitely far" (a sun): T = 2e-22
 
 
@@ -201,8 +202,8 @@ def tail(fog: Medium, lights: List[Light], origins, dirs, s0, s1, nodes: int = T
     """What the homogeneous fog adds to rays o + s d over s in [s0, s1] (s1 may be inf;
     nothing where s1 <= s0), as seen from s0: ``(single (N,3), emission (N,3),
     transmittance (N,3))``, radiance in W/(m^2 sr).  Single scattering of the POINT, SPOT
-    and AREA ``lights`` through the fog alone (no shadows), by a ``nodes``-point midpoint
-    rule in u = 1 - exp(-sigma (s - s0)), sigma the smallest positive extinction.  Emission
+    and AREA ``lights`` through the fog alone (no shadows), by ``nodes``-point Gauss-Legendre
+    quadrature in u = 1 - exp(-sigma (s - s0)), sigma the smallest positive extinction.  Emission
     in channels without extinction over an infinite stretch would be infinite; it is left
     out there (the caller warns)."""
     o = np.asarray(origins, np.float64)
@@ -229,10 +230,10 @@ def tail(fog: Medium, lights: List[Light], origins, dirs, s0, s1, nodes: int = T
         recs = [pack_light(li) for li in used]
         with np.errstate(over="ignore"):
             u_max = -np.expm1(-sig * length[live])            # (M,)
-        k = (np.arange(nodes) + 0.5) / nodes
-        u = u_max[:, None] * k[None, :]                      # (M, K)
+        k, kw = np.polynomial.legendre.leggauss(nodes)      # Gauss-Legendre on [-1, 1]
+        u = u_max[:, None] * (0.5 * (k[None, :] + 1.0))      # (M, K)
         s = -np.log1p(-u) / sig                              # distance from s0
-        w = (u_max[:, None] / nodes) / (sig * (1.0 - u))     # ds per node
+        w = (u_max[:, None] * 0.5 * kw[None, :]) / (sig * (1.0 - u))  # ds per node
         x = (o[live, None, :] + d[live, None, :] * (s0[live, None] + s)[..., None]).reshape(-1, 3)
         dd = np.repeat(d[live], nodes, axis=0)
         inc = np.zeros((len(x), 3))
