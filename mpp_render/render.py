@@ -101,6 +101,11 @@ def render(desc: SceneDescription,
     if fog is not None:
         world = worldfog.effective_world(desc.world, fog)
         lights = worldfog.effective_lights(desc.lights, fog)
+        for before, after in zip(desc.lights, lights):
+            if before.kind == "SUN" and np.any(np.asarray(before.strength) > 0) \
+                    and not np.any(np.asarray(after.strength) > 0):
+                warnings.append(f"light '{before.name}': a sun lights nothing through the world "
+                                "volume, which is endless (as in Cycles)")
         box = worldfog.bounded_medium(desc, fog, media, st.voxel_resolution)
         fog_pm = prepare(box.medium, warnings)
         media.append(fog_pm)

@@ -160,3 +160,5 @@ def test_suns_are_dark_and_emission_fills_the_fog(empty_scene, tmp_path):
     np.testing.assert_allclose(ours["Combined"][8, 12, :3], expect, rtol=0.01)
     np.testing.assert_allclose(ours["Emission"][8, 12], expect, rtol=0.01)
     assert np.all(ours["Volume Single"] == 0)   # the sun does not reach through the fog
+    assert any("a sun lights nothing through the world volume" in w
+               for w in engine.LAST_RENDER.output.warnings)
