@@ -466,18 +466,19 @@ static int parse_doubles(PyObject *list, Py_ssize_t n, double *out, const char *
 
 static const char march_doc[] =
     "march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs, thresholds,\n"
-    "      voxels, lights, ambient, step, depth_opacity, depth_miss[, multiple, emissions])\n"
+    "      voxels, lights, ambient, step, depth_opacity, depth_miss[, multiple, emissions,\n"
+    "      emission_channels])\n"
     "  -> (single, T, depth, multiple, steps, emission) as bytes of float64\n"
     "Twin of kernels_np.march.";
 
 static PyObject *march(PyObject *self, PyObject *args) {
     PyObject *po, *pd, *pt0, *pt1, *pax, *pk, *fields, *w2is, *sss, *sts, *gsl, *thrs, *vox, *plights;
-    PyObject *pms = Py_None, *pem = Py_None;
+    PyObject *pms = Py_None, *pem = Py_None, *pec = Py_None;
     int ambient;
     double step, depth_opacity, depth_miss;
-    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOiddd|OO", &po, &pd, &pt0, &pt1, &pax, &pk, &fields,
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOiddd|OOO", &po, &pd, &pt0, &pt1, &pax, &pk, &fields,
                           &w2is, &sss, &sts, &gsl, &thrs, &vox, &plights, &ambient, &step,
-                          &depth_opacity, &depth_miss, &pms, &pem))
+                          &depth_opacity, &depth_miss, &pms, &pem, &pec))
         return NULL;
     if (!(step > 0.0) || !isfinite(step)) {
         PyErr_SetString(PyExc_ValueError, "step must be a positive finite length");
@@ -493,6 +494,7 @@ static PyObject *march(PyObject *self, PyObject *args) {
     memset(&ms, 0, sizeof ms);
     Grid g[MAX_MEDIA];
     double sig_s[MAX_MEDIA][3], gg[MAX_MEDIA], voxel[MAX_MEDIA], emit[MAX_MEDIA][3];
+    int emc[MAX_MEDIA];  /* first channel of each medium's emission grid, or -1 */
     int use_em = 0;
     int ng = 0;
     PyObject *o_s = NULL, *o_t = NULL, *o_d = NULL, *o_m = NULL, *o_k = NULL, *o_e = NULL, *result = NULL;
@@ -540,6 +542,22 @@ static PyObject *march(PyObject *self, PyObject *args) {
                 }
         }
         use_em = 1;
+    }
+    for (int m = 0; m < ng; m++) emc[m] = -1;
+    if (pec != Py_None) {
+        if (!PyList_Check(pec) || PyList_GET_SIZE(pec) != ng) {
+            PyErr_SetString(PyExc_ValueError, "emission_channels: one int per medium");
+            goto done;
+        }
+        for (int m = 0; m < ng; m++) {
+            long c = PyLong_AsLong(PyList_GET_ITEM(pec, m));
+            if (c == -1 && PyErr_Occurred()) goto done;
+            if (c >= 0 && (c < 1 || c + 3 > g[m].nc)) {
+                PyErr_SetString(PyExc_ValueError, "emission_channels: channel outside the fields");
+                goto done;
+            }
+            emc[m] = c < 0 ? -1 : (int)c;
+        }
     }
     for (int m = 0; m < ng; m++) {
         if (!(gg[m] > -1.0 && gg[m] < 1.0) || !(voxel[m] > 0.0) || !isfinite(voxel[m])) {
@@ -686,6 +704,8 @@ static PyObject *march(PyObject *self, PyObject *args) {
                 double idx[3], v[MAX_CH];
                 to_index(&g[m], x, idx);
                 if (!trilinear(&g[m], idx, 0, (int)g[m].nc, v)) continue;
+                if (emc[m] >= 0)  /* an emission grid shines whatever the density */
+                    for (int a = 0; a < 3; a++) src_em[a] += v[emc[m] + a];
                 double rho = density_from(&g[m], v[0]);
                 if (!(rho > 0.0)) continue;
                 for (int a = 0; a < 3; a++) sig_t[a] += rho * g[m].sig[a];

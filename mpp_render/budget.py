@@ -144,8 +144,18 @@ def fit_media(media: Sequence[Medium], lights: Sequence[Light], budget_mb: float
         warnings.append(f"medium '{m.name}': grid {_describe(shape)} downsampled by {f} to fit "
                         f"the memory budget of {budget_mb:g} MB; now {_describe(small.shape)}")
         out.append(dataclasses.replace(m, density=small, index_to_world=downsampled_transform(
-            m.index_to_world, shape, small.shape)))
+            m.index_to_world, shape, small.shape), emission_grid=_downsampled_emission(m, f)))
     return out
+
+
+def _downsampled_emission(m: Medium, factor: int):
+    """``m.emission_grid`` box-downsampled like its density (NaN and negatives first set to
+    0, so they do not spread over a block; prepare() warns about them), or None."""
+    e = m.emission_grid
+    if e is None or np.shape(e) != tuple(np.shape(m.density)) + (3,):
+        return e  # None, or a mismatch that prepare() reports
+    e = sanitise(e)[0]
+    return np.stack([box_downsample(e[..., c], factor) for c in range(3)], axis=-1)
 
 
 def apply_budget(desc: SceneDescription, warnings: List[str]) -> SceneDescription:

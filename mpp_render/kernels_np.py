@@ -311,7 +311,8 @@ def _phi1(z):
 
 
 def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs, thresholds,
-          voxels, lights, ambient, step, depth_opacity, depth_miss, multiple=None, emissions=None):
+          voxels, lights, ambient, step, depth_opacity, depth_miss, multiple=None, emissions=None,
+          emission_channels=None):
     """March camera rays through media fields: the numpy twin of ``_kernels.march``.
 
     Rays ``origins + t dirs`` (N,3), t in [t0, t1] (N,) metres; ``axial`` (N,) turns t into
@@ -328,6 +329,9 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
     ``emissions``: None or per medium the RGB emitted radiance per metre (W/(m^3 sr)), given
     off wherever the medium's density is > 0 (not scaled by density, as Cycles' Principled
     Volume).
+    ``emission_channels``: None or per medium the first of 3 field channels holding its
+    emission grid (W/(m^3 sr), read with the same trilinear fetch and given off wherever it
+    is non-zero, whatever the density), or -1 for none.
 
     Each step of length h adds T S (1 - exp(-sigma_t h)) / sigma_t with S the in-scattered
     radiance at one jittered point of the step, then T *= exp(-sigma_t h).  Returns
@@ -366,6 +370,8 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
             v = _fetch(f, w2is[mi], x, 0, f.shape[3])
             rho = density_from(v[:, 0], thresholds[mi])
             sig_t += rho[:, None] * sigma_ts[mi][None, :]
+            if emission_channels is not None and emission_channels[mi] >= 0:
+                src_em += v[:, emission_channels[mi]:emission_channels[mi] + 3]
             if emissions is not None:
                 src_em += (rho > 0)[:, None] * np.asarray(emissions[mi], np.float64)[None, :]
             edge = np.flatnonzero((v[:, 0] > EDGE_EPS) & (v[:, 0] < 1.0 - EDGE_EPS) & (rho > 0)) \

@@ -12,6 +12,10 @@ In-scattered radiance at x, per medium m with density rho_m(x):
 with E_l the light's irradiance (lights.py), tau the precomputed optical depth to the light
 and A the precomputed world light (precompute.py).  Rays stop when T < ``T_MIN``.
 
+Emission (the Emission pass) is a medium's constant ``emission`` wherever its density is > 0
+plus, for a medium with an emission grid, the grid's value read from the field's emission
+channels (precompute.FieldLayout.emission_channels) wherever it is non-zero.
+
 Mesh volumes have a sharp surface (media.density_from).  There the optical depth to a light
 jumps from 0 outside to sigma_t * distance inside, a kink that trilinear interpolation of
 the voxel values smears over a voxel and that darkens the lit surface; so where a sample's
@@ -88,12 +92,14 @@ def march_rays(ctx: MarchContext, origins, dirs, t0, t1, axial, keys):
     fn = kernels.get("march")
     amb = ctx.layout.ambient_channel
     em = [np.maximum(np.asarray(m.medium.emission, np.float64).reshape(3), 0.0) for m in ctx.media]
+    ec = ctx.layout.emission_channels if ctx.layout is not None else None
+    ec = None if not ec or all(c is None for c in ec) else [-1 if c is None else c for c in ec]
     single, T, depth, multi, steps, emitted = fn(
         origins, dirs, t0, t1, axial, keys, ctx.fields, [m.w2i for m in ctx.media],
         [m.sigma_s for m in ctx.media], [m.sigma_t for m in ctx.media],
         [float(m.g) for m in ctx.media], [m.threshold for m in ctx.media],
         [m.voxel_size for m in ctx.media], ctx.packed, -1 if amb is None else amb,
         ctx.step, DEPTH_OPACITY, DEPTH_MISS, ctx.multiple,
-        em if any(np.any(e > 0) for e in em) else None)
+        em if any(np.any(e > 0) for e in em) else None, ec)
     return {"single": single, "T": T, "depth": depth, "multiple": multi, "steps": steps,
             "emission": emitted}

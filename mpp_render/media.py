@@ -8,7 +8,7 @@ the padded array and the affine map from world metres to *padded* index coordina
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import List
+from typing import List, Optional
 
 import numpy as np
 
@@ -23,6 +23,7 @@ class PreparedMedium:
     ``grid``: float32 (X, Y, Z) padded density.  ``w2i``: (3, 4) world -> padded index map.
     ``i2w``: (4, 4) padded index -> world.  ``sigma_s``, ``sigma_a``, ``sigma_t``: RGB 1/m
     per unit density.  ``voxel_size``: the shortest world length of a voxel edge (m).
+    ``emission_grid``: None or float32 (X, Y, Z, 3) padded emission grid (W/(m^3 sr)).
     """
 
     medium: Medium
@@ -35,6 +36,7 @@ class PreparedMedium:
     g: float
     voxel_size: float
     threshold: float = -1.0
+    emission_grid: Optional[np.ndarray] = None
 
     @property
     def sharp(self) -> bool:
@@ -81,7 +83,32 @@ def prepare(medium: Medium, warnings=None) -> PreparedMedium:
     sa = np.asarray(medium.sigma_a, np.float64).reshape(3)
     thr = 0.5 if medium.source == "MESH" else -1.0
     return PreparedMedium(medium, np.ascontiguousarray(grid), np.ascontiguousarray(w2i), i2w,
-                          ss, sa, ss + sa, clamp_g(float(medium.g)), voxel, thr)
+                          ss, sa, ss + sa, clamp_g(float(medium.g)), voxel, thr,
+                          _emission_grid(medium, d.shape, warnings))
+
+
+def _emission_grid(medium: Medium, shape, warnings):
+    """The padded float32 (X, Y, Z, 3) copy of ``medium.emission_grid`` (NaN, inf and
+    negative values set to 0 with a warning), or None when it has none, is all zero, or does
+    not match the density's shape (warned; the medium then renders without it)."""
+    e = medium.emission_grid
+    if e is None:
+        return None
+    e = np.asarray(e)
+    if e.shape != tuple(shape) + (3,):
+        if warnings is not None:
+            warnings.append(f"medium '{medium.name}': emission grid of shape {e.shape} does not "
+                            f"match the density {tuple(shape)} (+ 3 colours); ignored")
+        return None
+    e, bad = sanitise(e)
+    if bad and warnings is not None:
+        warnings.append(f"medium '{medium.name}': {bad} emission values were NaN, infinite or "
+                        "negative and were set to 0")
+    if not np.any(e > 0):
+        return None
+    out = np.zeros(tuple(s + 2 for s in shape) + (3,), np.float32)
+    out[1:-1, 1:-1, 1:-1] = e
+    return out
 
 
 def density_from(value, threshold: float):

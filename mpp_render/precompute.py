@@ -11,8 +11,19 @@ read by the march with a single trilinear fetch per step:
   A(x) = L_world * integral p(w_in . w_cam(x)) T(x, -w_in) dw_in, estimated with directions
   drawn from the phase lobe (so the estimate is the mean transmittance).  w_cam(x) points
   from x to the camera, which is exact for camera rays through x.
+* last, for a medium with an emission grid (scene.Medium.emission_grid) only, 3 channels of
+  its emitted radiance per metre (W/(m^3 sr)), copied from the grid
+  (``FieldLayout.emission_channels``); the march adds them to the Emission pass.
 
 Only voxels whose trilinear support touches non-zero density are computed; the rest stay 0.
+
+The world's fog (a medium with source 'WORLD', worldfog.py) fills all space homogeneously, so
+its optical depth to a light is sigma_t x distance, added analytically to what the other media
+(integrated by the kernel) and the surfaces give; its grid is never marched here.  On the fog's
+own grid the surfaces' shadows are prefiltered (``soft_visibility``): the optical depth holds
+-ln of the visibility averaged over each voxel near a shadow's edge, so that the interpolated
+field places the god rays' edges where they are instead of darkening a voxel of lit fog beside
+every shadow (interpolating the 0 / SHADOW_TAU step of a binary shadow does that).
 """
 from __future__ import annotations
 
@@ -39,12 +50,15 @@ MULTIPLE_RESOLUTION = 64  # lattice points along the longest side for the light 
 @dataclass
 class FieldLayout:
     """Channel offsets in a medium's field array.  ``light_channels[i]`` is the offset of
-    light i's optical depth, or None when the light is skipped (dark)."""
+    light i's optical depth, or None when the light is skipped (dark).  ``channels``: the
+    channels every medium's field has; ``emission_channels[m]``: the offset of medium m's
+    emission grid (its field then has ``channels + 3``), or None."""
 
     light_channels: List[Optional[int]]
     ambient_channel: Optional[int]
     channels: int
     ambient_multiple_channel: Optional[int] = None
+    emission_channels: Optional[List[Optional[int]]] = None
 
 
 @dataclass
@@ -132,24 +146,39 @@ def _media_arrays_for(media, coefficient):
     raise ValueError(coefficient)
 
 
+def split_fog(media: List[PreparedMedium]):
+    """(the media other than the world's fog, the fog's PreparedMedium or None)."""
+    fog = next((pm for pm in media if pm.medium.source == "WORLD"), None)
+    return [pm for pm in media if pm is not fog], fog
+
+
 def light_optical_depth(media: List[PreparedMedium], light: Light, points, step,
                         chunk=1 << 14, should_cancel=None, surfaces=None, threads=0,
-                        coefficient="sigma_t"):
+                        coefficient="sigma_t", fog_sigma_t=None):
     """RGB optical depth (N,3) from world ``points`` to ``light`` (its centre) through media;
     ``SHADOW_TAU`` is added where an opaque surface (``surfaces``, a SurfaceSet) blocks the
-    way, so surfaces cast volumetric shadows.  ``coefficient`` (see _media_arrays_for) picks
-    what is integrated; shadows are added to 'sigma_t' only.  None when cancelled."""
+    way, so surfaces cast volumetric shadows, and with ``fog_sigma_t`` (RGB 1/m) the world
+    fog's sigma_t x distance (worldfog.optical_depth).  ``media`` must not hold the fog.
+    ``coefficient`` (see _media_arrays_for) picks what is integrated; shadows and fog are
+    added to 'sigma_t' only.  None when cancelled."""
     od = kernels.get("optical_depth")
-    arrays = _media_arrays_for(media, coefficient)
+    arrays = _media_arrays_for(media, coefficient) if media else None
     if coefficient != "sigma_t":
         surfaces = None
+        fog_sigma_t = None
     out = np.zeros((len(points), 3))
 
     def work(a, b):
         p = points[a:b]
         d, limit = towards_light(light, p)
-        t = _exit_distance(media, p, d, limit)
-        tau = od(p, d, t, *arrays, float(step), 0.5)
+        if arrays is not None:
+            t = _exit_distance(media, p, d, limit)
+            tau = od(p, d, t, *arrays, float(step), 0.5)
+        else:
+            tau = np.zeros((len(p), 3))
+        if fog_sigma_t is not None:
+            from .worldfog import optical_depth as fog_optical_depth
+            tau = tau + fog_optical_depth(fog_sigma_t, limit)
         if surfaces is not None and not surfaces.empty:
             tau += SHADOW_TAU * occluded(surfaces, p, d, limit)[:, None]
         out[a:b] = tau
@@ -157,6 +186,56 @@ def light_optical_depth(media: List[PreparedMedium], light: Light, points, step,
     if not run_chunks(len(points), chunk, work, threads, should_cancel):
         return None
     return out
+
+
+SELF_VOXELS = 1.5  # surfaces this close to a fog voxel (in voxels) do not shadow it
+SOFT_OFFSETS = (np.stack(np.meshgrid(*[[-0.25, 0.25]] * 3, indexing="ij"), -1).reshape(-1, 3))
+
+
+def soft_visibility(surfaces, light: Light, pm: PreparedMedium, flat, points, chunk=1 << 14,
+                    threads=0, should_cancel=None):
+    """Visibility of ``light`` (0..1, (N,)) from the needed points ``points`` (at flat indices
+    ``flat`` of ``pm``'s grid) past the opaque ``surfaces``: 1 or 0 at the voxel point, and
+    near a shadow's edge (a 6-neighbour sees otherwise) the mean over the 2 x 2 x 2 points a
+    quarter voxel off, a box filter one voxel wide.  Surfaces within ``SELF_VOXELS`` voxels
+    of a point do not shadow it: the voxels just behind a lit floor or wall (which camera
+    rays never reach) then do not darken the lit fog in front of it through the
+    interpolation; a shadow starts that far behind its caster instead.  None when cancelled."""
+    vis = np.ones(len(points))
+    if surfaces is None or surfaces.empty or not len(points):
+        return vis
+    skip = SELF_VOXELS * pm.voxel_size
+
+    def binary(p):
+        d, limit = towards_light(light, p)
+        return ~occluded(surfaces, p + d * skip, d, np.maximum(limit - skip, 0.0))
+
+    def work(a, b):
+        vis[a:b] = binary(points[a:b])
+
+    if not run_chunks(len(points), chunk, work, threads, should_cancel):
+        return None
+    grid = np.ones(pm.grid.shape, bool)
+    grid.reshape(-1)[flat] = vis > 0.5
+    edge = np.zeros_like(grid)
+    for ax in range(3):
+        for sft in (1, -1):
+            edge |= grid != np.roll(grid, sft, axis=ax)
+    todo = np.flatnonzero(edge.reshape(-1)[flat])
+    if todo.size:
+        off = SOFT_OFFSETS @ pm.i2w[:3, :3].T  # quarter-voxel offsets in metres
+        acc = np.zeros(todo.size)
+        for o in off:
+            part = np.zeros(todo.size)
+
+            def work_o(a, b):
+                part[a:b] = binary(points[todo[a:b]] + o)
+
+            if not run_chunks(todo.size, chunk, work_o, threads, should_cancel):
+                return None
+            acc += part
+        vis[todo] = acc / len(off)
+    return vis
 
 
 WORLD_RNG_BLOCK = 1 << 11  # points sharing one random stream in world_light
@@ -202,6 +281,9 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
     if n == 0 or not np.any(colour > 0):
         return (np.zeros((n, 3)), np.zeros((n, 3))) if multiple else np.zeros((n, 3))
     od = kernels.get("optical_depth")
+    if not media:  # nothing but the fog (which has no extinction where the sky still shows)
+        def od(p, d, t, *args):
+            return np.zeros((len(p), 3))
     arrays = kernel_arrays(media)
     arrays_s = _media_arrays_for(media, "sigma_s")
     c2w = np.asarray(camera.cam_to_world, np.float64)
@@ -378,28 +460,42 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
         if multiple:
             amb_ms = c
             c += 3
-    layout = FieldLayout(chans, amb, c, amb_ms)
+    layout = FieldLayout(chans, amb, c, amb_ms,
+                         [c if pm.emission_grid is not None else None for pm in media])
     ms_all = []
     step = step_factor * min(pm.voxel_size for pm in media) if media else 1.0
+    solid, fog = split_fog(media)
+    fog_st = None if fog is None else fog.sigma_t
     fields = []
     n_pts = 0
     n_ambient = 0
     for mi, pm in enumerate(media):
-        f = np.zeros(pm.grid.shape + (c,), np.float32)
+        cm = c if pm.emission_grid is None else c + 3
+        f = np.zeros(pm.grid.shape + (cm,), np.float32)
         f[..., 0] = pm.grid
+        if pm.emission_grid is not None:
+            f[..., c:c + 3] = pm.emission_grid
         flat, pts = needed_points(pm)
         n_pts += len(pts)
         plan = interior_plan(pm, flat)
-        view = f.reshape(-1, c)
+        view = f.reshape(-1, cm)
         for li, light in enumerate(lights):
             if chans[li] is None:
                 continue
             if progress:
                 progress(0.0, f"Light attenuation: {light.name} on {pm.medium.name}")
-            tau = light_field(media, pm, light, flat, pts, step, plan, should_cancel=should_cancel,
-                              surfaces=surfaces, threads=threads)
+            soft = pm is fog and surfaces is not None and not surfaces.empty
+            tau = light_field(solid, pm, light, flat, pts, step, plan, should_cancel=should_cancel,
+                              surfaces=None if soft else surfaces, threads=threads,
+                              fog_sigma_t=fog_st)
             if tau is None:
                 return None
+            if soft:
+                vis = soft_visibility(surfaces, light, pm, flat, pts, threads=threads,
+                                      should_cancel=should_cancel)
+                if vis is None:
+                    return None
+                tau = tau - np.log(np.maximum(vis, np.exp(-SHADOW_TAU)))[:, None]
             view[flat, chans[li]:chans[li] + 3] = tau
         if amb is not None:
             if progress:
@@ -408,7 +504,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
             # interpolate trilinearly to the needed points
             stride = max(1, int(round(max(pm.grid.shape) / AMBIENT_RESOLUTION)))
             cshape, cflat, cpts = coarse_lattice(pm, stride)
-            a = world_light(media, pm, world, camera, cpts, n_dirs, 2.0 * step, seed=seed + mi,
+            a = world_light(solid, pm, world, camera, cpts, n_dirs, 2.0 * step, seed=seed + mi,
                             should_cancel=should_cancel, surfaces=surfaces, threads=threads,
                             multiple=amb_ms is not None)
             if a is None:

@@ -4,6 +4,10 @@ The image is cut into square tiles; each tile's rays (``samples`` jittered rays 
 stratified over the pixel square like Cycles' 1 px box filter) are marched independently with
 a random stream seeded by (seed, tile index), so the image does not depend on the number of
 threads.  ``progress`` and ``should_cancel`` are served between tiles.
+
+A world volume (``World.volume``) becomes one more medium, a grid over the view frustum
+(worldfog.py); rays leaving that grid get the fog beyond it from ``worldfog.tail``, and the
+background and suns are dark in the fog's colour channels.
 """
 from __future__ import annotations
 
@@ -21,7 +25,8 @@ from .camera import primary_rays
 from .march import MarchContext, march_rays, ray_keys
 from .media import prepare, union_interval
 from .passes import DEPTH_MISS, enabled_passes
-from .precompute import kernel_arrays, precompute
+from . import worldfog
+from .precompute import kernel_arrays, precompute, split_fog
 from .scene import SceneDescription
 from .surfaces import intersect, prepare_surfaces, shade
 
@@ -90,10 +95,28 @@ def render(desc: SceneDescription,
     cancel = should_cancel or (lambda: False)
 
     surf = prepare_surfaces(desc.surfaces)
+    fog = worldfog.active(desc.world)
+    world, lights = desc.world, desc.lights
+    fog_pm = None
+    if fog is not None:
+        world = worldfog.effective_world(desc.world, fog)
+        lights = worldfog.effective_lights(desc.lights, fog)
+        for before, after in zip(desc.lights, lights):
+            if before.kind == "SUN" and np.any(np.asarray(before.strength) > 0) \
+                    and not np.any(np.asarray(after.strength) > 0):
+                warnings.append(f"light '{before.name}': a sun lights nothing through the world "
+                                "volume, which is endless (as in Cycles)")
+        box = worldfog.bounded_medium(desc, fog, media, st.voxel_resolution)
+        fog_pm = prepare(box.medium, warnings)
+        media.append(fog_pm)
+        if worldfog.infinite_emission(fog):
+            warnings.append("world volume: it emits in a colour without extinction, which "
+                            "is infinitely bright in Cycles; that emission beyond "
+                            f"{box.depth:.3g} m is left out")
     t_pre = time.perf_counter()
     pre = None
     if media:
-        pre = precompute(media, desc.lights, desc.world, cam, n_dirs=st.ambient_directions,
+        pre = precompute(media, lights, world, cam, n_dirs=st.ambient_directions,
                          seed=st.seed, should_cancel=cancel, progress=progress,
                          surfaces=None if surf.empty else surf, threads=st.threads,
                          multiple=st.multiple)
@@ -101,20 +124,24 @@ def render(desc: SceneDescription,
             return RenderOutput(out, {"precompute": time.perf_counter() - t_pre}, warnings, True)
     timings["precompute"] = time.perf_counter() - t_pre
 
-    bg = np.asarray(desc.world.color, np.float64)
+    bg = np.asarray(world.color, np.float64)
     step = auto_step(desc, media)
     ctx = MarchContext(media, pre.fields if pre else [], pre.layout if pre else None,
-                       desc.lights, step, pre.multiple if st.multiple else None) if media else None
+                       lights, step, pre.multiple if st.multiple else None) if media else None
     od = kernels.get("optical_depth")
     step_light = step
 
-    arrays = kernel_arrays(media)
+    solid = split_fog(media)[0]
+    arrays = kernel_arrays(solid)
 
     def media_optical_depth(p, d, t_max):
-        if not media:
-            return np.zeros((len(p), 3))
-        t0, t1 = union_interval(media, p, d, np.zeros(len(p)), t_max)
-        return od(p, d, np.maximum(t1, 0.0), *arrays, step_light, 0.5)
+        tau = np.zeros((len(p), 3))
+        if solid:
+            t0, t1 = union_interval(solid, p, d, np.zeros(len(p)), t_max)
+            tau = od(p, d, np.maximum(t1, 0.0), *arrays, step_light, 0.5)
+        if fog_pm is not None:
+            tau = tau + worldfog.optical_depth(fog_pm.sigma_t, t_max)
+        return tau
 
     spp = max(1, int(st.samples))
     ts = tile_size(spp)
@@ -132,8 +159,10 @@ def render(desc: SceneDescription,
         n = len(o)
         t_hit, tri = intersect(surf, o, d, tmax)
         hit = tri >= 0
+        # the world's fog reaches beyond the clip end on rays that hit nothing, as in Cycles
+        t_end = np.where(hit, t_hit, np.inf) if fog_pm is not None else t_hit
         if ctx is not None:
-            t0, t1 = union_interval(media, o, d, tmin, t_hit)
+            t0, t1 = union_interval(media, o, d, tmin, t_end)
             r = march_rays(ctx, o, d, t0, t1, axial, ray_keys(st.seed, index, n))
         else:
             r = {"single": np.zeros((n, 3)), "T": np.ones((n, 3)), "depth": np.full(n, DEPTH_MISS),
@@ -141,10 +170,15 @@ def render(desc: SceneDescription,
         behind = np.broadcast_to(bg, (n, 3)).copy()
         if hit.any():
             ph = o[hit] + d[hit] * t_hit[hit, None]
-            behind[hit] = shade(surf, tri[hit], ph, d[hit], desc.lights, bg,
+            behind[hit] = shade(surf, tri[hit], ph, d[hit], lights, bg,
                                 media_optical_depth, rng)
             dh = t_hit[hit] * axial[hit]
             r["depth"][hit] = np.minimum(r["depth"][hit], dh)
+        if fog_pm is not None:  # the homogeneous fog beyond its grid, seen through the march
+            s0 = np.maximum(worldfog.tail_start(fog_pm, o, d), tmin)
+            t_single, t_emit, t_trans = worldfog.tail(fog, lights, o, d, s0, t_end)
+            r = dict(r, single=r["single"] + r["T"] * t_single,
+                     emission=r["emission"] + r["T"] * t_emit, T=r["T"] * t_trans)
         res = {}
         single = r["single"].reshape(th * tw, spp, 3).mean(axis=1)
         T = r["T"].reshape(th * tw, spp, 3).mean(axis=1)

@@ -84,8 +84,16 @@ class Medium:
     ``sigma_s`` / ``sigma_a``: RGB scattering / absorption coefficient in 1/m per unit density,
     so sigma_s(x) = sigma_s * density(x).  ``g``: Henyey-Greenstein anisotropy in (-1, 1).
     ``emission``: RGB emitted radiance per metre (W/(m^3 sr)), not scaled by density, as in
-    Cycles' Principled Volume; zero for most media.
-    ``source``: 'MESH', 'VDB', 'FLUID' or 'WORLD' (for messages and tests).
+    Cycles' Principled Volume; given off wherever the density is > 0; zero for most media.
+    ``emission_grid``: None, or float32 (nx, ny, nz, 3) emitted radiance per metre
+    (W/(m^3 sr)) at the same index points as ``density`` (e.g. blackbody emission from a
+    temperature grid, blackbody.py), interpolated trilinearly and given off wherever it is
+    non-zero (not gated by density: Cycles emits wherever the shader is evaluated); added to
+    ``emission``.  NaN, inf and negative values are set to 0 with a warning.
+    ``source``: 'MESH', 'VDB', 'FLUID' or 'WORLD' (for messages and tests).  A 'WORLD'
+    medium held by ``World.volume`` fills all space homogeneously: only its coefficients and
+    ``emission`` are read (``density`` and ``index_to_world`` are placeholders); the
+    renderer bounds it (worldfog.py).
     """
 
     name: str
@@ -96,6 +104,7 @@ class Medium:
     g: float = 0.0
     emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
     source: str = "VDB"
+    emission_grid: Optional[np.ndarray] = None
 
     @property
     def sigma_t(self) -> np.ndarray:
@@ -149,9 +158,15 @@ class Surface:
 @dataclass
 class World:
     """Constant background radiance ``color`` (RGB, W/(m^2 sr)), seen by rays that leave the
-    scene and lighting the media from every direction."""
+    scene and lighting the media from every direction.
+
+    ``volume``: None, or the world's Volume shader as a homogeneous medium that fills all
+    space, as Cycles' world volume (a Medium with source 'WORLD'; coefficients in 1/m,
+    emission in W/(m^3 sr)).  In every colour channel where its extinction is > 0 it
+    attenuates the background and sun lights completely (they are infinitely far away)."""
 
     color: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    volume: Optional[Medium] = None
 
 
 @dataclass

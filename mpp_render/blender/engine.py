@@ -119,7 +119,7 @@ def render_frame(engine, depsgraph) -> Optional[LastRender]:
         engine.report({'ERROR'}, f"MPP: cannot translate the scene: {e}")
         return None
     translate_s = time.perf_counter() - start
-    if not desc.media:
+    if not desc.media and desc.world.volume is None:
         desc.warnings.append(NO_MEDIA_MESSAGE)
 
     out = render(desc, progress=progress_reporter(engine), should_cancel=should_cancel)

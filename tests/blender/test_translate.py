@@ -533,10 +533,14 @@ def test_world_background_and_volume(empty_scene):
     nt.links.new(sky.outputs[0], bg.inputs["Color"])
     vol = nt.nodes.new("ShaderNodeVolumeAbsorption")
     nt.links.new(vol.outputs[0], nt.get_output_node("CYCLES").inputs["Volume"])
+    vol.inputs["Color"].default_value = (1.0, 0.5, 0.0, 1)
+    vol.inputs["Density"].default_value = 0.25
     desc = translate()
     assert desc.world.color == pytest.approx([0.5, 1.0, 2.0])
     assert any("Sky Texture" in w and "'Color'" in w for w in desc.warnings)
-    assert any("world volume not supported yet" in w for w in desc.warnings)
+    fog = desc.world.volume
+    assert fog.source == "WORLD" and fog.sigma_a == pytest.approx([0.0, 0.125, 0.25])
+    assert np.all(fog.sigma_s == 0) and np.all(fog.emission == 0)
 
 
 def test_no_world_is_black(empty_scene):

@@ -119,7 +119,10 @@ def _unlit_message(desc: SceneDescription) -> Optional[str]:
         return None
     if np.any(np.asarray(desc.world.color) > 0):
         return None
-    if any(np.any(np.asarray(m.emission) > 0) for m in desc.media):
+    if any(np.any(np.asarray(m.emission) > 0) or m.emission_grid is not None
+           for m in desc.media):
+        return None
+    if desc.world.volume is not None and np.any(np.asarray(desc.world.volume.emission) > 0):
         return None
     what = ("the scene has no lights" if not desc.lights else
             "no light of the scene has positive power")

@@ -7,7 +7,12 @@ Volume shaders follow Cycles (``svm_closure.h``); for a closure reached with wei
   sigma_a = max(1 - Color, 0) * max(1 - sqrt(Absorption Color), 0) * d,
   emission = Emission Color * Emission Strength (not scaled by density); the grid named by
   'Density Attribute' multiplies d where it exists (VDB volumes), so the coefficients are
-  returned *per unit of that grid*.
+  returned *per unit of that grid*.  With Blackbody Intensity > 0 it also emits
+  blackbody.emission(T, Blackbody Intensity, Blackbody Tint) with T = Temperature (kelvin),
+  times the grid named by 'Temperature Attribute' where it exists: ``emission`` includes
+  that term at the constant Temperature (what Cycles gives where the grid is missing: meshes,
+  the world) and ``blackbody`` lists it, so a reader of grids (vdb.py) can replace it by the
+  per-voxel emission.
 * Volume Scatter: sigma_s = Color * d.  Volume Absorption: sigma_a = max(1 - Color, 0) * d.
 * Volume Coefficients: sigma_a, sigma_s and emission are the node's coefficient vectors.
 * Emission (in a Volume output): emission = Color * Strength.
@@ -22,11 +27,39 @@ from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
+from ... import blackbody
 from .convert import fmt, rgb, scalar
 from .nodes import Closure, closures, describe, output_node, resolve
 
 DEFAULT_SURFACE_COLOR = np.full(3, 0.8)   # Cycles' default surface: 0.8 grey diffuse
 HG = "HENYEY_GREENSTEIN"
+
+
+@dataclass
+class BlackbodyTerm:
+    """The blackbody emission of one Principled Volume (Cycles' ``svm_node_principled_volume``).
+
+    ``intensity``: Blackbody Intensity (> 0); ``temperature``: Temperature (K); ``attribute``:
+    Temperature Attribute (the grid that multiplies the temperature where it exists) or None;
+    ``tint``: Blackbody Tint (RGB); ``weight``: the Mix Shader factors on the way;
+    ``constant``: weight x its emission at the constant temperature, W/(m^3 sr) (part of
+    VolumeCoefficients.emission)."""
+
+    intensity: float
+    temperature: float
+    attribute: Optional[str]
+    tint: np.ndarray
+    weight: float = 1.0
+    constant: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    def scaled(self, w: float) -> "BlackbodyTerm":
+        return BlackbodyTerm(self.intensity, self.temperature, self.attribute, self.tint,
+                             self.weight * w, self.constant * w)
+
+    def per_voxel(self, grid) -> np.ndarray:
+        """weight x emission (..., 3) float32 with T = temperature x max(grid, 0) (W/(m^3 sr))."""
+        t = self.temperature * np.maximum(np.nan_to_num(np.asarray(grid, np.float64)), 0.0)
+        return (self.weight * blackbody.emission(t, self.intensity, self.tint)).astype(np.float32)
 
 
 @dataclass
@@ -37,7 +70,8 @@ class VolumeCoefficients:
     None for a uniform density.  ``from_attribute_node``: the attribute comes from an
     Attribute node linked into a Density input (rather than Principled Volume's 'Density
     Attribute').  ``sigma_s``, ``sigma_a``: RGB 1/m per unit density; ``g``: anisotropy;
-    ``emission``: RGB W/(m^3 sr), not scaled by density."""
+    ``emission``: RGB W/(m^3 sr), not scaled by density (blackbody terms included at their
+    constant temperature); ``blackbody``: the blackbody terms (see BlackbodyTerm)."""
 
     attribute: Optional[str]
     sigma_s: np.ndarray = field(default_factory=lambda: np.zeros(3))
@@ -45,6 +79,7 @@ class VolumeCoefficients:
     g: float = 0.0
     emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
     from_attribute_node: bool = False
+    blackbody: List[BlackbodyTerm] = field(default_factory=list)
 
 
 def principled_volume(color, density, anisotropy, absorption_color, emission=(0.0, 0.0, 0.0),
@@ -123,9 +158,6 @@ def _volume_closure(c: Closure, where, warnings):
                             f"{describe(node)} is not supported together with its Density "
                             f"Attribute '{attr}'; using Density 1")
             linked_attr = None
-        if inp.number("Blackbody Intensity") > 0.0:
-            warnings.append(f"{where}: blackbody emission of {describe(node)} is not supported "
-                            "yet; ignored")
         color_attr = inp.raw("Color Attribute")[0]
         if color_attr:
             warnings.append(f"{where}: Color Attribute '{color_attr}' of {describe(node)} is not "
@@ -135,6 +167,14 @@ def _volume_closure(c: Closure, where, warnings):
                                inp.color("Emission Color") * inp.number("Emission Strength"),
                                attribute=linked_attr or attr)
         co.from_attribute_node = linked_attr is not None
+        b = inp.number("Blackbody Intensity")
+        if b > 0.0:
+            t = inp.number("Temperature")
+            tint = inp.color("Blackbody Tint")
+            term = BlackbodyTerm(b, t, inp.raw("Temperature Attribute")[0] or None, tint,
+                                 constant=blackbody.emission(t, b, tint))
+            co.emission = co.emission + term.constant
+            co.blackbody = [term]
         return co
     if kind in ("ShaderNodeVolumeScatter", "ShaderNodeVolumeAbsorption"):
         dens, attr = inp.raw("Density", allow_attribute=True)
@@ -208,6 +248,7 @@ def volume_shading(material, where: str, warnings: List[str]) -> Optional[List[V
         acc.sigma_s = acc.sigma_s + w * co.sigma_s
         acc.sigma_a = acc.sigma_a + w * co.sigma_a
         acc.emission = acc.emission + w * co.emission
+        acc.blackbody = acc.blackbody + [t.scaled(w) for t in co.blackbody]
         s = w * float(np.mean(co.sigma_s))
         acc.g += s * co.g
         g_weight[key] = g_weight.get(key, 0.0) + s
@@ -224,6 +265,7 @@ def merge(groups: List[VolumeCoefficients]) -> VolumeCoefficients:
         out.sigma_s = out.sigma_s + co.sigma_s
         out.sigma_a = out.sigma_a + co.sigma_a
         out.emission = out.emission + co.emission
+        out.blackbody = out.blackbody + list(co.blackbody)
         s = float(np.mean(co.sigma_s))
         out.g += s * co.g
         sw += s

@@ -8,6 +8,12 @@ render clipping set to 0) and whose coefficients are the material's, per unit gr
 ``index_to_world`` = object world matrix @ grid index->object matrix @ offset of the dense
 block, so integer ijk of the array are voxel centres, as in OpenVDB.
 
+Principled Volume's blackbody emission reads the grid named by its Temperature Attribute
+(commonly 'temperature' or 'flame' in Blender's smoke and fire caches) like the density grid
+and resamples it trilinearly onto the density grid's lattice (``resample``); the per-voxel
+emission becomes the medium's ``emission_grid`` (temperature outside the density grid's box
+is not rendered, with a warning).  Without that grid the constant Temperature is used.
+
 A bad file never stops the frame: a missing, truncated or corrupt .vdb, a grid the material
 reads but the file lacks, or bad voxel values are reported by object and file name and the
 volume is skipped (or sanitised); the rest of the scene renders.
@@ -61,6 +67,58 @@ def read_dense(vdb, path: str, name: str, dtype):
     return a.astype(np.float32, copy=False), tuple(int(v) for v in lo), float(grid.background)
 
 
+def _offset(origin) -> np.ndarray:
+    m = np.eye(4)
+    m[:3, 3] = origin
+    return m
+
+
+RESAMPLE_CHUNK = 1 << 18  # lattice points per trilinear batch (bounds the temporary arrays)
+
+
+def resample(src, dst):
+    """Values of grid block ``src`` at the lattice points of block ``dst`` (blocks as read by
+    VolumeTranslator: (values, ijk origin, index->object 4x4)), trilinear, 0 outside ``src``'s
+    active box: ``(float32 array of dst's shape, fraction of src's sum outside dst's box)``.
+    Both grids belong to one object, so only their index->object maps matter."""
+    from ...media import trilinear
+    values, origin, i2o = src
+    shape = dst[0].shape
+    a = np.linalg.inv(np.asarray(i2o) @ _offset(origin)) @ np.asarray(dst[2]) @ _offset(dst[1])
+    padded = np.zeros(tuple(n + 2 for n in values.shape), np.float32)
+    padded[1:-1, 1:-1, 1:-1] = values
+    if np.allclose(a, np.round(a)) and np.allclose(a[:3, :3], np.eye(3)):  # the same lattice
+        shift = np.round(a[:3, 3]).astype(int)
+        out = np.zeros(shape, np.float32)
+        lo = np.maximum(0, -shift)
+        hi = np.minimum(shape, np.array(values.shape) - shift)
+        if np.all(hi > lo):
+            out[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]] = values[
+                lo[0] + shift[0]:hi[0] + shift[0], lo[1] + shift[1]:hi[1] + shift[1],
+                lo[2] + shift[2]:hi[2] + shift[2]]
+    else:
+        flat = np.empty(int(np.prod(shape)), np.float32)
+        for start in range(0, flat.size, RESAMPLE_CHUNK):
+            ijk = np.stack(np.unravel_index(np.arange(start, min(flat.size, start + RESAMPLE_CHUNK)),
+                                            shape), axis=1).astype(np.float64)
+            flat[start:start + len(ijk)] = trilinear(padded, ijk @ a[:3, :3].T + a[:3, 3] + 1.0)
+        out = flat.reshape(shape)
+    total = float(np.abs(values).sum())
+    if total <= 0.0:
+        return out, 0.0
+    # the part of src outside dst's box (cells -0.5 .. n - 0.5 in dst's index space)
+    inv = np.linalg.inv(a)
+    corners = np.array([[i, j, k] for i in (0, values.shape[0] - 1) for j in (0, values.shape[1] - 1)
+                        for k in (0, values.shape[2] - 1)], np.float64) @ inv[:3, :3].T + inv[:3, 3]
+    if np.all((corners >= -0.5) & (corners <= np.array(shape) - 0.5)):
+        return out, 0.0
+    ijk = np.stack(np.nonzero(values), axis=1).astype(np.float64)
+    d = ijk @ inv[:3, :3].T + inv[:3, 3]
+    out_side = np.any((d < -0.5) | (d > np.array(shape) - 0.5), axis=1)
+    lost = float(np.abs(values[tuple(ijk[out_side].astype(int).T)]).sum()) / total
+    return out, lost
+
+
 class VolumeTranslator:
     """Turns evaluated Volume objects into media.  Grids are read once per volume datablock,
     so instances of one volume share their density arrays."""
@@ -79,7 +137,10 @@ class VolumeTranslator:
         if not grids:
             self.warnings.append(self._no_grids_message(vol, where))
             return []
-        wanted = [grids[co.attribute] for co in shading if co.attribute in grids]
+        names = [co.attribute for co in shading if co.attribute in grids]
+        names += [t.attribute for co in shading for t in co.blackbody
+                  if co.attribute in grids and t.attribute in grids]
+        wanted = [grids[n] for n in dict.fromkeys(names)]
         blocks = self._blocks(vol, wanted, where)
         media: List[Medium] = []
         uniform: List[VolumeCoefficients] = []
@@ -89,7 +150,7 @@ class VolumeTranslator:
             elif blocks.get(co.attribute) is not None:
                 block = blocks[co.attribute]
                 media.append(self._medium(ob, co, block, grids[co.attribute], world_matrix,
-                                          len(shading) > 1))
+                                          len(shading) > 1, blocks, where))
         if uniform:
             self._uniform(ob, where, uniform, media, grids)
         return media
@@ -215,14 +276,25 @@ class VolumeTranslator:
             return ""
         return f"of '{path}' could not be loaded; the file may be truncated or corrupt"
 
-    def _medium(self, ob, co, block, g, world_matrix, several) -> Medium:
+    def _medium(self, ob, co, block, g, world_matrix, several, blocks, where) -> Medium:
         values, origin, index_to_object = block
-        offset = np.eye(4)
-        offset[:3, 3] = origin
+        emission, grid = np.asarray(co.emission, np.float64), None
+        for term in co.blackbody:
+            tblock = blocks.get(term.attribute)
+            if tblock is None:
+                continue  # no such grid (or unreadable, warned): the constant temperature
+            temp, outside = resample(tblock, block)
+            if outside:
+                self.warnings.append(f"{where}: {outside:.0%} of grid '{term.attribute}' lies "
+                                     f"outside the box of grid '{g.name}'; that part of the "
+                                     "blackbody emission is not rendered")
+            per = term.per_voxel(temp)
+            grid = per if grid is None else grid + per
+            emission = emission - term.constant
         return Medium(name=f"{ob.name}:{g.name}" if several else ob.name, density=values,
-                      index_to_world=np.asarray(world_matrix) @ index_to_object @ offset,
+                      index_to_world=np.asarray(world_matrix) @ index_to_object @ _offset(origin),
                       sigma_s=co.sigma_s, sigma_a=co.sigma_a, g=float(co.g),
-                      emission=co.emission, source="VDB")
+                      emission=np.maximum(emission, 0.0), source="VDB", emission_grid=grid)
 
     def _uniform(self, ob, where, uniform, media, grids):
         """Closures with a uniform density: Cycles fills the hull of the grids the material

@@ -1,0 +1,252 @@
+"""Cycles' world volume: a homogeneous fog that fills all space, bounded for the march.
+
+Cycles treats the world's Volume shader as an infinite homogeneous medium (checked with
+Cycles renders, see docs/usage.md): a ray that hits nothing crosses infinitely much of it,
+so in every colour channel where its extinction sigma_t > 0 the background is black, a sun
+(infinitely far) lights nothing, and the fog is integrated to infinity whatever the
+camera's clip end.  Here (``World.volume``, a Medium with source 'WORLD'):
+
+* *Attenuation of lights* by the fog is analytic everywhere: sigma_t x the distance to the
+  light (``optical_depth``), added to what the other media and surfaces contribute; suns and
+  the background are zeroed in the fog's channels (``effective_world``, ``effective_lights``).
+* *The march* needs the fog as a voxel grid (its field holds the per-light optical depth
+  with the shadows of surfaces and other media: the volumetric shadows, "god rays").  The
+  grid (``bounded_medium``) is a box aligned with the camera covering the view frustum from
+  the near clip to a depth D = min(D_view, D_content): D_view is where the camera's
+  transmittance through the fog alone falls to e^-TAU_VIEW (9e-4), D_content is
+  CONTENT_MARGIN x the depth of the farthest content that lights the fog or sits in it (the
+  lights in front of the camera, the boxes of the other media seen by a grid of probe rays;
+  not surfaces, which can reach far from any light).  Its voxels are cubes,
+  ``voxel_resolution`` of them along the longest side.  Only camera rays march the grid, so
+  fog outside the frustum needs no voxels.
+* *Beyond the box* (``tail``): a camera ray leaving the box continues through homogeneous fog
+  to its surface hit or to infinity.  That stretch is integrated semi-analytically: the
+  emission exactly, e (1 - e^(-sigma_t L)) / sigma_t, and the single scattering of every
+  point, spot and area light by TAIL_NODES-point Gauss-Legendre quadrature in the fog's
+  transmittance,
+  with each light's irradiance, phase function and attenuation exp(-sigma_t r) through the
+  fog alone: shadows of surfaces and other media beyond the box are not traced there.  The
+  background behind it is attenuated by exp(-sigma_t L) (0 for L = infinity).  Measured on
+  the god-ray scene of tests/blender/test_world_volume.py: docs/usage.md.
+
+The box's padding (media.prepare) ramps the density from 1 to 0 over one voxel beyond the
+data; the tail starts halfway through that ramp, which puts back the half voxel of fog the
+ramp leaves out.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import List, Optional
+
+import numpy as np
+
+from .camera import primary_rays
+from .lights import pack_light
+from .phase import hg
+from .scene import Light, Medium, SceneDescription, World
+
+TAU_VIEW = 7.0          # camera optical depth through the fog where the grid may end
+CONTENT_MARGIN = 1.25   # the grid reaches this factor beyond the farthest content seen
+PROBES = 17             # probe rays per image side that find the content's depth
+MARGIN_VOXELS = 2.0     # voxels of fog kept beyond the frustum on every side
+TAIL_NODES = 16         # Gauss-Legendre points of the single-scattering tail per ray
+FOG_TAU_MAX = 50.0      # optical depth standing for "infinitely far" (a sun): T = 2e-22
+
+
+def active(world: World) -> Optional[Medium]:
+    """The world's fog when it does anything (extinction or emission > 0), else None."""
+    fog = world.volume
+    if fog is None:
+        return None
+    st = np.asarray(fog.sigma_s, np.float64) + np.asarray(fog.sigma_a, np.float64)
+    if np.any(st > 0) or np.any(np.asarray(fog.emission, np.float64) > 0):
+        return fog
+    return None
+
+
+def clear_channels(fog: Medium) -> np.ndarray:
+    """1.0 in the colour channels where the fog has no extinction, 0.0 where it has."""
+    st = np.asarray(fog.sigma_s, np.float64) + np.asarray(fog.sigma_a, np.float64)
+    return (st <= 0).astype(np.float64)
+
+
+def effective_world(world: World, fog: Medium) -> World:
+    """The background seen through infinite fog: zero in the fog's channels."""
+    return World(color=np.asarray(world.color, np.float64) * clear_channels(fog), volume=world.volume)
+
+
+def effective_lights(lights: List[Light], fog: Medium) -> List[Light]:
+    """``lights`` with every sun's strength zeroed in the fog's channels (a sun is infinitely
+    far behind the fog); the other lights unchanged (same objects)."""
+    keep = clear_channels(fog)
+    out = []
+    for light in lights:
+        if light.kind == "SUN":
+            light = dataclasses.replace(light, strength=np.asarray(light.strength, np.float64) * keep)
+        out.append(light)
+    return out
+
+
+def optical_depth(sigma_t, distance) -> np.ndarray:
+    """RGB optical depth (N,3) of the fog over ``distance`` (N,) metres (inf allowed):
+    sigma_t x distance, capped at FOG_TAU_MAX; 0 in channels without extinction."""
+    st = np.asarray(sigma_t, np.float64).reshape(1, 3)
+    dist = np.asarray(distance, np.float64).reshape(-1, 1)
+    with np.errstate(invalid="ignore"):
+        tau = np.where(st > 0, np.minimum(st * np.minimum(dist, 1e300), FOG_TAU_MAX), 0.0)
+    return tau
+
+
+# -- the box ------------------------------------------------------------------------------
+
+def view_depth(desc: SceneDescription, fog: Medium) -> float:
+    """Axial depth (m) where the camera's transmittance through the fog alone reaches
+    e^-TAU_VIEW: TAU_VIEW / the smallest positive sigma_t (inf when it has no extinction)."""
+    st = np.asarray(fog.sigma_s, np.float64) + np.asarray(fog.sigma_a, np.float64)
+    pos = st[st > 0]
+    return float(TAU_VIEW / pos.min()) if pos.size else np.inf
+
+
+def content_depth(desc: SceneDescription, media) -> float:
+    """Axial depth (m) of the farthest content that lights the fog or sits in it: the lights
+    in front of the camera and the boxes of the other ``media`` (prepared) crossed by a
+    PROBES x PROBES grid of rays over the image.  Surfaces do not count: where no light is
+    near, the fog beyond them is lit smoothly and the tail serves it.  0 when there is none."""
+    from .media import ray_box
+    cam = desc.camera
+    g = np.linspace(0.0, 1.0, PROBES)
+    px, py = np.meshgrid(g * cam.width, g * cam.height, indexing="ij")
+    o, d, tmin, tmax, axial = primary_rays(cam, px.ravel(), py.ravel())
+    far = np.zeros(len(o))
+    for pm in media:
+        a, b = ray_box(pm, o, d)
+        far = np.where(b > np.maximum(a, tmin), np.maximum(far, b), far)
+    depth = float(np.max(far * axial, initial=0.0))
+    c2w = np.asarray(cam.cam_to_world, np.float64)
+    fwd = -c2w[:3, 2]
+    for light in desc.lights:
+        if light.kind == "SUN" or not np.any(np.asarray(light.strength, np.float64) > 0):
+            continue
+        pos = (np.asarray(light.matrix, np.float64)[:3, 3] if light.kind == "AREA"
+               else np.asarray(light.position, np.float64))
+        depth = max(depth, float(np.dot(pos - c2w[:3, 3], fwd)))
+    return depth
+
+
+@dataclass
+class FogBox:
+    """The fog's grid: ``medium`` (source 'WORLD', density 1 on ``shape`` index points, voxel
+    ``voxel`` m) covering the view frustum to axial depth ``depth`` m."""
+
+    medium: Medium
+    depth: float
+    voxel: float
+
+
+def bounded_medium(desc: SceneDescription, fog: Medium, media=(),
+                   resolution: int = 128) -> FogBox:
+    """The fog as a grid on the camera-aligned box described in the module docstring, with
+    ``resolution`` voxels along its longest side (at least 8).  ``media``: the other prepared
+    media (they only locate the content)."""
+    cam = desc.camera
+    near = max(float(cam.clip_start), 0.0)
+    d_view = view_depth(desc, fog)
+    d_content = content_depth(desc, media) * CONTENT_MARGIN
+    depth = min(d_view, d_content) if d_content > near else d_view
+    if not np.isfinite(depth):   # emission only, nothing to bound it: the content, or 10 m
+        depth = max(d_content, near + 10.0)
+    depth = max(depth, near + 1e-3)
+    xmin, xmax, ymin, ymax = (float(v) for v in cam.plane)
+    if str(cam.projection).upper() == "ORTHO":
+        lo = np.array([xmin, ymin, -depth])
+        hi = np.array([xmax, ymax, -near])
+    else:
+        lo = np.array([min(xmin * near, xmin * depth), min(ymin * near, ymin * depth), -depth])
+        hi = np.array([max(xmax * near, xmax * depth), max(ymax * near, ymax * depth), -near])
+    n = max(int(resolution), 8)
+    voxel = float(np.max(hi - lo)) / (n - 2.0 * MARGIN_VOXELS - 1.0)
+    lo = lo - MARGIN_VOXELS * voxel
+    hi = hi + MARGIN_VOXELS * voxel
+    shape = tuple(int(np.ceil((b - a) / voxel - 1e-9)) + 1 for a, b in zip(lo, hi))
+    local = np.eye(4)
+    local[:3, :3] = np.eye(3) * voxel
+    local[:3, 3] = lo
+    c2w = np.asarray(cam.cam_to_world, np.float64)
+    med = Medium(name=fog.name, density=np.ones(shape, np.float32), index_to_world=c2w @ local,
+                 sigma_s=np.asarray(fog.sigma_s, np.float64), sigma_a=np.asarray(fog.sigma_a, np.float64),
+                 g=float(fog.g), emission=np.asarray(fog.emission, np.float64), source="WORLD")
+    return FogBox(med, float(depth), voxel)
+
+
+def tail_start(pm, origins, dirs) -> np.ndarray:
+    """Ray parameter (N,) where the tail of prepared fog grid ``pm`` starts: halfway between
+    the exits from its data box (density 1) and from its padded box (density 0)."""
+    from .media import to_index
+    o = to_index(pm, origins)
+    d = dirs @ pm.w2i[:, :3].T
+    exits = []
+    for lo, hi in ((1.0, np.array(pm.grid.shape, np.float64) - 2.0),
+                   (0.0, np.array(pm.grid.shape, np.float64) - 1.0)):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ta = (lo - o) / d
+            tb = (hi - o) / d
+        t = np.where(np.abs(d) > 1e-300, np.maximum(ta, tb), np.inf)
+        exits.append(np.min(t, axis=1))
+    return 0.5 * (exits[0] + exits[1])
+
+
+# -- beyond the box -----------------------------------------------------------------------
+
+def tail(fog: Medium, lights: List[Light], origins, dirs, s0, s1, nodes: int = TAIL_NODES):
+    """What the homogeneous fog adds to rays o + s d over s in [s0, s1] (s1 may be inf;
+    nothing where s1 <= s0), as seen from s0: ``(single (N,3), emission (N,3),
+    transmittance (N,3))``, radiance in W/(m^2 sr).  Single scattering of the POINT, SPOT
+    and AREA ``lights`` through the fog alone (no shadows), by ``nodes``-point Gauss-Legendre
+    quadrature in u = 1 - exp(-sigma (s - s0)), sigma the smallest positive extinction.  Emission
+    in channels without extinction over an infinite stretch would be infinite; it is left
+    out there (the caller warns)."""
+    o = np.asarray(origins, np.float64)
+    d = np.asarray(dirs, np.float64)
+    s0 = np.asarray(s0, np.float64)
+    length = np.maximum(np.asarray(s1, np.float64) - s0, 0.0)
+    n = len(o)
+    st = np.asarray(fog.sigma_s, np.float64) + np.asarray(fog.sigma_a, np.float64)
+    ss = np.asarray(fog.sigma_s, np.float64)
+    em = np.maximum(np.asarray(fog.emission, np.float64), 0.0)
+    L = length[:, None]
+    finite = np.isfinite(L)
+    with np.errstate(invalid="ignore", over="ignore"):
+        trans = np.where(st > 0, np.exp(-st * np.where(finite, L, 1e300)), 1.0)
+        emitted = np.where(st > 0, em * -np.expm1(-st * np.where(finite, L, 1e300)) / np.where(st > 0, st, 1.0),
+                           np.where(finite, em * np.where(finite, L, 0.0), 0.0))
+    single = np.zeros((n, 3))
+    used = [li for li in lights if li.kind != "SUN" and np.any(np.asarray(li.strength) > 0)]
+    pos = st[st > 0]
+    live = np.flatnonzero(length > 0)
+    if used and pos.size and np.any(ss > 0) and live.size:
+        from .kernels_np import light_sample
+        sig = float(pos.min())
+        recs = [pack_light(li) for li in used]
+        with np.errstate(over="ignore"):
+            u_max = -np.expm1(-sig * length[live])            # (M,)
+        k, kw = np.polynomial.legendre.leggauss(nodes)      # Gauss-Legendre on [-1, 1]
+        u = u_max[:, None] * (0.5 * (k[None, :] + 1.0))      # (M, K)
+        s = -np.log1p(-u) / sig                              # distance from s0
+        w = (u_max[:, None] * 0.5 * kw[None, :]) / (sig * (1.0 - u))  # ds per node
+        x = (o[live, None, :] + d[live, None, :] * (s0[live, None] + s)[..., None]).reshape(-1, 3)
+        dd = np.repeat(d[live], nodes, axis=0)
+        inc = np.zeros((len(x), 3))
+        for rec in recs:
+            wi, e, wc, dc = light_sample(rec, x, np.full(len(x), 0.5), np.full(len(x), 0.5))
+            cos = -np.einsum("ij,ij->i", wi, dd)
+            inc += hg(cos, float(fog.g))[:, None] * e * np.exp(-optical_depth(st, dc))
+        att = np.exp(-st[None, None, :] * s[..., None])      # (M, K, 3) fog from s0 to the node
+        single[live] = ss * np.sum(att * inc.reshape(len(live), nodes, 3) * w[..., None], axis=1)
+    return single, emitted, trans
+
+
+def infinite_emission(fog: Medium) -> bool:
+    """Whether the fog emits in a channel without extinction (infinite radiance in Cycles)."""
+    st = np.asarray(fog.sigma_s, np.float64) + np.asarray(fog.sigma_a, np.float64)
+    return bool(np.any((np.asarray(fog.emission, np.float64) > 0) & (st <= 0)))

@@ -1,0 +1,171 @@
+"""Per-voxel emission (Medium.emission_grid): the field channels, both march twins, the
+sanitising of bad values, the memory budget, and blackbody colours (blackbody.py)."""
+import numpy as np
+import pytest
+
+from mpp_render import blackbody, kernels, kernels_np
+from mpp_render.budget import fit_media
+from mpp_render.march import MarchContext, pack_lights
+from mpp_render.media import prepare
+from mpp_render.precompute import precompute
+from mpp_render.render import render
+from mpp_render.scene import Camera, Light, Medium, SceneDescription, Settings, World
+
+needs_c = pytest.mark.skipif(kernels._c is None, reason="compiled kernels not built")
+
+
+def hot_medium(shape=(10, 9, 8), emission=(0.0, 0.0, 0.0)):
+    """A smoke grid whose emission grid grows along x (hot at high x)."""
+    rng = np.random.default_rng(3)
+    d = (rng.random(shape) * 2).astype(np.float32)
+    i2w = np.eye(4)
+    i2w[:3, :3] = np.diag([0.3, 0.35, 0.4])
+    i2w[:3, 3] = [-1.4, -1.3, -1.5]
+    x = np.linspace(0.0, 1.0, shape[0])[:, None, None, None]
+    grid = (x * np.array([3.0, 2.0, 1.0]) * np.ones(shape + (3,))).astype(np.float32)
+    grid[:, :, :2] = 0.0   # some voxels with density but no emission
+    d[:, :, -1] = 0.0      # and some with emission but no density
+    return Medium("fire", d, i2w, np.array([1.0, 1.0, 1.0]), np.array([0.5, 0.5, 0.5]), 0.3,
+                  emission=np.array(emission, np.float64), emission_grid=grid)
+
+
+def march_args(rng, media, lights, pre, n=2000):
+    o = rng.uniform(-1.5, 1.5, (n, 3))
+    o[:, 2] = 4.0
+    d = rng.normal(size=(n, 3)) * [0.2, 0.2, 0.0]
+    d[:, 2] = -1
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    t0 = rng.uniform(0.5, 2.0, n)
+    t1 = t0 + rng.uniform(0, 6, n)
+    ec = [-1 if c is None else c for c in pre.layout.emission_channels]
+    return (o, d, t0, t1, np.ones(n), rng.integers(0, 2**32, n, dtype=np.uint32), pre.fields,
+            [m.w2i for m in media], [m.sigma_s for m in media], [m.sigma_t for m in media],
+            [m.g for m in media], [m.threshold for m in media], [m.voxel_size for m in media],
+            pack_lights(lights, pre.layout), -1, 0.07, 0.01, 1e10, None,
+            [np.maximum(m.medium.emission, 0) for m in media], ec)
+
+
+def two_media():
+    plain = Medium("plain", np.ones((4, 4, 4), np.float32), np.diag([0.3, 0.3, 0.3, 1.0]),
+                   np.full(3, 1.0), np.full(3, 0.2), emission=np.array([0.2, 0.1, 0.0]))
+    return [prepare(hot_medium(emission=(0.1, 0.0, 0.05))), prepare(plain)]
+
+
+def test_field_layout_puts_the_emission_grid_last():
+    media = two_media()
+    lights = [Light("POINT", "pt", np.full(3, 100.0), position=np.array([0.0, 0.0, 3.0]))]
+    pre = precompute(media, lights, World(), Camera("PERSP", np.eye(4), 4, 4, (-1, 1, -1, 1)))
+    c = pre.layout.channels
+    assert pre.layout.emission_channels == [c, None]
+    assert pre.fields[0].shape[3] == c + 3 and pre.fields[1].shape[3] == c
+    np.testing.assert_array_equal(pre.fields[0][..., c:c + 3], media[0].emission_grid)
+    assert media[0].emission_grid.shape == media[0].grid.shape + (3,)   # padded like density
+
+
+@needs_c
+def test_march_twins_agree_with_emission_grids():
+    rng = np.random.default_rng(11)
+    media = two_media()
+    lights = [Light("POINT", "pt", np.full(3, 100.0), position=np.array([0.5, 0.0, 3.0]))]
+    pre = precompute(media, lights, World(), Camera("PERSP", np.eye(4), 4, 4, (-1, 1, -1, 1)))
+    args = march_args(rng, media, lights, pre)
+    a = kernels_np.march(*args)
+    b = kernels.c_march(*args)
+    for x, y, name in zip(a, b, ("single", "T", "depth", "multiple", "steps", "emission")):
+        assert np.all(np.isfinite(y)), name
+        assert np.all(np.abs(x - y) <= 1e-4 * np.maximum(np.abs(x), 1e-6)), name
+    assert a[5].max() > 0.1
+    # the grid adds to the constant emission: without it the Emission pass is smaller
+    no_grid = kernels_np.march(*args[:-1], None)
+    assert np.all(no_grid[5] <= a[5] + 1e-12) and no_grid[5].sum() < 0.9 * a[5].sum()
+
+
+@needs_c
+def test_march_rejects_an_emission_channel_outside_the_fields():
+    rng = np.random.default_rng(1)
+    media = two_media()
+    pre = precompute(media, [], World(), Camera("PERSP", np.eye(4), 4, 4, (-1, 1, -1, 1)))
+    args = list(march_args(rng, media, [], pre, n=10))
+    for bad in ([pre.fields[0].shape[3] - 2, -1], [-1, pre.layout.channels], [-1, 0], [1]):
+        args[-1] = bad
+        with pytest.raises(ValueError):
+            kernels.c_march(*args)
+
+
+def test_emission_grid_only_shines_in_the_emission_pass_where_it_is_hot():
+    """Rendered through the core: the hot end (high x) is brighter in the Emission pass, and
+    the emission reaches it through voxels without density too."""
+    m = hot_medium()
+    cam = np.eye(4)
+    cam[:3, 3] = [0.0, 0.0, 6.0]
+    desc = SceneDescription(Camera("ORTHO", cam, 24, 8, (-1.8, 1.8, -0.6, 0.6)), media=[m],
+                            settings=Settings(samples=1, multiple=False))
+    out = render(desc)
+    e = out.passes["Emission"]
+    assert np.all(np.isfinite(e)) and e.min() >= 0
+    cols = e[:, :, 0].mean(axis=0)
+    assert cols[-6:].mean() > 3 * cols[:6].mean() > 0
+    assert np.allclose(out.passes["Volume Single"], 0)   # no lights: emission only
+    comb = out.passes["Combined"][..., :3]
+    np.testing.assert_allclose(comb, e, rtol=1e-5, atol=1e-6)
+
+
+def test_bad_emission_values_are_sanitised_with_a_warning():
+    m = hot_medium()
+    g = m.emission_grid.copy()
+    g[1, 1, 3] = np.nan
+    g[2, 2, 3, 1] = -4.0
+    g[3, 3, 3, 2] = np.inf
+    m.emission_grid = g
+    warnings = []
+    pm = prepare(m, warnings)
+    assert np.all(np.isfinite(pm.emission_grid)) and pm.emission_grid.min() >= 0
+    assert pm.emission_grid[2, 2, 4].tolist() == [0.0, 0.0, 0.0]   # NaN voxel, all colours
+    assert pm.emission_grid[3, 3, 4, 1] == 0.0 and pm.emission_grid[4, 4, 4, 2] == 0.0
+    assert any("5 emission values were NaN, infinite or negative" in w for w in warnings)
+    m.emission_grid = np.ones((2, 2, 2, 3), np.float32)          # wrong shape
+    warnings = []
+    assert prepare(m, warnings).emission_grid is None
+    assert any("does not match the density" in w for w in warnings)
+
+
+def test_budget_downsamples_the_emission_grid_with_the_density():
+    m = hot_medium(shape=(40, 40, 40))
+    lights = [Light("POINT", "pt", np.full(3, 100.0))]
+    warnings = []
+    small = fit_media([m], lights, 1.0, warnings)[0]
+    assert small.density.shape != m.density.shape
+    assert small.emission_grid.shape == small.density.shape + (3,)
+    # box filter: the mean emission is kept (up to the partial cells at the ends)
+    np.testing.assert_allclose(small.emission_grid.mean(axis=(0, 1, 2)),
+                               m.emission_grid.mean(axis=(0, 1, 2)), rtol=0.05)
+
+
+# -- blackbody colours --------------------------------------------------------------------
+
+def test_blackbody_colour_has_unit_luminance_and_reddens_when_cooler():
+    t = np.array([1000.0, 2000.0, 3000.0, 4500.0, 6500.0, 10000.0])
+    raw = blackbody.colour_exact(t)
+    np.testing.assert_allclose(raw @ [0.2126, 0.7152, 0.0722], 1.0, rtol=5e-4)  # rounded weights
+    c = blackbody.colour(t)
+    assert np.all(np.diff(c[:, 0]) < 0) and np.all(np.diff(c[:, 2]) > 0)
+    # D65 is the white of Rec.709: a 6504 K blackbody lies close to it (about 0.3 % in xy)
+    np.testing.assert_allclose(blackbody.colour(6504.0), 1.0, atol=0.05)
+    # clamped outside [800, 12000] K; NaN counts as 800 K
+    np.testing.assert_allclose(blackbody.colour([300.0, np.nan]), blackbody.colour([800.0] * 2))
+    np.testing.assert_allclose(blackbody.colour(5e4), blackbody.colour(12000.0))
+    fine = np.linspace(800, 12000, 2001)
+    np.testing.assert_allclose(blackbody.colour(fine), np.maximum(blackbody.colour_exact(fine), 0),
+                               atol=1e-4 * 5.5)
+
+
+def test_blackbody_emission_follows_stefan_boltzmann():
+    e = blackbody.emission(np.array([1000.0, 2000.0]), 1.0)
+    lum = e @ [0.2126, 0.7152, 0.0722]
+    sigma = 5.670373e-8 * 1e-6 / np.pi
+    assert lum[1] == pytest.approx(sigma * 2000.0 ** 4, rel=1e-3)  # blue is 0 at 2000 K already
+    half = blackbody.emission(2000.0, 0.5, tint=(1.0, 0.5, 0.0))
+    expect = sigma * (0.5 + 0.5 * 2000.0 ** 4) * blackbody.colour(2000.0) * [1.0, 0.5, 0.0]
+    np.testing.assert_allclose(half, expect, rtol=1e-12)
+    assert np.all(blackbody.emission(np.array([3000.0, -5.0, np.nan]), 0.0) == 0)
+    assert np.all(blackbody.emission(np.array([-5.0, np.nan]), 1.0) == 0)

@@ -1,0 +1,161 @@
+"""The world's fog (worldfog.py) without Blender: its grid over the view frustum, the
+analytic attenuation and tail, and renders through the core."""
+import numpy as np
+import pytest
+
+from mpp_render import worldfog
+from mpp_render.camera import primary_rays
+from mpp_render.media import prepare
+from mpp_render.precompute import soft_visibility
+from mpp_render.render import render
+from mpp_render.scene import (Camera, Light, Medium, SceneDescription, Settings, Surface,
+                              World)
+from mpp_render.surfaces import prepare_surfaces
+
+
+def fog(sigma_s=(0.1, 0.1, 0.1), sigma_a=(0.0, 0.0, 0.0), emission=(0.0, 0.0, 0.0), g=0.0):
+    return Medium("world 'W'", np.ones((1, 1, 1), np.float32), np.eye(4), np.array(sigma_s, float),
+                  np.array(sigma_a, float), g, emission=np.array(emission, float), source="WORLD")
+
+
+def camera(width=32, height=24, location=(0.0, -8.0, 0.0)):
+    """A PERSP camera at ``location`` looking along +y (Blender's 90 degree X rotation)."""
+    c2w = np.array([[1.0, 0, 0, 0], [0, 0, -1, 0], [0, 1, 0, 0], [0, 0, 0, 1]])
+    c2w[:3, 3] = location
+    return Camera("PERSP", c2w, width, height, (-0.36, 0.36, -0.27, 0.27), 0.1, 100.0)
+
+
+def point(position=(0.0, 0.0, 0.0), power=500.0):
+    return Light("POINT", "pt", np.full(3, power), position=np.array(position, float))
+
+
+def test_grid_covers_the_frustum_up_to_the_lights():
+    cam = camera()
+    desc = SceneDescription(cam, lights=[point((0.0, 2.0, 0.0))])
+    box = worldfog.bounded_medium(desc, fog(), resolution=40)
+    assert box.depth == pytest.approx(10.0 * worldfog.CONTENT_MARGIN)   # light at depth 10 m
+    m = box.medium
+    assert m.source == "WORLD" and max(m.density.shape) <= 40 and np.all(m.density == 1)
+    pm = prepare(m)
+    # every camera ray stays inside the data box (density 1) from the near clip to the depth
+    g = np.linspace(0, 1, 5)
+    px, py = np.meshgrid(g * cam.width, g * cam.height)
+    o, d, tmin, tmax, axial = primary_rays(cam, px.ravel(), py.ravel())
+    for t in (tmin, box.depth / axial):
+        idx = (o + d * t[:, None]) @ pm.w2i[:, :3].T + pm.w2i[:, 3]
+        assert np.all(idx >= 1.0) and np.all(idx <= np.array(pm.grid.shape) - 2.0)
+    # no content: the grid reaches where the camera's transmittance is e^-TAU_VIEW
+    far = worldfog.bounded_medium(SceneDescription(cam), fog(sigma_s=(0.1, 0.2, 0.5)), resolution=40)
+    assert far.depth == pytest.approx(worldfog.TAU_VIEW / 0.1)
+
+
+def test_optical_depth_lights_and_background():
+    f = fog(sigma_s=(0.2, 0.0, 0.1), sigma_a=(0.0, 0.0, 0.1))
+    tau = worldfog.optical_depth(f.sigma_s + f.sigma_a, np.array([0.0, 5.0, np.inf]))
+    np.testing.assert_allclose(tau, [[0, 0, 0], [1.0, 0, 1.0], [worldfog.FOG_TAU_MAX, 0, worldfog.FOG_TAU_MAX]])
+    w = worldfog.effective_world(World(np.array([1.0, 2.0, 3.0]), volume=f), f)
+    np.testing.assert_allclose(w.color, [0.0, 2.0, 0.0])
+    sun = Light("SUN", "sun", np.array([3.0, 3.0, 3.0]))
+    pt = point()
+    out = worldfog.effective_lights([sun, pt], f)
+    np.testing.assert_allclose(out[0].strength, [0.0, 3.0, 0.0])
+    assert out[1] is pt
+
+
+def brute_force_tail(f, light, o, d, s0, s1, n=200000):
+    s = s0 + (np.arange(n) + 0.5) / n * (s1 - s0)
+    x = o + d * s[:, None]
+    v = light.position - x
+    r = np.linalg.norm(v, axis=1)
+    e = light.strength[None, :] / (4 * np.pi) / (r * r)[:, None]
+    cos = np.einsum("ij,j->i", -v / r[:, None], -d)   # propagation direction . direction to camera
+    g = f.g
+    p = (1 - g * g) / (4 * np.pi * (1 + g * g - 2 * g * cos) ** 1.5)
+    st = f.sigma_s + f.sigma_a
+    integrand = f.sigma_s * p[:, None] * e * np.exp(-st * r[:, None]) * np.exp(-st * (s - s0)[:, None])
+    return integrand.sum(axis=0) * (s1 - s0) / n
+
+
+def test_tail_matches_a_brute_force_integral():
+    f = fog(sigma_s=(0.08, 0.08, 0.04), sigma_a=(0.02, 0.05, 0.02), emission=(0.1, 0.2, 0.0), g=0.4)
+    light = point((1.0, 3.0, 0.5), 800.0)
+    o = np.array([[0.0, -8.0, 0.0], [0.0, -8.0, 0.0]])
+    d = np.array([[0.0, 1.0, 0.0], [0.3, 0.95, 0.05]])
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    s0 = np.array([12.0, 12.0])
+    s1 = np.array([40.0, np.inf])
+    single, emitted, trans = worldfog.tail(f, [light], o, d, s0, s1)
+    st = f.sigma_s + f.sigma_a
+    ref0 = brute_force_tail(f, light, o[0], d[0], 12.0, 40.0)
+    ref1 = brute_force_tail(f, light, o[1], d[1], 12.0, 12.0 + 60.0 / st.min())
+    np.testing.assert_allclose(single[0], ref0, rtol=0.01)
+    np.testing.assert_allclose(single[1], ref1, rtol=0.01)
+    np.testing.assert_allclose(emitted[0], f.emission * -np.expm1(-st * 28.0) / st, rtol=1e-12)
+    np.testing.assert_allclose(emitted[1], f.emission / st, rtol=1e-12)
+    np.testing.assert_allclose(trans[0], np.exp(-st * 28.0))
+    assert np.all(trans[1] == 0)
+    # nothing where the stretch is empty
+    single, emitted, trans = worldfog.tail(f, [light], o, d, s0, s0 - 1.0)
+    assert np.all(single == 0) and np.all(emitted == 0) and np.all(trans == 1)
+
+
+def wall(y=0.0, half=1.0, emission=(1.0, 1.0, 1.0), albedo=(0.0, 0.0, 0.0)):
+    v = np.array([[-half, y, -half], [half, y, -half], [half, y, half], [-half, y, half]], float)
+    return Surface("wall", v, np.array([[0, 1, 2], [0, 2, 3]]), np.array(albedo, float),
+                   np.array(emission, float))
+
+
+def test_absorbing_fog_in_front_of_an_emitter_renders_exp_minus_sigma_d():
+    f = fog(sigma_s=(0, 0, 0), sigma_a=(0.0, 0.05, 0.2))
+    desc = SceneDescription(camera(), surfaces=[wall()], world=World(np.ones(3), volume=f),
+                            lights=[Light("SUN", "sun", np.full(3, 4.0))],
+                            settings=Settings(samples=1, multiple=False, voxel_resolution=24))
+    out = render(desc)
+    comb = out.passes["Combined"][..., :3]
+    d = 8.0 - desc.camera.clip_start   # camera rays start at the near clip, as in Cycles
+    np.testing.assert_allclose(comb[12, 16], np.exp(-np.array([0.0, 0.05, 0.2]) * d), rtol=1e-3)
+    np.testing.assert_allclose(comb[0, 0], [1.0, 0.0, 0.0], atol=1e-6)   # sky: red channel clear
+    assert np.all(np.isfinite(comb))
+
+
+def test_point_light_in_fog_is_continuous_across_the_grid_end():
+    """A point light near the camera in thin fog: the image varies smoothly where camera rays
+    leave the grid and the tail takes over, and the tail carries part of the glow."""
+    f = fog(sigma_s=(0.05, 0.05, 0.05))
+    desc = SceneDescription(camera(48, 8), lights=[point((0.0, -5.0, 0.0), 300.0)],
+                            world=World(volume=f),
+                            settings=Settings(samples=4, multiple=False, voxel_resolution=32))
+    out = render(desc)
+    img = out.passes["Volume Single"][..., 0]
+    assert np.all(np.isfinite(img)) and img.min() > 0
+    row = img[4]
+    # the glow falls off smoothly from the centre to the sides (no step at the grid's end)
+    left = row[:24]
+    assert np.all(np.diff(left) > -0.02 * left.max())
+    import mpp_render.worldfog as wf
+    orig = wf.tail
+    try:
+        wf.tail = lambda *a, **k: (lambda r: (0 * r[0], r[1], r[2]))(orig(*a, **k))
+        without = render(desc).passes["Volume Single"][..., 0]
+    finally:
+        wf.tail = orig
+    assert 0.01 < 1 - without.mean() / img.mean() < 0.5
+
+
+def test_surface_shadow_on_the_fog_grid_is_prefiltered():
+    """Visibility of a light past a plate, on the fog's grid: 0 or 1 away from the shadow's
+    edge, fractions on it, and a floor right under a voxel does not shadow it."""
+    cam = camera()
+    desc = SceneDescription(cam, lights=[point((0.0, 0.0, 5.0))])
+    pm = prepare(worldfog.bounded_medium(desc, fog(), resolution=24).medium)
+    plate = wall(y=0.0, half=1.0)
+    plate.vertices = np.array([[-1, -1, 2.0], [1, -1, 2.0], [1, 1, 2.0], [-1, 1, 2.0]])
+    flat = np.arange(pm.grid.size)
+    ijk = np.stack(np.unravel_index(flat, pm.grid.shape), axis=1).astype(float)
+    pts = ijk @ pm.i2w[:3, :3].T + pm.i2w[:3, 3]
+    vis = soft_visibility(prepare_surfaces([plate]), desc.lights[0], pm, flat, pts)
+    below = (np.abs(pts[:, 0]) < 0.5) & (np.abs(pts[:, 1]) < 0.5) & (pts[:, 2] < 1.0)
+    assert np.all(vis[below] == 0)
+    far = ((np.abs(pts[:, 0]) > 3.0) & (pts[:, 2] > -1.0)) | (pts[:, 2] > 3.0)
+    assert np.all(vis[far] == 1)
+    assert np.any((vis > 0) & (vis < 1))
