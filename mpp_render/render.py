@@ -16,12 +16,12 @@ from typing import Callable, Dict, List, Optional
 
 import numpy as np
 
-from . import kernels
+from . import cache, kernels
 from .camera import primary_rays
 from .march import MarchContext, march_rays, ray_keys
 from .media import prepare, union_interval
 from .passes import DEPTH_MISS, enabled_passes
-from .precompute import kernel_arrays, precompute
+from .precompute import kernel_arrays
 from .scene import SceneDescription
 from .surfaces import intersect, prepare_surfaces, shade
 
@@ -93,10 +93,13 @@ def render(desc: SceneDescription,
     t_pre = time.perf_counter()
     pre = None
     if media:
-        pre = precompute(media, desc.lights, desc.world, cam, n_dirs=st.ambient_directions,
-                         seed=st.seed, should_cancel=cancel, progress=progress,
-                         surfaces=None if surf.empty else surf, threads=st.threads,
-                         multiple=st.multiple)
+        # the light and world-light parts are reused from earlier renders when their inputs
+        # did not change (cache.py)
+        pre = cache.precompute_cached(media, desc.lights, desc.world, cam,
+                                      n_dirs=st.ambient_directions, seed=st.seed,
+                                      should_cancel=cancel, progress=progress,
+                                      surfaces=None if surf.empty else surf, threads=st.threads,
+                                      multiple=st.multiple)
         if pre is None:
             return RenderOutput(out, {"precompute": time.perf_counter() - t_pre}, warnings, True)
     timings["precompute"] = time.perf_counter() - t_pre
