@@ -181,16 +181,24 @@ class Cache:
 
 class KindView:
     """``get``/``__setitem__`` on one kind of a :class:`Cache`, for code written against a
-    plain dict."""
+    plain dict.  The view also keeps what passes through it itself, so within its lifetime
+    (one scene translation) a value is shared even when the cache is full or switched off."""
 
     def __init__(self, cache: Cache, kind: str):
         self.cache, self.kind = cache, kind
+        self.local: dict = {}
 
     def get(self, key, default=None):
+        if key in self.local:
+            return self.local[key]
         value = self.cache.get(self.kind, key)
-        return default if value is None else value
+        if value is None:
+            return default
+        self.local[key] = value
+        return value
 
     def __setitem__(self, key, value) -> None:
+        self.local[key] = value
         self.cache.put(self.kind, key, value)
 
 
