@@ -58,7 +58,7 @@ def test_live_grids_shapes_with_noise_and_colour():
     rflat = np.moveaxis(rgba, (0, 1, 2), (2, 1, 0)).ravel()
     dse = Settings(res, noise=2, density_grid=dflat, heat_grid=hflat, color_grid=rflat,
                    flame_grid=np.zeros(dflat.size), temperature_grid=np.zeros(dflat.size))
-    g = fluid.live_grids(dse, [], "domain")
+    g = fluid.live_grids(dse)
     assert g.shape == hi and g.low_shape == res and g.source == "live"
     np.testing.assert_array_equal(g.grids["density"], dens)
     np.testing.assert_array_equal(g.grids["heat"], heat)  # heat stays low resolution
@@ -73,10 +73,10 @@ def test_live_grids_shapes_with_noise_and_colour():
 def test_empty_or_mis_sized_live_grids_are_not_used():
     res = (4, 3, 2)
     n = int(np.prod(res))
-    assert fluid.live_grids(Settings(res, density_grid=np.zeros(n)), [], "d") is None
-    assert fluid.live_grids(Settings(res, density_grid=np.ones(n - 1)), [], "d") is None
-    assert fluid.live_grids(Settings((0, 0, 0)), [], "d") is None
-    g = fluid.live_grids(Settings(res, density_grid=np.ones(n), flame_grid=np.ones(7)), [], "d")
+    assert fluid.live_grids(Settings(res, density_grid=np.zeros(n))) is None
+    assert fluid.live_grids(Settings(res, density_grid=np.ones(n - 1))) is None
+    assert fluid.live_grids(Settings((0, 0, 0))) is None
+    g = fluid.live_grids(Settings(res, density_grid=np.ones(n), flame_grid=np.ones(7)))
     assert set(g.grids) == {"density"}
 
 

@@ -320,25 +320,38 @@ def test_noise_flame_heat_temperature_and_colour(tmp_path):
     warned(r["no_noise_file"], "'Smoke'", "fluid_noise_0001.vdb", "not found")
 
 
-def test_domain_shading_without_material_uniform_and_emission(tmp_path):
+def test_domain_shading_without_material_with_uniform_shaders_and_emission(tmp_path):
     body = """
         ob = t.domain(CACHE)
         t.write_frame(CACHE + "/data/fluid_data_0001.vdb", {"density": t.plume(t.RES, (16, 8, 8))})
         t.report("nomat", t.translate(1))
-        mat = bpy.data.materials.new("Fog")
-        nt = mat.node_tree
-        nt.nodes.clear()
-        sc = nt.nodes.new("ShaderNodeVolumeScatter")
-        sc.inputs["Density"].default_value = 0.25
-        em = nt.nodes.new("ShaderNodeEmission")
-        em.inputs["Strength"].default_value = 2.0
-        add = nt.nodes.new("ShaderNodeAddShader")
-        out = nt.nodes.new("ShaderNodeOutputMaterial")
-        nt.links.new(sc.outputs[0], add.inputs[0])
-        nt.links.new(em.outputs[0], add.inputs[1])
-        nt.links.new(add.outputs[0], out.inputs["Volume"])
-        ob.data.materials.append(mat)
-        t.report("uniform", t.translate(1))
+
+        def fog(with_grid):
+            mat = bpy.data.materials.new("Fog")
+            nt = mat.node_tree
+            nt.nodes.clear()
+            sc = nt.nodes.new("ShaderNodeVolumeScatter")
+            sc.inputs["Density"].default_value = 0.25
+            em = nt.nodes.new("ShaderNodeEmission")
+            em.inputs["Strength"].default_value = 2.0
+            add = nt.nodes.new("ShaderNodeAddShader")
+            out = nt.nodes.new("ShaderNodeOutputMaterial")
+            nt.links.new(sc.outputs[0], add.inputs[0])
+            nt.links.new(em.outputs[0], add.inputs[1])
+            if with_grid:
+                pv = nt.nodes.new("ShaderNodeVolumePrincipled")
+                add2 = nt.nodes.new("ShaderNodeAddShader")
+                nt.links.new(add.outputs[0], add2.inputs[0])
+                nt.links.new(pv.outputs[0], add2.inputs[1])
+                add = add2
+            nt.links.new(add.outputs[0], out.inputs["Volume"])
+            return mat
+
+        ob.data.materials.append(fog(False))
+        t.report("uniform_only", t.translate(1))
+        ob.data.materials.clear()
+        ob.data.materials.append(fog(True))
+        t.report("uniform_and_grid", t.translate(1))
         ob.data.materials.clear()
         ob.data.materials.append(t.volume_material("Odd", attribute="smoke"))
         t.report("unknown_attr", t.translate(1))
@@ -346,18 +359,22 @@ def test_domain_shading_without_material_uniform_and_emission(tmp_path):
     r = run(body, tmp_path)
     assert r["nomat"]["media"] == []
     warned(r["nomat"], "'Smoke'", "no material")
-    names = {m["name"]: m for m in r["uniform"]["media"]}
-    assert set(names) == {"Smoke:uniform", "Smoke:emission"}
-    box, glow = names["Smoke:uniform"], names["Smoke:emission"]
-    # the whole domain box, sharp, on the domain's cells
-    assert box["source"] == "MESH" and box["shape"] == list(RES) and box["max"] == 1.0
-    np.testing.assert_allclose(box["origin_world"], cell_centre((0, 0, 0)), atol=1e-9)
+    # a uniform scatter and emission alone: no grid is read, so nothing (as in Cycles)
+    assert r["uniform_only"]["media"] == []
+    warned(r["uniform_only"], "'Smoke'", "reads no smoke grid")
+    # beside a density shader they fill the density's non-zero cells
+    media = {m["name"]: m for m in r["uniform_and_grid"]["media"]}
+    assert set(media) == {"Smoke:density", "Smoke:uniform"}
+    dens, box = media["Smoke:density"], media["Smoke:uniform"]
+    assert box["source"] == "FLUID" and box["shape"] == dens["shape"] and box["max"] == 1.0
+    np.testing.assert_allclose(box["origin_world"], dens["origin_world"])
     np.testing.assert_allclose(box["sigma_s"], [0.2] * 3, rtol=1e-6)  # 0.8 x 0.25
-    np.testing.assert_allclose(glow["emission"], [2.0] * 3, rtol=1e-6)
-    np.testing.assert_allclose(glow["sigma_s"], [0.0] * 3)
-    odd = only(r["unknown_attr"])
-    assert odd["name"] == "Smoke:uniform" and odd["shape"] == list(RES)
-    warned(r["unknown_attr"], "'Smoke'", "no scalar grid 'smoke'", "uniform")
+    np.testing.assert_allclose(box["emission"], [2.0] * 3, rtol=1e-6)
+    np.testing.assert_allclose(dens["sigma_s"], [0.5] * 3, rtol=1e-6)  # default Principled
+    warned(r["uniform_and_grid"], "'Smoke'", "uniform density", "'Smoke:density'")
+    # a Density Attribute naming no smoke grid: a uniform density, with no grid read: nothing
+    assert r["unknown_attr"]["media"] == []
+    warned(r["unknown_attr"], "'Smoke'", "no scalar grid 'smoke'")
 
 
 def test_unbaked_domain_and_the_live_grids_are_reported(tmp_path):
@@ -365,7 +382,7 @@ def test_unbaked_domain_and_the_live_grids_are_reported(tmp_path):
         ob = t.domain(CACHE, t.volume_material(), cache_type="REPLAY")
         from mpp_render.blender.translate import fluid
         dse = ob.evaluated_get(bpy.context.evaluated_depsgraph_get()).modifiers["Fluid"].domain_settings
-        live = fluid.live_grids(dse, [], "x")
+        live = fluid.live_grids(dse)
         print("RESULT", json.dumps({"tag": "live", "none": live is None,
                                     "res": list(dse.domain_resolution),
                                     "n": len(dse.density_grid)}))

@@ -33,14 +33,17 @@ copied):
   resolution is read: sizes in a file are not trusted) in a reader *process* with a time
   limit, because a damaged file can hang or exhaust the openvdb reader; frames read are kept
   in ``mpp_render.cache`` (kind 'fluid') while the file is unchanged.
-* **Shading.**  The domain's material (``materials.volume_shading``): a closure whose density
-  attribute is one of the grids becomes a medium on that grid (source 'FLUID'); a closure
-  with a uniform density -- or whose Density Attribute names no smoke grid -- fills the domain
-  box (a sharp medium, like a mesh volume), and so does constant emission (Cycles' volume
-  emission does not depend on the density).  A Principled Volume's Color Attribute 'color'
-  tints its scattering colour by the smoke colour averaged over the density (one colour per
-  domain: a warning says when it varies).  Without a material, or without a volume shader,
-  a domain renders nothing (Cycles gives a mesh domain the default *surface* shader).
+* **Shading.**  The domain's material (``materials.volume_shading``), as for Volume objects
+  (vdb.py): a closure whose density attribute is one of the grids becomes a medium on that
+  grid (source 'FLUID', cropped to its non-zero cells) with the closure's emission inside
+  it; closures with a uniform density -- or whose Density Attribute names no smoke grid --
+  fill the hull of the grids the material reads (Cycles builds the volume's bounds from
+  them), approximated by the non-zero cells of the first; a material that reads no grid
+  renders nothing.  Only the grids the material needs are read.  A Principled Volume's Color
+  Attribute 'color' tints its scattering colour by the smoke colour averaged over the density
+  (one colour per domain: a warning says when it varies).  Without a material, or without a
+  volume shader, a domain renders nothing (Cycles gives a mesh domain the default *surface*
+  shader).
 
 Liquid domains are left to the mesh path (their evaluated mesh is the liquid surface).
 Anything missing or damaged -- no data, a missing or corrupt cache frame, a grid with NaN,
@@ -75,6 +78,9 @@ DATA_GRIDS = {"density": "density", "flame": "flame", "heat": "temperature",
               "color_r": "color_r", "color_g": "color_g", "color_b": "color_b"}
 NOISE_GRIDS = {"density": "density_noise", "flame": "flame_noise", "color_r": "color_r_noise",
                "color_g": "color_g_noise", "color_b": "color_b_noise"}
+# the file grids (our names) each smoke attribute is made from
+FILE_GRIDS_FOR = {"density": {"density"}, "flame": {"flame"}, "temperature": {"flame"},
+                  "heat": {"heat"}, "color": {"color_r", "color_g", "color_b", "density"}}
 FLAME_CUTOFF = 0.01      # flame below this has no temperature (rna_fluid.cc)
 HEAT_SCALE = 0.5         # heat_grid = Mantaflow heat x 0.5 (rna_fluid.cc)
 READ_TIMEOUT_ENV = "MPP_FLUID_READ_TIMEOUT_S"
@@ -176,7 +182,7 @@ def derived_grids(out: DomainGrids, density, flame, heat, rgb, ignition: float, 
     return out
 
 
-def live_grids(dse, warnings, where) -> Optional[DomainGrids]:
+def live_grids(dse) -> Optional[DomainGrids]:
     """The grids held by the evaluated domain settings, or None when they are empty (all
     zero) or their sizes do not match the domain's resolution."""
     res = tuple(int(v) for v in dse.domain_resolution)
@@ -365,10 +371,13 @@ class FluidTranslator:
             self.warnings.append(f"{where}: frame {self.frame} is outside its cache frames "
                                  f"{start}..{end}; nothing rendered (as Cycles)")
             return []
-        grids = self._grids(ob, dse, where)
+        colour_nodes = principled_colour_attributes(mat)
+        wanted = {co.attribute for co in shading if co.attribute in STANDARD_GRIDS}
+        if colour_nodes:
+            wanted.add("color")
+        grids = self._grids(ob, dse, where, wanted)
         if grids is None:
             return []
-        colour_nodes = principled_colour_attributes(mat)
         if colour_nodes:  # handled here: drop materials.py's "not supported" for them
             local = [w for w in local if not ("Color Attribute" in w and "is not supported" in w)]
         self.warnings.extend(local)
@@ -386,12 +395,14 @@ class FluidTranslator:
             mats = [m for m in getattr(ob.data, "materials", []) if m is not None]
         return mats[0] if mats else None
 
-    def _grids(self, ob, dse, where) -> Optional[DomainGrids]:
-        """This frame's grids: the live ones, else the baked cache; None with a warning when
-        there is no data."""
-        live = live_grids(dse, self.warnings, where)
+    def _grids(self, ob, dse, where, wanted) -> Optional[DomainGrids]:
+        """This frame's grids (of those named in ``wanted``, a set of STANDARD_GRIDS): the
+        live ones, else the baked cache; None with a warning when there is no data."""
+        live = live_grids(dse)
         if live is not None:
             return live
+        if not wanted:
+            return DomainGrids((1, 1, 1), (1, 1, 1), "")  # nothing to read
         res = tuple(int(v) for v in dse.domain_resolution)
         if min(res, default=0) < 1:
             self.warnings.append(f"{where}: the domain has no resolution; skipped")
@@ -412,11 +423,15 @@ class FluidTranslator:
             return None
         amp = int(dse.noise_scale) if dse.use_noise else 1
         shape = tuple(r * amp for r in res)
-        data = self._read(data_path, DATA_GRIDS, res, where)
+        keys = set()  # the file grids the wanted attributes are made from
+        for name in wanted:
+            keys |= FILE_GRIDS_FOR[name]
+        data = self._read(data_path, {k: v for k, v in DATA_GRIDS.items() if k in keys}, res,
+                          where)
         if data is None:
             return None
         noise = None
-        if amp > 1:
+        if amp > 1 and keys & set(NOISE_GRIDS):
             noise_path = cache_file(directory, frame, noise=True)
             if dse.cache_noise_format != "OPENVDB":
                 self.warnings.append(f"{where}: its noise cache format {dse.cache_noise_format} "
@@ -425,7 +440,9 @@ class FluidTranslator:
                 self.warnings.append(f"{where}: noise cache file '{noise_path}' not found; using "
                                      "the low-resolution data")
             else:
-                noise = self._read(noise_path, NOISE_GRIDS, shape, where)
+                noise = self._read(noise_path,
+                                   {k: v for k, v in NOISE_GRIDS.items() if k in keys}, shape,
+                                   where)
         hi_res = noise if noise else data
         hi_shape = shape if noise else res
         source = data_path if not noise else f"{data_path}' and '{noise_path}"
@@ -510,12 +527,8 @@ class FluidTranslator:
                world_matrix, clip, where) -> List[Medium]:
         media: List[Medium] = []
         uniform: List[VolumeCoefficients] = []
-        emission = np.zeros(3)
         several = len(shading) > 1
         for co in shading:
-            emission = emission + np.maximum(co.emission, 0.0)
-            if not (np.any(co.sigma_s > 0) or np.any(co.sigma_a > 0)):
-                continue
             attr = co.attribute
             if attr is None:
                 uniform.append(co)
@@ -531,16 +544,30 @@ class FluidTranslator:
                                      "nothing")
             else:
                 self.warnings.append(f"{where}: the domain has no scalar grid '{attr}'; that "
-                                     "shader's density is uniform over the domain box (as Cycles)")
+                                     "shader's density is uniform (as in Cycles)")
                 uniform.append(co)
         if uniform:
-            coeff = merge(uniform)
-            media.append(self._box(ob, f"{ob.name}:uniform", coeff.sigma_s, coeff.sigma_a, coeff.g,
-                                   np.zeros(3), grids, lo, hi, world_matrix))
-        if np.any(emission > 0):
-            media.append(self._box(ob, f"{ob.name}:emission", np.zeros(3), np.zeros(3), 0.0,
-                                   emission, grids, lo, hi, world_matrix))
+            self._uniform(ob, uniform, media, where)
         return media
+
+    def _uniform(self, ob, uniform, media, where) -> None:
+        """Closures with a uniform density (and their emission): Cycles fills the hull of the
+        grids the material reads with them, approximated by the voxels where the first of
+        those grids is non-zero, as for Volume objects (vdb.py).  A material that reads no
+        grid renders nothing in Cycles."""
+        if not media:
+            self.warnings.append(f"{where}: its material reads no smoke grid (density, flame, heat "
+                                 "or temperature) that holds data at this frame; without one "
+                                 "it renders nothing (as in Cycles)")
+            return
+        base = media[0]
+        coeff = merge(uniform)
+        self.warnings.append(f"{where}: shaders with a uniform density are approximated inside "
+                             f"the non-zero voxels of '{base.name}'")
+        media.append(Medium(name=f"{ob.name}:uniform", density=(base.density > 0).astype(np.float32),
+                            index_to_world=base.index_to_world, sigma_s=coeff.sigma_s,
+                            sigma_a=coeff.sigma_a, g=coeff.g, emission=coeff.emission,
+                            source="FLUID"))
 
     def _grid_medium(self, ob, co, attr, grids: DomainGrids, lo, hi, world_matrix, clip, where,
                      several) -> Optional[Medium]:
@@ -570,18 +597,7 @@ class FluidTranslator:
         i2w = world_matrix @ cell_to_object(lo, hi, grids.shape_of(attr)) @ offset
         return Medium(name=f"{ob.name}:{attr}" if several else ob.name, density=crop,
                       index_to_world=i2w, sigma_s=co.sigma_s, sigma_a=co.sigma_a, g=float(co.g),
-                      emission=np.zeros(3), source="FLUID")
-
-    @staticmethod
-    def _box(ob, name, sigma_s, sigma_a, g, emission, grids: DomainGrids, lo, hi,
-             world_matrix) -> Medium:
-        """The whole domain box filled with density 1: a sharp medium (like a mesh volume)
-        on the domain's low-resolution cells, whose edge falls on the box."""
-        shape = grids.low_shape
-        return Medium(name=name, density=np.ones(shape, np.float32),
-                      index_to_world=world_matrix @ cell_to_object(lo, hi, shape),
-                      sigma_s=np.asarray(sigma_s, np.float64), sigma_a=np.asarray(sigma_a, np.float64),
-                      g=float(g), emission=np.asarray(emission, np.float64), source="MESH")
+                      emission=co.emission, source="FLUID")
 
 
 def principled_colour_attributes(material) -> list:
