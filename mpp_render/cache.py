@@ -5,15 +5,13 @@ One store, ``CACHE``, holds entries of a few kinds under content keys (``digest`
 memory cap (``MPP_CACHE_MB``, default ``DEFAULT_LIMIT_MB``; least recently used entries go
 first) and hit/miss counters:
 
-* ``'lights'``: the light part of the precompute (``precompute.precompute`` with a black
-  world): per medium the density and the optical depth to every light, and the light
-  pyramids.  Keyed by the prepared media (grids, maps, coefficients), the lights, the opaque
-  surfaces' geometry and multiple scattering on/off.  The camera is not part of the key:
-  moving the camera keeps these fields.
-* ``'world'``: the world-light part (``precompute`` with no lights), keyed by the media, the
-  world colour, the surfaces, the ambient directions, the seed and the camera *position*
+* ``'precompute'``: the precompute fields and light pyramids, under a key of what the light
+  part reads -- the prepared media (grids, maps, coefficients), the lights, the opaque
+  surfaces' geometry, multiple scattering on/off -- with the key of the world-light part
+  they hold: the world colour, the ambient directions, the seed and the camera *position*
   (the direction for an orthographic camera), which ``precompute.world_light`` reads.
-  Rotating a perspective camera keeps it; moving it recomputes only this part.
+  Turning a perspective camera keeps everything; moving it recomputes the world light only;
+  changing a light keeps the world light (``precompute_cached``).
 * the Blender glue stores grids it read or built: ``'voxels'`` (voxelised mesh interiors),
   ``'vdb'`` (grids of unchanged .vdb files), ``'fluid'`` (fluid cache frames).
 
@@ -33,6 +31,7 @@ import numpy as np
 
 MB = 1 << 20
 DEFAULT_LIMIT_MB = 1024
+ENTRY_BYTES = 256  # counted for every entry besides its arrays (keys, small objects)
 LIMIT_ENV = "MPP_CACHE_MB"
 
 
@@ -134,8 +133,9 @@ class Cache:
 
     def put(self, kind: str, key, value) -> bool:
         """Store ``value``; the oldest entries are dropped until the cap holds.  False when
-        the value alone exceeds the cap (then it is not stored)."""
-        size = nbytes(value)
+        the value alone exceeds the cap (then it is not stored).  Each entry counts its
+        arrays' bytes plus ``ENTRY_BYTES``, so a zero cap keeps nothing at all."""
+        size = nbytes(value) + ENTRY_BYTES
         cap = self._cap()
         with self._lock:
             old = self._items.pop((kind, key), None)
@@ -236,71 +236,111 @@ def camera_key(camera) -> tuple:
     return (str(camera.projection), c2w[:3, 3].copy())
 
 
-def merge_parts(light_part, world_part):
-    """One ``Precomputed`` from the light part (black world) and the world part (no lights):
-    the world channels are appended to each medium's field after the light channels."""
-    from .precompute import FieldLayout, Precomputed
+def _world_channels(layout):
+    """The first world-light channel of a field layout (they run to the end), or None."""
+    return layout.ambient_channel
 
-    lay = light_part.layout
-    offset = lay.channels - 1  # the world part's channel c lands at c + offset
-    wl = world_part.layout
-    fields = [np.concatenate([fl, fw[..., 1:]], axis=-1)
-              for fl, fw in zip(light_part.fields, world_part.fields)]
-    layout = FieldLayout(list(lay.light_channels),
-                         None if wl.ambient_channel is None else wl.ambient_channel + offset,
-                         lay.channels + wl.channels - 1,
-                         None if wl.ambient_multiple_channel is None
-                         else wl.ambient_multiple_channel + offset)
-    stats = dict(light_part.stats)
-    stats["ambient_points"] = world_part.stats.get("ambient_points", 0)
-    return Precomputed(fields, layout, light_part.multiple,
-                       light_part.seconds + world_part.seconds, stats)
+
+def _light_channels(lights) -> list:
+    """The light channel offsets ``precompute.precompute`` gives ``lights`` (None for a dark
+    light), to tell whether two light sets share a field layout."""
+    from .lights import is_dark
+
+    out, c = [], 1
+    for light in lights:
+        if is_dark(light):
+            out.append(None)
+        else:
+            out.append(c)
+            c += 3
+    return out
 
 
 def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, surfaces=None,
                       threads: int = 0, multiple: bool = False,
                       should_cancel: Optional[Callable[[], bool]] = None,
                       progress=None, cache: Optional[Cache] = None):
-    """``precompute.precompute`` with the light part and the world-light part looked up in
-    ``cache`` (default ``CACHE``) and computed only when missing (see the module docstring).
-    The result equals a cold ``precompute`` call's: the two parts are independent in it.
-    ``stats["reused"]`` lists the parts taken from the cache.  None when cancelled."""
+    """``precompute.precompute`` reusing earlier results kept in ``cache`` (default ``CACHE``).
+
+    One entry (kind 'precompute') per *light key* -- the media, lights, surfaces, multiple
+    scattering, thread count and whether the world is lit -- holds the fields and pyramids
+    and the *world key* they were computed for (world colour, camera position, ambient
+    directions, seed).  Then:
+
+    * both keys match: everything is reused;
+    * only the world key differs (the camera moved): the world part alone is computed
+      (``precompute`` without lights) and written over the entry's world channels;
+    * the light key is new but an entry holds the same world key and the same channel
+      layout (a light's power or colour changed): the light part alone is computed and the
+      world channels are copied from that entry;
+    * otherwise the whole precompute runs.
+
+    The result equals a cold ``precompute`` call's: in it the light channels, the pyramids and
+    the world channels are computed independently.  ``stats["reused"]`` lists the parts
+    taken from the cache ('lights', 'world').  A cancelled precompute changes nothing and
+    returns None.  Callers must not modify the returned arrays."""
     from . import precompute as pre_mod
     from .scene import World
 
     cache = CACHE if cache is None else cache
-    # the thread count does not change the numbers; it is keyed anyway so that a render
-    # with other threads still runs (and checks) the precompute
-    common = (media_key(media), surfaces_key(surfaces), bool(multiple), int(threads))
-    light_key = digest("lights", common, list(lights))
     has_world = bool(np.any(np.asarray(world.color, np.float64) > 0))
+    # the thread count does not change the numbers; it is keyed anyway so that a render with
+    # other threads still runs (and checks) the precompute
+    common = (media_key(media), surfaces_key(surfaces), bool(multiple), int(threads))
+    light_key = digest("lights", common, list(lights), has_world)
     world_key = digest("world", common, np.asarray(world.color, np.float64), camera_key(camera),
                        int(n_dirs), int(seed)) if has_world else None
     kw = dict(n_dirs=n_dirs, seed=seed, should_cancel=should_cancel, progress=progress,
               surfaces=surfaces, threads=threads, multiple=multiple)
-    reused, fresh = [], []
-    light_part = cache.get("lights", light_key)
-    if light_part is None:
-        light_part = pre_mod.precompute(media, lights, World(), camera, **kw)
-        if light_part is None:
+
+    def result(pre, reused):
+        return pre_mod.Precomputed(pre.fields, pre.layout, pre.multiple, pre.seconds,
+                                   dict(pre.stats, reused=reused))
+
+    entry = cache.get("precompute", light_key)
+    if entry is not None:
+        pre = entry["pre"]
+        if entry["world"] == world_key:
+            return result(pre, ["lights", "world"] if has_world else ["lights"])
+        part = pre_mod.precompute(media, [], world, camera, **kw)  # the camera moved
+        if part is None:
             return None
-        fresh.append(("lights", light_key, light_part))
-    else:
-        reused.append("lights")
-    if not has_world:
-        out = pre_mod.Precomputed(light_part.fields, light_part.layout, light_part.multiple,
-                                  light_part.seconds, dict(light_part.stats))
-    else:
-        world_part = cache.get("world", world_key)
-        if world_part is None:
-            world_part = pre_mod.precompute(media, [], world, camera, **kw)
-            if world_part is None:
-                return None  # cancelled: nothing is kept
-            fresh.append(("world", world_key, world_part))
-        else:
-            reused.append("world")
-        out = merge_parts(light_part, world_part)
-    for kind, key, part in fresh:  # stored once the whole precompute is done
-        cache.put(kind, key, part)
-    out.stats["reused"] = reused
-    return out
+        first = _world_channels(pre.layout)
+        for f, w in zip(pre.fields, part.fields):
+            f[..., first:] = w[..., 1:]
+        entry["world"] = world_key
+        return result(pre, ["lights"])
+
+    donor = None
+    if has_world:
+        donor_key = cache.get("world_index", world_key)
+        donor = cache.get("precompute", donor_key) if donor_key is not None else None
+    if donor is not None and donor["world"] == world_key and \
+            donor["pre"].layout.light_channels == _light_channels(lights):
+        part = pre_mod.precompute(media, lights, World(), camera, **kw)  # a light changed
+        if part is None:
+            return None
+        old = donor["pre"]
+        first = _world_channels(old.layout)
+        fields = []
+        for fl, fo in zip(part.fields, old.fields):
+            f = np.empty(fo.shape, np.float32)
+            f[..., :first] = fl
+            f[..., first:] = fo[..., first:]
+            fields.append(f)
+        pre = pre_mod.Precomputed(fields, old.layout, part.multiple, part.seconds,
+                                  dict(part.stats,
+                                       ambient_points=old.stats.get("ambient_points", 0)))
+        _keep(cache, light_key, world_key, pre)
+        return result(pre, ["world"])
+    pre = pre_mod.precompute(media, lights, world, camera, **kw)
+    if pre is None:
+        return None
+    _keep(cache, light_key, world_key, pre)
+    return result(pre, [])
+
+
+def _keep(cache: Cache, light_key, world_key, pre) -> None:
+    cache.put("precompute", light_key, {"pre": pre, "world": world_key})
+    if world_key is not None:
+        cache.put("world_index", world_key, light_key)

@@ -27,7 +27,8 @@ def calls(monkeypatch):
     real = pre_mod.precompute
 
     def counting(media, lights, world, *a, **kw):
-        seen.append(("lights" if lights else "world"))
+        lit = bool(np.any(np.asarray(world.color) > 0))
+        seen.append("all" if lights and lit else "lights" if lights else "world")
         return real(media, lights, world, *a, **kw)
 
     monkeypatch.setattr(pre_mod, "precompute", counting)
@@ -80,58 +81,73 @@ def test_digest_follows_content_type_and_shape():
 
 
 def test_store_keeps_the_cap_drops_the_oldest_and_clears():
-    c = cache.Cache(limit=3000)
+    entry = 1000 + cache.ENTRY_BYTES
+    c = cache.Cache(limit=3 * entry)
     kb = np.zeros(250, np.float32)  # 1000 bytes
     assert c.put("k", 1, kb) and c.put("k", 2, kb.copy()) and c.put("k", 3, kb.copy())
     assert c.get("k", 1) is kb  # 1 is now the most recently used
     assert c.put("k", 4, kb.copy())
     assert c.get("k", 2) is None and c.get("k", 1) is kb and c.get("k", 4) is not None
-    assert c.bytes == 3000 and len(c) == 3
+    assert c.bytes == 3 * entry and len(c) == 3
     assert not c.put("k", 5, np.zeros(1000, np.float32))  # larger than the cap: not kept
     assert c.get("k", 5) is None
     s = c.stats()
     assert s["hits"]["k"] == 3 and s["misses"]["k"] == 2 and s["entries"] == 3
-    assert c.clear() == 3000 and len(c) == 0 and c.bytes == 0
+    assert c.clear() == 3 * entry and len(c) == 0 and c.bytes == 0
 
 
 def test_a_zero_cap_keeps_nothing(monkeypatch):
     monkeypatch.setenv(cache.LIMIT_ENV, "0")
     c = cache.Cache()
     assert not c.put("k", 1, np.zeros(4)) and c.get("k", 1) is None
+    assert not c.put("k", 2, "a small value") and len(c) == 0
 
 
 # -- the precompute ----------------------------------------------------------------------------
 
-def test_split_precompute_equals_the_cold_one(warm):
-    desc = scene()
-    media = [prepare(m) for m in desc.media]
+def prepared(desc):
     from mpp_render.surfaces import prepare_surfaces
-    surf = prepare_surfaces(desc.surfaces)
-    kw = dict(n_dirs=8, seed=3, surfaces=surf, threads=2, multiple=True)
-    cold = pre_mod.precompute(media, desc.lights, desc.world, desc.camera, **kw)
-    split = cache.precompute_cached(media, desc.lights, desc.world, desc.camera, **kw)
-    assert split.layout == cold.layout
-    for f, g in zip(split.fields, cold.fields):
+    return [prepare(m) for m in desc.media], prepare_surfaces(desc.surfaces)
+
+
+def assert_same_precompute(a, b):
+    assert a.layout == b.layout
+    for f, g in zip(a.fields, b.fields):
         np.testing.assert_array_equal(f, g)
-    for ms, mc in zip(split.multiple, cold.multiple):
-        for a, b in zip(ms, mc):
-            assert (a is None) == (b is None)
-            if a is not None:
-                assert a.stride == b.stride and a.h == b.h
-                for la, lb in zip(a.levels, b.levels):
-                    np.testing.assert_array_equal(la, lb)
-    assert split.stats["reused"] == []
-    again = cache.precompute_cached(media, desc.lights, desc.world, desc.camera, **kw)
-    assert again.stats["reused"] == ["lights", "world"]
-    for f, g in zip(again.fields, cold.fields):
-        np.testing.assert_array_equal(f, g)
+    for ms, mc in zip(a.multiple, b.multiple):
+        for x, y in zip(ms, mc):
+            assert (x is None) == (y is None)
+            if x is not None:
+                assert x.stride == y.stride and x.h == y.h
+                for lx, ly in zip(x.levels, y.levels):
+                    np.testing.assert_array_equal(lx, ly)
+
+
+@pytest.mark.parametrize("change", ["nothing", "camera", "light"])
+def test_cached_precompute_equals_the_cold_one(warm, change):
+    """Each way of reuse (all kept; world light recomputed in place; light part recomputed
+    with the world channels copied) gives exactly the fields of a cold precompute."""
+    kw = dict(n_dirs=8, seed=3, threads=2, multiple=True)
+    first = scene()
+    media, surf = prepared(first)
+    cache.precompute_cached(media, first.lights, first.world, first.camera, surfaces=surf, **kw)
+    second = {"nothing": scene(), "camera": scene(cam_pos=(0.5, -0.2, 3.5)),
+              "light": scene(power=400.0)}[change]
+    media, surf = prepared(second)
+    got = cache.precompute_cached(media, second.lights, second.world, second.camera,
+                                  surfaces=surf, **kw)
+    assert got.stats["reused"] == {"nothing": ["lights", "world"], "camera": ["lights"],
+                                   "light": ["world"]}[change]
+    cold = pre_mod.precompute(media, second.lights, second.world, second.camera, surfaces=surf,
+                              **kw)
+    assert_same_precompute(got, cold)
 
 
 def test_second_render_reuses_the_precompute_and_matches_a_cold_render(warm, calls):
     first = render(scene())
-    assert sorted(calls) == ["lights", "world"] and first.stats["reused"] == []
+    assert calls == ["all"] and first.stats["reused"] == []
     second = render(scene())
-    assert sorted(calls) == ["lights", "world"]  # no new precompute call
+    assert calls == ["all"]  # no new precompute call
     assert second.stats["reused"] == ["lights", "world"]
     assert_same_image(first, second)
     cache.clear()
@@ -182,10 +198,10 @@ def test_changed_density_or_multiple_scattering_recomputes(warm, calls):
     desc = scene()
     desc.media[0].density = desc.media[0].density * np.float32(1.01)
     render(desc)
-    assert sorted(calls) == ["lights", "world"]
+    assert calls == ["all"]
     calls.clear()
     render(scene(multiple=False))
-    assert sorted(calls) == ["lights", "world"]
+    assert calls == ["all"]
 
 
 def test_a_cancelled_render_keeps_nothing(warm):
