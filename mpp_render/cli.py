@@ -1,9 +1,12 @@
 """Command line: ``python -m mpp_render render|compare|demo|package``.
 
-* ``render FILE.blend -o OUT.exr [--frame N] [--samples N] [--no-multiple] [--seed N]
-  [--engine mpp|cycles] [--resolution-percentage P]`` renders one frame of the file's active
-  view layer and writes a multilayer EXR (every pass) and a PNG preview of Combined beside
-  it (same name, ``.png``).  ``--engine cycles`` renders the reference instead, with the
+* ``render FILE.blend -o OUT.exr [--frame N | --frames A:B[:STEP]] [--samples N]
+  [--no-multiple] [--seed N] [--engine mpp|cycles] [--resolution-percentage P]`` renders one
+  frame of the file's active view layer and writes a multilayer EXR (every pass) and a PNG
+  preview of Combined beside it (same name, ``.png``).  ``--frames`` renders frames A to B
+  (inclusive) into ``OUT_####.exr`` (the frame number, 4 digits; a run of ``#`` in OUT
+  gives the place and the width instead), reusing what did not change between frames
+  (``mpp_render.cache``).  ``--engine cycles`` renders the reference instead, with the
   settings of ``shared/reference/metrics.md`` (CPU, no denoising, no adaptive sampling, no
   clamping, 1024 bounces -- volume bounces 0 with ``--no-multiple`` -- 1 px box filter).
 * ``compare OUT.exr SCENE_DIR [--single]`` scores OUT.exr's Combined pass against the scene's
@@ -18,13 +21,16 @@
 
 ``total`` is the wall time of the render call plus writing the files (Blender start-up and
 opening the file excluded); ``render`` is the render call alone.  For Cycles the three stage
-times are null.  Blender's own log lines may come before the JSON line.
+times are null.  With ``--frames`` the line is ``{"frames": [one record per frame, with
+"frame"], "seconds_per_frame": s, "total": s, "warnings": [...], "cancelled": bool}``.
+Blender's own log lines may come before the JSON line.
 """
 from __future__ import annotations
 
 import argparse
 import json
 import os
+import re
 import sys
 import time
 
@@ -124,7 +130,8 @@ def render_current(scene, out_exr: str) -> dict:
         exr.write_preview_png(png_path(out_exr), passes["Combined"])
         rec = {"translate": last.translate_s,
                "precompute": last.output.timings.get("precompute"),
-               "march": last.output.timings.get("march")}
+               "march": last.output.timings.get("march"),
+               "reused": last.output.stats.get("reused", [])}
         extra_write = last.write_s
         warnings = list(last.output.warnings)
         cancelled = last.output.cancelled
@@ -148,21 +155,74 @@ def render_current(scene, out_exr: str) -> dict:
     return rec
 
 
-def cmd_render(args) -> dict:
-    bpy = _bpy()
-    bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.file))
-    scene = bpy.context.scene
-    if args.frame is not None:
-        scene.frame_set(args.frame)
+def parse_frames(text: str) -> range:
+    """``"A:B"`` or ``"A:B:STEP"`` (inclusive, STEP >= 1) as a range; ValueError otherwise."""
+    parts = text.split(":")
+    if len(parts) not in (2, 3) or not all(p.strip().lstrip("-").isdigit() for p in parts):
+        raise ValueError(f"--frames wants A:B or A:B:STEP (integers), got '{text}'")
+    a, b = int(parts[0]), int(parts[1])
+    step = int(parts[2]) if len(parts) == 3 else 1
+    if step < 1 or b < a:
+        raise ValueError(f"--frames {text}: need A <= B and STEP >= 1")
+    return range(a, b + 1, step)
+
+
+def frame_path(output: str, frame: int) -> str:
+    """The file of ``frame`` for ``-o output``: its last run of '#' replaced by the frame
+    number zero-padded to the run's length, else ``_####`` added before the extension."""
+    runs = list(re.finditer(r"#+", output))
+    if runs:
+        r = runs[-1]
+        return output[:r.start()] + f"{frame:0{len(r.group())}d}" + output[r.end():]
+    stem, ext = os.path.splitext(output)
+    return f"{stem}_{frame:04d}{ext or '.exr'}"
+
+
+def _configure(scene, args) -> None:
     if args.resolution_percentage:
         scene.render.resolution_percentage = args.resolution_percentage
     if args.engine == "cycles":
         set_cycles_reference(scene, args.samples, not args.no_multiple, args.seed or 0)
     else:
         set_mpp(scene, args.samples, not args.no_multiple, args.seed)
+
+
+def cmd_render(args) -> dict:
+    frames = parse_frames(args.frames) if args.frames else None
+    if frames is not None and args.frame is not None:
+        raise SystemExit("use either --frame or --frames")
+    bpy = _bpy()
+    bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.file))
+    scene = bpy.context.scene
+    if frames is not None:
+        return render_frames(scene, args, frames)
+    if args.frame is not None:
+        scene.frame_set(args.frame)
+    _configure(scene, args)
     rec = render_current(scene, args.output)
     rec.pop("_passes")
     return rec
+
+
+def render_frames(scene, args, frames) -> dict:
+    """Render ``frames`` one after the other into ``frame_path(args.output, f)``; stops at a
+    cancelled frame."""
+    _configure(scene, args)
+    records, warnings = [], []
+    t0 = time.perf_counter()
+    for f in frames:
+        scene.frame_set(f)
+        rec = render_current(scene, frame_path(args.output, f))
+        rec.pop("_passes")
+        rec["frame"] = f
+        records.append(rec)
+        warnings.extend(w for w in rec["warnings"] if w not in warnings)
+        if rec["cancelled"]:
+            break
+    total = time.perf_counter() - t0
+    return {"frames": records, "seconds_per_frame": total / max(1, len(records)),
+            "total": total, "warnings": warnings,
+            "cancelled": any(r["cancelled"] for r in records)}
 
 
 def cmd_demo(args) -> dict:
@@ -204,6 +264,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("file", help="the .blend file")
     r.add_argument("-o", "--output", required=True, help="multilayer EXR to write (PNG beside it)")
     r.add_argument("--frame", type=int, help="frame to render (default: the file's current)")
+    r.add_argument("--frames", metavar="A:B[:STEP]",
+                   help="render frames A..B (inclusive) to OUT_####.exr (or OUT's '#' run)")
     r.add_argument("--samples", type=int, help="samples per pixel (default: the file's)")
     r.add_argument("--no-multiple", action="store_true",
                    help="single scattering only (Cycles: volume_bounces 0)")

@@ -20,13 +20,12 @@ from typing import Callable, Dict, List, Optional
 
 import numpy as np
 
-from . import kernels
+from . import cache, kernels, worldfog
 from .camera import primary_rays
 from .march import MarchContext, march_rays, ray_keys
 from .media import prepare, union_interval
 from .passes import DEPTH_MISS, enabled_passes
-from . import worldfog
-from .precompute import kernel_arrays, precompute, split_fog
+from .precompute import kernel_arrays, split_fog
 from .scene import SceneDescription
 from .surfaces import intersect, prepare_surfaces, shade
 
@@ -116,10 +115,13 @@ def render(desc: SceneDescription,
     t_pre = time.perf_counter()
     pre = None
     if media:
-        pre = precompute(media, lights, world, cam, n_dirs=st.ambient_directions,
-                         seed=st.seed, should_cancel=cancel, progress=progress,
-                         surfaces=None if surf.empty else surf, threads=st.threads,
-                         multiple=st.multiple)
+        # the light and world-light parts are reused from earlier renders when their inputs
+        # did not change (cache.py)
+        pre = cache.precompute_cached(media, lights, world, cam,
+                                      n_dirs=st.ambient_directions, seed=st.seed,
+                                      should_cancel=cancel, progress=progress,
+                                      surfaces=None if surf.empty else surf, threads=st.threads,
+                                      multiple=st.multiple)
         if pre is None:
             return RenderOutput(out, {"precompute": time.perf_counter() - t_pre}, warnings, True)
     timings["precompute"] = time.perf_counter() - t_pre

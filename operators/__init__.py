@@ -20,10 +20,10 @@ import bpy
 import numpy as np
 
 if __package__ and "." in __package__:  # installed: a subpackage of the extension
-    from ..mpp_render import cli, metrics
+    from ..mpp_render import cache, cli, metrics
     from ..mpp_render.blender import engine
 else:  # a checkout: ``operators`` and ``mpp_render`` are both top-level
-    from mpp_render import cli, metrics
+    from mpp_render import cache, cli, metrics
     from mpp_render.blender import engine
 
 ENGINE = "MPP_RENDER"
@@ -231,39 +231,31 @@ def cached_functions():
                 yield obj
 
 
-def _nbytes(obj) -> int:
-    """Bytes held by the numpy arrays in ``obj`` (dicts, lists, tuples, dataclass fields)."""
-    if isinstance(obj, np.ndarray):
-        return int(obj.nbytes)
-    if isinstance(obj, dict):
-        return sum(_nbytes(v) for v in obj.values())
-    if isinstance(obj, (list, tuple)):
-        return sum(_nbytes(v) for v in obj)
-    if hasattr(obj, "__dataclass_fields__"):
-        return sum(_nbytes(getattr(obj, f)) for f in obj.__dataclass_fields__)
-    return 0
-
-
 def clear_caches() -> dict:
     """Drop what the engine keeps between renders: ``engine.LAST_RENDER`` (the last frame's
-    passes, kept for the command line) and the renderer's module-level function caches.
-    Returns ``{"last_render_mb", "functions", "entries"}``: the MB (2^20 bytes) of arrays the
-    last render held, the caches cleared and the entries they held."""
+    passes, kept for the command line), the renderer's store of reusable work
+    (``mpp_render.cache``: precompute fields, light pyramids, voxelised meshes, grids read
+    from files) and its module-level function caches.  Returns ``{"last_render_mb",
+    "cache_mb", "functions", "entries"}``: the MB (2^20 bytes) of arrays the last render and
+    the store held, the function caches cleared and the entries they held."""
     released = 0
     if engine.LAST_RENDER is not None:
-        released = _nbytes(engine.LAST_RENDER.output)
+        released = cache.nbytes(engine.LAST_RENDER.output)
         engine.LAST_RENDER = None
+    stored = cache.clear()
     functions = entries = 0
     for fn in cached_functions():
         entries += int(fn.cache_info().currsize)
         fn.cache_clear()
         functions += 1
     gc.collect()
-    return {"last_render_mb": released / MB, "functions": functions, "entries": entries}
+    return {"last_render_mb": released / MB, "cache_mb": stored / MB, "functions": functions,
+            "entries": entries}
 
 
 def clear_summary(rec: dict) -> str:
-    return (f"MPP: released {rec['last_render_mb']:.1f} MB (last render) and cleared "
+    return (f"MPP: released {rec['last_render_mb']:.1f} MB (last render), "
+            f"{rec.get('cache_mb', 0.0):.1f} MB (reusable precompute and grids) and cleared "
             f"{rec['functions']} function cache(s) ({rec['entries']} entries)")
 
 
@@ -307,7 +299,8 @@ class MPP_OT_compare_with_cycles(bpy.types.Operator):
 
 
 class MPP_OT_clear_cache(bpy.types.Operator):
-    """Free what MPP keeps between renders (the last frame's passes, cached tables)"""
+    """Free what MPP keeps between renders (the last frame's passes, the precompute and
+    grids kept for the next frame, cached tables)"""
 
     bl_idname = "mpp.clear_cache"
     bl_label = "Clear MPP Caches"

@@ -9,6 +9,12 @@ One frame of one view layer flows one way::
 The engine class only forwards to the plain functions below.  ``LAST_RENDER`` keeps the last
 frame's ``RenderOutput`` with the translation and write times, for the command line.
 
+Animations (``blender -b file.blend -E MPP_RENDER -a``, ``render.render(animation=True)``):
+Blender calls ``render`` once per frame and view layer and writes each frame's file.  What
+did not change since an earlier frame or render -- the light and world-light precompute,
+voxelised meshes, grids read from files -- is taken from ``mpp_render.cache``; the stats line
+and the frame's record say which parts were reused.
+
 ``MPP_TEST_BREAK_AFTER_S`` (environment, seconds): when set, the render behaves as if Esc was
 pressed that many seconds after it started (used by the tests; Blender's background mode has
 no Esc).
@@ -40,6 +46,7 @@ class LastRender:
     translate_s: float
     write_s: float
     view_layer: str
+    frame: int = 0
 
 
 LAST_RENDER: Optional[LastRender] = None
@@ -131,8 +138,12 @@ def render_frame(engine, depsgraph) -> Optional[LastRender]:
     write_s = time.perf_counter() - t_write
     if out.cancelled:
         engine.report({'INFO'}, "MPP: render cancelled; the passes hold the finished tiles")
+    reused = out.stats.get("reused")
+    if reused:
+        engine.update_stats("MPP", f"Frame {scene.frame_current}: reused the precompute of "
+                            + " and ".join(reused))
     engine.update_progress(1.0)
-    LAST_RENDER = LastRender(out, translate_s, write_s, layer_name)
+    LAST_RENDER = LastRender(out, translate_s, write_s, layer_name, int(scene.frame_current))
     return LAST_RENDER
 
 

@@ -7,7 +7,12 @@ it is skipped or approximated and explained by a message in ``SceneDescription.w
 
 Modules: ``camera`` (view plane, camera matrix), ``lights``, ``materials`` (volume and surface
 shaders to constant coefficients, built on ``nodes``), ``meshes`` (volume meshes voxelised by
-``voxelise``, opaque meshes as surfaces), ``vdb`` (Volume objects), ``world``.
+``voxelise``, opaque meshes as surfaces), ``vdb`` (Volume objects), ``fluid`` (Mantaflow smoke
+domains), ``world``.
+
+Work that does not change from frame to frame is kept in ``mpp_render.cache``: voxelised
+mesh interiors under a hash of the mesh's vertices and triangles (kind 'voxels'), grids of
+unchanged .vdb files ('vdb') and fluid cache frames ('fluid').
 """
 from __future__ import annotations
 
@@ -15,12 +20,15 @@ from typing import Optional
 
 import numpy as np
 
+from ...cache import CACHE, digest
 from ...lights import is_dark
 from ...scene import SceneDescription, Settings
 from .camera import camera_from_object, default_camera, render_size
 from .convert import matrix
+from .fluid import FluidTranslator, fluid_domain
 from .lights import light_from_object
-from .meshes import MeshTranslator
+from .materials import is_linked
+from .meshes import MeshTranslator, mesh_arrays, slot_materials
 from .vdb import VolumeTranslator
 from .world import world_from_scene
 
@@ -72,20 +80,22 @@ def _objects(depsgraph, desc: SceneDescription, settings: Settings) -> None:
     fails to translate is skipped with a warning naming it, so one bad object never costs the
     whole frame."""
     meshes = MeshTranslator(settings.voxel_resolution, desc.warnings)
+    meshes._cache = CACHE.store("voxels")  # keyed by mesh content (_mesh_key): kept across frames
     volumes = VolumeTranslator(desc.warnings)
+    fluids = FluidTranslator(desc.warnings, depsgraph.scene_eval.frame_current)
     for inst in depsgraph.object_instances:
         if not getattr(inst, "show_self", True):
             continue
         ob = inst.object
         try:
-            _instance(ob, matrix(inst.matrix_world), meshes, volumes, desc)
+            _instance(ob, matrix(inst.matrix_world), meshes, volumes, fluids, desc)
         except Exception as e:  # safety net: report, keep the rest of the scene
             desc.warnings.append(f"object '{ob.name}' could not be translated "
                                  f"({type(e).__name__}: {e}); skipped")
 
 
 def _instance(ob, world_matrix, meshes: MeshTranslator, volumes: VolumeTranslator,
-              desc: SceneDescription) -> None:
+              fluids: FluidTranslator, desc: SceneDescription) -> None:
     """Translate one evaluated object placed by ``world_matrix`` into ``desc``."""
     kind = ob.type
     if kind == "LIGHT":
@@ -96,11 +106,12 @@ def _instance(ob, world_matrix, meshes: MeshTranslator, volumes: VolumeTranslato
                                      "the light emits nothing")
             desc.lights.append(light)
     elif kind == "MESH":
-        if _is_fluid_domain(ob):
-            desc.warnings.append(f"object '{ob.name}': fluid domains not supported yet; skipped")
+        domain = fluid_domain(ob)
+        if domain is not None:  # a smoke domain renders its grids, not its mesh (as Cycles)
+            desc.media.extend(fluids.translate(ob, domain, world_matrix))
             return
         media, surfaces = meshes.translate(ob, ob.data, world_matrix,
-                                           cache_key=ob.data.as_pointer())
+                                           cache_key=_mesh_key(ob, ob.data))
         desc.media.extend(media)
         desc.surfaces.extend(surfaces)
     elif kind in MESH_LIKE:
@@ -138,15 +149,20 @@ def _mesh_like(ob, world_matrix, meshes: MeshTranslator, desc: SceneDescription)
     if mesh is None:
         return
     try:
-        media, surfaces = meshes.translate(ob, mesh, world_matrix)
+        media, surfaces = meshes.translate(ob, mesh, world_matrix, cache_key=_mesh_key(ob, mesh))
         desc.media.extend(media)
         desc.surfaces.extend(surfaces)
     finally:
         ob.to_mesh_clear()
 
 
-def _is_fluid_domain(ob) -> bool:
-    for mod in ob.modifiers:
-        if mod.type == "FLUID" and getattr(mod, "fluid_type", "") == "DOMAIN":
-            return True
-    return False
+def _mesh_key(ob, mesh):
+    """The voxelisation key of a mesh with a volume material: a hash of its vertices and
+    triangles, so an unchanged mesh is voxelised once across frames; None for other meshes
+    (they are not voxelised)."""
+    if not any(m is not None and is_linked(getattr(m, "node_tree", None), "Volume")
+               for m in slot_materials(ob, mesh)
+               if getattr(m, "node_tree", None) is not None):
+        return None
+    verts, tris, _ = mesh_arrays(mesh)
+    return digest(verts, tris)

@@ -27,6 +27,7 @@ from typing import Dict, List, Optional
 
 import numpy as np
 
+from ...cache import CACHE, digest
 from ...media import sanitise
 from ...scene import Medium
 from .convert import matrix
@@ -57,14 +58,38 @@ def openvdb_module():
 def read_dense(vdb, path: str, name: str, dtype):
     """``(values (nx,ny,nz) float32, ijk of values[0,0,0], background)`` of the active
     bounding box of grid ``name`` in the file ``path``; None when the grid is empty."""
+    block = read_window(vdb, path, name, dtype)
+    return None if block is None else block[:3]
+
+
+def read_window(vdb, path: str, name: str, dtype, lo=None, shape=None):
+    """``(values float32, ijk of values[0,0,0], background, clipped)`` of grid ``name`` in
+    the file ``path``: its active bounding box, or with ``lo``/``shape`` only the part of it
+    inside the index box [lo, lo + shape), so a damaged file cannot make the reader allocate
+    more than that box (``clipped``: the active box reached outside it).  Vector grids get a
+    trailing axis of 3.  None when the grid has no active voxel (in the box).  Needs only
+    numpy (``np``) and the openvdb module ``vdb``: fluid.py runs it in a reader process."""
     grid = vdb.read(path, name)
     if grid.activeVoxelCount() == 0:
         return None
-    lo, hi = grid.evalActiveVoxelBoundingBox()
-    shape = tuple(int(h) - int(l) + 1 for l, h in zip(lo, hi))
-    a = np.zeros(shape, dtype)
-    grid.copyToArray(a, ijk=tuple(int(v) for v in lo))
-    return a.astype(np.float32, copy=False), tuple(int(v) for v in lo), float(grid.background)
+    a_lo, a_hi = grid.evalActiveVoxelBoundingBox()
+    a_lo = [int(v) for v in a_lo]
+    a_hi = [int(v) for v in a_hi]
+    clipped = False
+    if lo is not None:
+        w_lo = [int(v) for v in lo]
+        w_hi = [int(v) + int(n) - 1 for v, n in zip(lo, shape)]
+        clipped = any(a < w for a, w in zip(a_lo, w_lo)) or any(a > w for a, w in zip(a_hi, w_hi))
+        a_lo = [max(a, w) for a, w in zip(a_lo, w_lo)]
+        a_hi = [min(a, w) for a, w in zip(a_hi, w_hi)]
+        if any(h < l for l, h in zip(a_lo, a_hi)):
+            return None
+    dims = tuple(h - l + 1 for l, h in zip(a_lo, a_hi))
+    vector = type(grid).__name__.startswith("Vec3")
+    a = np.zeros(dims + ((3,) if vector else ()), dtype)
+    grid.copyToArray(a, ijk=tuple(a_lo))
+    background = tuple(float(v) for v in grid.background) if vector else float(grid.background)
+    return a.astype(np.float32, copy=False), tuple(a_lo), background, clipped
 
 
 def _offset(origin) -> np.ndarray:
@@ -141,7 +166,8 @@ class VolumeTranslator:
         names += [t.attribute for co in shading for t in co.blackbody
                   if co.attribute in grids and t.attribute in grids]
         wanted = [grids[n] for n in dict.fromkeys(names)]
-        blocks = self._blocks(vol, wanted, where)
+        # grids straight from a file (no modifier changes them) are kept between renders
+        blocks = self._blocks(vol, wanted, where, reusable=len(ob.modifiers) == 0)
         media: List[Medium] = []
         uniform: List[VolumeCoefficients] = []
         for co in shading:
@@ -192,10 +218,12 @@ class VolumeTranslator:
         return f"{where}: no grids could be loaded from '{path}'" + (f" ({err})" if err else "") \
             + "; skipped"
 
-    def _blocks(self, vol, wanted, where) -> dict:
+    def _blocks(self, vol, wanted, where, reusable=False) -> dict:
         """``{grid name: (values, ijk origin, index->object 4x4) or None}`` for the grids in
         ``wanted``, read once per volume datablock: the evaluated grids are saved to one
-        scratch file and each wanted grid is read back, sanitised and clipped."""
+        scratch file and each wanted grid is read back, sanitised and clipped.  With
+        ``reusable`` the grids read from an unchanged .vdb (same path, size and modification
+        time) are taken from ``mpp_render.cache`` (kind 'vdb') with their warnings."""
         out, todo = {}, []
         for g in wanted:
             key = (vol.as_pointer(), g.name)
@@ -203,6 +231,16 @@ class VolumeTranslator:
                 out[g.name] = self._cache[key]
             elif g.name not in (t.name for t in todo):
                 todo.append(g)
+        if not todo:
+            return out
+        file_keys = {g.name: self._file_key(vol, g) for g in todo} if reusable else {}
+        for g in list(todo):
+            hit = CACHE.get("vdb", file_keys[g.name]) if file_keys.get(g.name) else None
+            if hit is not None:
+                block, messages = hit
+                self.warnings.extend(messages)
+                out[g.name] = self._cache[(vol.as_pointer(), g.name)] = block
+                todo.remove(g)
         if not todo:
             return out
         vdb = openvdb_module()
@@ -218,9 +256,24 @@ class VolumeTranslator:
                                      "skipped")
                 return out
             for g in todo:
-                out[g.name] = self._cache[(vol.as_pointer(), g.name)] = \
-                    self._read(vdb, path, vol, g, where)
+                before = len(self.warnings)
+                block = self._read(vdb, path, vol, g, where)
+                out[g.name] = self._cache[(vol.as_pointer(), g.name)] = block
+                if block is not None and file_keys.get(g.name):
+                    CACHE.put("vdb", file_keys[g.name], (block, self.warnings[before:]))
         return out
+
+    def _file_key(self, vol, g):
+        """Cache key of grid ``g`` as read from the volume's file (None without a file)."""
+        path = self._path(vol)
+        try:
+            st = os.stat(path) if path else None
+        except OSError:
+            st = None
+        if st is None:
+            return None
+        return digest(path, st.st_mtime_ns, st.st_size, g.name, str(g.data_type),
+                      float(getattr(vol.render, "clipping", 0.0)))
 
     def _read(self, vdb, path, vol, g, where):
         """The sanitised, clipped dense block of grid ``g`` from the scratch file, or None."""

@@ -1,0 +1,628 @@
+"""Fluid (Mantaflow) smoke domains as media.
+
+A mesh whose Fluid modifier is a *gas* domain renders its simulation grids, not its mesh, as in
+Cycles (``intern/cycles/blender/volume.cpp``, ``geometry.cpp``; Blender's source named, not
+copied):
+
+* **Where.**  The grids fill the evaluated mesh's texture space (``texspace_location`` +-
+  ``texspace_size``, object space; for a non-adaptive domain its bounding box), cell-centred:
+  voxel i of a grid with n cells along an axis sits at ``lo + (i + 0.5) (hi - lo) / n``.  The
+  object's world matrix places that box.
+* **Which grids.**  Cycles' smoke attributes: ``density``, ``flame``, ``heat``,
+  ``temperature`` and ``color``.  With noise on (``use_noise``), density, flame and colour have
+  ``noise_scale`` times the domain resolution per axis; heat stays low-resolution.  Following
+  the RNA arrays Cycles reads: ``heat`` is Mantaflow's heat grid x 0.5, ``temperature`` is
+  ``flame_ignition + flame (flame_max_temp - flame_ignition)`` where flame > 0.01 (else 0),
+  ``color`` is the density-weighted RGB (divided by the density for its colour).
+* **When.**  Only on frames ``cache_frame_start <= frame <= cache_frame_end`` (Cycles renders
+  nothing outside).  Values below the domain's ``clipping`` are 0.
+* **From where.**  (1) The live grids of the evaluated domain settings (``density_grid``, ...:
+  flat, x fastest); (2) when those are empty -- Mantaflow cannot load a cache in every build,
+  e.g. the bpy module -- the baked OpenVDB cache on disk, in Blender's layout
+  (``DNA_fluid_types.h``, ``fluid.cc``, Mantaflow's ``smoke_script.h`` / ``iovdb.cc``)::
+
+      <cache_directory>/data/fluid_data_####.vdb     density, flame, color_r/g/b and the heat
+                                                     grid (named 'temperature'), one voxel per
+                                                     cell, ijk (0,0,0) .. resolution - 1
+      <cache_directory>/noise/fluid_noise_####.vdb   density_noise, flame_noise, color_*_noise
+
+  where #### is the frame (minus ``cache_frame_offset`` for the Modular and All cache types).
+  The file's own transform (voxel size = domain size / resolution, no position) is not used:
+  the grids are placed in the texture space as above.  The files are read by the openvdb
+  module Blender bundles, with ``vdb.read_window`` (only the index box of the domain's
+  resolution is read: sizes in a file are not trusted) in a reader *process* with a time
+  limit, because a damaged file can hang or exhaust the openvdb reader; frames read are kept
+  in ``mpp_render.cache`` (kind 'fluid') while the file is unchanged.
+* **Shading.**  The domain's material (``materials.volume_shading``), as for Volume objects
+  (vdb.py): a closure whose density attribute is one of the grids becomes a medium on that
+  grid (source 'FLUID', cropped to its non-zero cells) with the closure's emission inside
+  it; closures with a uniform density -- or whose Density Attribute names no smoke grid --
+  fill the hull of the grids the material reads (Cycles builds the volume's bounds from
+  them), approximated by the non-zero cells of the first; a material that reads no grid
+  renders nothing.  Only the grids the material needs are read.  A Principled Volume's Color
+  Attribute 'color' tints its scattering colour by the smoke colour averaged over the density
+  (one colour per domain: a warning says when it varies).  Without a material, or without a
+  volume shader, a domain renders nothing (Cycles gives a mesh domain the default *surface*
+  shader).
+
+Liquid domains are left to the mesh path (their evaluated mesh is the liquid surface).
+Anything missing or damaged -- no data, a missing or corrupt cache frame, a grid with NaN,
+inf or negative voxels, a grid larger than the domain -- is reported by object and file name;
+the rest of the scene renders.
+"""
+from __future__ import annotations
+
+import inspect
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from typing import Dict, List, Optional, Tuple
+
+import numpy as np
+
+from ...cache import CACHE, digest
+from ...media import sanitise
+from ...scene import Medium
+from . import vdb as vdb_reader
+from .convert import scalar
+from .materials import ClosureInputs, VolumeCoefficients, merge, principled_volume, volume_shading
+from .nodes import closures, output_node
+
+STANDARD_GRIDS = ("density", "flame", "heat", "temperature", "color")
+DATA_DIR, NOISE_DIR = "data", "noise"            # FLUID_DOMAIN_DIR_DATA / _NOISE
+DATA_NAME, NOISE_NAME = "fluid_data", "fluid_noise"  # FLUID_NAME_DATA / _NOISE
+# grid names inside the cache files (Mantaflow's grid names, smoke_script.h)
+DATA_GRIDS = {"density": "density", "flame": "flame", "heat": "temperature",
+              "color_r": "color_r", "color_g": "color_g", "color_b": "color_b"}
+NOISE_GRIDS = {"density": "density_noise", "flame": "flame_noise", "color_r": "color_r_noise",
+               "color_g": "color_g_noise", "color_b": "color_b_noise"}
+# the file grids (our names) each smoke attribute is made from
+FILE_GRIDS_FOR = {"density": {"density"}, "flame": {"flame"}, "temperature": {"flame"},
+                  "heat": {"heat"}, "color": {"color_r", "color_g", "color_b", "density"}}
+FLAME_CUTOFF = 0.01      # flame below this has no temperature (rna_fluid.cc)
+HEAT_SCALE = 0.5         # heat_grid = Mantaflow heat x 0.5 (rna_fluid.cc)
+READ_TIMEOUT_ENV = "MPP_FLUID_READ_TIMEOUT_S"
+READ_TIMEOUT_S = 120.0   # seconds a reader process may take for one cache file
+COLOUR_SPREAD = 0.05     # relative spread of the smoke colour above which a warning is given
+
+
+def fluid_domain(ob):
+    """The domain settings of ``ob``'s Fluid modifier when it is a gas domain enabled for
+    rendering, else None (liquid domains and other objects render their mesh)."""
+    for mod in getattr(ob, "modifiers", ()):
+        if mod.type == "FLUID" and getattr(mod, "fluid_type", "") == "DOMAIN":
+            if not getattr(mod, "show_render", True):
+                return None
+            dse = mod.domain_settings
+            return dse if getattr(dse, "domain_type", "GAS") == "GAS" else None
+    return None
+
+
+def cache_file(directory: str, frame: int, noise: bool = False) -> str:
+    """Blender's path of a domain's OpenVDB cache frame (data, or noise with ``noise``)."""
+    sub, stem = (NOISE_DIR, NOISE_NAME) if noise else (DATA_DIR, DATA_NAME)
+    return os.path.join(directory, sub, f"{stem}_{int(frame):04d}.vdb")
+
+
+def cache_frame(dse, frame: int) -> int:
+    """The cache frame Blender loads at scene frame ``frame``: minus ``cache_frame_offset``
+    for the Modular and All cache types (fluid.cc); the frame itself for Replay."""
+    if getattr(dse, "cache_type", "REPLAY") in ("MODULAR", "ALL"):
+        return int(frame) - int(getattr(dse, "cache_frame_offset", 0))
+    return int(frame)
+
+
+def texture_box(mesh) -> Tuple[np.ndarray, np.ndarray]:
+    """``(lo, hi)`` object-space corners of the mesh's texture space (its bounding box when
+    the texture space is degenerate)."""
+    loc = np.array(mesh.texspace_location, np.float64)
+    size = np.array(mesh.texspace_size, np.float64)
+    if np.all(np.abs(size) > 0) and np.all(np.isfinite(size)) and np.all(np.isfinite(loc)):
+        return loc - np.abs(size), loc + np.abs(size)
+    co = np.empty(len(mesh.vertices) * 3, np.float32)
+    mesh.vertices.foreach_get("co", co)
+    co = co.reshape(-1, 3).astype(np.float64)
+    return co.min(axis=0), co.max(axis=0)
+
+
+def cell_to_object(lo, hi, shape) -> np.ndarray:
+    """4x4 map from grid index (integer ijk = cell centres) to object space for a grid of
+    ``shape`` cells spanning the box [lo, hi]."""
+    step = (np.asarray(hi, np.float64) - np.asarray(lo, np.float64)) / np.asarray(shape, np.float64)
+    m = np.eye(4)
+    m[:3, :3] = np.diag(step)
+    m[:3, 3] = np.asarray(lo, np.float64) + 0.5 * step
+    return m
+
+
+def flat_to_grid(flat, shape, channels: int = 1) -> np.ndarray:
+    """A flat x-fastest array (Mantaflow's layout) of ``shape`` = (nx, ny, nz) cells to a
+    float32 (nx, ny, nz[, channels]) array."""
+    nx, ny, nz = (int(v) for v in shape)
+    a = np.asarray(flat, np.float32).reshape((nz, ny, nx) + ((channels,) if channels > 1 else ()))
+    return np.ascontiguousarray(np.moveaxis(a, (0, 1, 2), (2, 1, 0)))
+
+
+# -- the grids of one frame -------------------------------------------------------------------
+
+class DomainGrids:
+    """The grids of one domain at one frame.
+
+    ``grids``: name -> float32 array (x, y, z) -- 'density', 'flame', 'heat', 'temperature'
+    and 'color' (x, y, z, 3), the colour already divided by the density; ``source``: 'live'
+    or the cache file read; ``shape``/``low_shape``: the cell counts of the (noise) and the
+    low-resolution grids."""
+
+    def __init__(self, shape, low_shape, source: str):
+        self.shape, self.low_shape, self.source = tuple(shape), tuple(low_shape), source
+        self.grids: Dict[str, np.ndarray] = {}
+
+    def shape_of(self, name: str):
+        return self.low_shape if name == "heat" else self.shape
+
+
+def derived_grids(out: DomainGrids, density, flame, heat, rgb, ignition: float, max_temp: float):
+    """Fill ``out`` from the raw grids (any may be None): flame, density, heat (x 0.5),
+    temperature from flame, colour from the density-premultiplied ``rgb`` (x, y, z, 3)."""
+    if density is not None:
+        out.grids["density"] = density
+    if flame is not None:
+        out.grids["flame"] = flame
+        out.grids["temperature"] = np.where(
+            flame > FLAME_CUTOFF, np.float32(ignition) + flame * np.float32(max_temp - ignition),
+            np.float32(0.0)).astype(np.float32)
+    if heat is not None:
+        out.grids["heat"] = (heat * np.float32(HEAT_SCALE)).astype(np.float32)
+    if rgb is not None and density is not None and rgb.shape[:3] == density.shape:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            col = np.where(density[..., None] > 1e-6, rgb / density[..., None], np.float32(0.0))
+        out.grids["color"] = col.astype(np.float32)
+    return out
+
+
+def live_grids(dse) -> Optional[DomainGrids]:
+    """The grids held by the evaluated domain settings, or None when they are empty (all
+    zero) or their sizes do not match the domain's resolution."""
+    res = tuple(int(v) for v in dse.domain_resolution)
+    if min(res) < 1:
+        return None
+    amp = int(dse.noise_scale) if getattr(dse, "use_noise", False) else 1
+    shape = tuple(r * amp for r in res)
+    n, n_low = int(np.prod(shape)), int(np.prod(res))
+
+    def get(name, count, channels=1):
+        arr = getattr(dse, name, None)
+        if arr is None or len(arr) != count * channels:
+            return None
+        buf = np.zeros(count * channels, np.float32)
+        arr.foreach_get(buf)
+        return buf
+
+    density, flame, heat, rgba = get("density_grid", n), get("flame_grid", n), \
+        get("heat_grid", n_low), get("color_grid", n, 4)
+    if not any(a is not None and np.any(a != 0) for a in (density, flame, heat)):
+        return None
+    out = DomainGrids(shape, res, "live")
+    if density is not None:
+        out.grids["density"] = flat_to_grid(density, shape)
+    if flame is not None:
+        out.grids["flame"] = flat_to_grid(flame, shape)
+    if heat is not None:
+        out.grids["heat"] = flat_to_grid(heat, res)  # already x 0.5 (heat_grid)
+    temp = get("temperature_grid", n)
+    if temp is not None:
+        out.grids["temperature"] = flat_to_grid(temp, shape)
+    if rgba is not None:
+        c = flat_to_grid(rgba, shape, 4)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            alpha = c[..., 3:4]
+            out.grids["color"] = np.where(alpha > 1e-6, c[..., :3] / alpha, c[..., :3]).astype(np.float32)
+    return out
+
+
+# -- reading cache files in a reader process --------------------------------------------------
+
+_DRIVER = '''
+import json, sys
+import numpy as np
+request = json.load(open(sys.argv[1]))
+sys.path.insert(0, request["openvdb_dir"])
+try:
+    import resource
+    cap = int(request["memory_cap"])
+    resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
+except Exception:
+    pass
+import openvdb as vdb
+status, arrays = {"grids": {}}, {}
+try:
+    found = {g.name: type(g).__name__ for g in vdb.readAllGridMetadata(request["path"])}
+except Exception as e:
+    status["error"] = type(e).__name__ + ": " + str(e)
+    found = None
+if found is not None:
+    status["names"] = sorted(found)
+    for i, g in enumerate(request["grids"]):
+        name = g["name"]
+        if name not in found:
+            continue
+        try:
+            block = read_window(vdb, request["path"], name, np.float32, g["lo"], g["shape"])
+        except Exception as e:
+            status["grids"][name] = {"error": type(e).__name__ + ": " + str(e)}
+            continue
+        if block is None:
+            status["grids"][name] = {"empty": True}
+            continue
+        values, origin, background, clipped = block
+        arrays["g%d" % i] = values
+        status["grids"][name] = {"key": "g%d" % i, "origin": list(origin), "clipped": clipped,
+                                 "background": background}
+np.savez(request["arrays"], **arrays)
+json.dump(status, open(request["status"], "w"))
+'''
+
+
+def read_timeout() -> float:
+    text = os.environ.get(READ_TIMEOUT_ENV, "")
+    try:
+        return float(text) if text.strip() else READ_TIMEOUT_S
+    except ValueError:
+        return READ_TIMEOUT_S
+
+
+def read_cache_file(path: str, requests: Dict[str, Tuple[str, tuple]], timeout: float = None):
+    """Read grids of one cache file in a reader process.
+
+    ``requests``: our name -> (grid name in the file, (nx, ny, nz) cells); each grid is read
+    only inside the index box (0, 0, 0) .. shape - 1.  Returns ``(grids, problems, names)``:
+    our name -> ``(values float32, ijk origin, clipped)``; messages about the file or single
+    grids; the grid names the file holds (None when it could not be read at all)."""
+    vdb = vdb_reader.openvdb_module()
+    if vdb is None:
+        return {}, ["could not be read: Blender's openvdb module is not available"], None
+    timeout = read_timeout() if timeout is None else float(timeout)
+    source = inspect.getsource(vdb_reader.read_window) + _DRIVER
+    want = [(ours, fname, tuple(int(v) for v in shape)) for ours, (fname, shape) in requests.items()]
+    biggest = max((int(np.prod(s)) * 4 * 3 for _, _, s in want), default=0)
+    with tempfile.TemporaryDirectory(prefix="mpp_fluid_") as tmp:
+        req = {"path": path, "openvdb_dir": os.path.dirname(os.path.abspath(vdb.__file__)),
+               "grids": [{"name": f, "lo": [0, 0, 0], "shape": list(s)} for _, f, s in want],
+               "arrays": os.path.join(tmp, "grids.npz"), "status": os.path.join(tmp, "status.json"),
+               "memory_cap": max(4 << 30, 8 * biggest)}
+        with open(os.path.join(tmp, "request.json"), "w") as f:
+            json.dump(req, f)
+        try:
+            run = subprocess.run([sys.executable, "-c", source, os.path.join(tmp, "request.json")],
+                                 capture_output=True, text=True, timeout=timeout)
+        except subprocess.TimeoutExpired:
+            return {}, [f"took longer than {timeout:g} s to read and may be damaged "
+                        f"({READ_TIMEOUT_ENV} sets the limit)"], None
+        except OSError as e:
+            return {}, [f"could not be read: no reader process could be started ({e})"], None
+        if run.returncode != 0 or not os.path.exists(req["status"]):
+            tail = (run.stderr or "").strip().splitlines()[-1:] or [f"exit status {run.returncode}"]
+            return {}, [f"could not be read: the openvdb reader failed ({tail[0][:200]})"], None
+        with open(req["status"]) as f:
+            status = json.load(f)
+        if "error" in status:
+            return {}, [f"could not be read; the file may be truncated or corrupt "
+                        f"({status['error'][:200]})"], None
+        grids, problems = {}, []
+        with np.load(req["arrays"], allow_pickle=False) as npz:
+            for ours, fname, shape in want:
+                st = status["grids"].get(fname)
+                if st is None:
+                    continue
+                if "error" in st:
+                    problems.append(f"grid '{fname}' could not be read; the file may be "
+                                    f"truncated or corrupt ({st['error'][:200]})")
+                    continue
+                if st.get("empty"):
+                    continue
+                values = npz[st["key"]]
+                origin = tuple(int(v) for v in st["origin"])
+                # never trust the reader's sizes either: the block must lie in the box
+                if (values.ndim != 3 or any(o < 0 for o in origin)
+                        or any(o + n > s for o, n, s in zip(origin, values.shape, shape))):
+                    problems.append(f"grid '{fname}' does not fit the domain's {shape} cells; "
+                                    "skipped")
+                    continue
+                grids[ours] = (values.astype(np.float32, copy=False), origin, bool(st["clipped"]))
+        return grids, problems, status.get("names")
+
+
+def _place(block, shape) -> np.ndarray:
+    """A (values, origin, clipped) block placed in a zero grid of ``shape`` cells."""
+    values, origin, _ = block
+    out = np.zeros(tuple(shape), np.float32)
+    sl = tuple(slice(o, o + n) for o, n in zip(origin, values.shape))
+    out[sl] = values
+    return out
+
+
+# -- the translator -------------------------------------------------------------------------
+
+class FluidTranslator:
+    """Turns evaluated gas domains into media at scene frame ``frame``."""
+
+    def __init__(self, warnings: List[str], frame: int):
+        self.warnings = warnings
+        self.frame = int(frame)
+
+    def translate(self, ob, dse, world_matrix: np.ndarray) -> List[Medium]:
+        where = f"fluid domain '{ob.name}'"
+        mat = self._material(ob)
+        if mat is None:
+            self.warnings.append(f"{where}: no material; a smoke domain renders with its volume "
+                                 "material only (Cycles renders it as nothing); skipped")
+            return []
+        mwhere = f"material '{mat.name}' on {where}"
+        local: List[str] = []
+        shading = volume_shading(mat, mwhere, local)
+        if shading is None:
+            self.warnings.append(f"{mwhere}: no volume shader is connected, so the domain renders "
+                                 "nothing; skipped")
+            return []
+        start, end = int(dse.cache_frame_start), int(dse.cache_frame_end)
+        if not start <= self.frame <= end:
+            self.warnings.append(f"{where}: frame {self.frame} is outside its cache frames "
+                                 f"{start}..{end}; nothing rendered (as Cycles)")
+            return []
+        colour_nodes = principled_colour_attributes(mat)
+        wanted = {co.attribute for co in shading if co.attribute in STANDARD_GRIDS}
+        if colour_nodes:
+            wanted.add("color")
+        grids = self._grids(ob, dse, where, wanted)
+        if grids is None:
+            return []
+        if colour_nodes:  # handled here: drop materials.py's "not supported" for them
+            local = [w for w in local if not ("Color Attribute" in w and "is not supported" in w)]
+        self.warnings.extend(local)
+        shading = self._tint(shading, colour_nodes, grids, mwhere)
+        lo, hi = texture_box(ob.data)
+        return self._media(ob, shading, grids, lo, hi, np.asarray(world_matrix, np.float64),
+                           float(getattr(dse, "clipping", 0.0)), where)
+
+    # -- pieces -----------------------------------------------------------------------------
+
+    @staticmethod
+    def _material(ob):
+        mats = [s.material for s in ob.material_slots if s.material is not None]
+        if not mats:
+            mats = [m for m in getattr(ob.data, "materials", []) if m is not None]
+        return mats[0] if mats else None
+
+    def _grids(self, ob, dse, where, wanted) -> Optional[DomainGrids]:
+        """This frame's grids (of those named in ``wanted``, a set of STANDARD_GRIDS): the
+        live ones, else the baked cache; None with a warning when there is no data."""
+        live = live_grids(dse)
+        if live is not None:
+            return live
+        if not wanted:
+            return DomainGrids((1, 1, 1), (1, 1, 1), "")  # nothing to read
+        res = tuple(int(v) for v in dse.domain_resolution)
+        if min(res, default=0) < 1:
+            self.warnings.append(f"{where}: the domain has no resolution; skipped")
+            return None
+        import bpy
+        lib = getattr(getattr(ob, "original", ob), "library", None)
+        directory = bpy.path.abspath(dse.cache_directory, library=lib) if dse.cache_directory else ""
+        frame = cache_frame(dse, self.frame)
+        if dse.cache_data_format != "OPENVDB":
+            self.warnings.append(f"{where}: its cache format {dse.cache_data_format} cannot be "
+                                 "read (only OpenVDB); skipped")
+            return None
+        data_path = cache_file(directory, frame)
+        if not directory or not os.path.isfile(data_path):
+            self.warnings.append(f"{where}: no simulation data at frame {self.frame}: cache file "
+                                 f"'{data_path}' not found (bake the domain with the OpenVDB "
+                                 "format); skipped")
+            return None
+        amp = int(dse.noise_scale) if dse.use_noise else 1
+        shape = tuple(r * amp for r in res)
+        keys = set()  # the file grids the wanted attributes are made from
+        for name in wanted:
+            keys |= FILE_GRIDS_FOR[name]
+        data = self._read(data_path, {k: v for k, v in DATA_GRIDS.items() if k in keys}, res,
+                          where)
+        if data is None:
+            return None
+        noise = None
+        if amp > 1 and keys & set(NOISE_GRIDS):
+            noise_path = cache_file(directory, frame, noise=True)
+            if dse.cache_noise_format != "OPENVDB":
+                self.warnings.append(f"{where}: its noise cache format {dse.cache_noise_format} "
+                                     "cannot be read; using the low-resolution data")
+            elif not os.path.isfile(noise_path):
+                self.warnings.append(f"{where}: noise cache file '{noise_path}' not found; using "
+                                     "the low-resolution data")
+            else:
+                noise = self._read(noise_path,
+                                   {k: v for k, v in NOISE_GRIDS.items() if k in keys}, shape,
+                                   where)
+        hi_res = noise if noise else data
+        hi_shape = shape if noise else res
+        source = data_path if not noise else f"{data_path}' and '{noise_path}"
+        out = DomainGrids(hi_shape, res, source)
+
+        def grid(blocks, name, cells):
+            return _place(blocks[name], cells) if name in blocks else None
+
+        rgb = None
+        if all(c in hi_res for c in ("color_r", "color_g", "color_b")):
+            rgb = np.stack([grid(hi_res, c, hi_shape) for c in ("color_r", "color_g", "color_b")],
+                           axis=-1)
+        return derived_grids(out, grid(hi_res, "density", hi_shape), grid(hi_res, "flame", hi_shape),
+                             grid(data, "heat", res), rgb, float(dse.flame_ignition),
+                             float(dse.flame_max_temp))
+
+    def _read(self, path, names, shape, where) -> Optional[dict]:
+        """Blocks of one cache file by our names (``names``: ours -> file grid name), from
+        ``mpp_render.cache`` while the file is unchanged; None (with a warning) when the file
+        cannot be read."""
+        try:
+            st = os.stat(path)
+        except OSError as e:
+            self.warnings.append(f"{where}: cache file '{path}' cannot be opened ({e}); skipped")
+            return None
+        key = digest(path, st.st_mtime_ns, st.st_size, sorted(names.items()), list(shape))
+        hit = CACHE.get("fluid", key)
+        if hit is None:
+            blocks, problems, found = read_cache_file(
+                path, {ours: (fname, shape) for ours, fname in names.items()})
+            hit = (blocks, problems, found)
+            if found is not None:
+                CACHE.put("fluid", key, hit)
+        blocks, problems, found = hit
+        if found is None:  # the file as a whole: one message naming it
+            why = problems[0] if problems else "could not be read"
+            self.warnings.append(f"{where}: cache file '{path}' {why}; frame {self.frame} "
+                                 "skipped")
+            return None
+        for p in problems:
+            self.warnings.append(f"{where}: cache file '{path}': {p}")
+        for ours, block in blocks.items():
+            if block[2]:
+                self.warnings.append(f"{where}: grid '{names[ours]}' of '{path}' reaches outside "
+                                     f"the domain's {tuple(shape)} cells (another resolution or "
+                                     "an adaptive domain?); only the part inside is used")
+        return blocks
+
+    def _tint(self, shading, colour_nodes, grids: DomainGrids, where):
+        """Scattering colour x the mean smoke colour for the Principled Volumes whose Color
+        Attribute is 'color' (see ``principled_colour_attributes``)."""
+        if not colour_nodes:
+            return shading
+        colour = grids.grids.get("color")
+        density = grids.grids.get("density")
+        if colour is None or density is None or not np.any(density > 0):
+            self.warnings.append(f"{where}: Color Attribute 'color': the domain has no colour "
+                                 "grids at this frame; using the Color input")
+            return shading
+        w = np.where(np.isfinite(density) & (density > 0), density, 0.0).astype(np.float64)
+        c = np.nan_to_num(colour.astype(np.float64), nan=0.0, posinf=0.0, neginf=0.0)
+        mean = np.einsum("xyz,xyzc->c", w, c) / w.sum()
+        spread = np.sqrt(np.einsum("xyz,xyzc->c", w, (c - mean) ** 2) / w.sum())
+        if np.max(spread) > COLOUR_SPREAD * max(float(np.max(mean)), 1e-6):
+            self.warnings.append(f"{where}: the smoke colour varies across the domain; its "
+                                 "density-weighted mean (" + ", ".join(f"{v:.3f}" for v in mean)
+                                 + ") is used everywhere")
+        by_attr = {(co.attribute, co.from_attribute_node): co for co in shading}
+        for weight, base, attr, linked in colour_nodes:
+            co = by_attr.get((attr, linked))
+            if co is None:
+                continue
+            tinted = principled_volume(base["color"] * mean, base["density"], base["g"],
+                                       base["absorption"], attribute=attr)
+            plain = principled_volume(base["color"], base["density"], base["g"],
+                                      base["absorption"], attribute=attr)
+            co.sigma_s = np.maximum(co.sigma_s + weight * (tinted.sigma_s - plain.sigma_s), 0.0)
+            co.sigma_a = np.maximum(co.sigma_a + weight * (tinted.sigma_a - plain.sigma_a), 0.0)
+        return shading
+
+    def _media(self, ob, shading: List[VolumeCoefficients], grids: DomainGrids, lo, hi,
+               world_matrix, clip, where) -> List[Medium]:
+        media: List[Medium] = []
+        uniform: List[VolumeCoefficients] = []
+        several = len(shading) > 1
+        for co in shading:
+            attr = co.attribute
+            if attr is None:
+                uniform.append(co)
+            elif attr in STANDARD_GRIDS and attr != "color":
+                m = self._grid_medium(ob, co, attr, grids, lo, hi, world_matrix, clip, where,
+                                      several)
+                if m is not None:
+                    media.append(m)
+            elif co.from_attribute_node:
+                self.warnings.append(f"{where}: the domain has no scalar grid '{attr}' (its grids: "
+                                     + ", ".join(n for n in STANDARD_GRIDS if n != "color")
+                                     + "); the Attribute node gives 0, so that shader renders "
+                                     "nothing")
+            else:
+                self.warnings.append(f"{where}: the domain has no scalar grid '{attr}'; that "
+                                     "shader's density is uniform (as in Cycles)")
+                uniform.append(co)
+        if uniform:
+            self._uniform(ob, uniform, media, where)
+        return media
+
+    def _uniform(self, ob, uniform, media, where) -> None:
+        """Closures with a uniform density (and their emission): Cycles fills the hull of the
+        grids the material reads with them, approximated by the voxels where the first of
+        those grids is non-zero, as for Volume objects (vdb.py).  A material that reads no
+        grid renders nothing in Cycles."""
+        if not media:
+            self.warnings.append(f"{where}: its material reads no smoke grid (density, flame, heat "
+                                 "or temperature) that holds data at this frame; without one "
+                                 "it renders nothing (as in Cycles)")
+            return
+        base = media[0]
+        coeff = merge(uniform)
+        self.warnings.append(f"{where}: shaders with a uniform density are approximated inside "
+                             f"the non-zero voxels of '{base.name}'")
+        media.append(Medium(name=f"{ob.name}:uniform", density=(base.density > 0).astype(np.float32),
+                            index_to_world=base.index_to_world, sigma_s=coeff.sigma_s,
+                            sigma_a=coeff.sigma_a, g=coeff.g, emission=coeff.emission,
+                            source="FLUID"))
+
+    def _grid_medium(self, ob, co, attr, grids: DomainGrids, lo, hi, world_matrix, clip, where,
+                     several) -> Optional[Medium]:
+        values = grids.grids.get(attr)
+        src = "live grids" if grids.source == "live" else f"'{grids.source}'"
+        if values is None:
+            self.warnings.append(f"{where}: no '{attr}' grid at frame {self.frame} ({src}); the "
+                                 f"shader reading it renders nothing")
+            return None
+        values, bad = sanitise(values)
+        if bad:
+            self.warnings.append(f"{where}: {bad} voxels of grid '{attr}' in {src} were NaN, "
+                                 "infinite or negative; set to 0")
+        if clip > 0.0:
+            values = np.where(values < clip, np.float32(0.0), values)
+        nz = np.nonzero(values > 0)
+        if len(nz[0]) == 0:
+            self.warnings.append(f"{where}: grid '{attr}' is empty at frame {self.frame}; the "
+                                 "shader reading it renders nothing")
+            return None
+        first = [int(a.min()) for a in nz]
+        last = [int(a.max()) for a in nz]
+        crop = np.ascontiguousarray(values[first[0]:last[0] + 1, first[1]:last[1] + 1,
+                                           first[2]:last[2] + 1])
+        offset = np.eye(4)
+        offset[:3, 3] = first
+        i2w = world_matrix @ cell_to_object(lo, hi, grids.shape_of(attr)) @ offset
+        return Medium(name=f"{ob.name}:{attr}" if several else ob.name, density=crop,
+                      index_to_world=i2w, sigma_s=co.sigma_s, sigma_a=co.sigma_a, g=float(co.g),
+                      emission=co.emission, source="FLUID")
+
+
+def principled_colour_attributes(material) -> list:
+    """The Principled Volume closures of ``material`` whose Color Attribute is 'color':
+    ``(weight, inputs, density attribute, from an Attribute node)`` with ``inputs`` the
+    constant values {color, density, g, absorption} as materials.py reads them."""
+    tree = getattr(material, "node_tree", None)
+    out_node = output_node(tree) if tree is not None else None
+    if out_node is None or out_node.inputs.get("Volume") is None:
+        return []
+    found = []
+    for c in closures(out_node.inputs["Volume"]):
+        node = c.node
+        if node.bl_idname != "ShaderNodeVolumePrincipled":
+            continue
+        quiet: List[str] = []
+        inp = ClosureInputs(c, "", quiet)
+        if inp.raw("Color Attribute")[0] != "color":
+            continue
+        dens, linked = inp.raw("Density", allow_attribute=True)
+        attr = inp.raw("Density Attribute")[0] or None
+        if linked is not None and attr is not None:
+            linked = None  # materials.py then uses Density 1 with the Density Attribute
+            dens = 1.0
+        base = {"color": inp.color("Color"), "density": scalar(dens),
+                "g": inp.number("Anisotropy"), "absorption": inp.color("Absorption Color")}
+        found.append((c.weight, base, linked or attr, linked is not None))
+    return found

@@ -1,0 +1,217 @@
+"""The cache between renders (mpp_render/cache.py): content keys, the memory cap, and the
+precompute reused exactly when its inputs did not change (images identical to cold renders)."""
+import dataclasses
+
+import numpy as np
+import pytest
+
+from mpp_render import cache, precompute as pre_mod
+from mpp_render.media import prepare
+from mpp_render.render import render
+from mpp_render.scene import Camera, Light, Medium, SceneDescription, Settings, Surface, World
+
+
+@pytest.fixture
+def warm(monkeypatch):
+    """The cache switched on (the suite runs with it off, see tests/conftest.py)."""
+    monkeypatch.setenv(cache.LIMIT_ENV, "256")
+    cache.clear()
+    yield cache.CACHE
+    cache.clear()
+
+
+@pytest.fixture
+def calls(monkeypatch):
+    """Counts the calls of precompute.precompute (the cold computation)."""
+    seen = []
+    real = pre_mod.precompute
+
+    def counting(media, lights, world, *a, **kw):
+        lit = bool(np.any(np.asarray(world.color) > 0))
+        seen.append("all" if lights and lit else "lights" if lights else "world")
+        return real(media, lights, world, *a, **kw)
+
+    monkeypatch.setattr(pre_mod, "precompute", counting)
+    return seen
+
+
+def scene(world=(0.2, 0.25, 0.3), power=150.0, cam_pos=(0.0, -0.3, 4.0), multiple=True):
+    n = 18
+    x = (np.arange(n) + 0.5) / n * 2 - 1
+    X, Y, Z = np.meshgrid(x, x, x, indexing="ij")
+    rng = np.random.default_rng(4)
+    dens = (np.clip(1 - np.sqrt(X ** 2 + Y ** 2 + Z ** 2), 0, None) * (0.5 + rng.random((n,) * 3)))
+    i2w = np.eye(4)
+    i2w[:3, :3] *= 2.0 / n
+    i2w[:3, 3] = -1 + 1.0 / n
+    cloud = Medium("cloud", dens.astype(np.float32), i2w, np.full(3, 4.0), np.full(3, 0.4), 0.3)
+    lights = [Light("SUN", "sun", np.full(3, 2.0), direction=np.array([0.3, 0.2, -0.93])),
+              Light("POINT", "pt", np.full(3, float(power)), position=np.array([1.5, -1.0, 1.5]),
+                    radius=0.1)]
+    ground = Surface("ground", np.array([[-3, -3, -1.1], [3, -3, -1.1], [3, 3, -1.1], [-3, 3, -1.1]],
+                                        float), np.array([[0, 1, 2], [0, 2, 3]]))
+    cam = Camera("PERSP", np.eye(4), 40, 30, (-0.5, 0.5, -0.375, 0.375))
+    cam.cam_to_world[:3, 3] = cam_pos
+    return SceneDescription(cam, lights, [cloud], surfaces=[ground], world=World(np.array(world)),
+                            settings=Settings(samples=4, multiple=multiple, ambient_directions=8))
+
+
+def assert_same_image(a, b):
+    assert a.passes.keys() == b.passes.keys()
+    for k in a.passes:
+        np.testing.assert_array_equal(a.passes[k], b.passes[k], err_msg=k)
+
+
+# -- keys and the store ------------------------------------------------------------------------
+
+def test_digest_follows_content_type_and_shape():
+    a = np.arange(6, dtype=np.float32)
+    assert cache.digest(a, 1.0, "x") == cache.digest(a.copy(), 1.0, "x")
+    assert cache.digest(a) != cache.digest(a.reshape(2, 3))
+    assert cache.digest(a) != cache.digest(a.astype(np.float64))
+    b = a.copy()
+    b[3] += 1e-6
+    assert cache.digest(a) != cache.digest(b)
+    assert cache.digest([1, 2]) != cache.digest([[1, 2]]) != cache.digest("12")
+    light = Light("SUN", "sun", np.full(3, 2.0))
+    assert cache.digest(light) == cache.digest(dataclasses.replace(light))
+    assert cache.digest(light) != cache.digest(dataclasses.replace(light, angle=0.01))
+    with pytest.raises(TypeError):
+        cache.digest(object())
+
+
+def test_store_keeps_the_cap_drops_the_oldest_and_clears():
+    entry = 1000 + cache.ENTRY_BYTES
+    c = cache.Cache(limit=3 * entry)
+    kb = np.zeros(250, np.float32)  # 1000 bytes
+    assert c.put("k", 1, kb) and c.put("k", 2, kb.copy()) and c.put("k", 3, kb.copy())
+    assert c.get("k", 1) is kb  # 1 is now the most recently used
+    assert c.put("k", 4, kb.copy())
+    assert c.get("k", 2) is None and c.get("k", 1) is kb and c.get("k", 4) is not None
+    assert c.bytes == 3 * entry and len(c) == 3
+    assert not c.put("k", 5, np.zeros(1000, np.float32))  # larger than the cap: not kept
+    assert c.get("k", 5) is None
+    s = c.stats()
+    assert s["hits"]["k"] == 3 and s["misses"]["k"] == 2 and s["entries"] == 3
+    assert c.clear() == 3 * entry and len(c) == 0 and c.bytes == 0
+
+
+def test_a_zero_cap_keeps_nothing(monkeypatch):
+    monkeypatch.setenv(cache.LIMIT_ENV, "0")
+    c = cache.Cache()
+    assert not c.put("k", 1, np.zeros(4)) and c.get("k", 1) is None
+    assert not c.put("k", 2, "a small value") and len(c) == 0
+
+
+# -- the precompute ----------------------------------------------------------------------------
+
+def prepared(desc):
+    from mpp_render.surfaces import prepare_surfaces
+    return [prepare(m) for m in desc.media], prepare_surfaces(desc.surfaces)
+
+
+def assert_same_precompute(a, b):
+    assert a.layout == b.layout
+    for f, g in zip(a.fields, b.fields):
+        np.testing.assert_array_equal(f, g)
+    for ms, mc in zip(a.multiple, b.multiple):
+        for x, y in zip(ms, mc):
+            assert (x is None) == (y is None)
+            if x is not None:
+                assert x.stride == y.stride and x.h == y.h
+                for lx, ly in zip(x.levels, y.levels):
+                    np.testing.assert_array_equal(lx, ly)
+
+
+@pytest.mark.parametrize("change", ["nothing", "camera", "light"])
+def test_cached_precompute_equals_the_cold_one(warm, change):
+    """Each way of reuse (all kept; world light recomputed in place; light part recomputed
+    with the world channels copied) gives exactly the fields of a cold precompute."""
+    kw = dict(n_dirs=8, seed=3, threads=2, multiple=True)
+    first = scene()
+    media, surf = prepared(first)
+    cache.precompute_cached(media, first.lights, first.world, first.camera, surfaces=surf, **kw)
+    second = {"nothing": scene(), "camera": scene(cam_pos=(0.5, -0.2, 3.5)),
+              "light": scene(power=400.0)}[change]
+    media, surf = prepared(second)
+    got = cache.precompute_cached(media, second.lights, second.world, second.camera,
+                                  surfaces=surf, **kw)
+    assert got.stats["reused"] == {"nothing": ["lights", "world"], "camera": ["lights"],
+                                   "light": ["world"]}[change]
+    cold = pre_mod.precompute(media, second.lights, second.world, second.camera, surfaces=surf,
+                              **kw)
+    assert_same_precompute(got, cold)
+
+
+def test_second_render_reuses_the_precompute_and_matches_a_cold_render(warm, calls):
+    first = render(scene())
+    assert calls == ["all"] and first.stats["reused"] == []
+    second = render(scene())
+    assert calls == ["all"]  # no new precompute call
+    assert second.stats["reused"] == ["lights", "world"]
+    assert_same_image(first, second)
+    cache.clear()
+    cold = render(scene())
+    assert cold.stats["reused"] == []
+    assert_same_image(cold, second)
+
+
+def test_changed_light_power_recomputes_the_lights_only(warm, calls):
+    render(scene())
+    calls.clear()
+    brighter = render(scene(power=300.0))
+    assert calls == ["lights"] and brighter.stats["reused"] == ["world"]
+    cache.clear()
+    cold = render(scene(power=300.0))
+    assert_same_image(cold, brighter)
+
+
+def test_camera_moves_recompute_the_world_light_only(warm, calls):
+    render(scene())
+    calls.clear()
+    moved = render(scene(cam_pos=(0.4, -0.3, 4.2)))
+    assert calls == ["world"] and moved.stats["reused"] == ["lights"]
+    cache.clear()
+    assert_same_image(render(scene(cam_pos=(0.4, -0.3, 4.2))), moved)
+
+
+def test_rotating_the_camera_keeps_everything(warm, calls):
+    render(scene())
+    calls.clear()
+    desc = scene()
+    c, s = np.cos(0.1), np.sin(0.1)
+    desc.camera.cam_to_world[:3, :3] = [[c, 0, s], [0, 1, 0], [-s, 0, c]]
+    turned = render(desc)
+    assert calls == [] and turned.stats["reused"] == ["lights", "world"]
+
+
+def test_black_world_ignores_the_camera(warm, calls):
+    render(scene(world=(0, 0, 0)))
+    calls.clear()
+    moved = render(scene(world=(0, 0, 0), cam_pos=(1.0, 0.0, 3.0)))
+    assert calls == [] and moved.stats["reused"] == ["lights"]
+
+
+def test_changed_density_or_multiple_scattering_recomputes(warm, calls):
+    render(scene())
+    calls.clear()
+    desc = scene()
+    desc.media[0].density = desc.media[0].density * np.float32(1.01)
+    render(desc)
+    assert calls == ["all"]
+    calls.clear()
+    render(scene(multiple=False))
+    assert calls == ["all"]
+
+
+def test_a_cancelled_render_keeps_nothing(warm):
+    stages = []
+
+    def progress(fraction, message):
+        stages.append(message)
+
+    def esc():
+        return any(m.startswith("World light") for m in stages)
+
+    out = render(scene(), progress=progress, should_cancel=esc)
+    assert out.cancelled and len(cache.CACHE) == 0
