@@ -112,3 +112,55 @@ def test_cache_frame_and_file_names(kind, offset, frame, want):
     assert fluid.cache_frame(D, frame) == want
     assert fluid.cache_file("/c", 7).replace("\\", "/") == "/c/data/fluid_data_0007.vdb"
     assert fluid.cache_file("/c", 12, noise=True).replace("\\", "/") == "/c/noise/fluid_noise_0012.vdb"
+
+
+# -- emission that grids drive, on the domain's lattices (vdb.lattice_emission, shared) ------
+
+def test_low_resolution_grid_drives_emission_on_the_noise_lattice():
+    from mpp_render import blackbody
+    from mpp_render.blender.translate import vdb
+    from mpp_render.blender.translate.materials import (AttributeEmissionTerm, BlackbodyTerm,
+                                                        VolumeCoefficients)
+    lo, hi = np.zeros(3), np.array([2.0, 1.0, 1.0])
+    heat = np.zeros((8, 4, 4), np.float32)
+    heat[3, 1, 2], heat[4, 1, 2] = 1.0, 3.0            # low resolution: 0.25 m cells
+    src = (heat, (0, 0, 0), fluid.cell_to_object(lo, hi, heat.shape))
+    dst = (np.zeros((16, 8, 8), np.float32), (0, 0, 0), fluid.cell_to_object(lo, hi, (16, 8, 8)))
+    bb = BlackbodyTerm(1.0, 1000.0, "heat", np.ones(3), weight=0.5,
+                       constant=0.5 * blackbody.emission(1000.0, 1.0))
+    glow = AttributeEmissionTerm(np.array([1.0, 0.5, 0.0]), "heat")
+    co = VolumeCoefficients("density", emission=np.full(3, 0.1) + bb.constant,
+                            emission_terms=[bb, glow])
+    emission, grid, lost = vdb.lattice_emission(co, dst, {"heat": src})
+    np.testing.assert_allclose(emission, 0.1)          # the constant 1000 K part replaced
+    assert lost == {} and grid.shape == (16, 8, 8, 3)
+    # noise cell (8, 2, 4) sits at low index (3.75, 0.75, 1.75): trilinear 0.25 x 1 + 0.75 x 3
+    # along x, 0.75 along y (towards index 1) and 0.75 along z (towards index 2)
+    v = (0.25 * 1.0 + 0.75 * 3.0) * 0.75 * 0.75
+    np.testing.assert_allclose(grid[8, 2, 4], 0.5 * blackbody.emission(1000.0 * v, 1.0)
+                               + v * np.array([1.0, 0.5, 0.0]), rtol=1e-5)
+    assert np.all(grid[:4] == 0) and np.all(grid[12:] == 0)
+    # a smoke grid without data (zero=): 0 K and strength 0, the constant part gone too
+    emission, grid, _ = vdb.lattice_emission(co, dst, {}, zero=fluid.SCALAR_GRIDS)
+    assert grid is None
+    np.testing.assert_allclose(emission, 0.1)
+    # a Volume object without the grid: the constant Temperature (and strength 0)
+    emission, grid, _ = vdb.lattice_emission(co, dst, {})
+    assert grid is None
+    np.testing.assert_allclose(emission, 0.1 + bb.constant)
+
+
+def test_the_support_box_covers_every_cell_an_emission_grid_reaches():
+    from mpp_render.blender.translate import vdb
+    lo, hi = np.zeros(3), np.ones(3)
+    low = np.zeros((4, 4, 4), np.float32)
+    low[2, 1, 3] = 1.0
+    src = (low, (0, 0, 0), fluid.cell_to_object(lo, hi, low.shape))
+    dst = (np.zeros((12, 12, 12), np.float32), (0, 0, 0), fluid.cell_to_object(lo, hi, (12,) * 3))
+    first, last = fluid._support_box(src, dst)
+    sampled, _ = vdb.resample(src, dst)
+    reach = np.argwhere(sampled > 0)
+    assert np.all(reach.min(axis=0) >= first) and np.all(reach.max(axis=0) <= last)
+    assert np.all(last < 12) and np.all(first >= 0)
+    assert np.all(last - first <= 3 * 3 + 2)            # about the reach, not the whole grid
+    assert fluid._support_box((np.zeros((4, 4, 4), np.float32),) + src[1:], dst) is None

@@ -77,6 +77,52 @@ def volume_material(name="Smoke", density=5.0, attribute="density", color=(0.9, 
     return mat
 
 
+def fire_material(name="Fire", density=10.0, blackbody=1.0, temperature_attribute="temperature",
+                  strength_attribute=None, emission_color=(1.0, 0.5, 0.25)):
+    """The usual fire shader: a Principled Volume on the 'density' grid with blackbody
+    emission (Temperature 1000 K x the grid ``temperature_attribute``); with
+    ``strength_attribute`` an Attribute node reading that grid drives Emission Strength
+    (Emission Color ``emission_color``)."""
+    mat = volume_material(name, density=density)
+    nt = mat.node_tree
+    pv = nt.nodes["Principled Volume"]
+    pv.inputs["Blackbody Intensity"].default_value = blackbody
+    pv.inputs["Temperature"].default_value = 1000.0
+    pv.inputs["Temperature Attribute"].default_value = temperature_attribute
+    if strength_attribute is not None:
+        attr = nt.nodes.new("ShaderNodeAttribute")
+        attr.attribute_name = strength_attribute
+        nt.links.new(attr.outputs["Fac"], pv.inputs["Emission Strength"])
+        pv.inputs["Emission Color"].default_value = (*emission_color, 1.0)
+    return mat
+
+
+def emission_material(attribute, color=(1.0, 0.5, 0.25)):
+    """An Emission shader alone whose Strength an Attribute node reading ``attribute`` drives."""
+    mat = bpy.data.materials.new("Glow")
+    nt = mat.node_tree
+    nt.nodes.clear()
+    em = nt.nodes.new("ShaderNodeEmission")
+    em.inputs["Color"].default_value = (*color, 1.0)
+    attr = nt.nodes.new("ShaderNodeAttribute")
+    attr.attribute_name = attribute
+    nt.links.new(attr.outputs["Fac"], em.inputs["Strength"])
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    nt.links.new(em.outputs[0], out.inputs["Volume"])
+    return mat
+
+
+def emission_at(m, point):
+    """A medium's per-voxel emission (RGB) at its lattice point nearest the world ``point``
+    (None: no emission grid; zeros: outside the medium's cropped block)."""
+    if m.emission_grid is None:
+        return None
+    local = np.rint(np.linalg.inv(m.index_to_world) @ [*point, 1])[:3].astype(int)
+    if np.any(local < 0) or np.any(local >= m.density.shape):
+        return [0.0, 0.0, 0.0]
+    return m.emission_grid[tuple(local)].tolist()
+
+
 def domain(cache_dir, material=None, cache_type="MODULAR", end=10, offset=0, noise=0):
     """The test domain (see LOCATION/SCALE) pointed at ``cache_dir``; returns its object."""
     bpy.ops.mesh.primitive_cube_add(location=LOCATION)
@@ -458,3 +504,213 @@ def test_render_shows_the_smoke_where_the_grid_puts_it(tmp_path):
     # a corrupt frame: reported by name, the frame renders empty instead of failing
     assert np.all(np.array(r["f2"]["T_cols"]) == 1.0)
     warned(r["f2"], "'Smoke'", "fluid_data_0002.vdb")
+
+
+# -- fire: emission driven by the flame / temperature / heat grids -------------------------------
+
+# The fire puff: smoke over the middle of the domain, flame (peak 0.2) in its upper right
+# corner.  With the domain's default Ignition 1.5 and Maximum 3.0 the 'temperature' grid is
+# 1.5 + 1.5 flame where flame > 0.01, so Temperature 1000 K gives 1515 .. 1800 K: red-orange.
+FLAME_CELL = (26, 8, 11)
+FLAME_PEAK = 0.2
+T_PEAK = 1000.0 * (1.5 + 1.5 * FLAME_PEAK)
+
+FIRE_SCENE = RENDER_SCENE.replace("t.volume_material(density=40.0)", "MATERIAL") + """
+    sc.world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0
+    DENS = t.plume(t.RES, (16, 8, 8), 4.0)
+    FLAME = t.FLAME_PEAK * t.plume(t.RES, t.FLAME_CELL, 2.0)
+
+    def passes():
+        bpy.ops.render.render()
+        out = engine.LAST_RENDER.output
+        return {k: out.passes[k][..., :3].tolist() for k in ("Combined", "Volume Single",
+                                                            "Emission")}
+"""
+
+
+def pixel(point):
+    """(row, column) of the 64 x 32 RENDER_SCENE image that sees the world ``point`` (rows
+    from the top; the frame spans x 0..2 m and z 2.5..3.5 m)."""
+    return int((3.5 - point[2]) / 1.0 * 32), int(point[0] / 2.0 * 64)
+
+
+def test_fire_glows_with_the_blackbody_of_its_flame_grid(tmp_path):
+    from mpp_render import blackbody
+    body = FIRE_SCENE.replace("MATERIAL", "t.fire_material()") + """
+    t.write_frame(CACHE + "/data/fluid_data_0001.vdb", {"density": DENS, "flame": FLAME})
+    desc = t.translate(1)
+    (m,) = desc.media
+    print("RESULT", json.dumps({"tag": "media", "media": [t.medium_record(m)],
+                                "warnings": desc.warnings,
+                                "hot": t.emission_at(m, t.cell_centre(t.FLAME_CELL)),
+                                "cold": t.emission_at(m, t.cell_centre((10, 8, 8))),
+                                "density_cold": float(DENS[10, 8, 8])}))
+    sc.frame_set(1)
+    print("RESULT", json.dumps(dict(tag="fire", warnings=[], media=[], **passes())))
+    ob.data.materials.clear()
+    ob.data.materials.append(t.volume_material("Smoke only", density=10.0))
+    print("RESULT", json.dumps(dict(tag="smoke", warnings=[], media=[], **passes())))
+    """
+    r = run(body, tmp_path)
+    m = only(r["media"])
+    assert m["source"] == "FLUID" and not [w for w in r["media"]["warnings"] if "Smoke" in w]
+    # per voxel: the blackbody at Temperature x temperature, the constant part (1000 K) gone
+    np.testing.assert_allclose(r["media"]["hot"], blackbody.emission(T_PEAK, 1.0), rtol=1e-5)
+    assert r["media"]["hot"][0] > r["media"]["hot"][1] > r["media"]["hot"][2] >= 0.0
+    assert r["media"]["cold"] == [0.0, 0.0, 0.0] and r["media"]["density_cold"] > 0.1
+    assert m["emission"] == [0.0, 0.0, 0.0]
+    em, single, comb = (np.array(r["fire"][k]) for k in ("Emission", "Volume Single", "Combined"))
+    # the glow sits where the flame is: its brightest pixel sees the flame's peak cell
+    row, col = np.unravel_index(int(np.argmax(em[..., 0])), em.shape[:2])
+    want = pixel(cell_centre(FLAME_CELL))
+    assert abs(row - want[0]) <= 1 and abs(col - want[1]) <= 1, (row, col, want)
+    hot = em[row, col]
+    assert hot[0] > hot[1] > hot[2] >= 0.0 and hot[0] > 0.02      # red-orange
+    # no emission where there is no flame (the left half: smoke, flame 0)
+    assert np.all(em[:, :32] == 0.0) and single[:, :32].max() > 0.01
+    # Combined = scattered light + emission (black world, single scattering only)
+    np.testing.assert_allclose(comb, single + em, rtol=1e-5, atol=1e-7)
+    assert single.max() > 0.01 and em.max() > 0.1 * single.max()
+    # the same smoke with a material without blackbody emits nothing
+    smoke = {k: np.array(r["smoke"][k]) for k in ("Emission", "Combined", "Volume Single")}
+    assert np.all(smoke["Emission"] == 0.0) and smoke["Volume Single"].max() > 0.01
+    np.testing.assert_allclose(smoke["Combined"], smoke["Volume Single"], rtol=1e-5, atol=1e-7)
+
+
+def test_fire_domain_glows_as_a_volume_object_with_the_same_grids(tmp_path):
+    """One implementation serves both: the domain's 'temperature' (from flame) and a Volume
+    object holding the same density and temperature grids on the same cells, with the same
+    shader, give the same per-voxel emission and the same Emission pass."""
+    body = FIRE_SCENE.replace("MATERIAL", "t.fire_material()") + """
+    t.write_frame(CACHE + "/data/fluid_data_0001.vdb", {"density": DENS, "flame": FLAME})
+    temp = np.where(FLAME > 0.01, 1.5 + 1.5 * FLAME, 0.0).astype(np.float32)
+    points = [t.cell_centre(c).tolist() for c in (t.FLAME_CELL, (24, 7, 10), (27, 9, 13),
+                                                   (10, 8, 8))]
+    sc.frame_set(1)
+    records = {}
+    for kind in ("fluid", "vdb"):
+        if kind == "vdb":
+            bpy.data.objects.remove(ob)
+            t.write_frame(CACHE + "/fire.vdb", {"density": DENS, "temperature": temp})
+            vol = bpy.data.volumes.new("FireVDB")
+            vol.filepath = CACHE + "/fire.vdb"
+            vol.materials.append(t.fire_material("FireVDB"))
+            vob = bpy.data.objects.new("FireVDB", vol)
+            vob.location = t.LO + 0.5 * t.CELL     # voxel (0,0,0) at the domain's first cell
+            sc.collection.objects.link(vob)
+        desc = t.translate(1)
+        print("RESULT", json.dumps(dict(tag=kind, warnings=desc.warnings, media=[],
+                                        at=[t.emission_at(desc.media[0], p) for p in points],
+                                        n=len(desc.media), **passes())))
+    """
+    r = run(body, tmp_path)
+    fl, vd = r["fluid"], r["vdb"]
+    assert fl["n"] == vd["n"] == 1, (fl["warnings"], vd["warnings"])
+    np.testing.assert_allclose(fl["at"], vd["at"], rtol=1e-5, atol=1e-9)
+    assert max(fl["at"][0]) > 0.1 and fl["at"][3] == [0.0, 0.0, 0.0]
+    for name in ("Emission", "Combined"):
+        a, b = np.array(fl[name]), np.array(vd[name])
+        assert a.max() > 0.05, name
+        np.testing.assert_allclose(a.sum(axis=(0, 1)), b.sum(axis=(0, 1)), rtol=0.01)
+        assert np.abs(a - b).max() < 0.02 * a.max(), name
+
+
+def test_fire_strength_attributes_heat_noise_lattice_and_missing_grids(tmp_path):
+    from mpp_render import blackbody
+    body = """
+        ob = t.domain(CACHE, t.fire_material(), noise=2)
+        res2 = tuple(2 * n for n in t.RES)
+        heat = 1.6 * t.plume(t.RES, (12, 8, 8))                 # 'heat' = 0.8 at its peak
+        t.write_frame(CACHE + "/data/fluid_data_0001.vdb",
+                      {"density": t.plume(t.RES, (16, 8, 8), 4.0), "temperature": heat})
+        t.write_frame(CACHE + "/noise/fluid_noise_0001.vdb",
+                      {"density_noise": t.plume(res2, (32, 16, 16), 8.0),
+                       "flame_noise": 0.5 * t.plume(res2, (41, 16, 16), 4.0)}, voxel=t.CELL / 2)
+        # smoke only at frame 2: no flame grid in the files
+        t.write_frame(CACHE + "/data/fluid_data_0002.vdb", {"density": t.plume(t.RES, (16, 8, 8))})
+        t.write_frame(CACHE + "/noise/fluid_noise_0002.vdb",
+                      {"density_noise": t.plume(res2, (32, 16, 16), 8.0)}, voxel=t.CELL / 2)
+        hi = lambda ijk: (t.LO + (np.asarray(ijk) + 0.5) * t.CELL / 2).tolist()
+        probes = {"flame_peak": hi((41, 16, 16)), "heat_peak": hi((24, 16, 16)),
+                  "far": hi((4, 16, 16))}
+
+        def record(tag, frame=1):
+            desc = t.translate(frame)
+            print("RESULT", json.dumps({
+                "tag": tag, "media": [t.medium_record(m) for m in desc.media],
+                "warnings": desc.warnings,
+                "at": {k: [t.emission_at(m, p) for m in desc.media] for k, p in probes.items()},
+                "grid_cells": [None if m.emission_grid is None else
+                               np.linalg.norm(m.index_to_world[:3, :3], axis=0).tolist()
+                               for m in desc.media]}))
+
+        def use(mat):
+            ob.data.materials.clear()
+            ob.data.materials.append(mat)
+
+        record("temperature")                      # the fire shader, flame from the noise file
+        use(t.fire_material("Heat", temperature_attribute="heat"))
+        record("heat")
+        use(t.fire_material("Strength", blackbody=0.0, strength_attribute="flame"))
+        record("strength")
+        use(t.emission_material("flame"))
+        record("emission_shader")
+        use(t.fire_material("Nothing", blackbody=0.0, strength_attribute="smoke"))
+        record("no_such_grid")
+        use(t.fire_material("Fire again"))
+        record("smoke_only", frame=2)
+        # fire without smoke at frame 3: flame only, the density grid empty
+        t.write_frame(CACHE + "/data/fluid_data_0003.vdb", {"temperature": heat})
+        t.write_frame(CACHE + "/noise/fluid_noise_0003.vdb",
+                      {"flame_noise": 0.5 * t.plume(res2, (41, 16, 16), 4.0)}, voxel=t.CELL / 2)
+        record("fire_only", frame=3)
+        # a mesh volume has no grids: the strength attribute reads 0 there too (warned)
+        bpy.data.objects.remove(ob)
+        bpy.ops.mesh.primitive_cube_add(location=(5.0, 0.0, 0.0))
+        bpy.context.object.data.materials.append(
+            t.fire_material("MeshGlow", blackbody=0.0, strength_attribute="flame"))
+        record("mesh")
+    """
+    r = run(body, tmp_path)
+    ign, top = 1.5, 3.0
+    # 'temperature' = ignition + flame (max - ignition) on the noise lattice, x 1000 K
+    te = only(r["temperature"])
+    np.testing.assert_allclose(te["cell"], [CELL / 2] * 3, rtol=1e-12)
+    t_peak = 1000.0 * (ign + 0.5 * (top - ign))
+    np.testing.assert_allclose(r["temperature"]["at"]["flame_peak"][0],
+                               blackbody.emission(t_peak, 1.0), rtol=1e-5)
+    assert r["temperature"]["at"]["far"][0] == [0.0, 0.0, 0.0]
+    # 'heat' stays low-resolution and is resampled onto the noise lattice of the density: the
+    # noise cell beside the heat's peak lies a quarter cell off each axis, so its value is the
+    # Gaussian's trilinear mix (0.75 + 0.25 e^(-1/8))^3 x 0.8
+    he = r["heat"]["at"]["heat_peak"][0]
+    heat_there = 0.8 * (0.75 + 0.25 * np.exp(-1 / 8)) ** 3
+    np.testing.assert_allclose(he, blackbody.emission(1000.0 * heat_there, 1.0), rtol=1e-4)
+    assert r["heat"]["grid_cells"] == [[CELL / 2] * 3]
+    # an Attribute node reading 'flame' into Emission Strength: Emission Color x flame
+    np.testing.assert_allclose(r["strength"]["at"]["flame_peak"][0],
+                               0.5 * np.array([1.0, 0.5, 0.25]), rtol=1e-5)
+    assert only(r["strength"])["emission"] == [0.0, 0.0, 0.0]
+    # an Emission shader alone whose Strength reads 'flame': it glows over the flame's cells
+    es = only(r["emission_shader"])
+    assert es["name"] == "Smoke:uniform" and es["sigma_s"] == [0.0, 0.0, 0.0]
+    np.testing.assert_allclose(r["emission_shader"]["at"]["flame_peak"][0],
+                               0.5 * np.array([1.0, 0.5, 0.25]), rtol=1e-5)
+    # an attribute no domain has: Cycles reads 0, so no emission (warned)
+    assert r["no_such_grid"]["at"]["flame_peak"] == [None]
+    assert only(r["no_such_grid"])["emission"] == [0.0, 0.0, 0.0]
+    warned(r["no_such_grid"], "'Smoke'", "'smoke'", "'Emission Strength'", "emission is 0")
+    # no flame at this frame: the domain's temperature is 0, no glow -- not the constant
+    # Temperature a Volume object without the grid would get
+    so = only(r["smoke_only"])
+    assert r["smoke_only"]["at"]["flame_peak"] == [None] and so["emission"] == [0.0, 0.0, 0.0]
+    warned(r["smoke_only"], "'Smoke'", "'temperature'", "holds no data")
+    # fire without smoke glows on a zero density (Cycles emits wherever the shader runs)
+    fo = only(r["fire_only"])
+    assert fo["max"] == 0.0
+    np.testing.assert_allclose(r["fire_only"]["at"]["flame_peak"][0],
+                               blackbody.emission(t_peak, 1.0), rtol=1e-5)
+    warned(r["fire_only"], "'Smoke'", "'density'", "holds no data")
+    mesh = only(r["mesh"])
+    assert mesh["source"] == "MESH" and mesh["emission"] == [0.0, 0.0, 0.0]
+    warned(r["mesh"], "'MeshGlow'", "'flame'", "'Emission Strength'", "emission is 0")

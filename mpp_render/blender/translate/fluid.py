@@ -44,6 +44,20 @@ copied):
   (one colour per domain: a warning says when it varies).  Without a material, or without a
   volume shader, a domain renders nothing (Cycles gives a mesh domain the default *surface*
   shader).
+* **Fire.**  Emission that grids drive is done by the VDB path's helper
+  (``vdb.lattice_emission``), so a domain glows as a Volume object with the same grids and
+  shader does: Principled Volume's blackbody with T = Temperature x the grid named by its
+  Temperature Attribute ('temperature': 1.5 .. 3 with the domain's default Ignition and
+  Maximum, so the node's default Temperature 1000 K gives 1500 .. 3000 K; 'flame': 0 .. 1;
+  'heat'), and an Attribute node reading a grid linked into Emission Strength (or an
+  Emission shader's Strength): Emission Color x the grid (``svm_node_principled_volume``).
+  As in Cycles (``volume.cpp`` gives a domain every smoke attribute its shader asks for,
+  filled from the RNA grids), a smoke grid the frame lacks reads as 0 -- no glow, not the
+  constant Temperature.  The emitting grid is resampled trilinearly onto the density grid's
+  cells (heat is low-resolution, density and flame follow the noise), and the medium covers
+  the density's non-zero cells and the cells the emission reaches (Cycles emits wherever the
+  shader is evaluated, not only where there is density): a fire without smoke glows on a
+  zero density.
 
 Liquid domains are left to the mesh path (their evaluated mesh is the liquid surface).
 Anything missing or damaged -- no data, a missing or corrupt cache frame, a grid with NaN,
@@ -66,11 +80,13 @@ from ...cache import CACHE, digest
 from ...media import sanitise
 from ...scene import Medium
 from . import vdb as vdb_reader
+from .vdb import emission_grids, lattice_emission, missing_strength_grids
 from .convert import scalar
 from .materials import ClosureInputs, VolumeCoefficients, merge, principled_volume, volume_shading
 from .nodes import closures, output_node
 
 STANDARD_GRIDS = ("density", "flame", "heat", "temperature", "color")
+SCALAR_GRIDS = ("density", "flame", "heat", "temperature")
 DATA_DIR, NOISE_DIR = "data", "noise"            # FLUID_DOMAIN_DIR_DATA / _NOISE
 DATA_NAME, NOISE_NAME = "fluid_data", "fluid_noise"  # FLUID_NAME_DATA / _NOISE
 # grid names inside the cache files (Mantaflow's grid names, smoke_script.h)
@@ -361,7 +377,7 @@ class FluidTranslator:
             return []
         mwhere = f"material '{mat.name}' on {where}"
         local: List[str] = []
-        shading = volume_shading(mat, mwhere, local)
+        shading = volume_shading(mat, mwhere, local, grids=True)
         if shading is None:
             self.warnings.append(f"{mwhere}: no volume shader is connected, so the domain renders "
                                  "nothing; skipped")
@@ -373,6 +389,7 @@ class FluidTranslator:
             return []
         colour_nodes = principled_colour_attributes(mat)
         wanted = {co.attribute for co in shading if co.attribute in STANDARD_GRIDS}
+        wanted |= {n for n in emission_grids(shading) if n in SCALAR_GRIDS}
         if colour_nodes:
             wanted.add("color")
         grids = self._grids(ob, dse, where, wanted)
@@ -381,6 +398,10 @@ class FluidTranslator:
         if colour_nodes:  # handled here: drop materials.py's "not supported" for them
             local = [w for w in local if not ("Color Attribute" in w and "is not supported" in w)]
         self.warnings.extend(local)
+        for attr, socket in missing_strength_grids(shading, lambda n: n in SCALAR_GRIDS):
+            self.warnings.append(f"{mwhere}: the domain has no scalar grid '{attr}' (its grids: "
+                                 + ", ".join(SCALAR_GRIDS) + f") for the attribute linked into "
+                                 f"'{socket}'; that emission is 0 (as in Cycles)")
         shading = self._tint(shading, colour_nodes, grids, mwhere)
         lo, hi = texture_box(ob.data)
         return self._media(ob, shading, grids, lo, hi, np.asarray(world_matrix, np.float64),
@@ -526,78 +547,177 @@ class FluidTranslator:
     def _media(self, ob, shading: List[VolumeCoefficients], grids: DomainGrids, lo, hi,
                world_matrix, clip, where) -> List[Medium]:
         media: List[Medium] = []
+        lattices: List[tuple] = []
         uniform: List[VolumeCoefficients] = []
         several = len(shading) > 1
+        blocks = _Blocks(self, grids, lo, hi, clip, where)
         for co in shading:
             attr = co.attribute
             if attr is None:
                 uniform.append(co)
-            elif attr in STANDARD_GRIDS and attr != "color":
-                m = self._grid_medium(ob, co, attr, grids, lo, hi, world_matrix, clip, where,
-                                      several)
-                if m is not None:
-                    media.append(m)
+            elif attr in SCALAR_GRIDS:
+                made = self._grid_medium(ob, co, attr, blocks, world_matrix, where, several)
+                if made is not None:
+                    media.append(made[0])
+                    lattices.append(made[1])
             elif co.from_attribute_node:
                 self.warnings.append(f"{where}: the domain has no scalar grid '{attr}' (its grids: "
-                                     + ", ".join(n for n in STANDARD_GRIDS if n != "color")
-                                     + "); the Attribute node gives 0, so that shader renders "
-                                     "nothing")
+                                     + ", ".join(SCALAR_GRIDS) + "); the Attribute node gives 0, "
+                                     "so that shader renders nothing")
             else:
                 self.warnings.append(f"{where}: the domain has no scalar grid '{attr}'; that "
                                      "shader's density is uniform (as in Cycles)")
                 uniform.append(co)
         if uniform:
-            self._uniform(ob, uniform, media, where)
+            self._uniform(ob, uniform, media, lattices, blocks, world_matrix, where)
         return media
 
-    def _uniform(self, ob, uniform, media, where) -> None:
+    def _uniform(self, ob, uniform, media, lattices, blocks, world_matrix, where) -> None:
         """Closures with a uniform density (and their emission): Cycles fills the hull of the
         grids the material reads with them, approximated by the voxels where the first of
-        those grids is non-zero, as for Volume objects (vdb.py).  A material that reads no
-        grid renders nothing in Cycles."""
-        if not media:
-            self.warnings.append(f"{where}: its material reads no smoke grid (density, flame, heat "
-                                 "or temperature) that holds data at this frame; without one "
-                                 "it renders nothing (as in Cycles)")
-            return
-        base = media[0]
+        those grids is non-zero -- the first density grid's, else the first grid driving an
+        emission -- as for Volume objects (vdb.py), with the emission grids drive on its
+        lattice.  A material that reads no grid renders nothing in Cycles."""
         coeff = merge(uniform)
+        if media:
+            base_name, block = media[0].name, lattices[0]
+        else:
+            found = [n for n in emission_grids(uniform) if blocks.get(n) is not None]
+            if not found:
+                self.warnings.append(f"{where}: its material reads no smoke grid (density, flame, "
+                                     "heat or temperature) that holds data at this frame; "
+                                     "without one it renders nothing (as in Cycles)")
+                return
+            base_name = found[0]
+            full = blocks.get(base_name)
+            first, last = _support_box(full, full)  # with the reach of its interpolation
+            block = (_crop(full[0], first, last), tuple(int(v) for v in first), full[2])
+        values, origin, i2o = block
+        emission, grid, lost = lattice_emission(coeff, block, blocks, zero=SCALAR_GRIDS)
+        for name, outside in lost.items():
+            self.warnings.append(f"{where}: {outside:.0%} of grid '{name}' lies outside the "
+                                 f"cells of '{base_name}'; that part of its emission is not "
+                                 "rendered")
         self.warnings.append(f"{where}: shaders with a uniform density are approximated inside "
-                             f"the non-zero voxels of '{base.name}'")
-        media.append(Medium(name=f"{ob.name}:uniform", density=(base.density > 0).astype(np.float32),
-                            index_to_world=base.index_to_world, sigma_s=coeff.sigma_s,
-                            sigma_a=coeff.sigma_a, g=coeff.g, emission=coeff.emission,
-                            source="FLUID"))
+                             f"the non-zero voxels of '{base_name}'")
+        media.append(Medium(name=f"{ob.name}:uniform", density=(values > 0).astype(np.float32),
+                            index_to_world=world_matrix @ i2o @ _shift(origin),
+                            sigma_s=coeff.sigma_s, sigma_a=coeff.sigma_a, g=coeff.g,
+                            emission=emission, source="FLUID", emission_grid=grid))
 
-    def _grid_medium(self, ob, co, attr, grids: DomainGrids, lo, hi, world_matrix, clip, where,
-                     several) -> Optional[Medium]:
-        values = grids.grids.get(attr)
-        src = "live grids" if grids.source == "live" else f"'{grids.source}'"
+    def _grid_medium(self, ob, co, attr, blocks, world_matrix, where, several):
+        """``(medium, its block)`` of a closure whose density is grid ``attr``, or None.  The
+        medium covers the grid's non-zero cells and, where the closure's emission reads other
+        grids (blackbody, an attribute-driven strength), theirs: Cycles emits wherever the
+        shader is evaluated, not only where there is density."""
+        full = blocks.lattice(attr)
+        if full is None:
+            return None  # not a smoke grid
+        values, _, i2o = full
+        boxes = [_nonzero_box(values)]
+        for name in emission_grids([co]):
+            src = blocks.get(name)
+            if src is not None:
+                boxes.append(_support_box(src, full))
+        boxes = [b for b in boxes if b is not None]
+        if not boxes:
+            return None  # nothing non-zero (warned)
+        first = np.min([b[0] for b in boxes], axis=0)
+        last = np.max([b[1] for b in boxes], axis=0)
+        block = (_crop(values, first, last), tuple(int(v) for v in first), i2o)
+        # the box holds the emission grids' reach: nothing is lost
+        emission, grid, _ = lattice_emission(co, block, blocks, zero=SCALAR_GRIDS)
+        crop = block[0]
+        if not np.any(crop > 0) and (grid is None or not np.any(grid > 0)):
+            return None
+        medium = Medium(name=f"{ob.name}:{attr}" if several else ob.name, density=crop,
+                        index_to_world=world_matrix @ i2o @ _shift(block[1]),
+                        sigma_s=co.sigma_s, sigma_a=co.sigma_a, g=float(co.g),
+                        emission=emission, source="FLUID", emission_grid=grid)
+        return medium, block
+
+
+class _Blocks:
+    """The scalar grids of one domain frame as vdb.py's grid blocks (values, ijk origin 0,
+    index->object 4x4 of their cells in the texture space), sanitised and clipped once each,
+    with warnings.  A domain has every smoke grid (Cycles reads one it lacks as zeros), so a
+    grid missing from the frame -- e.g. flame without fire, or an empty grid the cache file
+    leaves out -- is all zero.  ``get(name)``: None for a grid with no non-zero cell (or a
+    name that is no smoke grid); ``lattice(name)``: the block even then (None only for a
+    name that is no smoke grid)."""
+
+    def __init__(self, owner, grids: DomainGrids, lo, hi, clip, where):
+        self.owner, self.grids, self.lo, self.hi = owner, grids, lo, hi
+        self.clip, self.where = clip, where
+        self._done: Dict[str, Optional[tuple]] = {}
+
+    def get(self, name):
+        block = self.lattice(name)
+        return block if block is not None and np.any(block[0] > 0) else None
+
+    def lattice(self, name):
+        if name not in SCALAR_GRIDS:
+            return None
+        if name in self._done:
+            return self._done[name]
+        warn = self.owner.warnings.append
+        frame = self.owner.frame
+        values = self.grids.grids.get(name)
+        src = "live grids" if self.grids.source == "live" else f"'{self.grids.source}'"
+        shape = self.grids.shape_of(name)
         if values is None:
-            self.warnings.append(f"{where}: no '{attr}' grid at frame {self.frame} ({src}); the "
-                                 f"shader reading it renders nothing")
-            return None
-        values, bad = sanitise(values)
-        if bad:
-            self.warnings.append(f"{where}: {bad} voxels of grid '{attr}' in {src} were NaN, "
-                                 "infinite or negative; set to 0")
-        if clip > 0.0:
-            values = np.where(values < clip, np.float32(0.0), values)
-        nz = np.nonzero(values > 0)
-        if len(nz[0]) == 0:
-            self.warnings.append(f"{where}: grid '{attr}' is empty at frame {self.frame}; the "
-                                 "shader reading it renders nothing")
-            return None
-        first = [int(a.min()) for a in nz]
-        last = [int(a.max()) for a in nz]
-        crop = np.ascontiguousarray(values[first[0]:last[0] + 1, first[1]:last[1] + 1,
-                                           first[2]:last[2] + 1])
-        offset = np.eye(4)
-        offset[:3, 3] = first
-        i2w = world_matrix @ cell_to_object(lo, hi, grids.shape_of(attr)) @ offset
-        return Medium(name=f"{ob.name}:{attr}" if several else ob.name, density=crop,
-                      index_to_world=i2w, sigma_s=co.sigma_s, sigma_a=co.sigma_a, g=float(co.g),
-                      emission=co.emission, source="FLUID")
+            values = np.zeros(shape, np.float32)
+        else:
+            values, bad = sanitise(values)
+            if bad:
+                warn(f"{self.where}: {bad} voxels of grid '{name}' in {src} were NaN, infinite or "
+                     "negative; set to 0")
+            if self.clip > 0.0:
+                values = np.where(values < self.clip, np.float32(0.0), values)
+        if not np.any(values > 0):
+            warn(f"{self.where}: grid '{name}' holds no data at frame {frame} ({src}); it "
+                 "reads as 0")
+        block = (values, (0, 0, 0), cell_to_object(self.lo, self.hi, shape))
+        self._done[name] = block
+        return block
+
+
+def _shift(origin) -> np.ndarray:
+    m = np.eye(4)
+    m[:3, 3] = origin
+    return m
+
+
+def _nonzero_box(values):
+    """``(first, last)`` ijk of the non-zero cells of ``values`` (3-D), or None."""
+    nz = np.nonzero(values > 0)
+    if len(nz[0]) == 0:
+        return None
+    return np.array([int(a.min()) for a in nz]), np.array([int(a.max()) for a in nz])
+
+
+def _crop(values, first, last) -> np.ndarray:
+    return np.ascontiguousarray(values[first[0]:last[0] + 1, first[1]:last[1] + 1,
+                                       first[2]:last[2] + 1])
+
+
+def _support_box(src, dst):
+    """The cells of block ``dst``'s lattice that trilinear samples of block ``src``'s
+    non-zero cells can reach (one source cell around them), clamped to ``dst``: ``(first,
+    last)`` or None.  Both blocks map into one space (index->space 4x4)."""
+    box = _nonzero_box(src[0])
+    if box is None:
+        return None
+    to_dst = np.linalg.inv(dst[2] @ _shift(dst[1])) @ src[2] @ _shift(src[1])
+    lo, hi = box[0] - 1.0, box[1] + 1.0
+    corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                        for z in (lo[2], hi[2])]) @ to_dst.T
+    shape = np.array(dst[0].shape)
+    first = np.clip(np.floor(corners[:, :3].min(axis=0)), 0, shape - 1).astype(int)
+    last = np.clip(np.ceil(corners[:, :3].max(axis=0)), 0, shape - 1).astype(int)
+    if np.any(last < first):
+        return None
+    return first, last
 
 
 def principled_colour_attributes(material) -> list:

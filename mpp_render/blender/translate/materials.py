@@ -6,16 +6,23 @@ Volume shaders follow Cycles (``svm_closure.h``); for a closure reached with wei
 * Principled Volume: sigma_s = Color * d,
   sigma_a = max(1 - Color, 0) * max(1 - sqrt(Absorption Color), 0) * d,
   emission = Emission Color * Emission Strength (not scaled by density); the grid named by
-  'Density Attribute' multiplies d where it exists (VDB volumes), so the coefficients are
-  returned *per unit of that grid*.  With Blackbody Intensity > 0 it also emits
-  blackbody.emission(T, Blackbody Intensity, Blackbody Tint) with T = Temperature (kelvin),
-  times the grid named by 'Temperature Attribute' where it exists: ``emission`` includes
-  that term at the constant Temperature (what Cycles gives where the grid is missing: meshes,
-  the world) and ``blackbody`` lists it, so a reader of grids (vdb.py) can replace it by the
-  per-voxel emission.
+  'Density Attribute' multiplies d where it exists (VDB volumes, smoke domains), so the
+  coefficients are returned *per unit of that grid*.  With Blackbody Intensity > 0 it also
+  emits blackbody.emission(T, Blackbody Intensity, Blackbody Tint) with T = Temperature
+  (kelvin), times the grid named by 'Temperature Attribute' where it exists.
 * Volume Scatter: sigma_s = Color * d.  Volume Absorption: sigma_a = max(1 - Color, 0) * d.
 * Volume Coefficients: sigma_a, sigma_s and emission are the node's coefficient vectors.
 * Emission (in a Volume output): emission = Color * Strength.
+
+Emission that a grid drives -- the blackbody term, and an Attribute node linked into
+Principled Volume's Emission Strength or the Emission shader's Strength (Cycles'
+``svm_node_principled_volume`` and ``svm_node_attr``: emission = Emission Color x the
+attribute's value, 0 where the attribute does not exist) -- is listed in
+``VolumeCoefficients.emission_terms`` (:class:`BlackbodyTerm`, :class:`AttributeEmissionTerm`);
+``emission`` holds each term's value where its grid is missing (``constant``: the blackbody
+at the constant Temperature, 0 for an attribute), which is what meshes and the world render.
+A reader of grids (vdb.py for Volume objects and, through the same helper, fluid.py for
+smoke domains: ``vdb.lattice_emission``) replaces that constant by the per-voxel emission.
 
 Coefficients are in 1/m, emission in W/(m^3 sr).  Closures that read the same density source
 add; their anisotropies combine as the mean weighted by each closure's mean sigma_s.
@@ -23,7 +30,7 @@ add; their anisotropies combine as the mean weighted by each closure's mean sigm
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional, Tuple
+from typing import Dict, List, Optional, Tuple, Union
 
 import numpy as np
 
@@ -63,6 +70,33 @@ class BlackbodyTerm:
 
 
 @dataclass
+class AttributeEmissionTerm:
+    """Emission whose strength an Attribute node gives (linked into Principled Volume's
+    Emission Strength or the Emission shader's Strength): ``colour`` (Emission Color, RGB)
+    x the value of grid ``attribute``, W/(m^3 sr).  Where the attribute does not exist
+    Cycles reads 0, so ``constant`` (the part of VolumeCoefficients.emission) is 0.
+    ``socket``: the input's name, for messages; ``weight``: the Mix Shader factors."""
+
+    colour: np.ndarray
+    attribute: str
+    socket: str = "Emission Strength"
+    weight: float = 1.0
+    constant: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    def scaled(self, w: float) -> "AttributeEmissionTerm":
+        return AttributeEmissionTerm(self.colour, self.attribute, self.socket, self.weight * w,
+                                     self.constant * w)
+
+    def per_voxel(self, grid) -> np.ndarray:
+        """weight x colour x max(grid, 0): (..., 3) float32, W/(m^3 sr)."""
+        g = np.maximum(np.nan_to_num(np.asarray(grid, np.float64)), 0.0)
+        return (self.weight * g[..., None] * np.asarray(self.colour, np.float64)).astype(np.float32)
+
+
+EmissionTerm = Union[BlackbodyTerm, AttributeEmissionTerm]
+
+
+@dataclass
 class VolumeCoefficients:
     """Constant coefficients of the closures that share one density source.
 
@@ -70,8 +104,9 @@ class VolumeCoefficients:
     None for a uniform density.  ``from_attribute_node``: the attribute comes from an
     Attribute node linked into a Density input (rather than Principled Volume's 'Density
     Attribute').  ``sigma_s``, ``sigma_a``: RGB 1/m per unit density; ``g``: anisotropy;
-    ``emission``: RGB W/(m^3 sr), not scaled by density (blackbody terms included at their
-    constant temperature); ``blackbody``: the blackbody terms (see BlackbodyTerm)."""
+    ``emission``: RGB W/(m^3 sr), not scaled by density (the emission terms included at
+    their ``constant``); ``emission_terms``: the emission that grids drive
+    (:class:`BlackbodyTerm`, :class:`AttributeEmissionTerm`)."""
 
     attribute: Optional[str]
     sigma_s: np.ndarray = field(default_factory=lambda: np.zeros(3))
@@ -79,7 +114,7 @@ class VolumeCoefficients:
     g: float = 0.0
     emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
     from_attribute_node: bool = False
-    blackbody: List[BlackbodyTerm] = field(default_factory=list)
+    emission_terms: List[EmissionTerm] = field(default_factory=list)
 
 
 def principled_volume(color, density, anisotropy, absorption_color, emission=(0.0, 0.0, 0.0),
@@ -162,11 +197,12 @@ def _volume_closure(c: Closure, where, warnings):
         if color_attr:
             warnings.append(f"{where}: Color Attribute '{color_attr}' of {describe(node)} is not "
                             "supported; using its Color")
+        emission, terms = _emission(inp, "Emission Color", "Emission Strength")
         co = principled_volume(inp.color("Color"), scalar(dens), inp.number("Anisotropy"),
-                               inp.color("Absorption Color"),
-                               inp.color("Emission Color") * inp.number("Emission Strength"),
+                               inp.color("Absorption Color"), emission,
                                attribute=linked_attr or attr)
         co.from_attribute_node = linked_attr is not None
+        co.emission_terms = terms
         b = inp.number("Blackbody Intensity")
         if b > 0.0:
             t = inp.number("Temperature")
@@ -174,7 +210,7 @@ def _volume_closure(c: Closure, where, warnings):
             term = BlackbodyTerm(b, t, inp.raw("Temperature Attribute")[0] or None, tint,
                                  constant=blackbody.emission(t, b, tint))
             co.emission = co.emission + term.constant
-            co.blackbody = [term]
+            co.emission_terms = co.emission_terms + [term]
         return co
     if kind in ("ShaderNodeVolumeScatter", "ShaderNodeVolumeAbsorption"):
         dens, attr = inp.raw("Density", allow_attribute=True)
@@ -192,9 +228,21 @@ def _volume_closure(c: Closure, where, warnings):
             np.maximum(inp.color("Absorption Coefficients"), 0.0),
             _phase_g(node, inp, where, warnings), inp.color("Emission Coefficients"))
     if kind == "ShaderNodeEmission":
-        return VolumeCoefficients(None, emission=inp.color("Color") * inp.number("Strength"))
+        emission, terms = _emission(inp, "Color", "Strength")
+        return VolumeCoefficients(None, emission=emission, emission_terms=terms)
     warnings.append(f"{where}: {describe(node)} is not a supported volume shader; ignored")
     return None
+
+
+def _emission(inp: ClosureInputs, colour: str, strength: str):
+    """``(constant emission RGB, [AttributeEmissionTerm])`` of a colour x strength pair of
+    inputs: an Attribute node linked into the strength makes it a term (0 where the grid is
+    missing), else the product is constant."""
+    value, attr = inp.raw(strength, allow_attribute=True)
+    c = inp.color(colour)
+    if attr is not None:
+        return np.zeros(3), [AttributeEmissionTerm(c, attr, socket=strength)]
+    return c * scalar(value), []
 
 
 def _culprit(res) -> str:
@@ -229,9 +277,12 @@ def is_linked(tree, socket_name) -> bool:
     return bool(socket is not None and socket.is_linked)
 
 
-def volume_shading(material, where: str, warnings: List[str]) -> Optional[List[VolumeCoefficients]]:
+def volume_shading(material, where: str, warnings: List[str],
+                   grids: bool = False) -> Optional[List[VolumeCoefficients]]:
     """The volume coefficients of ``material``, one entry per density source; None when the
-    material has no volume shader (nothing linked into its output's 'Volume')."""
+    material has no volume shader (nothing linked into its output's 'Volume').  Without
+    ``grids`` (meshes, the world: nothing to read attributes from) an Attribute node driving
+    an emission strength is warned about: it gives 0 there, as in Cycles."""
     tree = getattr(material, "node_tree", None)
     if tree is None or not is_linked(tree, "Volume"):
         return None
@@ -248,10 +299,17 @@ def volume_shading(material, where: str, warnings: List[str]) -> Optional[List[V
         acc.sigma_s = acc.sigma_s + w * co.sigma_s
         acc.sigma_a = acc.sigma_a + w * co.sigma_a
         acc.emission = acc.emission + w * co.emission
-        acc.blackbody = acc.blackbody + [t.scaled(w) for t in co.blackbody]
+        acc.emission_terms = acc.emission_terms + [t.scaled(w) for t in co.emission_terms]
         s = w * float(np.mean(co.sigma_s))
         acc.g += s * co.g
         g_weight[key] = g_weight.get(key, 0.0) + s
+        if not grids:
+            for t in co.emission_terms:
+                if isinstance(t, AttributeEmissionTerm):
+                    warnings.append(f"{where}: attribute '{t.attribute}' linked into "
+                                    f"'{t.socket}' of {describe(c.node)} has no values here "
+                                    "(only Volume objects and smoke domains have grids); that "
+                                    "emission is 0, as in Cycles")
     for key, acc in groups.items():
         acc.g = acc.g / g_weight[key] if g_weight[key] > 0.0 else 0.0
     return list(groups.values())
@@ -265,7 +323,7 @@ def merge(groups: List[VolumeCoefficients]) -> VolumeCoefficients:
         out.sigma_s = out.sigma_s + co.sigma_s
         out.sigma_a = out.sigma_a + co.sigma_a
         out.emission = out.emission + co.emission
-        out.blackbody = out.blackbody + list(co.blackbody)
+        out.emission_terms = out.emission_terms + list(co.emission_terms)
         s = float(np.mean(co.sigma_s))
         out.g += s * co.g
         sw += s

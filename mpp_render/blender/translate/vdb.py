@@ -8,11 +8,15 @@ render clipping set to 0) and whose coefficients are the material's, per unit gr
 ``index_to_world`` = object world matrix @ grid index->object matrix @ offset of the dense
 block, so integer ijk of the array are voxel centres, as in OpenVDB.
 
-Principled Volume's blackbody emission reads the grid named by its Temperature Attribute
-(commonly 'temperature' or 'flame' in Blender's smoke and fire caches) like the density grid
-and resamples it trilinearly onto the density grid's lattice (``resample``); the per-voxel
-emission becomes the medium's ``emission_grid`` (temperature outside the density grid's box
-is not rendered, with a warning).  Without that grid the constant Temperature is used.
+Emission that a grid drives (materials.py's ``emission_terms``: Principled Volume's
+blackbody with the grid named by its Temperature Attribute -- commonly 'temperature' or
+'flame' in Blender's smoke and fire caches -- and an Attribute node linked into an emission
+strength) reads that grid like the density grid and resamples it trilinearly onto the
+density grid's lattice (``resample``, ``lattice_emission``); the per-voxel emission becomes
+the medium's ``emission_grid`` (the part of the grid outside the density grid's box is not
+rendered, with a warning).  Without that grid the blackbody uses the constant Temperature
+and an attribute-driven strength is 0 (as in Cycles).  ``lattice_emission`` serves smoke
+domains too (fluid.py).
 
 A bad file never stops the frame: a missing, truncated or corrupt .vdb, a grid the material
 reads but the file lacks, or bad voxel values are reported by object and file name and the
@@ -144,6 +148,53 @@ def resample(src, dst):
     return out, lost
 
 
+def lattice_emission(co, block, blocks, zero=()):
+    """The emission of the closures ``co`` (materials.VolumeCoefficients) at the lattice
+    points of grid block ``block`` (values, ijk origin, index->space 4x4: only its shape and
+    map are used), W/(m^3 sr): ``(constant RGB >= 0, per-voxel float32 (shape + (3,)) or None,
+    lost)``.  Each of ``co.emission_terms`` whose grid is in ``blocks`` (``get(name)`` -> block
+    or None; all maps into one space) is resampled onto the lattice and becomes per-voxel
+    emission in place of its constant part; a term whose attribute is in ``zero`` (grids that
+    exist but hold no data, e.g. a smoke domain's flame without fire) emits as at grid value 0;
+    other terms keep their constant (the attribute does not exist: materials.py).  ``lost``:
+    grid name -> fraction of its sum outside the lattice's box (not rendered)."""
+    emission = np.asarray(co.emission, np.float64)
+    grid, lost, sampled = None, {}, {}
+    for term in co.emission_terms:
+        src = blocks.get(term.attribute) if term.attribute else None
+        if src is None:
+            if term.attribute in zero:
+                emission = emission - term.constant + term.per_voxel(np.zeros(()))
+            continue
+        if term.attribute not in sampled:
+            sampled[term.attribute], outside = resample(src, block)
+            if outside:
+                lost[term.attribute] = outside
+        per = term.per_voxel(sampled[term.attribute])
+        grid = per if grid is None else grid + per
+        emission = emission - term.constant
+    return np.maximum(emission, 0.0), grid, lost
+
+
+def emission_grids(shading) -> List[str]:
+    """The grid names the emission terms of ``shading`` read, in order, once each."""
+    return list(dict.fromkeys(t.attribute for co in shading for t in co.emission_terms
+                              if t.attribute))
+
+
+def missing_strength_grids(shading, has) -> List[tuple]:
+    """``(attribute, socket)`` of the attribute-driven emission strengths of ``shading``
+    whose grid ``has(name)`` denies: Cycles reads 0 there."""
+    from .materials import AttributeEmissionTerm
+    out = []
+    for co in shading:
+        for t in co.emission_terms:
+            if isinstance(t, AttributeEmissionTerm) and not has(t.attribute) \
+                    and (t.attribute, t.socket) not in out:
+                out.append((t.attribute, t.socket))
+    return out
+
+
 class VolumeTranslator:
     """Turns evaluated Volume objects into media.  Grids are read once per volume datablock,
     so instances of one volume share their density arrays."""
@@ -163,12 +214,15 @@ class VolumeTranslator:
             self.warnings.append(self._no_grids_message(vol, where))
             return []
         names = [co.attribute for co in shading if co.attribute in grids]
-        names += [t.attribute for co in shading for t in co.blackbody
-                  if co.attribute in grids and t.attribute in grids]
+        names += [n for n in emission_grids(shading) if n in grids]
         wanted = [grids[n] for n in dict.fromkeys(names)]
+        for attr, socket in missing_strength_grids(shading, lambda n: n in grids):
+            self.warnings.append(f"{where}: the volume has no grid '{attr}' for the attribute "
+                                 f"linked into '{socket}'; that emission is 0 (as in Cycles)")
         # grids straight from a file (no modifier changes them) are kept between renders
         blocks = self._blocks(vol, wanted, where, reusable=len(ob.modifiers) == 0)
         media: List[Medium] = []
+        lattices: List[tuple] = []
         uniform: List[VolumeCoefficients] = []
         for co in shading:
             if co.attribute not in grids:
@@ -177,8 +231,9 @@ class VolumeTranslator:
                 block = blocks[co.attribute]
                 media.append(self._medium(ob, co, block, grids[co.attribute], world_matrix,
                                           len(shading) > 1, blocks, where))
+                lattices.append(block)
         if uniform:
-            self._uniform(ob, where, uniform, media, grids)
+            self._uniform(ob, where, uniform, media, lattices, grids, blocks, world_matrix)
         return media
 
     # -- pieces -----------------------------------------------------------------------------
@@ -191,7 +246,7 @@ class VolumeTranslator:
             return [default_volume()]
         mat = mats[0]
         mwhere = f"material '{mat.name}' on {where}"
-        shading = volume_shading(mat, mwhere, self.warnings)
+        shading = volume_shading(mat, mwhere, self.warnings, grids=True)
         if shading is None:
             self.warnings.append(f"{mwhere}: no volume shader is connected, so the volume "
                                  "renders nothing; skipped")
@@ -331,42 +386,47 @@ class VolumeTranslator:
 
     def _medium(self, ob, co, block, g, world_matrix, several, blocks, where) -> Medium:
         values, origin, index_to_object = block
-        emission, grid = np.asarray(co.emission, np.float64), None
-        for term in co.blackbody:
-            tblock = blocks.get(term.attribute)
-            if tblock is None:
-                continue  # no such grid (or unreadable, warned): the constant temperature
-            temp, outside = resample(tblock, block)
-            if outside:
-                self.warnings.append(f"{where}: {outside:.0%} of grid '{term.attribute}' lies "
-                                     f"outside the box of grid '{g.name}'; that part of the "
-                                     "blackbody emission is not rendered")
-            per = term.per_voxel(temp)
-            grid = per if grid is None else grid + per
-            emission = emission - term.constant
+        emission, grid, lost = lattice_emission(co, block, blocks)
+        self._warn_lost(lost, g.name, where)
         return Medium(name=f"{ob.name}:{g.name}" if several else ob.name, density=values,
                       index_to_world=np.asarray(world_matrix) @ index_to_object @ _offset(origin),
                       sigma_s=co.sigma_s, sigma_a=co.sigma_a, g=float(co.g),
-                      emission=np.maximum(emission, 0.0), source="VDB", emission_grid=grid)
+                      emission=emission, source="VDB", emission_grid=grid)
 
-    def _uniform(self, ob, where, uniform, media, grids):
+    def _warn_lost(self, lost, onto, where):
+        for name, outside in lost.items():
+            self.warnings.append(f"{where}: {outside:.0%} of grid '{name}' lies outside the box "
+                                 f"of grid '{onto}'; that part of its emission is not rendered")
+
+    def _uniform(self, ob, where, uniform, media, lattices, grids, blocks, world_matrix):
         """Closures with a uniform density: Cycles fills the hull of the grids the material
         reads with them; that hull is approximated by the voxels where those grids are
-        non-zero.  A material that reads no grid renders nothing in Cycles."""
+        non-zero -- the first density grid's, else (a material whose only grid drives its
+        emission) that emission grid's -- with the emission those grids drive on its lattice.
+        A material that reads no grid renders nothing in Cycles."""
         names = ", ".join(f"'{n}'" for n in grids)
-        if not media:
-            wanted = sorted({co.attribute for co in uniform if co.attribute})
-            what = (f"reads grid {', '.join(repr(w) for w in wanted)}, which the volume lacks"
-                    if wanted else "reads no grid of the volume")
-            self.warnings.append(f"{where}: its material {what} (grids{self._in_file(ob.data)}: "
-                                 f"{names}); without a density grid it renders nothing; skipped")
-            return
-        base = media[0]
         coeff = merge(uniform)
+        if media:
+            base_name, block = media[0].name, lattices[0]
+        else:
+            found = [n for n in emission_grids(uniform) if blocks.get(n) is not None]
+            if not found:
+                wanted = sorted({co.attribute for co in uniform if co.attribute})
+                what = (f"reads grid {', '.join(repr(w) for w in wanted)}, which the volume "
+                        "lacks" if wanted else "reads no grid of the volume")
+                self.warnings.append(f"{where}: its material {what} (grids"
+                                     f"{self._in_file(ob.data)}: {names}); without a density "
+                                     "grid it renders nothing; skipped")
+                return
+            base_name, block = found[0], blocks[found[0]]
+        values, origin, index_to_object = block
+        emission, grid, lost = lattice_emission(coeff, block, blocks)
+        self._warn_lost(lost, base_name, where)
         self.warnings.append(f"{where}: shaders with a uniform density are approximated inside "
-                             f"the non-zero voxels of '{base.name}'")
-        media.append(Medium(name=f"{ob.name}:uniform", density=(base.density > 0).astype(np.float32),
-                            index_to_world=base.index_to_world, sigma_s=coeff.sigma_s,
-                            sigma_a=coeff.sigma_a, g=coeff.g, emission=coeff.emission,
-                            source="VDB"))
+                             f"the non-zero voxels of '{base_name}'")
+        media.append(Medium(name=f"{ob.name}:uniform", density=(values > 0).astype(np.float32),
+                            index_to_world=np.asarray(world_matrix) @ index_to_object
+                            @ _offset(origin), sigma_s=coeff.sigma_s,
+                            sigma_a=coeff.sigma_a, g=coeff.g, emission=emission,
+                            source="VDB", emission_grid=grid))
 
