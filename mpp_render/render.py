@@ -30,6 +30,7 @@ from .scene import SceneDescription
 from .surfaces import intersect, prepare_surfaces, shade
 
 TILE = 32            # largest tile side (pixels)
+GATHER_SEED = 0x5BD1E995  # offsets the seed of the rays that gather volume light onto surfaces
 TILE_RAYS = 4096     # rays per tile at most: Esc and progress are served between tiles
 
 
@@ -145,6 +146,17 @@ def render(desc: SceneDescription,
             tau = tau + worldfog.optical_depth(fog_pm.sigma_t, t_max)
         return tau
 
+    def media_radiance(index):
+        """``(points, dirs, t_max) -> (N,3)``: the radiance the volumes scatter and emit
+        towards ``points`` along ``dirs`` (a march of tile ``index``'s own random stream):
+        the light they throw onto a surface (surfaces.shade)."""
+        def radiance(p, d, t_max):
+            n = len(p)
+            t0, t1 = union_interval(media, p, d, np.zeros(n), t_max)
+            r = march_rays(ctx, p, d, t0, t1, np.ones(n), ray_keys(st.seed + GATHER_SEED, index, n))
+            return r["single"] + r["multiple"] + r["emission"]
+        return radiance if ctx is not None else None
+
     spp = max(1, int(st.samples))
     ts = tile_size(spp)
     tiles = [(x0, y0) for y0 in range(0, H, ts) for x0 in range(0, W, ts)]
@@ -173,7 +185,7 @@ def render(desc: SceneDescription,
         if hit.any():
             ph = o[hit] + d[hit] * t_hit[hit, None]
             behind[hit] = shade(surf, tri[hit], ph, d[hit], lights, bg,
-                                media_optical_depth, rng)
+                                media_optical_depth, rng, media_radiance(index))
             dh = t_hit[hit] * axial[hit]
             r["depth"][hit] = np.minimum(r["depth"][hit], dh)
         if fog_pm is not None:  # the homogeneous fog beyond its grid, seen through the march

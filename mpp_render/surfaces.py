@@ -228,12 +228,19 @@ def facing_normals(ss: SurfaceSet, tri, d):
     return np.where(flip[:, None], -n, n)
 
 
-def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, rng):
+def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, rng,
+          media_radiance=None):
     """Outgoing radiance (N,3) W/(m^2 sr) of surface points ``p`` hit by rays ``d``.
 
     ``media_optical_depth(points, dirs, t_max)`` -> (N,3) optical depth through the media
     (the caller binds the prepared media); ``rng`` jitters area/sphere light points and the
-    one cosine-weighted sky direction per point."""
+    one cosine-weighted direction per point that gathers the sky and the volumes' light.
+    ``media_radiance(points, dirs, t_max)`` -> (N,3), when given, is the radiance the volumes
+    scatter and emit towards ``points`` along ``dirs`` up to ``t_max`` (m; a march, bound by
+    the caller): the light the smoke and fog around a surface throw onto it (single and
+    multiple scattering and emission; the sky and the lights seen through the volumes are
+    the terms above).  With the cosine-weighted direction the estimate of its reflection is
+    the layers' directional albedo x that radiance, unbiased over samples per pixel."""
     from .lights import incident, is_dark, towards_light
     from .phase import orthonormal_basis
 
@@ -259,18 +266,23 @@ def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, r
         tau = media_optical_depth(po[lit], to_l[lit], dist)
         out[lit] += bsdf.eval(to_l[lit], lit) * e[lit] * np.exp(-tau)
     wc = np.asarray(world_color, np.float64)
-    if np.any(wc > 0):
+    if np.any(wc > 0) or media_radiance is not None:
         u = rng.random((n_pts, 2))
         r = np.sqrt(u[:, 0])
         phi = 2 * np.pi * u[:, 1]
         t1, t2 = orthonormal_basis(nrm)
         w = (t1 * (r * np.cos(phi))[:, None] + t2 * (r * np.sin(phi))[:, None]
              + nrm * np.sqrt(np.maximum(0.0, 1 - r * r))[:, None])
-        vis = ~occluded(ss, po, w, np.full(n_pts, np.inf))
-        tau = media_optical_depth(po, w, np.full(n_pts, np.inf))
-        # the uniform sky seen through one cosine-distributed direction, reflected by every
-        # layer with its directional albedo
-        out += bsdf.albedo() * wc * (np.exp(-tau) * vis[:, None])
+        t_hit, _ = intersect(ss, po, w, np.full(n_pts, np.inf))
+        albedo = bsdf.albedo()
+        if np.any(wc > 0):
+            vis = ~np.isfinite(t_hit)
+            tau = media_optical_depth(po, w, np.full(n_pts, np.inf))
+            # the uniform sky seen through one cosine-distributed direction, reflected by
+            # every layer with its directional albedo
+            out += albedo * wc * (np.exp(-tau) * vis[:, None])
+        if media_radiance is not None:
+            out += albedo * media_radiance(po, w, t_hit)
     return out
 
 

@@ -297,3 +297,43 @@ def test_fresnel_helpers():
     for eta in (1.05, 1.1, 1.5, 2.0, 3.0):
         exact = float(np.sum(w * mu * S.fresnel_dielectric(mu, eta)))
         assert S.fresnel_dielectric_avg(eta) == pytest.approx(exact, abs=0.007)
+
+
+def test_volume_light_reaches_the_ground():
+    """A glowing, absorbing layer (emission e W/(m^3 sr), sigma_a, thickness H, 16 m wide)
+    just above a Lambertian ground, no lights, black world: every direction above the ground
+    sees L(theta) = e/sigma_a (1 - exp(-sigma_a l(theta))) with l the path through the layer,
+    so the ground reflects albedo/pi x int L cos dw (computed here by quadrature over the
+    hemisphere, the layer's sides included).  The renderer gathers that light with one
+    cosine-distributed march per sample (surfaces.shade's media_radiance); without it the
+    ground would be black.  Seen from above through the layer, the ground's part of Combined
+    is T x that radiance with T = exp(-sigma_a H).  Measured 0.998 of the quadrature with 64
+    samples x 64 pixels (4096 gathering marches); 5 % allowed."""
+    e, sigma_a, H, half, albedo = 0.4, 2.0, 0.5, 8.0, 0.5
+    n = (32, 32, 4)
+    i2w = np.eye(4)
+    i2w[:3, :3] = np.diag([2 * half / n[0], 2 * half / n[1], H / n[2]])
+    i2w[:3, 3] = [-half + half / n[0], -half + half / n[1], 0.001 + H / (2 * n[2])]
+    layer = Medium("glow", np.ones(n, np.float32), i2w, np.zeros(3), np.full(3, sigma_a), 0.0,
+                   emission=np.full(3, e), source="MESH")
+    cam = Camera("ORTHO", np.eye(4), 8, 8, (-0.5, 0.5, -0.5, 0.5))
+    cam.cam_to_world[:3, 3] = [0, 0, 10]
+    desc = SceneDescription(cam, [], [layer], surfaces=[quad(0.0, 12.0, albedo=albedo)],
+                            world=World(np.zeros(3)), settings=Settings(samples=64, multiple=False))
+    out = render(desc).passes
+    T = out["Transmittance"][..., 0]
+    assert np.allclose(T, math.exp(-sigma_a * H), rtol=1e-3)
+    ground = ((out["Combined"][..., :3] - out["Emission"]) / T[..., None]).mean()
+    # quadrature: directions (theta, phi) from the ground at the centre
+    th = (np.arange(2000) + 0.5) / 2000 * (math.pi / 2)
+    ph = (np.arange(720) + 0.5) / 720 * (2 * math.pi)
+    TH, PH = np.meshgrid(th, ph, indexing="ij")
+    up = np.cos(TH)
+    side = np.sin(TH) * np.maximum(np.abs(np.cos(PH)), np.abs(np.sin(PH)))
+    with np.errstate(divide="ignore"):
+        length = np.minimum(H / up, np.where(side > 0, half / side, np.inf))   # through the top or a side
+    L = e / sigma_a * -np.expm1(-sigma_a * length)
+    irradiance = np.sum(L * np.cos(TH) * np.sin(TH)) * (math.pi / 2 / 2000) * (2 * math.pi / 720)
+    want = albedo / math.pi * irradiance
+    print("ground / quadrature:", ground / want)
+    assert abs(ground / want - 1.0) < 0.05, (ground, want)
