@@ -44,6 +44,19 @@ def c_optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step
     return np.frombuffer(buf, np.float64).reshape(n, 3)
 
 
+def c_light_sweep(out, channel, a2w, axis, sign, i_first, i_last, coef, light_index, cone, init,
+                  p_lo, p_hi, n_sub, grids, w2is, sigma_ts, thresholds):
+    if not (isinstance(out, np.ndarray) and out.dtype == np.float32 and out.flags.c_contiguous
+            and out.flags.writeable and out.ndim == 4):
+        raise ValueError("light_sweep: out must be a writable C-contiguous (X,Y,Z,C) float32 array")
+    init = _f64(init)
+    _c.light_sweep(out, int(channel), _f64(a2w).reshape(3, 4), int(axis), int(sign), int(i_first),
+                   int(i_last), _f64(coef).reshape(6), _f64(light_index).reshape(3), int(bool(cone)),
+                   init, int(p_lo), int(p_hi), int(n_sub), [_f32(g) for g in grids],
+                   [_f64(w) for w in w2is], [_f64(s).reshape(3) for s in sigma_ts],
+                   [float(t) for t in thresholds])
+
+
 def c_march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs,
             thresholds, voxels, lights, ambient, step, depth_opacity, depth_miss, multiple=None,
             emissions=None):
@@ -77,7 +90,8 @@ def c_march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts
             np.frombuffer(k, np.float64).reshape(n), np.frombuffer(e, np.float64).reshape(n, 3))
 
 
-_C_WRAPPERS = {"optical_depth": c_optical_depth, "march": c_march}
+_C_WRAPPERS = {"optical_depth": c_optical_depth, "march": c_march,
+               "light_sweep": c_light_sweep}
 
 
 def get(name: str):

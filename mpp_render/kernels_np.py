@@ -84,6 +84,123 @@ def optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, 
     return tau
 
 
+def _other_axes(axis):
+    """The two index axes (b, c) across slabs of ``axis``, in increasing order."""
+    return (1, 2) if axis == 0 else ((0, 2) if axis == 1 else (0, 1))
+
+
+def column_index(axis, coef, i, p, q):
+    """Index coordinates (..., 3) in the target grid of sweep columns ``p``, ``q`` (arrays of
+    column numbers) on slab ``i``: along ``axis`` the slab, across it
+    (coef[0] + i coef[2] + B p, coef[1] + i coef[3] + B q) with spacing B = coef[4] + i coef[5]
+    (B = 1 for parallel columns, B proportional to the distance from the light for columns
+    fanning out from a point)."""
+    bax, cax = _other_axes(axis)
+    p, q = np.broadcast_arrays(np.asarray(p, np.float64), np.asarray(q, np.float64))
+    b = coef[4] + i * coef[5]
+    idx = np.empty(p.shape + (3,))
+    idx[..., axis] = i
+    idx[..., bax] = coef[0] + i * coef[2] + b * p
+    idx[..., cax] = coef[1] + i * coef[3] + b * q
+    return idx
+
+
+def segment_tau(grids, w2is, sigma_ts, thresholds, P, D, n_sub, vprev, tau):
+    """Add to ``tau`` (N,3) the optical depth of the segments P -> P + D (world (N,3), D not
+    unit) through every medium, each cut into ``n_sub`` equal pieces: Simpson's rule on smooth
+    grids (exact for the cubic that trilinear interpolation is along a line within a cell),
+    ``inside_fraction`` on sharp ones.  ``vprev`` (N, media): channel 0 of each medium at P on
+    entry, at P + D on return (updated in place)."""
+    n = len(P)
+    length = np.sqrt(np.einsum("ij,ij->i", D, D)) / n_sub
+    for u in range(n_sub):
+        sa, sb = u / n_sub, (u + 1) / n_sub
+        for m, (g, w2i, st, thr) in enumerate(zip(grids, w2is, sigma_ts, thresholds)):
+            def value(s, rows=slice(None), g=g, w2i=w2i):
+                x = P[rows] + D[rows] * s[:, None]
+                return trilinear(g, x @ w2i[:, :3].T + w2i[:, 3])
+            va = vprev[:, m].copy()
+            vb = value(np.full(n, sb))
+            if thr >= 0.0:
+                rho = inside_fraction(value, np.full(n, sa), np.full(n, sb), va, vb, thr)
+            else:
+                rho = (va + 4.0 * value(np.full(n, 0.5 * (sa + sb))) + vb) / 6.0
+            tau += rho[:, None] * np.asarray(st, np.float64)[None, :] * length[:, None]
+            vprev[:, m] = vb
+
+
+def light_sweep(out, channel, a2w, axis, sign, i_first, i_last, coef, light_index, cone, init,
+                p_lo, p_hi, n_sub, grids, w2is, sigma_ts, thresholds):
+    """Optical depth towards a light for the voxels of one grid, written into
+    ``out[..., channel:channel + 3]`` (``out``: (X,Y,Z,C) float32, the medium's field).
+
+    The light's rays are followed as *columns*, numbered (p, q) on a lattice, from slab
+    ``i_first`` (nearest the light) to slab ``i_last`` of the grid along ``axis`` (``sign``
+    +1 or -1 the direction of travel); column (p, q) crosses slab i at ``column_index``
+    (index coordinates of the grid; ``a2w`` (3,4) maps them to world metres).  Each column
+    starts with ``init[p, q]`` (RGB optical depth from its point on slab i_first to the light,
+    computed by the caller) and adds, slab to slab, the optical depth of the segment between
+    (``segment_tau`` through every medium of ``grids``, ``n_sub`` pieces per segment).  Every
+    voxel of a slab then takes the bilinear interpolation of the four columns around it on
+    that slab.  (The compiled twin skips segments outside every medium's box, which add 0.)
+
+    Only columns p in [p_lo, p_hi] are followed, and only voxels whose cell floor(p) lies in
+    [p_lo, p_hi) are written (a partition of the cells [0, P - 1) lets chunks run in
+    parallel).  With ``cone`` only the voxels whose largest index offset from
+    ``light_index`` (the light in index coordinates) is along ``axis`` with sign ``sign``
+    are written (ties go to the later axis), the part of space this pyramid of columns
+    covers; otherwise (a sun) every voxel."""
+    dims = out.shape[:3]
+    bax, cax = _other_axes(axis)
+    NP, NQ = init.shape[:2]
+    ps = np.arange(p_lo, p_hi + 1, dtype=np.float64)
+    qs = np.arange(NQ, dtype=np.float64)
+    PP, QQ = np.meshgrid(ps, qs, indexing="ij")
+    PP, QQ = PP.ravel(), QQ.ravel()
+    tau = np.array(init[p_lo:p_hi + 1].reshape(-1, 3), np.float64)
+    a2w = np.asarray(a2w, np.float64)
+
+    def world(i):
+        return column_index(axis, coef, float(i), PP, QQ) @ a2w[:, :3].T + a2w[:, 3]
+
+    x = world(i_first)
+    vprev = np.stack([trilinear(g, x @ w[:, :3].T + w[:, 3]) for g, w in zip(grids, w2is)], 1)         if len(grids) else np.zeros((len(x), 0))
+    J = np.arange(dims[bax], dtype=np.float64)[:, None]
+    K = np.arange(dims[cax], dtype=np.float64)[None, :]
+    i = i_first
+    while True:
+        if i != i_first:
+            P = world(i - sign)
+            segment_tau(grids, w2is, sigma_ts, thresholds, P, world(i) - P, n_sub, vprev, tau)
+        Bi, Ab, Ac = coef[4] + i * coef[5], coef[0] + i * coef[2], coef[1] + i * coef[3]
+        iB = 1.0 / Bi
+        p = np.broadcast_to((J - Ab) * iB, (dims[bax], dims[cax]))
+        q = np.broadcast_to((K - Ac) * iB, (dims[bax], dims[cax]))
+        pcell = np.clip(np.floor(p), 0, NP - 2).astype(np.int64)
+        qcell = np.clip(np.floor(q), 0, NQ - 2).astype(np.int64)
+        mine = (pcell >= p_lo) & (pcell < p_hi)
+        if cone:
+            da = i - light_index[axis]
+            db, dc = np.abs(J - light_index[bax]), np.abs(K - light_index[cax])
+            okb = abs(da) > db if bax < axis else abs(da) >= db
+            okc = abs(da) > dc if cax < axis else abs(da) >= dc
+            mine &= (sign * da > 0.0) & okb & okc
+        jj, kk = np.nonzero(mine)
+        if jj.size:
+            fp = np.clip(p[jj, kk] - pcell[jj, kk], 0.0, 1.0)[:, None]
+            fq = np.clip(q[jj, kk] - qcell[jj, kk], 0.0, 1.0)[:, None]
+            c00 = (pcell[jj, kk] - p_lo) * NQ + qcell[jj, kk]
+            t = ((1.0 - fp) * ((1.0 - fq) * tau[c00] + fq * tau[c00 + 1])
+                 + fp * ((1.0 - fq) * tau[c00 + NQ] + fq * tau[c00 + NQ + 1]))
+            vox = [None, None, None]
+            vox[axis] = np.full(jj.size, i)
+            vox[bax], vox[cax] = jj, kk
+            out[vox[0], vox[1], vox[2], channel:channel + 3] = t.astype(np.float32)
+        if i == i_last:
+            break
+        i += sign
+
+
 # ---------------------------------------------------------------------------------------------
 # Counter-based random numbers shared by both twins: u = hash(key, step, dim) in [0, 1).
 # ``lowbias32`` (C. Wellons' integer hash); all arithmetic wraps modulo 2^32.

@@ -79,9 +79,15 @@ def prepare(medium: Medium, warnings=None) -> PreparedMedium:
     voxel = float(np.min(np.linalg.norm(i2w[:3, :3], axis=0)))
     ss = np.asarray(medium.sigma_s, np.float64).reshape(3)
     sa = np.asarray(medium.sigma_a, np.float64).reshape(3)
-    thr = 0.5 if medium.source == "MESH" else -1.0
+    thr = SHARP_THRESHOLD if medium.source == "MESH" else -1.0
     return PreparedMedium(medium, np.ascontiguousarray(grid), np.ascontiguousarray(w2i), i2w,
                           ss, sa, ss + sa, clamp_g(float(medium.g)), voxel, thr)
+
+
+# A mesh volume's surface is where its interpolated occupancy crosses one half.  The test is
+# v >= 0.5 - 1e-9 rather than v >= 0.5: grid-aligned faces put many sample points exactly on
+# 0.5, and there the two kernel twins' different rounding would otherwise decide differently.
+SHARP_THRESHOLD = 0.5 - 1e-9
 
 
 def density_from(value, threshold: float):

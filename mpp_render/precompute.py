@@ -24,7 +24,7 @@ from typing import Callable, List, Optional
 
 import numpy as np
 
-from . import kernels
+from . import kernels, kernels_np
 from .lights import is_dark, towards_light
 from .media import PreparedMedium, trilinear, union_interval
 from .phase import sample_hg
@@ -61,12 +61,9 @@ class Precomputed:
 
 def needed_points(pm: PreparedMedium):
     """Flat indices and world positions of the padded grid points whose trilinear
-    neighbourhood holds non-zero density."""
-    occ = pm.grid > 0.0
-    dil = occ.copy()
-    for ax in range(3):  # one-voxel dilation: any neighbour cell with density counts
-        for s in (1, -1):
-            dil |= np.roll(occ, s, axis=ax)
+    neighbourhood holds non-zero density: every point of a cell with a non-zero corner (the
+    3x3x3 dilation of the occupied points, diagonal neighbours included)."""
+    dil = _dilate(pm.grid > 0.0)
     flat = np.flatnonzero(dil)
     ijk = np.stack(np.unravel_index(flat, pm.grid.shape), axis=1).astype(np.float64)
     world = ijk @ pm.i2w[:3, :3].T + pm.i2w[:3, 3]
@@ -274,48 +271,220 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
     return MultipleField(stride, h, levels)
 
 
-BAND = 3           # voxels from a sharp surface whose optical depth is computed exactly
-INTERIOR_MIN = 1 << 17  # needed points from which a sharp medium's interior goes coarse
+@dataclass
+class SweepPyramid:
+    """One pyramid of light columns for ``kernels.light_sweep``: slabs along ``axis`` from
+    ``i_first`` to ``i_last`` (travelling ``sign`` = +1 or -1, away from the light), the
+    column lattice ``n_p`` x ``n_q`` placed by ``coef`` (kernels_np.column_index), ``cone``
+    for columns fanning out from a point (only the voxels of this pyramid are written)."""
+
+    axis: int
+    sign: int
+    i_first: int
+    i_last: int
+    coef: np.ndarray
+    n_p: int
+    n_q: int
+    cone: bool
 
 
-def interior_plan(pm: PreparedMedium, flat):
-    """For a large sharp (mesh) medium: which needed points lie deeper than ``BAND`` voxels
-    inside (their optical depth to a light is smooth there: piecewise linear, read from a
-    lattice two voxels apart) and the lattice itself.  None when everything is exact."""
-    if not pm.sharp or len(flat) < INTERIOR_MIN:
+def _lattice(lo, hi):
+    """First column number and count of a lattice (spacing 1) covering [lo, hi]."""
+    first = int(np.floor(lo))
+    return first, max(2, int(np.ceil(hi)) - first + 1)
+
+
+def light_position(light: Light):
+    """World position of a local light's centre (the point optical depths are taken to)."""
+    m = np.asarray(light.matrix, np.float64)
+    return m[:3, 3] if light.kind == "AREA" else np.asarray(light.position, np.float64)
+
+
+def sweep_pyramids(pm: PreparedMedium, light: Light):
+    """(pyramids, light in index coordinates) for sweeping ``light`` over ``pm``'s padded
+    grid, or None when the light cannot be swept (non-finite or astronomically far: the
+    caller then marches every voxel exactly).
+
+    A sun gives one pyramid of parallel columns along the grid axis closest to its
+    direction; a local light up to six, one per axis and side, fanning out from its centre,
+    each covering the voxels whose largest offset from the light is along its axis."""
+    shape = pm.grid.shape
+    if light.kind == "SUN":
+        d = -np.asarray(light.direction, np.float64)
+        u = pm.w2i[:, :3] @ d  # index-space direction towards the sun
+        if not np.all(np.isfinite(u)):
+            return None
+        axis = int(np.argmax(np.abs(u)))
+        if not abs(u[axis]) > 0.0:
+            return None
+        sign = -1 if u[axis] > 0 else 1
+        i_first, i_last = (0, shape[axis] - 1) if sign > 0 else (shape[axis] - 1, 0)
+        coef = np.zeros(6)
+        coef[4] = 1.0
+        counts = []
+        for slot, e in enumerate(kernels_np._other_axes(axis)):
+            slope = u[e] / u[axis]
+            # column p sits at p + first + (i - i_first) slope on slab i: cover every voxel
+            ends = [j - (i - i_first) * slope for j in (0, shape[e] - 1) for i in (i_first, i_last)]
+            first, n = _lattice(min(ends), max(ends))
+            coef[slot] = first - i_first * slope
+            coef[2 + slot] = slope
+            counts.append(n)
+        return [SweepPyramid(axis, sign, i_first, i_last, coef, counts[0], counts[1], False)], \
+            np.zeros(3)
+    c = light_position(light)
+    L = pm.w2i[:, :3] @ c + pm.w2i[:, 3]
+    if not np.all(np.isfinite(L)) or np.max(np.abs(L)) > 1e9:
         return None
-    occ = pm.grid >= pm.threshold
-    near_out = ~occ
+    out = []
+    for axis in range(3):
+        n_a = shape[axis]
+        for sign in (1, -1):
+            far = n_a - 1 if sign > 0 else 0
+            d_far = sign * (far - L[axis])
+            if not d_far > 0.0:
+                continue
+            i_first = max(0, int(np.floor(L[axis])) + 1) if sign > 0 else \
+                min(n_a - 1, int(np.ceil(L[axis])) - 1)
+            if not (0 <= i_first < n_a) or not sign * (i_first - L[axis]) > 0.0:
+                continue
+            coef = np.zeros(6)
+            coef[4] = -L[axis] / (far - L[axis])
+            coef[5] = 1.0 / (far - L[axis])
+            counts = []
+            for slot, e in enumerate(kernels_np._other_axes(axis)):
+                if L[e] - d_far > shape[e] - 1 or L[e] + d_far < 0:
+                    break  # the cone misses the grid
+                # voxels project from the light onto the far slab; the extremes come from
+                # the corners of the box between the first and the far slab
+                proj = [L[e] + (j - L[e]) * (far - L[axis]) / (i - L[axis])
+                        for j in (0, shape[e] - 1) for i in (i_first, far)]
+                first, n = _lattice(max(min(proj), L[e] - d_far), min(max(proj), L[e] + d_far))
+                coef[slot] = L[e] + coef[4] * (first - L[e])
+                coef[2 + slot] = coef[5] * (first - L[e])
+                counts.append(n)
+            if len(counts) == 2:
+                out.append(SweepPyramid(axis, sign, i_first, far, coef, counts[0], counts[1], True))
+    return out, L
+
+
+SWEEP_PIECE = 2.0  # longest piece of a column segment, in precompute steps (Simpson's rule)
+
+
+def _sub_steps(pm: PreparedMedium, pyr: SweepPyramid, step: float) -> int:
+    """Pieces per slab-to-slab segment so that none is longer than ``SWEEP_PIECE`` steps of
+    ``step`` metres (the longest segment is at a corner column of the lattice)."""
+    longest = 0.0
+    for p in (0, pyr.n_p - 1):
+        for q in (0, pyr.n_q - 1):
+            a = kernels_np.column_index(pyr.axis, pyr.coef, float(pyr.i_first), p, q)
+            b = kernels_np.column_index(pyr.axis, pyr.coef, float(pyr.i_first + pyr.sign), p, q)
+            longest = max(longest, float(np.linalg.norm(pm.i2w[:3, :3] @ (b - a))))
+    return max(1, int(np.ceil(longest / (SWEEP_PIECE * step) - 1e-9)))
+
+
+def _dilate(mask):
+    """3x3x3 dilation of a boolean grid (its outer layer is padding: np.roll's wrap is harmless)."""
     for ax in range(3):
-        acc = near_out.copy()
-        for sft in range(1, BAND + 1):
-            acc |= np.roll(near_out, sft, axis=ax) | np.roll(near_out, -sft, axis=ax)
-        near_out = acc
-    deep = (occ & ~near_out).reshape(-1)[flat]
-    if deep.sum() < len(flat) // 4:
-        return None
-    return deep, coarse_lattice(pm, 2)
+        mask = mask | np.roll(mask, 1, axis=ax) | np.roll(mask, -1, axis=ax)
+    return mask
 
 
-def light_field(media, pm, light, flat, pts, step, plan, **kw):
-    """Optical depth (N,3) of ``light`` at the needed points ``pts``: exact, except in a
-    large sharp medium's interior (interior_plan), where it is interpolated from a lattice
-    two voxels apart.  None when cancelled."""
+def near_sharp_surfaces(pm: PreparedMedium, media: List[PreparedMedium]):
+    """Flat indices of ``pm``'s voxels next to a sharp (mesh) surface: its own inside voxels
+    with an outside voxel among their 26 neighbours, and its voxels within one voxel of the
+    surface of any other sharp medium in ``media``."""
+    out = np.zeros(pm.grid.shape, bool)
+    if pm.sharp:
+        inside = pm.grid >= pm.threshold
+        out |= inside & _dilate(~inside)
+    others = [m for m in media if m is not pm and m.sharp]
+    if others:
+        ijk = np.stack(np.meshgrid(*[np.arange(n, dtype=np.float64) for n in pm.grid.shape],
+                                   indexing="ij"), -1).reshape(-1, 3)
+        world = ijk @ pm.i2w[:3, :3].T + pm.i2w[:3, 3]
+        for m in others:
+            inside = (trilinear(m.grid, world @ m.w2i[:, :3].T + m.w2i[:, 3]) >= m.threshold)
+            inside = inside.reshape(pm.grid.shape)
+            out |= _dilate(inside) & _dilate(~inside)
+    return np.flatnonzero(out)
+
+
+SWEEP_CELLS = 16  # column cells per sweep chunk (at least): chunks run in parallel, Esc between
+
+
+def sweep_light(media: List[PreparedMedium], pm: PreparedMedium, light: Light, field: np.ndarray,
+                channel: int, step: float, surfaces=None, threads=0, should_cancel=None,
+                needed=None):
+    """Fill ``field[..., channel:channel+3]`` with the RGB optical depth from every voxel of
+    ``pm``'s grid to ``light`` through all media, with ``kernels.light_sweep``: the light's
+    rays are followed slab by slab across the grid, so the cost is that of a few passes over
+    the grid instead of one march per voxel.  Each column starts from the exact optical depth
+    of its first point (``light_optical_depth``: the media between the grid and the light)
+    and every voxel interpolates the four columns around it on its slab.
+
+    ``SHADOW_TAU`` is added where an opaque surface (``surfaces``) lies between a voxel and
+    the light, tested per voxel at ``needed`` = (flat indices, world points) (all voxels by
+    default), as before the sweep: shadow edges stay sharp.  Returns True when done, False
+    when cancelled, None when the light cannot be swept (the caller then marches every
+    voxel)."""
+    plan = sweep_pyramids(pm, light)
     if plan is None:
-        return light_optical_depth(media, light, pts, step, **kw)
-    deep, (cshape, cflat, cpts) = plan
-    out = np.zeros((len(pts), 3))
-    band = np.flatnonzero(~deep)
-    exact = light_optical_depth(media, light, pts[band], step, **kw)
-    coarse = light_optical_depth(media, light, cpts, step, **kw) if exact is not None else None
-    if coarse is None:
         return None
-    out[band] = exact
-    lattice = np.zeros((int(np.prod(cshape)), 3), np.float32)
-    lattice[cflat] = coarse
-    fine = upsample(lattice.reshape(cshape + (3,)), 2, pm.grid.shape).reshape(-1, 3)
-    out[deep] = fine[flat[deep]]
-    return out
+    pyramids, L = plan
+    sweep = kernels.get("light_sweep")
+    grids, w2is, sigmas, thrs = kernel_arrays(media)
+    a2w = pm.i2w[:3, :]
+    n_threads = threads if threads > 0 else (os.cpu_count() or 1)
+    jobs = []
+    for pyr in pyramids:
+        pq = np.stack(np.meshgrid(np.arange(pyr.n_p), np.arange(pyr.n_q), indexing="ij"), -1)
+        idx = kernels_np.column_index(pyr.axis, pyr.coef, float(pyr.i_first), pq[..., 0], pq[..., 1])
+        start = idx.reshape(-1, 3) @ a2w[:, :3].T + a2w[:, 3]
+        init = light_optical_depth(media, light, start, step, should_cancel=should_cancel,
+                                   threads=threads)
+        if init is None:
+            return False
+        n_sub = _sub_steps(pm, pyr, step)
+        cells = pyr.n_p - 1
+        per = max(SWEEP_CELLS, -(-cells // (4 * n_threads)))
+        for a in range(0, cells, per):
+            jobs.append((pyr, init.reshape(pyr.n_p, pyr.n_q, 3), a, min(cells, a + per), n_sub))
+
+    def work(a, b):
+        for pyr, init, p_lo, p_hi, n_sub in jobs[a:b]:
+            sweep(field, channel, a2w, pyr.axis, pyr.sign, pyr.i_first, pyr.i_last, pyr.coef, L,
+                  pyr.cone, init, p_lo, p_hi, n_sub, grids, w2is, sigmas, thrs)
+
+    if not run_chunks(len(jobs), 1, work, threads, should_cancel):
+        return False
+    if pm.sharp or any(m.sharp for m in media):
+        # The optical depth bends sharply at a mesh volume's surface, which the columns'
+        # interpolation would smear over a voxel; the voxels there (for the medium's own
+        # surface its inside layer, what the march reads once its refinement, march.py, has
+        # stepped off the surface) march exactly.
+        flat = near_sharp_surfaces(pm, media)
+        ijk = np.stack(np.unravel_index(flat, pm.grid.shape), axis=1).astype(np.float64)
+        tau = light_optical_depth(media, light, ijk @ pm.i2w[:3, :3].T + pm.i2w[:3, 3], step,
+                                  should_cancel=should_cancel, threads=threads)
+        if tau is None:
+            return False
+        field.reshape(-1, field.shape[-1])[flat, channel:channel + 3] = tau
+    if surfaces is not None and not surfaces.empty:
+        if needed is None:
+            flat = np.arange(int(np.prod(pm.grid.shape)))
+            ijk = np.stack(np.unravel_index(flat, pm.grid.shape), axis=1).astype(np.float64)
+            needed = flat, ijk @ pm.i2w[:3, :3].T + pm.i2w[:3, 3]
+        flat, pts = needed
+        view = field.reshape(-1, field.shape[-1])
+
+        def shadow(a, b):
+            d, limit = towards_light(light, pts[a:b])
+            view[flat[a:b], channel:channel + 3] += \
+                np.float32(SHADOW_TAU) * occluded(surfaces, pts[a:b], d, limit)[:, None]
+
+        return run_chunks(len(flat), 1 << 14, shadow, threads, should_cancel)
+    return True
 
 
 def upsample(lattice: np.ndarray, stride: int, shape) -> np.ndarray:
@@ -389,18 +558,22 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
         f[..., 0] = pm.grid
         flat, pts = needed_points(pm)
         n_pts += len(pts)
-        plan = interior_plan(pm, flat)
         view = f.reshape(-1, c)
         for li, light in enumerate(lights):
             if chans[li] is None:
                 continue
             if progress:
                 progress(0.0, f"Light attenuation: {light.name} on {pm.medium.name}")
-            tau = light_field(media, pm, light, flat, pts, step, plan, should_cancel=should_cancel,
-                              surfaces=surfaces, threads=threads)
-            if tau is None:
+            swept = sweep_light(media, pm, light, f, chans[li], step, surfaces=surfaces,
+                                threads=threads, should_cancel=should_cancel, needed=(flat, pts))
+            if swept is False:
                 return None
-            view[flat, chans[li]:chans[li] + 3] = tau
+            if swept is None:  # not sweepable: march from every needed voxel
+                tau = light_optical_depth(media, light, pts, step, should_cancel=should_cancel,
+                                          surfaces=surfaces, threads=threads)
+                if tau is None:
+                    return None
+                view[flat, chans[li]:chans[li] + 3] = tau
         if amb is not None:
             if progress:
                 progress(0.0, f"World light on {pm.medium.name}")
