@@ -109,6 +109,14 @@ static inline void to_index(const Grid *g, const double x[3], double idx[3]) {
         idx[r] = g->w2i[4 * r] * x[0] + g->w2i[4 * r + 1] * x[1] + g->w2i[4 * r + 2] * x[2] + g->w2i[4 * r + 3];
 }
 
+/* floor(v) clamped to [lo, hi] (lo for NaN): a safe index from any double. */
+static inline Py_ssize_t floor_clamp(double v, Py_ssize_t lo, Py_ssize_t hi) {
+    double f = floor(v);
+    if (!(f > (double)lo)) return lo;
+    if (f > (double)hi) return hi;
+    return (Py_ssize_t)f;
+}
+
 /* Parse parallel lists of grids, (3,4) maps and RGB coefficients. `nchan` = channels per voxel
  * (grids are (X,Y,Z) when nchan == 0, else (X,Y,Z,nchan) with nchan >= 1 accepted as any). */
 static int parse_grids(PyObject *grids, PyObject *w2is, PyObject *sigs, PyObject *thrs, Grid *out,
@@ -211,22 +219,172 @@ static inline double inside_fraction(const Grid *g, const double o[3], const dou
     return (ia ? cross - sa : sb - cross) / len;
 }
 
+/* ---- Empty and constant space (twin of kernels_np.Walk) ----
+ * Per medium an optional coarse grid of density bounds (media.brick_bounds): brick b covers
+ * the index cells [b B, (b + 1) B] and holds [least, largest] density of its points. */
+typedef struct {
+    const float *data;   /* (n[0], n[1], n[2], 2) or NULL: no bricks, the box is "varying" */
+    Py_ssize_t n[3];
+    double size;         /* B, cells per brick edge */
+} Bricks;
+
+#define EMPTY_MAX_BRICKS 100000  /* DDA steps per call at most (a bounded loop) */
+#define KIND_EMPTY 0
+#define KIND_CONST 1
+#define KIND_VARYING 2
+
+/* Parse `list` (None, or one float32 (bx, by, bz, 2) per grid with b = ceil((n - 1) / brick)). */
+static int parse_bricks(PyObject *list, int brick, const Grid *g, int ng, Bricks *out, Buf *bufs,
+                        int *nheld) {
+    *nheld = 0;
+    for (int m = 0; m < ng; m++) { out[m].data = NULL; out[m].size = 1.0; }
+    if (list == NULL || list == Py_None) return 0;
+    if (!PyList_Check(list) || PyList_GET_SIZE(list) != ng || brick < 1 || brick > 4096) {
+        PyErr_SetString(PyExc_ValueError, "bricks: one array per medium and 1 <= brick <= 4096");
+        return -1;
+    }
+    for (int m = 0; m < ng; m++) {
+        Py_ssize_t dims[3] = {g[m].nx, g[m].ny, g[m].nz}, sh[4];
+        for (int a = 0; a < 3; a++) {
+            Py_ssize_t nb = (dims[a] - 1 + brick - 1) / brick;
+            sh[a] = nb < 1 ? 1 : nb;
+        }
+        sh[3] = 2;
+        if (get_buf(PyList_GET_ITEM(list, m), &bufs[m], 'f', 4, sh, "bricks") < 0) return -1;
+        *nheld = m + 1;
+        out[m].data = (const float *)bufs[m].view.buf;
+        for (int a = 0; a < 3; a++) out[m].n[a] = sh[a];
+        out[m].size = (double)brick;
+    }
+    return 0;
+}
+
+/* A walk along the line o + s v (s increasing) of one grid's index coordinates through its
+ * bricks: it cuts the line into stretches of whole bricks that surely hold no density
+ * (empty), hold one constant density (const: every brick's least = largest = value) or may
+ * vary.  A brick's far face is computed afresh from its index, (face - o) * (1 / v), so both
+ * twins find the same s. */
+typedef struct {
+    const Bricks *b;
+    double o[3], inv[3];
+    int dir[3];
+    double sa, sb;          /* the line's interval inside the padded box (sa > sb: misses) */
+    Py_ssize_t idx[3];      /* the brick just past the current stretch */
+    double end;             /* where the current stretch ends */
+    int kind;               /* the current stretch's kind */
+    double value;           /* its density when const */
+    int state;              /* 0 not started, 1 walking, 2 past the box */
+} Walk;
+
+static void walk_init(Walk *w, const Grid *g, const Bricks *b, const double o[3], const double v[3]) {
+    double dims[3] = {(double)(g->nx - 1), (double)(g->ny - 1), (double)(g->nz - 1)};
+    w->b = b;
+    w->sa = -INFINITY;
+    w->sb = INFINITY;
+    w->state = 0;
+    w->end = -INFINITY;
+    w->kind = KIND_VARYING;
+    w->value = 0.0;
+    for (int a = 0; a < 3; a++) {
+        w->o[a] = o[a];
+        w->dir[a] = v[a] > 1e-300 ? 1 : (v[a] < -1e-300 ? -1 : 0);
+        w->inv[a] = w->dir[a] ? 1.0 / v[a] : 0.0;
+        if (!w->dir[a]) {
+            if (!(o[a] >= 0.0 && o[a] <= dims[a])) { w->sa = INFINITY; w->sb = -INFINITY; }
+            continue;
+        }
+        double t0 = (0.0 - o[a]) * w->inv[a], t1 = (dims[a] - o[a]) * w->inv[a];
+        if (t0 > t1) { double t = t0; t0 = t1; t1 = t; }
+        if (t0 > w->sa) w->sa = t0;
+        if (t1 < w->sb) w->sb = t1;
+    }
+    if (!(w->sa <= w->sb)) { w->sa = INFINITY; w->sb = -INFINITY; }
+}
+
+/* s at which the walk leaves brick idx (its nearest face ahead) and the axis crossed. */
+static inline double brick_exit(const Walk *w, const Py_ssize_t idx[3], int *axis) {
+    double best = INFINITY;
+    *axis = -1;
+    for (int a = 0; a < 3; a++) {
+        if (!w->dir[a]) continue;
+        double face = (double)(w->dir[a] > 0 ? idx[a] + 1 : idx[a]) * w->b->size;
+        double t = (face - w->o[a]) * w->inv[a];
+        if (t < best) { best = t; *axis = a; }
+    }
+    return best;
+}
+
+static inline int brick_kind(const Bricks *b, const Py_ssize_t idx[3], double *value) {
+    const float *e = b->data + ((idx[0] * b->n[1] + idx[1]) * b->n[2] + idx[2]) * 2;
+    *value = (double)e[1];
+    if (!(e[1] > 0.0f)) return KIND_EMPTY;
+    return e[0] == e[1] ? KIND_CONST : KIND_VARYING;
+}
+
+/* The next stretch of the walk from brick w->idx (entered at `from`): a run of bricks of the
+ * same kind (and value, when const); past the box everything is empty. */
+static void walk_next(Walk *w, double from) {
+    const Bricks *b = w->b;
+    if (w->state == 2) { w->kind = KIND_EMPTY; w->value = 0.0; w->end = INFINITY; return; }
+    w->kind = brick_kind(b, w->idx, &w->value);
+    double e = from;
+    for (int it = 0; it < EMPTY_MAX_BRICKS; it++) {
+        int ax;
+        double x = brick_exit(w, w->idx, &ax), val;
+        e = x > e ? x : e;
+        if (ax < 0 || !(e < w->sb)) { w->state = 2; break; }
+        w->idx[ax] += w->dir[ax];
+        if (w->idx[ax] < 0 || w->idx[ax] >= b->n[ax]) { w->state = 2; break; }
+        int k = brick_kind(b, w->idx, &val);
+        if (k != w->kind || (k == KIND_CONST && val != w->value)) break;
+    }
+    if (w->state == 2) w->end = (w->kind == KIND_EMPTY) ? INFINITY : (e < w->sb ? e : w->sb);
+    else w->end = e;
+}
+
+/* The kind of the stretch holding s (calls come with non-decreasing s); *end: where it ends
+ * (INFINITY: empty from there on), *value: its density when const. */
+static int walk_at(Walk *w, double s, double *end, double *value) {
+    *value = 0.0;
+    if (!(s < w->sb)) { *end = INFINITY; return KIND_EMPTY; }
+    if (s < w->sa) { *end = w->sa; return KIND_EMPTY; }
+    if (!w->b->data) { *end = w->sb; return KIND_VARYING; }
+    if (w->state == 0) {
+        for (int a = 0; a < 3; a++) {
+            double v = w->dir[a] ? 1.0 / w->inv[a] : 0.0;
+            w->idx[a] = floor_clamp((w->o[a] + s * v) / w->b->size, 0, w->b->n[a] - 1);
+        }
+        w->state = 1;
+        walk_next(w, s);
+    }
+    for (int it = 0; it < EMPTY_MAX_BRICKS && !(s < w->end); it++) walk_next(w, w->end);
+    if (!(s < w->end)) { *end = INFINITY; return KIND_EMPTY; }
+    *end = w->end;
+    *value = w->value;
+    return w->kind;
+}
+
 static const char optical_depth_doc[] =
-    "optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, offset) -> (N,3) float64\n"
-    "Twin of kernels_np.optical_depth.";
+    "optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, offset[, bricks, brick])\n"
+    "  -> (N,3) float64\n"
+    "Twin of kernels_np.optical_depth; with bricks (media.brick_bounds per grid) the steps that lie\n"
+    "wholly in empty or constant bricks are added in one go.";
 
 static PyObject *optical_depth(PyObject *self, PyObject *args) {
-    PyObject *po, *pd, *pt, *grids, *w2is, *sigs, *thrs;
+    PyObject *po, *pd, *pt, *grids, *w2is, *sigs, *thrs, *pbk = Py_None;
     double step, offset;
-    if (!PyArg_ParseTuple(args, "OOOOOOOdd", &po, &pd, &pt, &grids, &w2is, &sigs, &thrs, &step, &offset))
+    int brick = 4;
+    if (!PyArg_ParseTuple(args, "OOOOOOOdd|Oi", &po, &pd, &pt, &grids, &w2is, &sigs, &thrs, &step,
+                          &offset, &pbk, &brick))
         return NULL;
     if (!(step > 0.0) || !isfinite(step) || !(offset >= 0.0 && offset <= 1.0)) {
         PyErr_SetString(PyExc_ValueError, "step must be > 0 and offset in [0, 1]");
         return NULL;
     }
-    Buf bp = {0}, bd = {0}, bt = {0}, gb[MAX_MEDIA];
+    Buf bp = {0}, bd = {0}, bt = {0}, gb[MAX_MEDIA], kb[MAX_MEDIA];
     Grid g[MAX_MEDIA];
-    int ng = 0;
+    Bricks bk[MAX_MEDIA];
+    int ng = 0, nkb = 0;
     PyObject *result = NULL, *outobj = NULL;
     Py_ssize_t s_p[2] = {-1, 3};
     if (get_buf(po, &bp, 'd', 2, s_p, "points") < 0) goto done;
@@ -235,6 +393,8 @@ static PyObject *optical_depth(PyObject *self, PyObject *args) {
     if (get_buf(pd, &bd, 'd', 2, s_d, "dirs") < 0) goto done;
     if (get_buf(pt, &bt, 'd', 1, s_t, "t_max") < 0) goto done;
     if (parse_grids(grids, w2is, sigs, thrs, g, gb, &ng, 0) < 0) goto done;
+    if (parse_bricks(pbk, brick, g, ng, bk, kb, &nkb) < 0) goto done;
+    int skip = pbk != Py_None;
     outobj = PyByteArray_FromStringAndSize(NULL, (Py_ssize_t)(n * 3 * sizeof(double)));
     if (!outobj) goto done;
     double *out = (double *)PyByteArray_AS_STRING(outobj);
@@ -255,7 +415,38 @@ static PyObject *optical_depth(PyObject *self, PyObject *args) {
                 /* sharp grids: occupancy at the segment's start */
                 if (g[m].thr >= 0.0) prev[m] = line_at(&g[m], lo[m], lv[m], 0.0);
             }
+            /* Where every medium is empty or constant over whole steps (their bricks) the
+             * steps add rate * length in one go; elsewhere they are marched. */
+            double busy = -INFINITY;
+            Walk wk[MAX_MEDIA];
+            if (skip)
+                for (int m = 0; m < ng; m++) walk_init(&wk[m], &g[m], &bk[m], lo[m], lv[m]);
             for (long j = 0; j < ns; j++) {
+                if (skip && (double)j * h >= busy) {
+                    double s0 = (double)j * h, run = INFINITY, vary = s0, rate[3] = {0, 0, 0};
+                    for (int m = 0; m < ng; m++) {
+                        double e, val;
+                        int kd = walk_at(&wk[m], s0, &e, &val);
+                        if (kd == KIND_VARYING) { if (e > vary) vary = e; run = -1.0; continue; }
+                        if (e < run) run = e;
+                        for (int c = 0; c < 3; c++) rate[c] += val * g[m].sig[c];
+                    }
+                    if (run < 0.0) {
+                        busy = vary;
+                    } else {
+                        long jump = run >= tm ? ns - j : (long)floor((run - s0) / h);
+                        if (jump > 0) {
+                            for (int c = 0; c < 3; c++) tau[c] += rate[c] * ((double)jump * h);
+                            j += jump;
+                            if (j >= ns) break;
+                            for (int m = 0; m < ng; m++)
+                                if (g[m].thr >= 0.0) prev[m] = line_at(&g[m], lo[m], lv[m], (double)j * h);
+                            j--;
+                            continue;
+                        }
+                        busy = run;
+                    }
+                }
                 double s = ((double)j + offset) * h;
                 for (int m = 0; m < ng; m++) {
                     double rho;
@@ -280,6 +471,7 @@ done:
     Py_XDECREF(outobj);
     buf_release(&bp); buf_release(&bd); buf_release(&bt);
     for (int m = 0; m < ng; m++) buf_release(&gb[m]);
+    for (int m = 0; m < nkb; m++) buf_release(&kb[m]);
     return result;
 }
 
@@ -290,13 +482,6 @@ done:
  */
 #define SWEEP_MAX_SUB 10000
 
-/* floor(v) clamped to [lo, hi] (lo for NaN): a safe index from any double. */
-static inline Py_ssize_t floor_clamp(double v, Py_ssize_t lo, Py_ssize_t hi) {
-    double f = floor(v);
-    if (!(f > (double)lo)) return lo;
-    if (f > (double)hi) return hi;
-    return (Py_ssize_t)f;
-}
 
 /* Index-space position (in the target grid) of column (p, q) on slab i. */
 static inline void column_index(int axis, int bax, int cax, const double *cf, double i, double p,

@@ -11,6 +11,7 @@ import os
 import numpy as np
 
 from . import kernels_np
+from .media import BRICK
 
 try:  # pragma: no cover - depends on the build
     from . import _kernels as _c  # built in place (setup.py build_ext --inplace)
@@ -35,12 +36,14 @@ def _f32(a):
     return np.ascontiguousarray(a, np.float32)
 
 
-def c_optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, offset=0.5):
+def c_optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, offset=0.5,
+                    bricks=None):
     n = len(points)
     buf = _c.optical_depth(_f64(points).reshape(n, 3), _f64(dirs).reshape(n, 3),
                            _f64(t_max).reshape(n), [_f32(g) for g in grids],
                            [_f64(w) for w in w2is], [_f64(s).reshape(3) for s in sigma_ts],
-                           [float(t) for t in thresholds], float(step), float(offset))
+                           [float(t) for t in thresholds], float(step), float(offset),
+                           None if bricks is None else [_f32(b) for b in bricks], BRICK)
     return np.frombuffer(buf, np.float64).reshape(n, 3)
 
 

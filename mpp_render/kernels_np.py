@@ -46,7 +46,8 @@ def inside_fraction(value, s_a, s_b, va, vb, threshold):
     return out
 
 
-def optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, offset=0.5):
+def optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, offset=0.5,
+                  bricks=None):
     """RGB optical depth (N,3) along rays p + s*dir, s in [0, t_max], through every medium.
 
     ``points`` (N,3), ``dirs`` (N,3) unit, ``t_max`` (N,) metres; ``grids`` padded float32
@@ -57,7 +58,11 @@ def optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, 
     grid is read at both ends of each segment and the segment counts by the fraction of it
     inside (``inside_fraction``, which brackets a crossing), so a surface lying anywhere within a segment is placed
     where it is rather than rounded to a whole segment (a midpoint that lands on the
-    surface would otherwise drop or add up to half a segment on every ray)."""
+    surface would otherwise drop or add up to half a segment on every ray).
+
+    ``bricks`` (the media's ``media.brick_bounds`` grids, or None) lets the compiled twin add
+    the steps that lie wholly in empty or constant bricks in one go (its ``Walk``): the same
+    sum up to rounding, so this twin ignores them."""
     points = np.asarray(points, np.float64)
     dirs = np.asarray(dirs, np.float64)
     t_max = np.maximum(np.asarray(t_max, np.float64), 0.0)
@@ -142,7 +147,7 @@ def light_sweep(out, channel, a2w, axis, sign, i_first, i_last, coef, light_inde
     computed by the caller) and adds, slab to slab, the optical depth of the segment between
     (``segment_tau`` through every medium of ``grids``, ``n_sub`` pieces per segment).  Every
     voxel of a slab then takes the bilinear interpolation of the four columns around it on
-    that slab.  (The compiled twin skips segments outside every medium's box, which add 0.)
+    that slab.  (The compiled twin skips the segments outside every medium's box, which add 0.)
 
     Only columns p in [p_lo, p_hi] are followed, and only voxels whose cell floor(p) lies in
     [p_lo, p_hi) are written (a partition of the cells [0, P - 1) lets chunks run in

@@ -41,6 +41,14 @@ class PreparedMedium:
         return self.threshold >= 0.0
 
     @property
+    def bricks(self) -> np.ndarray:
+        """The density bounds per brick of ``BRICK``^3 cells (``brick_bounds``), computed on
+        first use."""
+        if getattr(self, "_bricks", None) is None:
+            self._bricks = brick_bounds(self.grid, self.threshold)
+        return self._bricks
+
+    @property
     def shape(self):
         return self.grid.shape
 
@@ -88,6 +96,48 @@ def prepare(medium: Medium, warnings=None) -> PreparedMedium:
 # v >= 0.5 - 1e-9 rather than v >= 0.5: grid-aligned faces put many sample points exactly on
 # 0.5, and there the two kernel twins' different rounding would otherwise decide differently.
 SHARP_THRESHOLD = 0.5 - 1e-9
+
+
+BRICK = 4  # cells per edge of the bricks of the empty-space grid
+
+
+def _block_reduce(a: np.ndarray, brick: int, fn) -> np.ndarray:
+    """``fn`` (np.maximum or np.minimum) over the voxels b brick .. (b + 1) brick (inclusive)
+    of each brick b along every axis of ``a``; b = ceil((n - 1) / brick) bricks per axis
+    (voxels past the grid repeat its last one)."""
+    out = a
+    for ax in range(3):
+        n = out.shape[ax]
+        nb = max(1, -(-(n - 1) // brick))
+        extra = nb * brick + 1 - n
+        b = np.moveaxis(out, ax, 0)
+        if extra > 0:
+            b = np.concatenate([b, np.repeat(b[-1:], extra, axis=0)])
+        body = fn.reduce(b[:nb * brick].reshape((nb, brick) + b.shape[1:]), axis=1)
+        out = np.moveaxis(fn(body, b[brick:nb * brick + 1:brick]), 0, ax)
+    return out
+
+
+def brick_bounds(grid: np.ndarray, threshold: float = -1.0, brick: int = BRICK) -> np.ndarray:
+    """Coarse bounds of a padded density ``grid`` (X,Y,Z): float32 (bx, by, bz, 2) with
+    b = ceil((n - 1) / brick) bricks per axis, brick b covering the index cells
+    [b brick, (b + 1) brick]; [..., 0] is the least and [..., 1] the largest density
+    (``density_from``) any point of the brick can have: the extremes of the voxels its
+    cells' trilinear interpolation reads (index b brick .. (b + 1) brick), widened by one
+    voxel on each side so that a point a rounding error across a face is covered too.
+    Largest 0: surely empty (the kernels skip it); least = largest: constant (the optical
+    depth kernel integrates it in one go)."""
+    g = np.asarray(grid, np.float32)
+    hi, lo = g, g
+    for ax in range(3):  # one-voxel max / min filters (np.roll wraps: the padding is 0 anyway)
+        hi = np.maximum(hi, np.maximum(np.roll(hi, 1, axis=ax), np.roll(hi, -1, axis=ax)))
+        lo = np.minimum(lo, np.minimum(np.roll(lo, 1, axis=ax), np.roll(lo, -1, axis=ax)))
+    hi = _block_reduce(hi, brick, np.maximum)
+    lo = _block_reduce(lo, brick, np.minimum)
+    if threshold >= 0.0:
+        hi = (hi >= threshold).astype(np.float32)
+        lo = (lo >= threshold).astype(np.float32)
+    return np.ascontiguousarray(np.stack([lo, hi], axis=-1), np.float32)
 
 
 def density_from(value, threshold: float):

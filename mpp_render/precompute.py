@@ -59,15 +59,23 @@ class Precomputed:
     stats: dict = field(default_factory=dict)
 
 
-def needed_points(pm: PreparedMedium):
-    """Flat indices and world positions of the padded grid points whose trilinear
-    neighbourhood holds non-zero density: every point of a cell with a non-zero corner (the
-    3x3x3 dilation of the occupied points, diagonal neighbours included)."""
-    dil = _dilate(pm.grid > 0.0)
-    flat = np.flatnonzero(dil)
+def needed_flat(pm: PreparedMedium):
+    """Flat indices of the padded grid points whose trilinear neighbourhood holds non-zero
+    density: every point of a cell with a non-zero corner (the 3x3x3 dilation of the
+    occupied points, diagonal neighbours included)."""
+    return np.flatnonzero(_dilate(pm.grid > 0.0))
+
+
+def grid_points(pm: PreparedMedium, flat):
+    """World positions (N,3) of the padded grid points with flat indices ``flat``."""
     ijk = np.stack(np.unravel_index(flat, pm.grid.shape), axis=1).astype(np.float64)
-    world = ijk @ pm.i2w[:3, :3].T + pm.i2w[:3, 3]
-    return flat, world
+    return ijk @ pm.i2w[:3, :3].T + pm.i2w[:3, 3]
+
+
+def needed_points(pm: PreparedMedium):
+    """``needed_flat`` and the world positions of those points."""
+    flat = needed_flat(pm)
+    return flat, grid_points(pm, flat)
 
 
 def _exit_distance(media, points, dirs, limit):
@@ -129,6 +137,38 @@ def _media_arrays_for(media, coefficient):
     raise ValueError(coefficient)
 
 
+SKIP_MIN_VOXELS = 1 << 20  # grids from which optical_depth walks the bricks (measured:
+# below it a grid sits in the cache, a step is as cheap as a brick crossing and walking the
+# bricks costs more than it saves; above it 1.7-2.9x faster on the public scenes' grids)
+
+
+def media_bricks(media):
+    """The media's brick bounds (media.brick_bounds) for optical_depth to add empty and
+    constant stretches in one go, or None for small grids (SKIP_MIN_VOXELS); the result is
+    the same either way."""
+    if not media or max(m.grid.size for m in media) < SKIP_MIN_VOXELS:
+        return None
+    return [m.bricks for m in media]
+
+
+def density_lengths(media: List[PreparedMedium], points, dirs, t_max, step):
+    """(N, M) metres of density along rays p + s dir, s in [0, t_max], per medium: the
+    integral of density_from(grid) (kernels.optical_depth with each medium's coefficient a
+    unit vector, three media per call).  Any RGB optical depth through the media is then a
+    product with their coefficients (M, 3), so one march gives both the extinction and the
+    scattering optical depth."""
+    od = kernels.get("optical_depth")
+    n, M = len(points), len(media)
+    out = np.zeros((n, M))
+    for g0 in range(0, M, 3):
+        grp = media[g0:g0 + 3]
+        units = [np.eye(3)[k] for k in range(len(grp))]
+        v = od(points, dirs, t_max, [m.grid for m in grp], [m.w2i for m in grp], units,
+               [m.threshold for m in grp], float(step), 0.5, bricks=media_bricks(grp))
+        out[:, g0:g0 + len(grp)] = v[:, :len(grp)]
+    return out
+
+
 def light_optical_depth(media: List[PreparedMedium], light: Light, points, step,
                         chunk=1 << 14, should_cancel=None, surfaces=None, threads=0,
                         coefficient="sigma_t"):
@@ -138,6 +178,8 @@ def light_optical_depth(media: List[PreparedMedium], light: Light, points, step,
     what is integrated; shadows are added to 'sigma_t' only.  None when cancelled."""
     od = kernels.get("optical_depth")
     arrays = _media_arrays_for(media, coefficient)
+    # the bricks bound density_from(grid), which 'length' does not integrate
+    bricks = None if coefficient == "length" else media_bricks(media)
     if coefficient != "sigma_t":
         surfaces = None
     out = np.zeros((len(points), 3))
@@ -146,7 +188,7 @@ def light_optical_depth(media: List[PreparedMedium], light: Light, points, step,
         p = points[a:b]
         d, limit = towards_light(light, p)
         t = _exit_distance(media, p, d, limit)
-        tau = od(p, d, t, *arrays, float(step), 0.5)
+        tau = od(p, d, t, *arrays, float(step), 0.5, bricks=bricks)
         if surfaces is not None and not surfaces.empty:
             tau += SHADOW_TAU * occluded(surfaces, p, d, limit)[:, None]
         out[a:b] = tau
@@ -198,9 +240,8 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
     n = len(points)
     if n == 0 or not np.any(colour > 0):
         return (np.zeros((n, 3)), np.zeros((n, 3))) if multiple else np.zeros((n, 3))
-    od = kernels.get("optical_depth")
-    arrays = kernel_arrays(media)
-    arrays_s = _media_arrays_for(media, "sigma_s")
+    sig_t = np.stack([m.sigma_t for m in media])  # (M, 3)
+    sig_s = np.stack([m.sigma_s for m in media])
     c2w = np.asarray(camera.cam_to_world, np.float64)
     out = np.zeros((n, 3))
     out_ms = np.zeros((n, 3))
@@ -224,12 +265,13 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
         d = -w_in  # march towards where the light comes from
         pp = np.repeat(p, n_dirs, axis=0)
         t = _exit_distance(media, pp, d, np.full(len(pp), np.inf))
-        tau = od(pp, d, t, *arrays, float(step), 0.5)
+        lengths = density_lengths(media, pp, d, t, step)
+        tau = lengths @ sig_t
         if surfaces is not None and not surfaces.empty:
             tau += SHADOW_TAU * occluded(surfaces, pp, d, np.full(len(pp), np.inf))[:, None]
         out[a:b] = np.exp(-tau).reshape(m, n_dirs, 3).mean(axis=1) * colour
         if multiple:
-            tau_s = np.minimum(od(pp, d, t, *arrays_s, float(step), 0.5), tau)
+            tau_s = np.minimum(lengths @ sig_s, tau)
             collided = np.exp(-(tau - tau_s)) * -np.expm1(-tau_s)
             out_ms[a:b] = collided.reshape(m, n_dirs, 3).mean(axis=1) * colour
 
@@ -556,8 +598,9 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
     for mi, pm in enumerate(media):
         f = np.zeros(pm.grid.shape + (c,), np.float32)
         f[..., 0] = pm.grid
-        flat, pts = needed_points(pm)
-        n_pts += len(pts)
+        flat = needed_flat(pm)
+        n_pts += len(flat)
+        pts = grid_points(pm, flat) if surfaces is not None and not surfaces.empty else None
         view = f.reshape(-1, c)
         for li, light in enumerate(lights):
             if chans[li] is None:
@@ -565,10 +608,12 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
             if progress:
                 progress(0.0, f"Light attenuation: {light.name} on {pm.medium.name}")
             swept = sweep_light(media, pm, light, f, chans[li], step, surfaces=surfaces,
-                                threads=threads, should_cancel=should_cancel, needed=(flat, pts))
+                                threads=threads, should_cancel=should_cancel,
+                                needed=None if pts is None else (flat, pts))
             if swept is False:
                 return None
             if swept is None:  # not sweepable: march from every needed voxel
+                pts = grid_points(pm, flat) if pts is None else pts
                 tau = light_optical_depth(media, light, pts, step, should_cancel=should_cancel,
                                           surfaces=surfaces, threads=threads)
                 if tau is None:

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from mpp_render import kernels, kernels_np
+from mpp_render.media import brick_bounds
 
 pytestmark = pytest.mark.skipif(kernels._c is None, reason="compiled kernels not built")
 ROUNDS = int(os.environ.get("MPP_FUZZ_ROUNDS", "60"))
@@ -64,11 +65,16 @@ def test_fuzz_march_and_optical_depth():
         n = len(args[0])
         assert len(s) == 24 * n and len(t) == 24 * n and len(dep) == 8 * n
         fields, w2is, st, thr = args[6], args[7], args[9], args[11]
-        try:
-            kernels._c.optical_depth(args[0], args[1], args[3], [np.ascontiguousarray(f[..., 0]) for f in fields],
-                                     w2is, st, thr, args[15], 0.5)
-        except ValueError:
-            pass
+        grids = [np.ascontiguousarray(f[..., 0]) for f in fields]
+        brick = int(rng.choice([1, 2, 4]))
+        bricks = [spoil(brick_bounds(g, t, brick), rng, 0.05).astype(np.float32)
+                  for g, t in zip(grids, thr)]
+        for extra in ((), (bricks, brick)):
+            try:
+                kernels._c.optical_depth(args[0], args[1], args[3], grids, w2is, st, thr, args[15],
+                                         0.5, *extra)
+            except ValueError:
+                pass
 
 
 def random_sweep(rng):
