@@ -79,11 +79,23 @@ static inline double density_from(const Grid *g, double v) {
     return g->thr >= 0.0 ? (v >= g->thr ? 1.0 : 0.0) : v;
 }
 
+/* The corner (fx, fy, fz) = floor(idx) of the cell holding index coordinates idx: 1 when the
+ * cell lies in grid g (0 <= idx < n - 1 per axis; NaN is outside).  Truncation is the floor
+ * there, without a libm call. */
+static inline int cell_floor(const double idx[3], const Grid *g, double *fx, double *fy, double *fz) {
+    if (!(idx[0] >= 0.0 && idx[1] >= 0.0 && idx[2] >= 0.0 && idx[0] < (double)(g->nx - 1) &&
+          idx[1] < (double)(g->ny - 1) && idx[2] < (double)(g->nz - 1)))
+        return 0;
+    *fx = (double)(Py_ssize_t)idx[0];
+    *fy = (double)(Py_ssize_t)idx[1];
+    *fz = (double)(Py_ssize_t)idx[2];
+    return 1;
+}
+
 /* Trilinear fetch of channel range [c0, c0+nc_out) at index coords; zeros outside. */
 static inline int trilinear(const Grid *g, const double idx[3], int c0, int nc_out, double *out) {
-    double fx = floor(idx[0]), fy = floor(idx[1]), fz = floor(idx[2]);
-    if (!(fx >= 0.0 && fy >= 0.0 && fz >= 0.0 &&
-          fx < (double)(g->nx - 1) && fy < (double)(g->ny - 1) && fz < (double)(g->nz - 1))) {
+    double fx, fy, fz;
+    if (!cell_floor(idx, g, &fx, &fy, &fz)) {
         for (int c = 0; c < nc_out; c++) out[c] = 0.0;
         return 0;
     }
@@ -102,6 +114,49 @@ static inline int trilinear(const Grid *g, const double idx[3], int c0, int nc_o
         out[c] = v;
     }
     return 1;
+}
+
+/* A trilinear stencil, set up once and read channel by channel. */
+typedef struct {
+    const float *p;
+    Py_ssize_t off[8];
+    double w[8];
+} Tri;
+
+/* The stencil of grid g at index coordinates idx; 0 outside (zeros there). */
+static inline int tri_setup(const Grid *g, const double idx[3], Tri *t) {
+    double fx, fy, fz;
+    if (!cell_floor(idx, g, &fx, &fy, &fz))
+        return 0;
+    double tx = idx[0] - fx, ty = idx[1] - fy, tz = idx[2] - fz;
+    Py_ssize_t sz = g->nc, sy = g->nz * sz, sx = g->ny * sy;
+    t->p = g->data + (Py_ssize_t)fx * sx + (Py_ssize_t)fy * sy + (Py_ssize_t)fz * sz;
+    double w[8] = {(1 - tx) * (1 - ty) * (1 - tz), (1 - tx) * (1 - ty) * tz,
+                   (1 - tx) * ty * (1 - tz),       (1 - tx) * ty * tz,
+                   tx * (1 - ty) * (1 - tz),       tx * (1 - ty) * tz,
+                   tx * ty * (1 - tz),             tx * ty * tz};
+    Py_ssize_t off[8] = {0, sz, sy, sy + sz, sx, sx + sz, sx + sy, sx + sy + sz};
+    for (int q = 0; q < 8; q++) { t->w[q] = w[q]; t->off[q] = off[q]; }
+    return 1;
+}
+
+static inline double tri_get1(const Tri *t, int c) {
+    double v = 0.0;
+    for (int q = 0; q < 8; q++) v += t->w[q] * (double)t->p[t->off[q] + c];
+    return v;
+}
+
+static inline void tri_get(const Tri *t, int c0, int n, double *out) {
+    for (int c = 0; c < n; c++) out[c] = tri_get1(t, c0 + c);
+}
+
+/* out = exp(-x) per channel; one exp when the three are equal (grey media). */
+static inline void exp3(const double x[3], double out[3]) {
+    if (x[0] == x[1] && x[1] == x[2]) {
+        out[0] = out[1] = out[2] = exp(-x[0]);
+    } else {
+        for (int a = 0; a < 3; a++) out[a] = exp(-x[a]);
+    }
 }
 
 static inline void to_index(const Grid *g, const double x[3], double idx[3]) {
@@ -162,9 +217,8 @@ static int parse_grids(PyObject *grids, PyObject *w2is, PyObject *sigs, PyObject
 
 /* Channel 0 of grid g, trilinear at index coordinates idx (0 outside the grid). */
 static inline double tri0(const Grid *g, const double idx[3]) {
-    double fx = floor(idx[0]), fy = floor(idx[1]), fz = floor(idx[2]);
-    if (!(fx >= 0.0 && fy >= 0.0 && fz >= 0.0 &&
-          fx < (double)(g->nx - 1) && fy < (double)(g->ny - 1) && fz < (double)(g->nz - 1)))
+    double fx, fy, fz;
+    if (!cell_floor(idx, g, &fx, &fy, &fz))
         return 0.0;
     Py_ssize_t sz = g->nc, sy = g->nz * sz, sx = g->ny * sy;
     const float *p = g->data + (Py_ssize_t)fx * sx + (Py_ssize_t)fy * sy + (Py_ssize_t)fz * sz;
@@ -362,6 +416,35 @@ static int walk_at(Walk *w, double s, double *end, double *value) {
     *end = w->end;
     *value = w->value;
     return w->kind;
+}
+
+/* The largest density (brick bound) on the segment [s_a, s_b] of the line o + s v of a grid's
+ * index coordinates: the largest bound among the bricks its bounding box touches (0 when it
+ * lies wholly outside the grid).  Twin of kernels_np.segment_majorant. */
+static double segment_majorant(const Grid *g, const Bricks *b, const double o[3], const double v[3],
+                               double s_a, double s_b) {
+    double dims[3] = {(double)(g->nx - 1), (double)(g->ny - 1), (double)(g->nz - 1)};
+    Py_ssize_t lo[3], hi[3];
+    double mn[3], mx[3];
+    for (int a = 0; a < 3; a++) {
+        double p0 = o[a] + s_a * v[a], p1 = o[a] + s_b * v[a];
+        mn[a] = p0 < p1 ? p0 : p1;
+        mx[a] = p0 < p1 ? p1 : p0;
+        if (isnan(mn[a]) || isnan(mx[a])) return INFINITY;
+    }
+    for (int a = 0; a < 3; a++) {
+        if (mx[a] < 0.0 || mn[a] > dims[a]) return 0.0;  /* wholly outside the grid */
+        lo[a] = floor_clamp(mn[a] / b->size, 0, b->n[a] - 1);
+        hi[a] = floor_clamp(mx[a] / b->size, 0, b->n[a] - 1);
+    }
+    float best = 0.0f;
+    for (Py_ssize_t i = lo[0]; i <= hi[0]; i++)
+        for (Py_ssize_t j = lo[1]; j <= hi[1]; j++)
+            for (Py_ssize_t k = lo[2]; k <= hi[2]; k++) {
+                float e = b->data[((i * b->n[1] + j) * b->n[2] + k) * 2 + 1];
+                if (e > best) best = e;
+            }
+    return (double)best;
 }
 
 static const char optical_depth_doc[] =
@@ -744,6 +827,7 @@ done:
 #define EDGE_EPS 1e-6
 #define T_MIN 1e-6
 #define MAX_STEPS 1000000L  /* per ray: a 256^3 grid needs ~1000 */
+#define SUPER 4             /* steps per super-step (kernels_np.SUPER) */
 
 static inline uint32_t hash32(uint32_t x) {
     x ^= x >> 16; x *= 0x7FEB352Du; x ^= x >> 15; x *= 0x846CA68Bu; x ^= x >> 16;
@@ -912,6 +996,29 @@ static void multiple_source_c(const MS *ms, const Grid *lv, int m, int nl, const
     }
 }
 
+#define LIGHT_VARIATION 0.2  /* kernels_np.LIGHT_VARIATION */
+
+/* Whether the light a lit local light scatters towards the camera (its irradiance at its
+ * centre, before the media, times the phase function of anisotropy g) differs by more than
+ * LIGHT_VARIATION between the ends of the segment [s_a, s_b] of the ray o + s d: a spot's cone
+ * edge, a nearby light or a forward-scattering lobe, whose shape longer steps would miss.
+ * Twin of kernels_np.light_varies. */
+static int light_varies(const double *LR, Py_ssize_t nl, const int *chan, const double o[3],
+                        const double d[3], double s_a, double s_b, double g) {
+    double xa[3], xb[3], wi[3], e[3], wc[3], dc;
+    for (int q = 0; q < 3; q++) { xa[q] = o[q] + d[q] * s_a; xb[q] = o[q] + d[q] * s_b; }
+    for (Py_ssize_t l = 0; l < nl; l++) {
+        if (chan[l] < 0 || (int)LR[l * LIGHT_FIELDS + L_KIND] == KIND_SUN) continue;
+        light_sample(LR + l * LIGHT_FIELDS, xa, 0.5, 0.5, wi, e, wc, &dc);
+        double ea = (e[0] + e[1] + e[2]) * hg_phase(-(wi[0] * d[0] + wi[1] * d[1] + wi[2] * d[2]), g);
+        light_sample(LR + l * LIGHT_FIELDS, xb, 0.5, 0.5, wi, e, wc, &dc);
+        double eb = (e[0] + e[1] + e[2]) * hg_phase(-(wi[0] * d[0] + wi[1] * d[1] + wi[2] * d[2]), g);
+        double hi = ea > eb ? ea : eb, lo = ea > eb ? eb : ea;
+        if (hi > 0.0 && !(lo >= (1.0 - LIGHT_VARIATION) * hi)) return 1;
+    }
+    return 0;
+}
+
 static int parse_doubles(PyObject *list, Py_ssize_t n, double *out, const char *what) {
     if (!PyList_Check(list) || PyList_GET_SIZE(list) != n) {
         PyErr_Format(PyExc_ValueError, "%s: expected a list of %zd numbers", what, n);
@@ -926,26 +1033,31 @@ static int parse_doubles(PyObject *list, Py_ssize_t n, double *out, const char *
 
 static const char march_doc[] =
     "march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs, thresholds,\n"
-    "      voxels, lights, ambient, step, depth_opacity, depth_miss[, multiple, emissions])\n"
+    "      voxels, lights, ambient, step, depth_opacity, depth_miss[, multiple, emissions, bricks, brick])\n"
     "  -> (single, T, depth, multiple, steps, emission) as bytes of float64\n"
     "Twin of kernels_np.march.";
 
 static PyObject *march(PyObject *self, PyObject *args) {
     PyObject *po, *pd, *pt0, *pt1, *pax, *pk, *fields, *w2is, *sss, *sts, *gsl, *thrs, *vox, *plights;
-    PyObject *pms = Py_None, *pem = Py_None;
-    int ambient;
-    double step, depth_opacity, depth_miss;
-    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOiddd|OO", &po, &pd, &pt0, &pt1, &pax, &pk, &fields,
+    PyObject *pms = Py_None, *pem = Py_None, *pbk = Py_None;
+    int ambient, brick = 4;
+    double step, depth_opacity, depth_miss, adapt_tau = 0.0;
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOiddd|OOOid", &po, &pd, &pt0, &pt1, &pax, &pk, &fields,
                           &w2is, &sss, &sts, &gsl, &thrs, &vox, &plights, &ambient, &step,
-                          &depth_opacity, &depth_miss, &pms, &pem))
+                          &depth_opacity, &depth_miss, &pms, &pem, &pbk, &brick, &adapt_tau))
         return NULL;
+    if (!isfinite(adapt_tau)) {
+        PyErr_SetString(PyExc_ValueError, "adapt_tau must be finite");
+        return NULL;
+    }
     if (!(step > 0.0) || !isfinite(step)) {
         PyErr_SetString(PyExc_ValueError, "step must be a positive finite length");
         return NULL;
     }
     Buf bo = {0}, bd = {0}, b0 = {0}, b1 = {0}, bax = {0}, bk = {0}, bl = {0}, gb[MAX_MEDIA];
-    Buf btab = {0}, btabs[MAX_MEDIA];
-    int ntabs = 0;
+    Buf btab = {0}, btabs[MAX_MEDIA], kb[MAX_MEDIA];
+    Bricks bks[MAX_MEDIA];
+    int ntabs = 0, nkb = 0;
     Buf *lvb = NULL;
     Grid *lv = NULL;
     int nlv = 0, use_ms = 0;
@@ -966,6 +1078,8 @@ static PyObject *march(PyObject *self, PyObject *args) {
     if (get_buf(pax, &bax, 'd', 1, s_n3, "axial") < 0) goto done;
     if (get_buf(pk, &bk, 'I', 1, s_n4, "keys") < 0) goto done;
     if (parse_grids(fields, w2is, sts, thrs, g, gb, &ng, 1) < 0) goto done;
+    if (parse_bricks(pbk, brick, g, ng, bks, kb, &nkb) < 0) goto done;
+    int skip = pbk != Py_None;
     if (!PyList_Check(sss) || PyList_GET_SIZE(sss) != ng) {
         PyErr_SetString(PyExc_ValueError, "sigma_ss: one RGB array per medium");
         goto done;
@@ -1124,83 +1238,144 @@ static PyObject *march(PyObject *self, PyObject *args) {
                  *AX = (const double *)bax.view.buf;
     const uint32_t *K = (const uint32_t *)bk.view.buf;
     const double thr_op = 1.0 - depth_opacity;
+    double g_lobe = 0.0;  /* the most anisotropic medium's g (light_varies) */
+    for (int m = 0; m < ng; m++) if (fabs(gg[m]) > fabs(g_lobe)) g_lobe = gg[m];
+    double sig_max[MAX_MEDIA];  /* largest extinction per unit density, over the channels */
+    for (int m = 0; m < ng; m++) {
+        sig_max[m] = g[m].sig[0] > g[m].sig[1] ? g[m].sig[0] : g[m].sig[1];
+        sig_max[m] = sig_max[m] > g[m].sig[2] ? sig_max[m] : g[m].sig[2];
+        if (!(sig_max[m] > 0.0)) sig_max[m] = 1.0;  /* a medium that only scatters nothing still counts */
+    }
+    /* lights whose sample does not depend on the random pair (a sun, a point or spot without
+     * radius) draw none */
+    int jitter[MAX_LIGHTS];
+    for (Py_ssize_t l = 0; l < nl; l++) {
+        const double *L = LR + l * LIGHT_FIELDS;
+        int kind = (int)L[L_KIND];
+        jitter[l] = kind == KIND_AREA || ((kind == KIND_POINT || kind == KIND_SPOT) && L[L_RADIUS] > 0.0);
+    }
+    /* longer steps in thin media only where every lit light is sampled without jitter: the
+     * jittered ones (area, sphere) average their shape over the steps' samples */
+    int adapt = adapt_tau > 0.0;
+    for (Py_ssize_t l = 0; l < nl; l++)
+        if (chan[l] >= 0 && jitter[l]) adapt = 0;
     Py_BEGIN_ALLOW_THREADS
     for (Py_ssize_t r = 0; r < n; r++) {
         const double *o = O + 3 * r, *d = D + 3 * r;
         double T[3] = {1, 1, 1}, S[3] = {0, 0, 0}, M3[3] = {0, 0, 0}, E3[3] = {0, 0, 0};
         double depth = depth_miss;
-        double t1 = T1[r], seg = T0[r];
+        double t0 = T0[r], t1 = T1[r];
         uint32_t key = K[r];
-        double t = seg + uniform01(key, 0, DIM_JITTER) * step;
-        long k = 0;
-        while (seg < t1 && k < MAX_STEPS) {
-            double hl = t1 - seg < step ? t1 - seg : step;
-            double ts = t < seg + hl ? t : seg + hl, x[3];
-            for (int a = 0; a < 3; a++) x[a] = o[a] + d[a] * ts;
-            double wi[MAX_LIGHTS][3], e[MAX_LIGHTS][3], wc[MAX_LIGHTS][3], dc[MAX_LIGHTS];
-            for (Py_ssize_t l = 0; l < nl; l++)
-                light_sample(LR + l * LIGHT_FIELDS, x, uniform01(key, k, 2 * l),
-                             uniform01(key, k, 2 * l + 1), wi[l], e[l], wc[l], &dc[l]);
-            double sig_t[3] = {0, 0, 0}, src[3] = {0, 0, 0}, src_ms[3] = {0, 0, 0}, src_em[3] = {0, 0, 0};
-            for (int m = 0; m < ng; m++) {
-                double idx[3], v[MAX_CH];
-                to_index(&g[m], x, idx);
-                if (!trilinear(&g[m], idx, 0, (int)g[m].nc, v)) continue;
-                double rho = density_from(&g[m], v[0]);
-                if (!(rho > 0.0)) continue;
-                for (int a = 0; a < 3; a++) sig_t[a] += rho * g[m].sig[a];
-                if (use_em)
-                    for (int a = 0; a < 3; a++) src_em[a] += emit[m][a];
-                int edge = g[m].thr >= 0.0 && v[0] > EDGE_EPS && v[0] < 1.0 - EDGE_EPS;
-                double inc[3] = {0, 0, 0};
+        /* Super-step K covers [t0 + SUPER K step, t0 + SUPER (K + 1) step] (the last one ends at
+         * t1) and is cut into n_sub equal steps, each read at one jittered point: n_sub = SUPER
+         * without bricks; with bricks, 0 where every medium is empty and, with adapt_tau > 0,
+         * the fewest (at least 1) that keep the majorant's optical depth per step <= adapt_tau. */
+        long taken = 0, K = 0;
+        int done = 0;
+        double lo[MAX_MEDIA][3], lvv[MAX_MEDIA][3];
+        if (skip)
+            for (int m = 0; m < ng; m++) ray_to_index(&g[m], o, d, lo[m], lvv[m]);
+        while (!done && K < MAX_STEPS / SUPER) {
+            double s_lo = t0 + (double)(SUPER * K) * step;
+            if (!(s_lo < t1)) break;
+            double s_hi = t0 + (double)(SUPER * (K + 1)) * step;
+            s_hi = s_hi < t1 ? s_hi : t1;
+            int n_sub = SUPER;
+            if (skip) {
+                double maj = 0.0;
+                int sharp = 0;  /* a mesh volume's surface must keep the steps short */
+                for (int m = 0; m < ng; m++) {
+                    double mm = segment_majorant(&g[m], &bks[m], lo[m], lvv[m], s_lo, s_hi);
+                    maj += mm * sig_max[m];
+                    sharp |= g[m].thr >= 0.0 && mm > 0.0;
+                }
+                if (!(maj > 0.0)) { K++; continue; }  /* wholly empty: nothing to add */
+                if (adapt && !sharp) {
+                    double want = ceil(maj * (s_hi - s_lo) / adapt_tau);
+                    n_sub = want < 1.0 ? 1 : (want > (double)SUPER ? SUPER : (int)want);
+                    if (n_sub < SUPER && light_varies(LR, nl, chan, o, d, s_lo, s_hi, g_lobe)) n_sub = SUPER;
+                }
+            }
+            double H = (double)SUPER * step / (double)n_sub;
+            for (int jj = 0; jj < n_sub; jj++) {
+                long k = SUPER * K + jj;
+                double seg = s_lo + (double)jj * H;
+                if (!(seg < t1)) break;
+                double hl = t1 - seg < H ? t1 - seg : H;
+                double t = seg + uniform01(key, k, DIM_JITTER) * H;
+                double ts = t < seg + hl ? t : seg + hl, x[3];
+                for (int q = 0; q < 3; q++) x[q] = o[q] + d[q] * ts;
+                double wi[MAX_LIGHTS][3], e[MAX_LIGHTS][3], wc[MAX_LIGHTS][3], dc[MAX_LIGHTS];
                 for (Py_ssize_t l = 0; l < nl; l++) {
-                    int c = chan[l];
-                    if (c < 0) continue;
-                    double tau[3] = {v[c], v[c + 1], v[c + 2]};
-                    if (edge) refined_tau(g, ng, m, c, x, wc[l], dc[l], 0.5 * voxel[m], tau);
-                    double cs = -(wi[l][0] * d[0] + wi[l][1] * d[1] + wi[l][2] * d[2]);
-                    double p = hg_phase(cs, gg[m]);
-                    for (int a = 0; a < 3; a++) inc[a] += p * e[l][a] * exp(-tau[a]);
+                    double u1 = 0.5, u2 = 0.5;
+                    if (jitter[l]) { u1 = uniform01(key, k, 2 * l); u2 = uniform01(key, k, 2 * l + 1); }
+                    light_sample(LR + l * LIGHT_FIELDS, x, u1, u2, wi[l], e[l], wc[l], &dc[l]);
                 }
-                if (ambient >= 0)
-                    for (int a = 0; a < 3; a++) inc[a] += v[ambient + a];
-                for (int a = 0; a < 3; a++) src[a] += rho * sig_s[m][a] * inc[a];
-                if (use_ms) {
-                    double cosl[MAX_LIGHTS], msi[3];
-                    for (Py_ssize_t l = 0; l < nl; l++)
-                        cosl[l] = -(wi[l][0] * d[0] + wi[l][1] * d[1] + wi[l][2] * d[2]);
-                    multiple_source_c(&ms, lv, m, (int)nl, cosl, rho, x, g[m].w2i, msi);
-                    if (ms.amb >= 0)
-                        for (int a = 0; a < 3; a++) msi[a] += v[ms.amb + a];
-                    for (int a = 0; a < 3; a++) src_ms[a] += rho * sig_s[m][a] * msi[a];
+                double sig_t[3] = {0, 0, 0}, src[3] = {0, 0, 0}, src_ms[3] = {0, 0, 0}, src_em[3] = {0, 0, 0};
+                for (int m = 0; m < ng; m++) {
+                    double idx[3], v[MAX_CH];
+                    to_index(&g[m], x, idx);
+                    Tri tw;
+                    if (!tri_setup(&g[m], idx, &tw)) continue;
+                    double rho = density_from(&g[m], tri_get1(&tw, 0));  /* the density first */
+                    if (!(rho > 0.0)) continue;
+                    tri_get(&tw, 0, (int)g[m].nc, v);
+                    for (int a = 0; a < 3; a++) sig_t[a] += rho * g[m].sig[a];
+                    if (use_em)
+                        for (int a = 0; a < 3; a++) src_em[a] += emit[m][a];
+                    int edge = g[m].thr >= 0.0 && v[0] > EDGE_EPS && v[0] < 1.0 - EDGE_EPS;
+                    double inc[3] = {0, 0, 0};
+                    for (Py_ssize_t l = 0; l < nl; l++) {
+                        int c = chan[l];
+                        if (c < 0) continue;
+                        double tau[3] = {v[c], v[c + 1], v[c + 2]};
+                        if (edge) refined_tau(g, ng, m, c, x, wc[l], dc[l], 0.5 * voxel[m], tau);
+                        double cs = -(wi[l][0] * d[0] + wi[l][1] * d[1] + wi[l][2] * d[2]);
+                        double p = hg_phase(cs, gg[m]);
+                        exp3(tau, tau);
+                        for (int a = 0; a < 3; a++) inc[a] += p * e[l][a] * tau[a];
+                    }
+                    if (ambient >= 0)
+                        for (int a = 0; a < 3; a++) inc[a] += v[ambient + a];
+                    for (int a = 0; a < 3; a++) src[a] += rho * sig_s[m][a] * inc[a];
+                    if (use_ms) {
+                        double cosl[MAX_LIGHTS], msi[3];
+                        for (Py_ssize_t l = 0; l < nl; l++)
+                            cosl[l] = -(wi[l][0] * d[0] + wi[l][1] * d[1] + wi[l][2] * d[2]);
+                        multiple_source_c(&ms, lv, m, (int)nl, cosl, rho, x, g[m].w2i, msi);
+                        if (ms.amb >= 0)
+                            for (int a = 0; a < 3; a++) msi[a] += v[ms.amb + a];
+                        for (int a = 0; a < 3; a++) src_ms[a] += rho * sig_s[m][a] * msi[a];
+                    }
                 }
+                taken++;
+                double Tb[3] = {T[0], T[1], T[2]}, xt[3], att[3];
+                for (int a = 0; a < 3; a++) xt[a] = sig_t[a] * hl;
+                exp3(xt, att);
+                int grey = xt[0] == xt[1] && xt[1] == xt[2];
+                double frac0 = xt[0] > 1e-7 ? -expm1(-xt[0]) / xt[0] : 1.0 - 0.5 * xt[0];
+                for (int a = 0; a < 3; a++) {
+                    double frac = grey ? frac0 : (xt[a] > 1e-7 ? -expm1(-xt[a]) / xt[a] : 1.0 - 0.5 * xt[a]);
+                    S[a] += Tb[a] * src[a] * (frac * hl);
+                    M3[a] += Tb[a] * src_ms[a] * (frac * hl);
+                    E3[a] += Tb[a] * src_em[a] * (frac * hl);
+                    T[a] = Tb[a] * att[a];
+                }
+                double tb = (Tb[0] + Tb[1] + Tb[2]) / 3.0, ta = (T[0] + T[1] + T[2]) / 3.0;
+                if (depth >= depth_miss && ta <= thr_op && tb > thr_op) {
+                    double fr = log(tb / thr_op) / log(tb / (ta > 1e-300 ? ta : 1e-300));
+                    fr = fr < 0.0 ? 0.0 : (fr > 1.0 ? 1.0 : fr);
+                    depth = (seg + fr * hl) * AX[r];
+                }
+                double tmax = T[0] > T[1] ? T[0] : T[1];
+                tmax = tmax > T[2] ? tmax : T[2];
+                /* opaque enough, or a step that no longer advances t: stop */
+                if (!(tmax > T_MIN) || !(seg + H > seg)) { done = 1; break; }
             }
-            double Tb[3] = {T[0], T[1], T[2]};
-            for (int a = 0; a < 3; a++) {
-                double xt = sig_t[a] * hl;
-                double frac = xt > 1e-7 ? -expm1(-xt) / xt : 1.0 - 0.5 * xt;
-                S[a] += Tb[a] * src[a] * (frac * hl);
-                M3[a] += Tb[a] * src_ms[a] * (frac * hl);
-                E3[a] += Tb[a] * src_em[a] * (frac * hl);
-                T[a] = Tb[a] * exp(-xt);
-            }
-            double tb = (Tb[0] + Tb[1] + Tb[2]) / 3.0, ta = (T[0] + T[1] + T[2]) / 3.0;
-            if (depth >= depth_miss && ta <= thr_op && tb > thr_op) {
-                double fr = log(tb / thr_op) / log(tb / (ta > 1e-300 ? ta : 1e-300));
-                fr = fr < 0.0 ? 0.0 : (fr > 1.0 ? 1.0 : fr);
-                depth = (seg + fr * hl) * AX[r];
-            }
-            double next = seg + hl;
-            if (!(next > seg)) break;  /* the step no longer advances t: stop, never spin */
-            seg = next;
-            k++;
-            t = seg + uniform01(key, k, DIM_JITTER) * step;
-            double tmax = T[0] > T[1] ? T[0] : T[1];
-            tmax = tmax > T[2] ? tmax : T[2];
-            if (!(tmax > T_MIN)) break;
+            K++;
         }
         for (int a = 0; a < 3; a++) { OS[3 * r + a] = S[a]; OT[3 * r + a] = T[a]; OM[3 * r + a] = M3[a]; }
-        OK[r] = (double)k;
+        OK[r] = (double)taken;
         for (int a = 0; a < 3; a++) OE[3 * r + a] = E3[a];
         OD[r] = depth;
     }
@@ -1216,6 +1391,7 @@ done:
     buf_release(&bo); buf_release(&bd); buf_release(&b0); buf_release(&b1); buf_release(&bax);
     buf_release(&bk); buf_release(&bl);
     for (int m = 0; m < ng; m++) buf_release(&gb[m]);
+    for (int m = 0; m < nkb; m++) buf_release(&kb[m]);
     return result;
 }
 

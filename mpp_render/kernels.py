@@ -62,7 +62,7 @@ def c_light_sweep(out, channel, a2w, axis, sign, i_first, i_last, coef, light_in
 
 def c_march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs,
             thresholds, voxels, lights, ambient, step, depth_opacity, depth_miss, multiple=None,
-            emissions=None):
+            emissions=None, bricks=None, adapt_tau=0.0):
     n = len(origins)
     nl = len(np.asarray(lights).reshape(-1, kernels_np.LIGHT_FIELDS))
     packed = None
@@ -87,7 +87,9 @@ def c_march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts
                        [float(x) for x in thresholds], [float(v) for v in voxels],
                        _f64(lights).reshape(-1, kernels_np.LIGHT_FIELDS), int(ambient),
                        float(step), float(depth_opacity), float(depth_miss), packed,
-                       None if emissions is None else [_f64(x).reshape(3) for x in emissions])
+                       None if emissions is None else [_f64(x).reshape(3) for x in emissions],
+                       None if bricks is None else [_f32(b) for b in bricks], BRICK,
+                       float(adapt_tau))
     return (np.frombuffer(s, np.float64).reshape(n, 3), np.frombuffer(t, np.float64).reshape(n, 3),
             np.frombuffer(d, np.float64).reshape(n), np.frombuffer(m, np.float64).reshape(n, 3),
             np.frombuffer(k, np.float64).reshape(n), np.frombuffer(e, np.float64).reshape(n, 3))

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .media import density_from, trilinear
+from .media import BRICK, density_from, trilinear
 from .phase import hg, orthonormal_basis
 
 
@@ -425,6 +425,71 @@ def multiple_source(ms_fields, table, rho, x, w2i, cos):
     return out
 
 
+SUPER = 4  # march steps per super-step (the compiled twin's SUPER)
+
+
+def ray_to_index(w2i, origins, dirs):
+    """Rays o + s d (world) as lines lo + s lv in a grid's index coordinates, computed term by
+    term in the compiled twin's order (its brick decisions must match)."""
+    w = np.asarray(w2i, np.float64)
+    o, d = np.asarray(origins, np.float64), np.asarray(dirs, np.float64)
+    lo = np.stack([w[r, 0] * o[:, 0] + w[r, 1] * o[:, 1] + w[r, 2] * o[:, 2] + w[r, 3]
+                   for r in range(3)], axis=1)
+    lv = np.stack([w[r, 0] * d[:, 0] + w[r, 1] * d[:, 1] + w[r, 2] * d[:, 2] for r in range(3)], axis=1)
+    return lo, lv
+
+
+def segment_majorant(shape, bricks, lo, lv, s_a, s_b, brick=BRICK):
+    """The largest density bound (media.brick_bounds [..., 1], bricks of ``brick`` cells)
+    among the bricks touched by the bounding box of each segment [s_a, s_b] of the lines
+    lo + s lv (index coordinates of a grid of ``shape``); 0 for segments wholly outside the
+    grid, inf where the coordinates are not finite."""
+    nb = np.array(bricks.shape[:3])
+    p0, p1 = lo + s_a[:, None] * lv, lo + s_b[:, None] * lv
+    mn, mx = np.minimum(p0, p1), np.maximum(p0, p1)
+    bad = np.any(np.isnan(mn) | np.isnan(mx), axis=1)
+    mn, mx = np.where(bad[:, None], 0.0, mn), np.where(bad[:, None], 0.0, mx)
+    dims = np.array(shape[:3], np.float64) - 1.0
+    out_of = np.any((mx < 0.0) | (mn > dims), axis=1)
+    blo = np.clip(np.floor(np.clip(mn / brick, -1.0, nb)), 0, nb - 1).astype(np.int64)
+    bhi = np.clip(np.floor(np.clip(mx / brick, -1.0, nb)), 0, nb - 1).astype(np.int64)
+    best = np.zeros(len(lo), np.float32)
+    span = bhi - blo
+    for di in range(int(span[:, 0].max(initial=0)) + 1):
+        for dj in range(int(span[:, 1].max(initial=0)) + 1):
+            for dk in range(int(span[:, 2].max(initial=0)) + 1):
+                i = np.minimum(blo[:, 0] + di, bhi[:, 0])
+                j = np.minimum(blo[:, 1] + dj, bhi[:, 1])
+                k = np.minimum(blo[:, 2] + dk, bhi[:, 2])
+                best = np.maximum(best, bricks[i, j, k, 1])
+    return np.where(bad, np.inf, np.where(out_of, 0.0, best.astype(np.float64)))
+
+
+LIGHT_VARIATION = 0.2  # relative change of a light's irradiance that keeps the steps short
+
+
+def light_varies(lights, origins, dirs, s_a, s_b, g):
+    """(N,) whether the light a lit local light scatters towards the camera (its irradiance at
+    its centre, before the media, times the HG phase of anisotropy ``g``) differs by more
+    than ``LIGHT_VARIATION`` between the ends of the segments [s_a, s_b] of the rays: a spot's
+    cone edge, a nearby light or a forward-scattering lobe, whose shape longer steps would
+    miss."""
+    xa = origins + dirs * s_a[:, None]
+    xb = origins + dirs * s_b[:, None]
+    half = np.full(len(xa), 0.5)
+    out = np.zeros(len(xa), bool)
+    for rec in np.asarray(lights, np.float64).reshape(-1, LIGHT_FIELDS):
+        if rec[L_CHANNEL] < 0 or int(rec[L_KIND]) == KIND_SUN:
+            continue
+        va, vb = [], []
+        for x, acc in ((xa, va), (xb, vb)):
+            wi, e = light_sample(rec, x, half, half)[:2]
+            acc.append(e.sum(axis=1) * hg(-np.einsum("ij,ij->i", wi, dirs), g))
+        hi, lo = np.maximum(va[0], vb[0]), np.minimum(va[0], vb[0])
+        out |= (hi > 0.0) & ~(lo >= (1.0 - LIGHT_VARIATION) * hi)
+    return out
+
+
 def _phi1(z):
     """(1 - e^-z) / z, 1 at z = 0."""
     z = np.asarray(z, np.float64)
@@ -433,7 +498,8 @@ def _phi1(z):
 
 
 def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs, thresholds,
-          voxels, lights, ambient, step, depth_opacity, depth_miss, multiple=None, emissions=None):
+          voxels, lights, ambient, step, depth_opacity, depth_miss, multiple=None, emissions=None,
+          bricks=None, adapt_tau=0.0):
     """March camera rays through media fields: the numpy twin of ``_kernels.march``.
 
     Rays ``origins + t dirs`` (N,3), t in [t0, t1] (N,) metres; ``axial`` (N,) turns t into
@@ -451,10 +517,19 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
     off wherever the medium's density is > 0 (not scaled by density, as Cycles' Principled
     Volume).
 
-    Each step of length h adds T S (1 - exp(-sigma_t h)) / sigma_t with S the in-scattered
-    radiance at one jittered point of the step, then T *= exp(-sigma_t h).  Returns
-    (single (N,3), T (N,3), depth (N,), multiple (N,3), steps (N,), emission (N,3)) float64,
-    steps being the number of samples each ray took."""
+    Super-step K covers [t0 + SUPER K h, t0 + SUPER (K + 1) h] (the last one ends at t1) and
+    is cut into n_sub equal steps of length H, step j read at one jittered point (random
+    numbers of step index SUPER K + j): n_sub = SUPER without ``bricks``; with ``bricks``
+    (media.brick_bounds per medium) n_sub = 0 where every medium is empty on the super-step
+    (``segment_majorant``) and, with ``adapt_tau`` > 0, the fewest steps (at least 1) that keep
+    the majorant's optical depth per step within ``adapt_tau`` (thin medium: longer steps),
+    unless a light's scattered light changes along the super-step (``light_varies``) or a
+    sharp (mesh) medium is there; not at all when a lit light is sampled with jitter (area,
+    sphere lights).
+    Each step adds T S (1 - exp(-sigma_t H)) / sigma_t with S the in-scattered radiance at its
+    point, then T *= exp(-sigma_t H).  Returns (single (N,3), T (N,3), depth (N,), multiple
+    (N,3), steps (N,), emission (N,3)) float64, steps being the number of samples each ray
+    took."""
     n = len(origins)
     single = np.zeros((n, 3))
     multi = np.zeros((n, 3))
@@ -465,82 +540,121 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
     keys = np.asarray(keys, np.uint32)
     lights = np.asarray(lights, np.float64).reshape(-1, LIGHT_FIELDS)
     h = float(step)
-    t = t0 + uniform(keys, 0, DIM_JITTER) * h
-    seg_start = t0.astype(np.float64).copy()
-    alive = np.flatnonzero(seg_start < t1)
-    k = 0
-    while alive.size:
-        o, d = origins[alive], dirs[alive]
-        hl = np.minimum(h, t1[alive] - seg_start[alive])
-        ts = np.minimum(t[alive], seg_start[alive] + hl)
-        x = o + d * ts[:, None]
-        m = len(alive)
-        sig_t = np.zeros((m, 3))
-        src = np.zeros((m, 3))
-        src_ms = np.zeros((m, 3))
-        src_em = np.zeros((m, 3))
-        ka = keys[alive]
-        emit = []
-        for li, rec in enumerate(lights):
-            emit.append(light_sample(rec, x, uniform(ka, k, 2 * li), uniform(ka, k, 2 * li + 1)))
-        for mi in range(len(fields)):
-            f = fields[mi]
-            v = _fetch(f, w2is[mi], x, 0, f.shape[3])
-            rho = density_from(v[:, 0], thresholds[mi])
-            sig_t += rho[:, None] * sigma_ts[mi][None, :]
-            if emissions is not None:
-                src_em += (rho > 0)[:, None] * np.asarray(emissions[mi], np.float64)[None, :]
-            edge = np.flatnonzero((v[:, 0] > EDGE_EPS) & (v[:, 0] < 1.0 - EDGE_EPS) & (rho > 0)) \
-                if thresholds[mi] >= 0 else np.zeros(0, np.int64)
-            inc = np.zeros((m, 3))
+    t0 = np.asarray(t0, np.float64)
+    t1 = np.asarray(t1, np.float64)
+    sig_max = [float(np.max(st)) if np.max(st) > 0 else 1.0 for st in sigma_ts]
+    lines = [ray_to_index(w, origins, dirs) for w in w2is] if bricks is not None else None
+    running = np.flatnonzero(t0 < t1)
+    K = 0
+    # longer steps in thin media only where no lit light is sampled with jitter (area, sphere):
+    # those average their shape over the steps' samples
+    jittered = [int(r[L_KIND]) == KIND_AREA or (int(r[L_KIND]) in (KIND_POINT, KIND_SPOT)
+                                                and r[L_RADIUS] > 0) for r in lights]
+    if any(j and r[L_CHANNEL] >= 0 for j, r in zip(jittered, lights)):
+        adapt_tau = 0.0
+    while running.size:
+        s_lo = t0[running] + float(SUPER * K) * h
+        if not np.all(s_lo < t1[running]):  # past the end (after an empty super-step)
+            running = running[s_lo < t1[running]]
+            s_lo = t0[running] + float(SUPER * K) * h
+        s_hi = np.minimum(t0[running] + float(SUPER * (K + 1)) * h, t1[running])
+        n_sub = np.full(running.size, SUPER)
+        if bricks is not None:
+            maj = np.zeros(running.size)
+            sharp = np.zeros(running.size, bool)  # a mesh volume's surface keeps steps short
+            for mi in range(len(fields)):
+                lo, lv = lines[mi][0][running], lines[mi][1][running]
+                mm = segment_majorant(fields[mi].shape[:3], bricks[mi], lo, lv, s_lo, s_hi)
+                maj += mm * sig_max[mi]
+                sharp |= (thresholds[mi] >= 0.0) & (mm > 0.0)
+            n_sub = np.where(maj > 0.0, n_sub, 0)
+            if adapt_tau > 0.0:
+                want = np.ceil(maj * (s_hi - s_lo) / adapt_tau)
+                short = sharp | light_varies(lights, origins[running], dirs[running], s_lo, s_hi,
+                                             max(gs, key=abs) if len(gs) else 0.0)
+                n_sub = np.where(maj > 0.0, np.where(short, SUPER, np.clip(want, 1, SUPER)),
+                                 0).astype(np.int64)
+        H = float(SUPER) * h / np.maximum(n_sub, 1)
+        going = np.ones(running.size, bool)
+        for jj in range(SUPER):
+            sel = np.flatnonzero(going & (n_sub > jj))
+            seg = s_lo[sel] + jj * H[sel]
+            inside = seg < t1[running[sel]]
+            going[sel[~inside]] = False
+            sel, seg = sel[inside], seg[inside]
+            if not sel.size:
+                continue
+            alive = running[sel]
+            Hs = H[sel]
+            k = SUPER * K + jj
+            o, d = origins[alive], dirs[alive]
+            ka = keys[alive]
+            hl = np.minimum(Hs, t1[alive] - seg)
+            ts = np.minimum(seg + uniform(ka, k, DIM_JITTER) * Hs, seg + hl)
+            x = o + d * ts[:, None]
+            m = len(alive)
+            sig_t = np.zeros((m, 3))
+            src = np.zeros((m, 3))
+            src_ms = np.zeros((m, 3))
+            src_em = np.zeros((m, 3))
+            emit = []
             for li, rec in enumerate(lights):
-                c = int(rec[L_CHANNEL])
-                if c < 0:
-                    continue
-                wi, e, wc, dc = emit[li]
-                tau = v[:, c:c + 3]
-                if edge.size:
-                    tau = tau.copy()
-                    tau[edge] = _refined_tau(fields, w2is, thresholds, sigma_ts, mi, c, x[edge],
-                                             wc[edge], dc[edge], 0.5 * voxels[mi])
-                cos = -np.einsum("ij,ij->i", wi, d)
-                inc += (hg(cos, gs[mi])[:, None] * e) * np.exp(-tau)
-            if ambient >= 0:
-                inc += v[:, ambient:ambient + 3]
-            src += rho[:, None] * sigma_ss[mi][None, :] * inc
-            if multiple is not None:
-                amb_ms, per_medium, tables = multiple
-                ms_fields = per_medium[mi]
-                live = np.flatnonzero(rho > 0)
-                if live.size:
-                    wd = np.stack([emit[li][0][live] for li in range(len(lights))]) \
-                        if len(lights) else np.zeros((0, live.size, 3))
-                    cos = -np.einsum("lij,ij->li", wd, d[live])
-                    ms_inc = multiple_source(ms_fields, tables[mi], rho[live], x[live], w2is[mi], cos)
-                    if amb_ms >= 0:
-                        ms_inc += v[live, amb_ms:amb_ms + 3]
-                    src_ms[live] += rho[live, None] * sigma_ss[mi][None, :] * ms_inc
-        x_t = sig_t * hl[:, None]
-        frac = np.where(x_t > 1e-7, -np.expm1(-x_t) / np.maximum(x_t, 1e-300), 1.0 - 0.5 * x_t)
-        T_before = trans[alive]
-        single[alive] += T_before * src * (frac * hl[:, None])
-        multi[alive] += T_before * src_ms * (frac * hl[:, None])
-        emitted[alive] += T_before * src_em * (frac * hl[:, None])
-        T_after = T_before * np.exp(-x_t)
-        trans[alive] = T_after
-        tb, ta = T_before.mean(axis=1), T_after.mean(axis=1)
-        thr = 1.0 - depth_opacity
-        hit = (depth[alive] >= depth_miss) & (ta <= thr) & (tb > thr)
-        if hit.any():
-            with np.errstate(divide="ignore", invalid="ignore"):
-                fr = np.clip(np.log(tb[hit] / thr) / np.log(tb[hit] / np.maximum(ta[hit], 1e-300)), 0, 1)
-            depth[alive[hit]] = (seg_start[alive[hit]] + fr * hl[hit]) * axial[alive[hit]]
-        nxt = seg_start[alive] + hl
-        advanced = nxt > seg_start[alive]   # a step that no longer moves t stops the ray
-        seg_start[alive] = nxt
-        k += 1
-        steps[alive] = k
-        t[alive] = seg_start[alive] + uniform(ka, k, DIM_JITTER) * h
-        keep = advanced & (seg_start[alive] < t1[alive]) & (T_after.max(axis=1) > T_MIN)
-        alive = alive[keep]
+                emit.append(light_sample(rec, x, uniform(ka, k, 2 * li), uniform(ka, k, 2 * li + 1)))
+            for mi in range(len(fields)):
+                f = fields[mi]
+                v = _fetch(f, w2is[mi], x, 0, f.shape[3])
+                rho = density_from(v[:, 0], thresholds[mi])
+                sig_t += rho[:, None] * sigma_ts[mi][None, :]
+                if emissions is not None:
+                    src_em += (rho > 0)[:, None] * np.asarray(emissions[mi], np.float64)[None, :]
+                edge = np.flatnonzero((v[:, 0] > EDGE_EPS) & (v[:, 0] < 1.0 - EDGE_EPS) & (rho > 0)) \
+                    if thresholds[mi] >= 0 else np.zeros(0, np.int64)
+                inc = np.zeros((m, 3))
+                for li, rec in enumerate(lights):
+                    c = int(rec[L_CHANNEL])
+                    if c < 0:
+                        continue
+                    wi, e, wc, dc = emit[li]
+                    tau = v[:, c:c + 3]
+                    if edge.size:
+                        tau = tau.copy()
+                        tau[edge] = _refined_tau(fields, w2is, thresholds, sigma_ts, mi, c, x[edge],
+                                                 wc[edge], dc[edge], 0.5 * voxels[mi])
+                    cos = -np.einsum("ij,ij->i", wi, d)
+                    inc += (hg(cos, gs[mi])[:, None] * e) * np.exp(-tau)
+                if ambient >= 0:
+                    inc += v[:, ambient:ambient + 3]
+                src += rho[:, None] * sigma_ss[mi][None, :] * inc
+                if multiple is not None:
+                    amb_ms, per_medium, tables = multiple
+                    ms_fields = per_medium[mi]
+                    live = np.flatnonzero(rho > 0)
+                    if live.size:
+                        wd = np.stack([emit[li][0][live] for li in range(len(lights))]) \
+                            if len(lights) else np.zeros((0, live.size, 3))
+                        cos = -np.einsum("lij,ij->li", wd, d[live])
+                        ms_inc = multiple_source(ms_fields, tables[mi], rho[live], x[live], w2is[mi], cos)
+                        if amb_ms >= 0:
+                            ms_inc += v[live, amb_ms:amb_ms + 3]
+                        src_ms[live] += rho[live, None] * sigma_ss[mi][None, :] * ms_inc
+            x_t = sig_t * hl[:, None]
+            frac = np.where(x_t > 1e-7, -np.expm1(-x_t) / np.maximum(x_t, 1e-300), 1.0 - 0.5 * x_t)
+            T_before = trans[alive]
+            single[alive] += T_before * src * (frac * hl[:, None])
+            multi[alive] += T_before * src_ms * (frac * hl[:, None])
+            emitted[alive] += T_before * src_em * (frac * hl[:, None])
+            T_after = T_before * np.exp(-x_t)
+            trans[alive] = T_after
+            tb, ta = T_before.mean(axis=1), T_after.mean(axis=1)
+            thr = 1.0 - depth_opacity
+            hit = (depth[alive] >= depth_miss) & (ta <= thr) & (tb > thr)
+            if hit.any():
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    fr = np.clip(np.log(tb[hit] / thr) / np.log(tb[hit] / np.maximum(ta[hit], 1e-300)), 0, 1)
+                depth[alive[hit]] = (seg[hit] + fr * hl[hit]) * axial[alive[hit]]
+            steps[alive] += 1
+            stop = (T_after.max(axis=1) <= T_MIN) | ~(seg + Hs > seg)  # opaque, or t stalls
+            going[sel[stop]] = False
+        running = running[going]
+        K += 1
     return single, trans, depth, multi, steps, emitted

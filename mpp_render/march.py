@@ -40,6 +40,14 @@ from .scene import Light
 
 __all__ = ["MarchContext", "march_rays", "pack_lights", "ray_keys", "REFINE_STEPS", "T_MIN"]
 
+# Longer steps where the medium is thin: the march cuts each super-step of SUPER steps into
+# as few (at least one) as keep the density majorant's optical depth per step within this
+# (kernels_np.march; never at a mesh volume's surface, where a lighting feature changes, or
+# with area / sphere lights, whose jitter the steps average).  Measured on the public scenes at
+# 16 spp: cloud_vdb 0.72 of the samples at the same error against Cycles (0.0066); larger
+# values (0.2, 0.4) biased slab_isotropic when its surfaces were still adapted.
+ADAPT_TAU = 0.1
+
 def pack_lights(lights: List[Light], layout: FieldLayout) -> np.ndarray:
     """(L, LIGHT_FIELDS) float64 records of the lights for the march kernel."""
     out = np.zeros((len(lights), LIGHT_FIELDS))
@@ -94,6 +102,7 @@ def march_rays(ctx: MarchContext, origins, dirs, t0, t1, axial, keys):
         [float(m.g) for m in ctx.media], [m.threshold for m in ctx.media],
         [m.voxel_size for m in ctx.media], ctx.packed, -1 if amb is None else amb,
         ctx.step, DEPTH_OPACITY, DEPTH_MISS, ctx.multiple,
-        em if any(np.any(e > 0) for e in em) else None)
+        em if any(np.any(e > 0) for e in em) else None, [m.bricks for m in ctx.media],
+        adapt_tau=ADAPT_TAU)
     return {"single": single, "T": T, "depth": depth, "multiple": multi, "steps": steps,
             "emission": emitted}
