@@ -182,22 +182,24 @@ def trilinear(grid, idx):
 def ray_box(pm: PreparedMedium, origins, dirs):
     """Parametric interval (t0, t1) where rays o + t d (world, any |d|) lie inside the padded
     grid's sampling box; t0 > t1 where they miss.  Works in index space, where the map is
-    affine, so t is the same parameter as in world space."""
+    affine, so t is the same parameter as in world space.  (Column-wise minima and maxima:
+    numpy's reductions over a length-3 axis cost several times more.)"""
     o = to_index(pm, origins)
     d = dirs @ pm.w2i[:, :3].T
-    lo = np.zeros(3)
     hi = np.array(pm.grid.shape, np.float64) - 1.0
     with np.errstate(divide="ignore", invalid="ignore"):
         inv = 1.0 / d
-        ta = (lo - o) * inv
+        ta = -o * inv
         tb = (hi - o) * inv
-    tmin = np.minimum(ta, tb)
-    tmax = np.maximum(ta, tb)
+    tmin = np.fmin(ta, tb)
+    tmax = np.fmax(ta, tb)
     par = np.abs(d) < 1e-300
-    inside_par = (o >= lo) & (o <= hi)
-    tmin = np.where(par, np.where(inside_par, -np.inf, np.inf), tmin)
-    tmax = np.where(par, np.where(inside_par, np.inf, -np.inf), tmax)
-    return np.nanmax(tmin, axis=1), np.nanmin(tmax, axis=1)
+    if par.any():
+        inside_par = (o >= 0.0) & (o <= hi)
+        tmin = np.where(par, np.where(inside_par, -np.inf, np.inf), tmin)
+        tmax = np.where(par, np.where(inside_par, np.inf, -np.inf), tmax)
+    return (np.maximum(np.maximum(tmin[:, 0], tmin[:, 1]), tmin[:, 2]),
+            np.minimum(np.minimum(tmax[:, 0], tmax[:, 1]), tmax[:, 2]))
 
 
 def union_interval(media: List[PreparedMedium], origins, dirs, t_lo, t_hi):

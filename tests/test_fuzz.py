@@ -62,6 +62,13 @@ def test_fuzz_march_and_optical_depth():
             s, t, dep = kernels._c.march(*args)[:3]
         except ValueError:
             continue   # rejected input is fine; a crash is not
+        # with brick bounds (some spoiled) and longer steps in thin media
+        bricks = [spoil(brick_bounds(np.ascontiguousarray(f[..., 0]), th), rng, 0.05).astype(np.float32)
+                  for f, th in zip(args[6], args[11])]
+        try:
+            kernels._c.march(*args, None, None, bricks, 4, float(rng.choice([0.0, 0.1, 5.0])))
+        except ValueError:
+            pass
         n = len(args[0])
         assert len(s) == 24 * n and len(t) == 24 * n and len(dep) == 8 * n
         fields, w2is, st, thr = args[6], args[7], args[9], args[11]
