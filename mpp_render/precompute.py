@@ -12,7 +12,10 @@ read by the march with a single trilinear fetch per step:
   drawn from the phase lobe (so the estimate is the mean transmittance).  w_cam(x) points
   from x to the camera, which is exact for camera rays through x.
 
-Only voxels whose trilinear support touches non-zero density are computed; the rest stay 0.
+The lights' optical depth is swept over the whole grid (``sweep_light``: the light's rays
+followed slab by slab, a few passes over the grid instead of one march per voxel); the world
+light is computed on a coarse lattice and interpolated to the voxels whose trilinear support
+touches non-zero density (``needed_flat``; the rest stay 0).
 """
 from __future__ import annotations
 
@@ -452,6 +455,8 @@ def near_sharp_surfaces(pm: PreparedMedium, media: List[PreparedMedium]):
     return np.flatnonzero(out)
 
 
+SWEEP = True  # lights by the sweep (False: one exact march per needed voxel, the old way;
+# a switch for benchmarks/performance.py)
 SWEEP_CELLS = 16  # column cells per sweep chunk (at least): chunks run in parallel, Esc between
 
 
@@ -470,7 +475,7 @@ def sweep_light(media: List[PreparedMedium], pm: PreparedMedium, light: Light, f
     default), as before the sweep: shadow edges stay sharp.  Returns True when done, False
     when cancelled, None when the light cannot be swept (the caller then marches every
     voxel)."""
-    plan = sweep_pyramids(pm, light)
+    plan = sweep_pyramids(pm, light) if SWEEP else None
     if plan is None:
         return None
     pyramids, L = plan
