@@ -447,8 +447,34 @@ static double segment_majorant(const Grid *g, const Bricks *b, const double o[3]
     return (double)best;
 }
 
+/* Where the ray p + s d leaves the last of the media's padded boxes it crosses (the far end of
+ * the union of their intervals, as media.union_interval), capped at t_max; 0 when it meets
+ * none ahead.  Twin of kernels_np.media_exit. */
+static double media_exit(const Grid *g, int ng, const double p[3], const double d[3], double t_max) {
+    double far = -INFINITY;
+    for (int m = 0; m < ng; m++) {
+        double o[3], v[3], lo = -INFINITY, hi = INFINITY;
+        ray_to_index(&g[m], p, d, o, v);
+        double dims[3] = {(double)(g[m].nx - 1), (double)(g[m].ny - 1), (double)(g[m].nz - 1)};
+        for (int a = 0; a < 3; a++) {
+            if (fabs(v[a]) < 1e-300) {
+                if (!(o[a] >= 0.0 && o[a] <= dims[a])) { lo = INFINITY; hi = -INFINITY; }
+                continue;
+            }
+            double inv = 1.0 / v[a], ta = -o[a] * inv, tb = (dims[a] - o[a]) * inv;
+            double t0 = ta < tb ? ta : tb, t1 = ta < tb ? tb : ta;
+            if (t0 > lo) lo = t0;
+            if (t1 < hi) hi = t1;
+        }
+        if (hi > lo && hi > far) far = hi;
+    }
+    double t = far < t_max ? far : t_max;
+    return t > 0.0 ? t : 0.0;
+}
+
 static const char optical_depth_doc[] =
-    "optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, offset[, bricks, brick])\n"
+    "optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, offset[, bricks, brick,\n"
+    "              clip]) -> (N,3) float64; clip: first cut t_max at the media's far side (media_exit)\n"
     "  -> (N,3) float64\n"
     "Twin of kernels_np.optical_depth; with bricks (media.brick_bounds per grid) the steps that lie\n"
     "wholly in empty or constant bricks are added in one go.";
@@ -456,9 +482,9 @@ static const char optical_depth_doc[] =
 static PyObject *optical_depth(PyObject *self, PyObject *args) {
     PyObject *po, *pd, *pt, *grids, *w2is, *sigs, *thrs, *pbk = Py_None;
     double step, offset;
-    int brick = 4;
-    if (!PyArg_ParseTuple(args, "OOOOOOOdd|Oi", &po, &pd, &pt, &grids, &w2is, &sigs, &thrs, &step,
-                          &offset, &pbk, &brick))
+    int brick = 4, clip = 0;
+    if (!PyArg_ParseTuple(args, "OOOOOOOdd|Oip", &po, &pd, &pt, &grids, &w2is, &sigs, &thrs, &step,
+                          &offset, &pbk, &brick, &clip))
         return NULL;
     if (!(step > 0.0) || !isfinite(step) || !(offset >= 0.0 && offset <= 1.0)) {
         PyErr_SetString(PyExc_ValueError, "step must be > 0 and offset in [0, 1]");
@@ -487,6 +513,7 @@ static PyObject *optical_depth(PyObject *self, PyObject *args) {
     for (Py_ssize_t r = 0; r < n; r++) {
         double tau[3] = {0, 0, 0};
         double tm = TM[r];
+        if (clip) tm = media_exit(g, ng, P + 3 * r, D + 3 * r, tm);
         if (isfinite(tm) && tm > 0.0) {
             double cnt = ceil(tm / step);
             if (cnt > 1e6) cnt = 1e6;  /* a bounded loop whatever the caller passes */

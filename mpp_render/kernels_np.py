@@ -46,8 +46,30 @@ def inside_fraction(value, s_a, s_b, va, vb, threshold):
     return out
 
 
+def media_exit(grids, w2is, points, dirs, t_max):
+    """(N,) where rays p + s dir leave the last of the grids' padded boxes they cross (the far
+    end of the union of their intervals, as media.union_interval), capped at ``t_max``; 0
+    where they meet none ahead."""
+    far = np.full(len(points), -np.inf)
+    for g, w2i in zip(grids, w2is):
+        o, v = ray_to_index(w2i, points, dirs)
+        dims = np.array(g.shape[:3], np.float64) - 1.0
+        par = np.abs(v) < 1e-300
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = 1.0 / np.where(par, 1.0, v)
+            ta, tb = -o * inv, (dims - o) * inv
+        t0 = np.where(par, -np.inf, np.minimum(ta, tb))
+        t1 = np.where(par, np.inf, np.maximum(ta, tb))
+        outside = par & ~((o >= 0.0) & (o <= dims))
+        lo, hi = t0.max(axis=1), t1.min(axis=1)
+        hit = (hi > lo) & ~outside.any(axis=1)
+        far = np.where(hit, np.maximum(far, hi), far)
+    t = np.minimum(far, np.asarray(t_max, np.float64))
+    return np.where(t > 0.0, t, 0.0)
+
+
 def optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, offset=0.5,
-                  bricks=None):
+                  bricks=None, clip=False):
     """RGB optical depth (N,3) along rays p + s*dir, s in [0, t_max], through every medium.
 
     ``points`` (N,3), ``dirs`` (N,3) unit, ``t_max`` (N,) metres; ``grids`` padded float32
@@ -60,11 +82,15 @@ def optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, 
     where it is rather than rounded to a whole segment (a midpoint that lands on the
     surface would otherwise drop or add up to half a segment on every ray).
 
+    With ``clip`` t_max is first cut where the rays leave the media's boxes (``media_exit``).
+
     ``bricks`` (the media's ``media.brick_bounds`` grids, or None) lets the compiled twin add
     the steps that lie wholly in empty or constant bricks in one go (its ``Walk``): the same
     sum up to rounding, so this twin ignores them."""
     points = np.asarray(points, np.float64)
     dirs = np.asarray(dirs, np.float64)
+    if clip:
+        t_max = media_exit(grids, w2is, points, dirs, t_max)
     t_max = np.maximum(np.asarray(t_max, np.float64), 0.0)
     n = np.ceil(t_max / step).astype(np.int64)
     h = np.where(n > 0, t_max / np.maximum(n, 1), 0.0)

@@ -155,19 +155,22 @@ def media_bricks(media):
 
 
 def density_lengths(media: List[PreparedMedium], points, dirs, t_max, step):
-    """(N, M) metres of density along rays p + s dir, s in [0, t_max], per medium: the
-    integral of density_from(grid) (kernels.optical_depth with each medium's coefficient a
-    unit vector, three media per call).  Any RGB optical depth through the media is then a
-    product with their coefficients (M, 3), so one march gives both the extinction and the
-    scattering optical depth."""
+    """(N, M) metres of density along rays p + s dir, s in [0, t_max] cut where they leave
+    the media's boxes, per medium: the integral of density_from(grid) (kernels.optical_depth
+    with each medium's coefficient a unit vector, three media per call).  Any RGB optical
+    depth through the media is then a product with their coefficients (M, 3), so one march
+    gives both the extinction and the scattering optical depth."""
     od = kernels.get("optical_depth")
     n, M = len(points), len(media)
     out = np.zeros((n, M))
+    # the rays end where they leave the last medium, of all of them (not only of the group)
+    t_max = _exit_distance(media, points, dirs, t_max) if M > 3 else t_max
     for g0 in range(0, M, 3):
         grp = media[g0:g0 + 3]
         units = [np.eye(3)[k] for k in range(len(grp))]
         v = od(points, dirs, t_max, [m.grid for m in grp], [m.w2i for m in grp], units,
-               [m.threshold for m in grp], float(step), 0.5, bricks=media_bricks(grp))
+               [m.threshold for m in grp], float(step), 0.5, bricks=media_bricks(grp),
+               clip=M <= 3)
         out[:, g0:g0 + len(grp)] = v[:, :len(grp)]
     return out
 
@@ -190,8 +193,7 @@ def light_optical_depth(media: List[PreparedMedium], light: Light, points, step,
     def work(a, b):
         p = points[a:b]
         d, limit = towards_light(light, p)
-        t = _exit_distance(media, p, d, limit)
-        tau = od(p, d, t, *arrays, float(step), 0.5, bricks=bricks)
+        tau = od(p, d, limit, *arrays, float(step), 0.5, bricks=bricks, clip=True)
         if surfaces is not None and not surfaces.empty:
             tau += SHADOW_TAU * occluded(surfaces, p, d, limit)[:, None]
         out[a:b] = tau
@@ -267,8 +269,7 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
         w_in = sample_hg(u1, u2, pm.g, axis)  # propagation directions of the arriving light
         d = -w_in  # march towards where the light comes from
         pp = np.repeat(p, n_dirs, axis=0)
-        t = _exit_distance(media, pp, d, np.full(len(pp), np.inf))
-        lengths = density_lengths(media, pp, d, t, step)
+        lengths = density_lengths(media, pp, d, np.full(len(pp), np.inf), step)
         tau = lengths @ sig_t
         if surfaces is not None and not surfaces.empty:
             tau += SHADOW_TAU * occluded(surfaces, pp, d, np.full(len(pp), np.inf))[:, None]

@@ -76,7 +76,7 @@ def test_fuzz_march_and_optical_depth():
         brick = int(rng.choice([1, 2, 4]))
         bricks = [spoil(brick_bounds(g, t, brick), rng, 0.05).astype(np.float32)
                   for g, t in zip(grids, thr)]
-        for extra in ((), (bricks, brick)):
+        for extra in ((), (bricks, brick), (bricks, brick, True), (None, 4, True)):
             try:
                 kernels._c.optical_depth(args[0], args[1], args[3], grids, w2is, st, thr, args[15],
                                          0.5, *extra)

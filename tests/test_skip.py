@@ -74,3 +74,34 @@ def test_optical_depth_is_the_same_with_bricks():
             b = kernels.c_optical_depth(*args, step, bricks=[x.bricks for x in ms])
             assert np.allclose(a, b, rtol=1e-12, atol=1e-12), (sub, step)
             assert a.max() > 0.5 and (a == 0).mean() > 0.05
+
+
+def test_optical_depth_clipped_to_the_media_is_the_twins_and_the_exit_distance():
+    """``clip`` cuts each ray where it leaves the last medium's box: the same as handing the
+    kernel the exit distance of media.union_interval, in both twins."""
+    from mpp_render import kernels_np
+    from mpp_render.precompute import _exit_distance
+    rng = np.random.default_rng(11)
+    media = []
+    for k, sharp in enumerate((False, True)):
+        i2w = np.eye(4)
+        i2w[:3, :3] = np.diag(rng.uniform(0.05, 0.09, 3))
+        i2w[:3, 3] = rng.uniform(-1.2, -0.6, 3) + k * 0.5
+        media.append(prepare(Medium(f"m{k}", blocky((20, 18, 22), rng, sharp), i2w,
+                                    rng.uniform(0.5, 3, 3), np.full(3, 0.2), 0.0,
+                                    source="MESH" if sharp else "VDB")))
+    m = 2000
+    p = rng.uniform(-2, 2, (m, 3))
+    d = rng.normal(size=(m, 3))
+    d[:50, 1] = 0.0  # rays parallel to a face
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    limit = np.where(rng.random(m) < 0.5, np.inf, rng.uniform(0, 3, m))
+    args = ([x.grid for x in media], [x.w2i for x in media], [x.sigma_t for x in media],
+            [x.threshold for x in media], 0.03)
+    want = kernels_np.optical_depth(p, d, _exit_distance(media, p, d, limit), *args)
+    got_np = kernels_np.optical_depth(p, d, limit, *args, clip=True)
+    assert np.allclose(got_np, want, rtol=1e-9, atol=1e-12)
+    if kernels._c is not None:
+        got_c = kernels.c_optical_depth(p, d, limit, *args, clip=True)
+        assert np.allclose(got_c, want, rtol=1e-4, atol=1e-9)
+    assert want.max() > 0.3 and (want == 0).mean() > 0.05

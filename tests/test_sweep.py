@@ -216,3 +216,19 @@ def test_light_sweep_rejects_bad_input():
     args[10] = nan_init
     with pytest.raises(ValueError):
         kernels.c_light_sweep(*args)
+
+
+def test_lights_that_cannot_be_swept_fall_back_to_the_exact_march():
+    """A point light astronomically far away is not swept (sweep_light returns None); the
+    precompute then marches from every needed voxel, as before the sweep."""
+    from mpp_render.scene import Camera, World
+    pm = prepare(smooth_cloud(n=10))
+    far = Light("POINT", "far", np.full(3, 1e30), position=np.array([1e12, 0.0, 0.0]))
+    f = np.zeros(pm.grid.shape + (4,), np.float32)
+    assert P.sweep_light([pm], pm, far, f, 1, pm.voxel_size) is None
+    cam = Camera("ORTHO", np.eye(4), 4, 4, (-1, 1, -1, 1))
+    pre = P.precompute([pm], [far], World(np.zeros(3)), cam)
+    flat, pts = P.needed_points(pm)
+    got = pre.fields[0].reshape(-1, pre.layout.channels)[flat, 1:4]
+    want = P.light_optical_depth([pm], far, pts, pm.voxel_size)
+    assert np.allclose(got, want, rtol=1e-5, atol=1e-6) and got.max() > 0.1
