@@ -61,6 +61,14 @@ def c_light_sweep(out, channel, a2w, axis, sign, i_first, i_last, coef, light_in
                    [float(t) for t in thresholds])
 
 
+def c_upsample_into(field, channel, lattice, stride, flat):
+    if not (isinstance(field, np.ndarray) and field.dtype == np.float32 and field.flags.c_contiguous
+            and field.flags.writeable and field.ndim == 4):
+        raise ValueError("upsample_into: field must be a writable C-contiguous (X,Y,Z,C) float32 array")
+    _c.upsample_into(field, int(channel), _f32(lattice), int(stride),
+                     np.ascontiguousarray(flat, np.int64).reshape(-1))
+
+
 def c_march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs,
             thresholds, voxels, lights, ambient, step, depth_opacity, depth_miss, multiple=None,
             emissions=None, bricks=None, adapt_tau=0.0):
@@ -97,7 +105,7 @@ def c_march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts
 
 
 _C_WRAPPERS = {"optical_depth": c_optical_depth, "march": c_march,
-               "light_sweep": c_light_sweep}
+               "light_sweep": c_light_sweep, "upsample_into": c_upsample_into}
 
 
 def get(name: str):

@@ -535,21 +535,7 @@ def sweep_light(media: List[PreparedMedium], pm: PreparedMedium, light: Light, f
     return True
 
 
-def upsample(lattice: np.ndarray, stride: int, shape) -> np.ndarray:
-    """Trilinear upsampling of a lattice (cx,cy,cz,C) whose point j sits at fine index
-    j * stride, onto the fine grid ``shape`` (X,Y,Z): separable linear interpolation, one
-    vectorised pass per axis (the same values as media.trilinear at those points)."""
-    out = lattice.astype(np.float32)
-    for ax in range(3):
-        i = np.arange(shape[ax])
-        lo = np.minimum(i // stride, out.shape[ax] - 1)
-        hi = np.minimum(lo + 1, out.shape[ax] - 1)
-        f = ((i - lo * stride) / float(stride)).astype(np.float32)
-        sh = [1] * out.ndim
-        sh[ax] = -1
-        out = (np.take(out, lo, axis=ax) * (1 - f).reshape(sh)
-               + np.take(out, hi, axis=ax) * f.reshape(sh))
-    return out
+upsample = kernels_np.upsample  # (re-exported: the world light's lattice to the voxels)
 
 
 def coarse_lattice(pm: PreparedMedium, stride: int):
@@ -637,11 +623,11 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                             multiple=amb_ms is not None)
             if a is None:
                 return None
+            up = kernels.get("upsample_into")
             for ch, vals in zip((amb, amb_ms), a if amb_ms is not None else (a,)):
                 coarse = np.zeros((int(np.prod(cshape)), 3), np.float32)
                 coarse[cflat] = vals
-                fine = upsample(coarse.reshape(cshape + (3,)), stride, pm.grid.shape)
-                view[flat, ch:ch + 3] = fine.reshape(-1, 3)[flat]
+                up(f, ch, coarse.reshape(cshape + (3,)), stride, flat)
             n_ambient += len(cpts)
         ms = [None] * len(lights)
         if multiple and np.any(pm.sigma_s > 0):
