@@ -11,6 +11,7 @@ import os
 import numpy as np
 
 from . import kernels_np
+from .media import BRICK
 
 try:  # pragma: no cover - depends on the build
     from . import _kernels as _c  # built in place (setup.py build_ext --inplace)
@@ -35,18 +36,42 @@ def _f32(a):
     return np.ascontiguousarray(a, np.float32)
 
 
-def c_optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, offset=0.5):
+def c_optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, offset=0.5,
+                    bricks=None, clip=False):
     n = len(points)
     buf = _c.optical_depth(_f64(points).reshape(n, 3), _f64(dirs).reshape(n, 3),
                            _f64(t_max).reshape(n), [_f32(g) for g in grids],
                            [_f64(w) for w in w2is], [_f64(s).reshape(3) for s in sigma_ts],
-                           [float(t) for t in thresholds], float(step), float(offset))
+                           [float(t) for t in thresholds], float(step), float(offset),
+                           None if bricks is None else [_f32(b) for b in bricks], BRICK,
+                           bool(clip))
     return np.frombuffer(buf, np.float64).reshape(n, 3)
+
+
+def c_light_sweep(out, channel, a2w, axis, sign, i_first, i_last, coef, light_index, cone, init,
+                  p_lo, p_hi, n_sub, grids, w2is, sigma_ts, thresholds):
+    if not (isinstance(out, np.ndarray) and out.dtype == np.float32 and out.flags.c_contiguous
+            and out.flags.writeable and out.ndim == 4):
+        raise ValueError("light_sweep: out must be a writable C-contiguous (X,Y,Z,C) float32 array")
+    init = _f64(init)
+    _c.light_sweep(out, int(channel), _f64(a2w).reshape(3, 4), int(axis), int(sign), int(i_first),
+                   int(i_last), _f64(coef).reshape(6), _f64(light_index).reshape(3), int(bool(cone)),
+                   init, int(p_lo), int(p_hi), int(n_sub), [_f32(g) for g in grids],
+                   [_f64(w) for w in w2is], [_f64(s).reshape(3) for s in sigma_ts],
+                   [float(t) for t in thresholds])
+
+
+def c_upsample_into(field, channel, lattice, stride, flat):
+    if not (isinstance(field, np.ndarray) and field.dtype == np.float32 and field.flags.c_contiguous
+            and field.flags.writeable and field.ndim == 4):
+        raise ValueError("upsample_into: field must be a writable C-contiguous (X,Y,Z,C) float32 array")
+    _c.upsample_into(field, int(channel), _f32(lattice), int(stride),
+                     np.ascontiguousarray(flat, np.int64).reshape(-1))
 
 
 def c_march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs,
             thresholds, voxels, lights, ambient, step, depth_opacity, depth_miss, multiple=None,
-            emissions=None, emission_channels=None):
+            emissions=None, bricks=None, adapt_tau=0.0, emission_channels=None):
     n = len(origins)
     nl = len(np.asarray(lights).reshape(-1, kernels_np.LIGHT_FIELDS))
     packed = None
@@ -72,13 +97,16 @@ def c_march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts
                        _f64(lights).reshape(-1, kernels_np.LIGHT_FIELDS), int(ambient),
                        float(step), float(depth_opacity), float(depth_miss), packed,
                        None if emissions is None else [_f64(x).reshape(3) for x in emissions],
+                       None if bricks is None else [_f32(b) for b in bricks], BRICK,
+                       float(adapt_tau),
                        None if emission_channels is None else [int(c) for c in emission_channels])
     return (np.frombuffer(s, np.float64).reshape(n, 3), np.frombuffer(t, np.float64).reshape(n, 3),
             np.frombuffer(d, np.float64).reshape(n), np.frombuffer(m, np.float64).reshape(n, 3),
             np.frombuffer(k, np.float64).reshape(n), np.frombuffer(e, np.float64).reshape(n, 3))
 
 
-_C_WRAPPERS = {"optical_depth": c_optical_depth, "march": c_march}
+_C_WRAPPERS = {"optical_depth": c_optical_depth, "march": c_march,
+               "light_sweep": c_light_sweep, "upsample_into": c_upsample_into}
 
 
 def get(name: str):

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .media import density_from, trilinear
+from .media import BRICK, density_from, trilinear
 from .phase import hg, orthonormal_basis
 
 
@@ -46,7 +46,30 @@ def inside_fraction(value, s_a, s_b, va, vb, threshold):
     return out
 
 
-def optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, offset=0.5):
+def media_exit(grids, w2is, points, dirs, t_max):
+    """(N,) where rays p + s dir leave the last of the grids' padded boxes they cross (the far
+    end of the union of their intervals, as media.union_interval), capped at ``t_max``; 0
+    where they meet none ahead."""
+    far = np.full(len(points), -np.inf)
+    for g, w2i in zip(grids, w2is):
+        o, v = ray_to_index(w2i, points, dirs)
+        dims = np.array(g.shape[:3], np.float64) - 1.0
+        par = np.abs(v) < 1e-300
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = 1.0 / np.where(par, 1.0, v)
+            ta, tb = -o * inv, (dims - o) * inv
+        t0 = np.where(par, -np.inf, np.minimum(ta, tb))
+        t1 = np.where(par, np.inf, np.maximum(ta, tb))
+        outside = par & ~((o >= 0.0) & (o <= dims))
+        lo, hi = t0.max(axis=1), t1.min(axis=1)
+        hit = (hi > lo) & ~outside.any(axis=1)
+        far = np.where(hit, np.maximum(far, hi), far)
+    t = np.minimum(far, np.asarray(t_max, np.float64))
+    return np.where(t > 0.0, t, 0.0)
+
+
+def optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, offset=0.5,
+                  bricks=None, clip=False):
     """RGB optical depth (N,3) along rays p + s*dir, s in [0, t_max], through every medium.
 
     ``points`` (N,3), ``dirs`` (N,3) unit, ``t_max`` (N,) metres; ``grids`` padded float32
@@ -57,9 +80,17 @@ def optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, 
     grid is read at both ends of each segment and the segment counts by the fraction of it
     inside (``inside_fraction``, which brackets a crossing), so a surface lying anywhere within a segment is placed
     where it is rather than rounded to a whole segment (a midpoint that lands on the
-    surface would otherwise drop or add up to half a segment on every ray)."""
+    surface would otherwise drop or add up to half a segment on every ray).
+
+    With ``clip`` t_max is first cut where the rays leave the media's boxes (``media_exit``).
+
+    ``bricks`` (the media's ``media.brick_bounds`` grids, or None) lets the compiled twin add
+    the steps that lie wholly in empty or constant bricks in one go (its ``Walk``): the same
+    sum up to rounding, so this twin ignores them."""
     points = np.asarray(points, np.float64)
     dirs = np.asarray(dirs, np.float64)
+    if clip:
+        t_max = media_exit(grids, w2is, points, dirs, t_max)
     t_max = np.maximum(np.asarray(t_max, np.float64), 0.0)
     n = np.ceil(t_max / step).astype(np.int64)
     h = np.where(n > 0, t_max / np.maximum(n, 1), 0.0)
@@ -82,6 +113,149 @@ def optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, 
             acc += rho[:, None] * st[None, :]
         tau[live] += acc * hl[:, None]
     return tau
+
+
+def _other_axes(axis):
+    """The two index axes (b, c) across slabs of ``axis``, in increasing order."""
+    return (1, 2) if axis == 0 else ((0, 2) if axis == 1 else (0, 1))
+
+
+def column_index(axis, coef, i, p, q):
+    """Index coordinates (..., 3) in the target grid of sweep columns ``p``, ``q`` (arrays of
+    column numbers) on slab ``i``: along ``axis`` the slab, across it
+    (coef[0] + i coef[2] + B p, coef[1] + i coef[3] + B q) with spacing B = coef[4] + i coef[5]
+    (B = 1 for parallel columns, B proportional to the distance from the light for columns
+    fanning out from a point)."""
+    bax, cax = _other_axes(axis)
+    p, q = np.broadcast_arrays(np.asarray(p, np.float64), np.asarray(q, np.float64))
+    b = coef[4] + i * coef[5]
+    idx = np.empty(p.shape + (3,))
+    idx[..., axis] = i
+    idx[..., bax] = coef[0] + i * coef[2] + b * p
+    idx[..., cax] = coef[1] + i * coef[3] + b * q
+    return idx
+
+
+def segment_tau(grids, w2is, sigma_ts, thresholds, P, D, n_sub, vprev, tau):
+    """Add to ``tau`` (N,3) the optical depth of the segments P -> P + D (world (N,3), D not
+    unit) through every medium, each cut into ``n_sub`` equal pieces: Simpson's rule on smooth
+    grids (exact for the cubic that trilinear interpolation is along a line within a cell),
+    ``inside_fraction`` on sharp ones.  ``vprev`` (N, media): channel 0 of each medium at P on
+    entry, at P + D on return (updated in place)."""
+    n = len(P)
+    length = np.sqrt(np.einsum("ij,ij->i", D, D)) / n_sub
+    for u in range(n_sub):
+        sa, sb = u / n_sub, (u + 1) / n_sub
+        for m, (g, w2i, st, thr) in enumerate(zip(grids, w2is, sigma_ts, thresholds)):
+            def value(s, rows=slice(None), g=g, w2i=w2i):
+                x = P[rows] + D[rows] * s[:, None]
+                return trilinear(g, x @ w2i[:, :3].T + w2i[:, 3])
+            va = vprev[:, m].copy()
+            vb = value(np.full(n, sb))
+            if thr >= 0.0:
+                rho = inside_fraction(value, np.full(n, sa), np.full(n, sb), va, vb, thr)
+            else:
+                rho = (va + 4.0 * value(np.full(n, 0.5 * (sa + sb))) + vb) / 6.0
+            tau += rho[:, None] * np.asarray(st, np.float64)[None, :] * length[:, None]
+            vprev[:, m] = vb
+
+
+def light_sweep(out, channel, a2w, axis, sign, i_first, i_last, coef, light_index, cone, init,
+                p_lo, p_hi, n_sub, grids, w2is, sigma_ts, thresholds):
+    """Optical depth towards a light for the voxels of one grid, written into
+    ``out[..., channel:channel + 3]`` (``out``: (X,Y,Z,C) float32, the medium's field).
+
+    The light's rays are followed as *columns*, numbered (p, q) on a lattice, from slab
+    ``i_first`` (nearest the light) to slab ``i_last`` of the grid along ``axis`` (``sign``
+    +1 or -1 the direction of travel); column (p, q) crosses slab i at ``column_index``
+    (index coordinates of the grid; ``a2w`` (3,4) maps them to world metres).  Each column
+    starts with ``init[p, q]`` (RGB optical depth from its point on slab i_first to the light,
+    computed by the caller) and adds, slab to slab, the optical depth of the segment between
+    (``segment_tau`` through every medium of ``grids``, ``n_sub`` pieces per segment).  Every
+    voxel of a slab then takes the bilinear interpolation of the four columns around it on
+    that slab.  (The compiled twin skips the segments outside every medium's box, which add 0.)
+
+    Only columns p in [p_lo, p_hi] are followed, and only voxels whose cell floor(p) lies in
+    [p_lo, p_hi) are written (a partition of the cells [0, P - 1) lets chunks run in
+    parallel).  With ``cone`` only the voxels whose largest index offset from
+    ``light_index`` (the light in index coordinates) is along ``axis`` with sign ``sign``
+    are written (ties go to the later axis), the part of space this pyramid of columns
+    covers; otherwise (a sun) every voxel."""
+    dims = out.shape[:3]
+    bax, cax = _other_axes(axis)
+    NP, NQ = init.shape[:2]
+    ps = np.arange(p_lo, p_hi + 1, dtype=np.float64)
+    qs = np.arange(NQ, dtype=np.float64)
+    PP, QQ = np.meshgrid(ps, qs, indexing="ij")
+    PP, QQ = PP.ravel(), QQ.ravel()
+    tau = np.array(init[p_lo:p_hi + 1].reshape(-1, 3), np.float64)
+    a2w = np.asarray(a2w, np.float64)
+
+    def world(i):
+        return column_index(axis, coef, float(i), PP, QQ) @ a2w[:, :3].T + a2w[:, 3]
+
+    x = world(i_first)
+    vprev = np.stack([trilinear(g, x @ w[:, :3].T + w[:, 3]) for g, w in zip(grids, w2is)], 1)         if len(grids) else np.zeros((len(x), 0))
+    J = np.arange(dims[bax], dtype=np.float64)[:, None]
+    K = np.arange(dims[cax], dtype=np.float64)[None, :]
+    i = i_first
+    while True:
+        if i != i_first:
+            P = world(i - sign)
+            segment_tau(grids, w2is, sigma_ts, thresholds, P, world(i) - P, n_sub, vprev, tau)
+        Bi, Ab, Ac = coef[4] + i * coef[5], coef[0] + i * coef[2], coef[1] + i * coef[3]
+        iB = 1.0 / Bi
+        p = np.broadcast_to((J - Ab) * iB, (dims[bax], dims[cax]))
+        q = np.broadcast_to((K - Ac) * iB, (dims[bax], dims[cax]))
+        pcell = np.clip(np.floor(p), 0, NP - 2).astype(np.int64)
+        qcell = np.clip(np.floor(q), 0, NQ - 2).astype(np.int64)
+        mine = (pcell >= p_lo) & (pcell < p_hi)
+        if cone:
+            da = i - light_index[axis]
+            db, dc = np.abs(J - light_index[bax]), np.abs(K - light_index[cax])
+            okb = abs(da) > db if bax < axis else abs(da) >= db
+            okc = abs(da) > dc if cax < axis else abs(da) >= dc
+            mine &= (sign * da > 0.0) & okb & okc
+        jj, kk = np.nonzero(mine)
+        if jj.size:
+            fp = np.clip(p[jj, kk] - pcell[jj, kk], 0.0, 1.0)[:, None]
+            fq = np.clip(q[jj, kk] - qcell[jj, kk], 0.0, 1.0)[:, None]
+            c00 = (pcell[jj, kk] - p_lo) * NQ + qcell[jj, kk]
+            t = ((1.0 - fp) * ((1.0 - fq) * tau[c00] + fq * tau[c00 + 1])
+                 + fp * ((1.0 - fq) * tau[c00 + NQ] + fq * tau[c00 + NQ + 1]))
+            vox = [None, None, None]
+            vox[axis] = np.full(jj.size, i)
+            vox[bax], vox[cax] = jj, kk
+            out[vox[0], vox[1], vox[2], channel:channel + 3] = t.astype(np.float32)
+        if i == i_last:
+            break
+        i += sign
+
+
+def upsample(lattice, stride, shape):
+    """Trilinear upsampling of a lattice (cx,cy,cz,C) whose point j sits at fine index
+    j * stride, onto the fine grid ``shape`` (X,Y,Z): separable linear interpolation, one
+    vectorised pass per axis (the same values as media.trilinear at those points); float32."""
+    out = np.asarray(lattice).astype(np.float32)
+    for ax in range(3):
+        i = np.arange(shape[ax])
+        lo = np.minimum(i // stride, out.shape[ax] - 1)
+        hi = np.minimum(lo + 1, out.shape[ax] - 1)
+        f = ((i - lo * stride) / float(stride)).astype(np.float32)
+        sh = [1] * out.ndim
+        sh[ax] = -1
+        out = (np.take(out, lo, axis=ax) * (1 - f).reshape(sh)
+               + np.take(out, hi, axis=ax) * f.reshape(sh))
+    return out
+
+
+def upsample_into(field, channel, lattice, stride, flat):
+    """Write ``upsample(lattice, stride, field.shape[:3])`` into
+    ``field[..., channel:channel + C]`` at the flat voxel indices ``flat`` only (C = the
+    lattice's channels; ``field`` (X,Y,Z,F) float32, modified in place)."""
+    nc = lattice.shape[3]
+    fine = upsample(lattice, int(stride), field.shape[:3]).reshape(-1, nc)
+    field.reshape(-1, field.shape[3])[flat, channel:channel + nc] = fine[flat]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -303,6 +477,71 @@ def multiple_source(ms_fields, table, rho, x, w2i, cos):
     return out
 
 
+SUPER = 4  # march steps per super-step (the compiled twin's SUPER)
+
+
+def ray_to_index(w2i, origins, dirs):
+    """Rays o + s d (world) as lines lo + s lv in a grid's index coordinates, computed term by
+    term in the compiled twin's order (its brick decisions must match)."""
+    w = np.asarray(w2i, np.float64)
+    o, d = np.asarray(origins, np.float64), np.asarray(dirs, np.float64)
+    lo = np.stack([w[r, 0] * o[:, 0] + w[r, 1] * o[:, 1] + w[r, 2] * o[:, 2] + w[r, 3]
+                   for r in range(3)], axis=1)
+    lv = np.stack([w[r, 0] * d[:, 0] + w[r, 1] * d[:, 1] + w[r, 2] * d[:, 2] for r in range(3)], axis=1)
+    return lo, lv
+
+
+def segment_majorant(shape, bricks, lo, lv, s_a, s_b, brick=BRICK):
+    """The largest density bound (media.brick_bounds [..., 1], bricks of ``brick`` cells)
+    among the bricks touched by the bounding box of each segment [s_a, s_b] of the lines
+    lo + s lv (index coordinates of a grid of ``shape``); 0 for segments wholly outside the
+    grid, inf where the coordinates are not finite."""
+    nb = np.array(bricks.shape[:3])
+    p0, p1 = lo + s_a[:, None] * lv, lo + s_b[:, None] * lv
+    mn, mx = np.minimum(p0, p1), np.maximum(p0, p1)
+    bad = np.any(np.isnan(mn) | np.isnan(mx), axis=1)
+    mn, mx = np.where(bad[:, None], 0.0, mn), np.where(bad[:, None], 0.0, mx)
+    dims = np.array(shape[:3], np.float64) - 1.0
+    out_of = np.any((mx < 0.0) | (mn > dims), axis=1)
+    blo = np.clip(np.floor(np.clip(mn / brick, -1.0, nb)), 0, nb - 1).astype(np.int64)
+    bhi = np.clip(np.floor(np.clip(mx / brick, -1.0, nb)), 0, nb - 1).astype(np.int64)
+    best = np.zeros(len(lo), np.float32)
+    span = bhi - blo
+    for di in range(int(span[:, 0].max(initial=0)) + 1):
+        for dj in range(int(span[:, 1].max(initial=0)) + 1):
+            for dk in range(int(span[:, 2].max(initial=0)) + 1):
+                i = np.minimum(blo[:, 0] + di, bhi[:, 0])
+                j = np.minimum(blo[:, 1] + dj, bhi[:, 1])
+                k = np.minimum(blo[:, 2] + dk, bhi[:, 2])
+                best = np.maximum(best, bricks[i, j, k, 1])
+    return np.where(bad, np.inf, np.where(out_of, 0.0, best.astype(np.float64)))
+
+
+LIGHT_VARIATION = 0.2  # relative change of a light's irradiance that keeps the steps short
+
+
+def light_varies(lights, origins, dirs, s_a, s_b, g):
+    """(N,) whether the light a lit local light scatters towards the camera (its irradiance at
+    its centre, before the media, times the HG phase of anisotropy ``g``) differs by more
+    than ``LIGHT_VARIATION`` between the ends of the segments [s_a, s_b] of the rays: a spot's
+    cone edge, a nearby light or a forward-scattering lobe, whose shape longer steps would
+    miss."""
+    xa = origins + dirs * s_a[:, None]
+    xb = origins + dirs * s_b[:, None]
+    half = np.full(len(xa), 0.5)
+    out = np.zeros(len(xa), bool)
+    for rec in np.asarray(lights, np.float64).reshape(-1, LIGHT_FIELDS):
+        if rec[L_CHANNEL] < 0 or int(rec[L_KIND]) == KIND_SUN:
+            continue
+        va, vb = [], []
+        for x, acc in ((xa, va), (xb, vb)):
+            wi, e = light_sample(rec, x, half, half)[:2]
+            acc.append(e.sum(axis=1) * hg(-np.einsum("ij,ij->i", wi, dirs), g))
+        hi, lo = np.maximum(va[0], vb[0]), np.minimum(va[0], vb[0])
+        out |= (hi > 0.0) & ~(lo >= (1.0 - LIGHT_VARIATION) * hi)
+    return out
+
+
 def _phi1(z):
     """(1 - e^-z) / z, 1 at z = 0."""
     z = np.asarray(z, np.float64)
@@ -312,7 +551,7 @@ def _phi1(z):
 
 def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs, thresholds,
           voxels, lights, ambient, step, depth_opacity, depth_miss, multiple=None, emissions=None,
-          emission_channels=None):
+          bricks=None, adapt_tau=0.0, emission_channels=None):
     """March camera rays through media fields: the numpy twin of ``_kernels.march``.
 
     Rays ``origins + t dirs`` (N,3), t in [t0, t1] (N,) metres; ``axial`` (N,) turns t into
@@ -333,10 +572,19 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
     emission grid (W/(m^3 sr), read with the same trilinear fetch and given off wherever it
     is non-zero, whatever the density), or -1 for none.
 
-    Each step of length h adds T S (1 - exp(-sigma_t h)) / sigma_t with S the in-scattered
-    radiance at one jittered point of the step, then T *= exp(-sigma_t h).  Returns
-    (single (N,3), T (N,3), depth (N,), multiple (N,3), steps (N,), emission (N,3)) float64,
-    steps being the number of samples each ray took."""
+    Super-step K covers [t0 + SUPER K h, t0 + SUPER (K + 1) h] (the last one ends at t1) and
+    is cut into n_sub equal steps of length H, step j read at one jittered point (random
+    numbers of step index SUPER K + j): n_sub = SUPER without ``bricks``; with ``bricks``
+    (media.brick_bounds per medium) n_sub = 0 where every medium is empty on the super-step
+    (``segment_majorant``) and, with ``adapt_tau`` > 0, the fewest steps (at least 1) that keep
+    the majorant's optical depth per step within ``adapt_tau`` (thin medium: longer steps),
+    unless a light's scattered light changes along the super-step (``light_varies``) or a
+    sharp (mesh) medium is there; not at all when a lit light is sampled with jitter (area,
+    sphere lights).
+    Each step adds T S (1 - exp(-sigma_t H)) / sigma_t with S the in-scattered radiance at its
+    point, then T *= exp(-sigma_t H).  Returns (single (N,3), T (N,3), depth (N,), multiple
+    (N,3), steps (N,), emission (N,3)) float64, steps being the number of samples each ray
+    took."""
     n = len(origins)
     single = np.zeros((n, 3))
     multi = np.zeros((n, 3))
@@ -347,84 +595,123 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
     keys = np.asarray(keys, np.uint32)
     lights = np.asarray(lights, np.float64).reshape(-1, LIGHT_FIELDS)
     h = float(step)
-    t = t0 + uniform(keys, 0, DIM_JITTER) * h
-    seg_start = t0.astype(np.float64).copy()
-    alive = np.flatnonzero(seg_start < t1)
-    k = 0
-    while alive.size:
-        o, d = origins[alive], dirs[alive]
-        hl = np.minimum(h, t1[alive] - seg_start[alive])
-        ts = np.minimum(t[alive], seg_start[alive] + hl)
-        x = o + d * ts[:, None]
-        m = len(alive)
-        sig_t = np.zeros((m, 3))
-        src = np.zeros((m, 3))
-        src_ms = np.zeros((m, 3))
-        src_em = np.zeros((m, 3))
-        ka = keys[alive]
-        emit = []
-        for li, rec in enumerate(lights):
-            emit.append(light_sample(rec, x, uniform(ka, k, 2 * li), uniform(ka, k, 2 * li + 1)))
-        for mi in range(len(fields)):
-            f = fields[mi]
-            v = _fetch(f, w2is[mi], x, 0, f.shape[3])
-            rho = density_from(v[:, 0], thresholds[mi])
-            sig_t += rho[:, None] * sigma_ts[mi][None, :]
-            if emission_channels is not None and emission_channels[mi] >= 0:
-                src_em += v[:, emission_channels[mi]:emission_channels[mi] + 3]
-            if emissions is not None:
-                src_em += (rho > 0)[:, None] * np.asarray(emissions[mi], np.float64)[None, :]
-            edge = np.flatnonzero((v[:, 0] > EDGE_EPS) & (v[:, 0] < 1.0 - EDGE_EPS) & (rho > 0)) \
-                if thresholds[mi] >= 0 else np.zeros(0, np.int64)
-            inc = np.zeros((m, 3))
+    t0 = np.asarray(t0, np.float64)
+    t1 = np.asarray(t1, np.float64)
+    sig_max = [float(np.max(st)) if np.max(st) > 0 else 1.0 for st in sigma_ts]
+    lines = [ray_to_index(w, origins, dirs) for w in w2is] if bricks is not None else None
+    running = np.flatnonzero(t0 < t1)
+    K = 0
+    # longer steps in thin media only where no lit light is sampled with jitter (area, sphere):
+    # those average their shape over the steps' samples
+    jittered = [int(r[L_KIND]) == KIND_AREA or (int(r[L_KIND]) in (KIND_POINT, KIND_SPOT)
+                                                and r[L_RADIUS] > 0) for r in lights]
+    if any(j and r[L_CHANNEL] >= 0 for j, r in zip(jittered, lights)):
+        adapt_tau = 0.0
+    while running.size:
+        s_lo = t0[running] + float(SUPER * K) * h
+        if not np.all(s_lo < t1[running]):  # past the end (after an empty super-step)
+            running = running[s_lo < t1[running]]
+            s_lo = t0[running] + float(SUPER * K) * h
+        s_hi = np.minimum(t0[running] + float(SUPER * (K + 1)) * h, t1[running])
+        n_sub = np.full(running.size, SUPER)
+        if bricks is not None:
+            maj = np.zeros(running.size)
+            sharp = np.zeros(running.size, bool)  # a mesh volume's surface keeps steps short
+            for mi in range(len(fields)):
+                lo, lv = lines[mi][0][running], lines[mi][1][running]
+                mm = segment_majorant(fields[mi].shape[:3], bricks[mi], lo, lv, s_lo, s_hi)
+                maj += mm * sig_max[mi]
+                sharp |= (thresholds[mi] >= 0.0) & (mm > 0.0)
+            n_sub = np.where(maj > 0.0, n_sub, 0)
+            if adapt_tau > 0.0:
+                want = np.ceil(maj * (s_hi - s_lo) / adapt_tau)
+                short = sharp | light_varies(lights, origins[running], dirs[running], s_lo, s_hi,
+                                             max(gs, key=abs) if len(gs) else 0.0)
+                n_sub = np.where(maj > 0.0, np.where(short, SUPER, np.clip(want, 1, SUPER)),
+                                 0).astype(np.int64)
+        H = float(SUPER) * h / np.maximum(n_sub, 1)
+        going = np.ones(running.size, bool)
+        for jj in range(SUPER):
+            sel = np.flatnonzero(going & (n_sub > jj))
+            seg = s_lo[sel] + jj * H[sel]
+            inside = seg < t1[running[sel]]
+            going[sel[~inside]] = False
+            sel, seg = sel[inside], seg[inside]
+            if not sel.size:
+                continue
+            alive = running[sel]
+            Hs = H[sel]
+            k = SUPER * K + jj
+            o, d = origins[alive], dirs[alive]
+            ka = keys[alive]
+            hl = np.minimum(Hs, t1[alive] - seg)
+            ts = np.minimum(seg + uniform(ka, k, DIM_JITTER) * Hs, seg + hl)
+            x = o + d * ts[:, None]
+            m = len(alive)
+            sig_t = np.zeros((m, 3))
+            src = np.zeros((m, 3))
+            src_ms = np.zeros((m, 3))
+            src_em = np.zeros((m, 3))
+            emit = []
             for li, rec in enumerate(lights):
-                c = int(rec[L_CHANNEL])
-                if c < 0:
-                    continue
-                wi, e, wc, dc = emit[li]
-                tau = v[:, c:c + 3]
-                if edge.size:
-                    tau = tau.copy()
-                    tau[edge] = _refined_tau(fields, w2is, thresholds, sigma_ts, mi, c, x[edge],
-                                             wc[edge], dc[edge], 0.5 * voxels[mi])
-                cos = -np.einsum("ij,ij->i", wi, d)
-                inc += (hg(cos, gs[mi])[:, None] * e) * np.exp(-tau)
-            if ambient >= 0:
-                inc += v[:, ambient:ambient + 3]
-            src += rho[:, None] * sigma_ss[mi][None, :] * inc
-            if multiple is not None:
-                amb_ms, per_medium, tables = multiple
-                ms_fields = per_medium[mi]
-                live = np.flatnonzero(rho > 0)
-                if live.size:
-                    wd = np.stack([emit[li][0][live] for li in range(len(lights))]) \
-                        if len(lights) else np.zeros((0, live.size, 3))
-                    cos = -np.einsum("lij,ij->li", wd, d[live])
-                    ms_inc = multiple_source(ms_fields, tables[mi], rho[live], x[live], w2is[mi], cos)
-                    if amb_ms >= 0:
-                        ms_inc += v[live, amb_ms:amb_ms + 3]
-                    src_ms[live] += rho[live, None] * sigma_ss[mi][None, :] * ms_inc
-        x_t = sig_t * hl[:, None]
-        frac = np.where(x_t > 1e-7, -np.expm1(-x_t) / np.maximum(x_t, 1e-300), 1.0 - 0.5 * x_t)
-        T_before = trans[alive]
-        single[alive] += T_before * src * (frac * hl[:, None])
-        multi[alive] += T_before * src_ms * (frac * hl[:, None])
-        emitted[alive] += T_before * src_em * (frac * hl[:, None])
-        T_after = T_before * np.exp(-x_t)
-        trans[alive] = T_after
-        tb, ta = T_before.mean(axis=1), T_after.mean(axis=1)
-        thr = 1.0 - depth_opacity
-        hit = (depth[alive] >= depth_miss) & (ta <= thr) & (tb > thr)
-        if hit.any():
-            with np.errstate(divide="ignore", invalid="ignore"):
-                fr = np.clip(np.log(tb[hit] / thr) / np.log(tb[hit] / np.maximum(ta[hit], 1e-300)), 0, 1)
-            depth[alive[hit]] = (seg_start[alive[hit]] + fr * hl[hit]) * axial[alive[hit]]
-        nxt = seg_start[alive] + hl
-        advanced = nxt > seg_start[alive]   # a step that no longer moves t stops the ray
-        seg_start[alive] = nxt
-        k += 1
-        steps[alive] = k
-        t[alive] = seg_start[alive] + uniform(ka, k, DIM_JITTER) * h
-        keep = advanced & (seg_start[alive] < t1[alive]) & (T_after.max(axis=1) > T_MIN)
-        alive = alive[keep]
+                emit.append(light_sample(rec, x, uniform(ka, k, 2 * li), uniform(ka, k, 2 * li + 1)))
+            for mi in range(len(fields)):
+                f = fields[mi]
+                v = _fetch(f, w2is[mi], x, 0, f.shape[3])
+                rho = density_from(v[:, 0], thresholds[mi])
+                sig_t += rho[:, None] * sigma_ts[mi][None, :]
+                if emission_channels is not None and emission_channels[mi] >= 0:
+                    src_em += v[:, emission_channels[mi]:emission_channels[mi] + 3]
+                if emissions is not None:
+                    src_em += (rho > 0)[:, None] * np.asarray(emissions[mi], np.float64)[None, :]
+                edge = np.flatnonzero((v[:, 0] > EDGE_EPS) & (v[:, 0] < 1.0 - EDGE_EPS) & (rho > 0)) \
+                    if thresholds[mi] >= 0 else np.zeros(0, np.int64)
+                inc = np.zeros((m, 3))
+                for li, rec in enumerate(lights):
+                    c = int(rec[L_CHANNEL])
+                    if c < 0:
+                        continue
+                    wi, e, wc, dc = emit[li]
+                    tau = v[:, c:c + 3]
+                    if edge.size:
+                        tau = tau.copy()
+                        tau[edge] = _refined_tau(fields, w2is, thresholds, sigma_ts, mi, c, x[edge],
+                                                 wc[edge], dc[edge], 0.5 * voxels[mi])
+                    cos = -np.einsum("ij,ij->i", wi, d)
+                    inc += (hg(cos, gs[mi])[:, None] * e) * np.exp(-tau)
+                if ambient >= 0:
+                    inc += v[:, ambient:ambient + 3]
+                src += rho[:, None] * sigma_ss[mi][None, :] * inc
+                if multiple is not None:
+                    amb_ms, per_medium, tables = multiple
+                    ms_fields = per_medium[mi]
+                    live = np.flatnonzero(rho > 0)
+                    if live.size:
+                        wd = np.stack([emit[li][0][live] for li in range(len(lights))]) \
+                            if len(lights) else np.zeros((0, live.size, 3))
+                        cos = -np.einsum("lij,ij->li", wd, d[live])
+                        ms_inc = multiple_source(ms_fields, tables[mi], rho[live], x[live], w2is[mi], cos)
+                        if amb_ms >= 0:
+                            ms_inc += v[live, amb_ms:amb_ms + 3]
+                        src_ms[live] += rho[live, None] * sigma_ss[mi][None, :] * ms_inc
+            x_t = sig_t * hl[:, None]
+            frac = np.where(x_t > 1e-7, -np.expm1(-x_t) / np.maximum(x_t, 1e-300), 1.0 - 0.5 * x_t)
+            T_before = trans[alive]
+            single[alive] += T_before * src * (frac * hl[:, None])
+            multi[alive] += T_before * src_ms * (frac * hl[:, None])
+            emitted[alive] += T_before * src_em * (frac * hl[:, None])
+            T_after = T_before * np.exp(-x_t)
+            trans[alive] = T_after
+            tb, ta = T_before.mean(axis=1), T_after.mean(axis=1)
+            thr = 1.0 - depth_opacity
+            hit = (depth[alive] >= depth_miss) & (ta <= thr) & (tb > thr)
+            if hit.any():
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    fr = np.clip(np.log(tb[hit] / thr) / np.log(tb[hit] / np.maximum(ta[hit], 1e-300)), 0, 1)
+                depth[alive[hit]] = (seg[hit] + fr * hl[hit]) * axial[alive[hit]]
+            steps[alive] += 1
+            stop = (T_after.max(axis=1) <= T_MIN) | ~(seg + Hs > seg)  # opaque, or t stalls
+            going[sel[stop]] = False
+        running = running[going]
+        K += 1
     return single, trans, depth, multi, steps, emitted

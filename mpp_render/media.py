@@ -43,6 +43,28 @@ class PreparedMedium:
         return self.threshold >= 0.0
 
     @property
+    def bricks(self) -> np.ndarray:
+        """The density bounds per brick of ``BRICK``^3 cells (``brick_bounds``), computed on
+        first use."""
+        if getattr(self, "_bricks", None) is None:
+            self._bricks = brick_bounds(self.grid, self.threshold)
+        return self._bricks
+
+    @property
+    def march_bricks(self) -> np.ndarray:
+        """``bricks`` for the camera march: where the emission grid glows the largest bound is
+        raised to ``GLOW_BOUND``, so that the march neither skips those super-steps nor
+        lengthens their steps (the grid shines whatever the density)."""
+        if self.emission_grid is None:
+            return self.bricks
+        if getattr(self, "_march_bricks", None) is None:
+            glow = brick_bounds(np.abs(self.emission_grid).max(axis=-1))[..., 1] > 0.0
+            b = self.bricks.copy()
+            b[..., 1] = np.where(glow, np.maximum(b[..., 1], GLOW_BOUND), b[..., 1])
+            self._march_bricks = b
+        return self._march_bricks
+
+    @property
     def shape(self):
         return self.grid.shape
 
@@ -81,7 +103,7 @@ def prepare(medium: Medium, warnings=None) -> PreparedMedium:
     voxel = float(np.min(np.linalg.norm(i2w[:3, :3], axis=0)))
     ss = np.asarray(medium.sigma_s, np.float64).reshape(3)
     sa = np.asarray(medium.sigma_a, np.float64).reshape(3)
-    thr = 0.5 if medium.source == "MESH" else -1.0
+    thr = SHARP_THRESHOLD if medium.source == "MESH" else -1.0
     return PreparedMedium(medium, np.ascontiguousarray(grid), np.ascontiguousarray(w2i), i2w,
                           ss, sa, ss + sa, clamp_g(float(medium.g)), voxel, thr,
                           _emission_grid(medium, d.shape, warnings))
@@ -109,6 +131,55 @@ def _emission_grid(medium: Medium, shape, warnings):
     out = np.zeros(tuple(s + 2 for s in shape) + (3,), np.float32)
     out[1:-1, 1:-1, 1:-1] = e
     return out
+
+
+# A mesh volume's surface is where its interpolated occupancy crosses one half.  The test is
+# v >= 0.5 - 1e-9 rather than v >= 0.5: grid-aligned faces put many sample points exactly on
+# 0.5, and there the two kernel twins' different rounding would otherwise decide differently.
+SHARP_THRESHOLD = 0.5 - 1e-9
+
+
+BRICK = 4  # cells per edge of the bricks of the empty-space grid
+GLOW_BOUND = 1e30  # a brick's largest density bound where an emission grid glows (march_bricks)
+
+
+def _block_reduce(a: np.ndarray, brick: int, fn) -> np.ndarray:
+    """``fn`` (np.maximum or np.minimum) over the voxels b brick .. (b + 1) brick (inclusive)
+    of each brick b along every axis of ``a``; b = ceil((n - 1) / brick) bricks per axis
+    (voxels past the grid repeat its last one)."""
+    out = a
+    for ax in range(3):
+        n = out.shape[ax]
+        nb = max(1, -(-(n - 1) // brick))
+        extra = nb * brick + 1 - n
+        b = np.moveaxis(out, ax, 0)
+        if extra > 0:
+            b = np.concatenate([b, np.repeat(b[-1:], extra, axis=0)])
+        body = fn.reduce(b[:nb * brick].reshape((nb, brick) + b.shape[1:]), axis=1)
+        out = np.moveaxis(fn(body, b[brick:nb * brick + 1:brick]), 0, ax)
+    return out
+
+
+def brick_bounds(grid: np.ndarray, threshold: float = -1.0, brick: int = BRICK) -> np.ndarray:
+    """Coarse bounds of a padded density ``grid`` (X,Y,Z): float32 (bx, by, bz, 2) with
+    b = ceil((n - 1) / brick) bricks per axis, brick b covering the index cells
+    [b brick, (b + 1) brick]; [..., 0] is the least and [..., 1] the largest density
+    (``density_from``) any point of the brick can have: the extremes of the voxels its
+    cells' trilinear interpolation reads (index b brick .. (b + 1) brick), widened by one
+    voxel on each side so that a point a rounding error across a face is covered too.
+    Largest 0: surely empty (the kernels skip it); least = largest: constant (the optical
+    depth kernel integrates it in one go)."""
+    g = np.asarray(grid, np.float32)
+    hi, lo = g, g
+    for ax in range(3):  # one-voxel max / min filters (np.roll wraps: the padding is 0 anyway)
+        hi = np.maximum(hi, np.maximum(np.roll(hi, 1, axis=ax), np.roll(hi, -1, axis=ax)))
+        lo = np.minimum(lo, np.minimum(np.roll(lo, 1, axis=ax), np.roll(lo, -1, axis=ax)))
+    hi = _block_reduce(hi, brick, np.maximum)
+    lo = _block_reduce(lo, brick, np.minimum)
+    if threshold >= 0.0:
+        hi = (hi >= threshold).astype(np.float32)
+        lo = (lo >= threshold).astype(np.float32)
+    return np.ascontiguousarray(np.stack([lo, hi], axis=-1), np.float32)
 
 
 def density_from(value, threshold: float):
@@ -153,22 +224,24 @@ def trilinear(grid, idx):
 def ray_box(pm: PreparedMedium, origins, dirs):
     """Parametric interval (t0, t1) where rays o + t d (world, any |d|) lie inside the padded
     grid's sampling box; t0 > t1 where they miss.  Works in index space, where the map is
-    affine, so t is the same parameter as in world space."""
+    affine, so t is the same parameter as in world space.  (Column-wise minima and maxima:
+    numpy's reductions over a length-3 axis cost several times more.)"""
     o = to_index(pm, origins)
     d = dirs @ pm.w2i[:, :3].T
-    lo = np.zeros(3)
     hi = np.array(pm.grid.shape, np.float64) - 1.0
     with np.errstate(divide="ignore", invalid="ignore"):
         inv = 1.0 / d
-        ta = (lo - o) * inv
+        ta = -o * inv
         tb = (hi - o) * inv
-    tmin = np.minimum(ta, tb)
-    tmax = np.maximum(ta, tb)
+    tmin = np.fmin(ta, tb)
+    tmax = np.fmax(ta, tb)
     par = np.abs(d) < 1e-300
-    inside_par = (o >= lo) & (o <= hi)
-    tmin = np.where(par, np.where(inside_par, -np.inf, np.inf), tmin)
-    tmax = np.where(par, np.where(inside_par, np.inf, -np.inf), tmax)
-    return np.nanmax(tmin, axis=1), np.nanmin(tmax, axis=1)
+    if par.any():
+        inside_par = (o >= 0.0) & (o <= hi)
+        tmin = np.where(par, np.where(inside_par, -np.inf, np.inf), tmin)
+        tmax = np.where(par, np.where(inside_par, np.inf, -np.inf), tmax)
+    return (np.maximum(np.maximum(tmin[:, 0], tmin[:, 1]), tmin[:, 2]),
+            np.minimum(np.minimum(tmax[:, 0], tmax[:, 1]), tmax[:, 2]))
 
 
 def union_interval(media: List[PreparedMedium], origins, dirs, t_lo, t_hi):

@@ -29,7 +29,7 @@ from .precompute import kernel_arrays, split_fog
 from .scene import SceneDescription
 from .surfaces import intersect, prepare_surfaces, shade
 
-TILE = 32            # largest tile side (pixels)
+TILE = 64            # largest tile side (pixels)
 GATHER_SEED = 0x5BD1E995  # offsets the seed of the rays that gather volume light onto surfaces
 TILE_RAYS = 4096     # rays per tile at most: Esc and progress are served between tiles
 
@@ -193,29 +193,34 @@ def render(desc: SceneDescription,
             t_single, t_emit, t_trans = worldfog.tail(fog, lights, o, d, s0, t_end)
             r = dict(r, single=r["single"] + r["T"] * t_single,
                      emission=r["emission"] + r["T"] * t_emit, T=r["T"] * t_trans)
+        npx = th * tw
+
+        def pixel_mean(a):  # (n, C) per ray -> (pixels, C), the box filter over the pixel
+            return a if spp == 1 else a.reshape(npx, spp, -1).mean(axis=1)
+
         res = {}
-        single = r["single"].reshape(th * tw, spp, 3).mean(axis=1)
-        T = r["T"].reshape(th * tw, spp, 3).mean(axis=1)
-        seen = (r["T"] * behind).reshape(th * tw, spp, 3).mean(axis=1)
-        multi = r["multiple"].reshape(th * tw, spp, 3).mean(axis=1)
-        emitted = r["emission"].reshape(th * tw, spp, 3).mean(axis=1)
-        res["Volume Single"] = single
-        res["Volume Multiple"] = multi
-        res["Emission"] = emitted
-        res["Transmittance"] = T
-        comb = np.empty((th * tw, 4))
+        single, multi, emitted = pixel_mean(r["single"]), pixel_mean(r["multiple"]), \
+            pixel_mean(r["emission"])
+        for name, val in (("Volume Single", single), ("Volume Multiple", multi),
+                          ("Emission", emitted)):
+            if name in out:
+                res[name] = val
+        if "Transmittance" in out:
+            res["Transmittance"] = pixel_mean(r["T"])
+        comb = np.empty((npx, 4))
         if st.film_transparent:
-            surf_seen = (r["T"] * np.where(hit[:, None], behind, 0.0)).reshape(th * tw, spp, 3).mean(axis=1)
-            comb[:, :3] = single + multi + emitted + surf_seen
-            t_miss = np.where(hit[:, None], 0.0, r["T"]).reshape(th * tw, spp, 3).mean(axis=1)
-            comb[:, 3] = 1.0 - t_miss.mean(axis=1)
+            comb[:, :3] = single + multi + emitted + pixel_mean(
+                r["T"] * np.where(hit[:, None], behind, 0.0))
+            comb[:, 3] = 1.0 - pixel_mean(np.where(hit[:, None], 0.0, r["T"])).mean(axis=1)
         else:
-            comb[:, :3] = single + multi + emitted + seen
+            comb[:, :3] = single + multi + emitted + pixel_mean(r["T"] * behind)
             comb[:, 3] = 1.0
         res["Combined"] = comb
-        dep = r["depth"].reshape(th * tw, spp)
-        hitd = dep < DEPTH_MISS
-        res["Depth"] = np.where(hitd.any(axis=1), np.where(hitd, dep, np.inf).min(axis=1), DEPTH_MISS)[:, None]
+        if "Depth" in out:
+            dep = r["depth"].reshape(npx, spp)
+            hitd = dep < DEPTH_MISS
+            res["Depth"] = np.where(hitd.any(axis=1), np.where(hitd, dep, np.inf).min(axis=1),
+                                    DEPTH_MISS)[:, None]
         return index, (x0, y0, tw, th), res, float(r["steps"].sum())
 
     t_march = time.perf_counter()

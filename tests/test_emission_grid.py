@@ -42,7 +42,8 @@ def march_args(rng, media, lights, pre, n=2000):
             [m.w2i for m in media], [m.sigma_s for m in media], [m.sigma_t for m in media],
             [m.g for m in media], [m.threshold for m in media], [m.voxel_size for m in media],
             pack_lights(lights, pre.layout), -1, 0.07, 0.01, 1e10, None,
-            [np.maximum(m.medium.emission, 0) for m in media], ec)
+            [np.maximum(m.medium.emission, 0) for m in media],
+            [m.march_bricks for m in media], 0.1, ec)
 
 
 def two_media():
@@ -169,3 +170,31 @@ def test_blackbody_emission_follows_stefan_boltzmann():
     np.testing.assert_allclose(half, expect, rtol=1e-12)
     assert np.all(blackbody.emission(np.array([3000.0, -5.0, np.nan]), 0.0) == 0)
     assert np.all(blackbody.emission(np.array([-5.0, np.nan]), 1.0) == 0)
+
+
+def test_march_does_not_skip_a_glow_where_there_is_no_density():
+    """Empty-space skipping reads brick bounds of the density; a medium's emission grid shines
+    whatever the density, so its bricks (march_bricks) keep the glowing super-steps: the same
+    Emission pass as with no skipping, where density-only bounds would lose the glow."""
+    shape = (12, 12, 12)
+    d = np.zeros(shape, np.float32)
+    d[0, 0, 0] = 1.0                     # a speck of smoke in a corner
+    glow = np.zeros(shape + (3,), np.float32)
+    glow[4:8, 4:8, 4:8] = (2.0, 1.0, 0.5)   # fire without smoke in the middle
+    i2w = np.diag([0.25, 0.25, 0.25, 1.0])
+    i2w[:3, 3] = -1.5
+    pm = prepare(Medium("fire", d, i2w, np.full(3, 1.0), np.full(3, 0.5), emission_grid=glow))
+    pre = precompute([pm], [], World(), Camera("PERSP", np.eye(4), 4, 4, (-1, 1, -1, 1)))
+    rng = np.random.default_rng(5)
+    base = list(march_args(rng, [pm], [], pre, n=400))
+    out = {}
+    for name, bricks in (("none", None), ("march", [pm.march_bricks]), ("density", [pm.bricks])):
+        args = base[:-3] + [bricks, 0.1, base[-1]]
+        out[name] = [kernels_np.march(*args)[5]]
+        if kernels._c is not None:
+            out[name].append(kernels.c_march(*args)[5])
+    assert out["none"][0].sum() > 1.0
+    for a, b in zip(out["march"], out["none"]):
+        np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12)
+    assert out["density"][0].sum() < 0.5 * out["none"][0].sum()
+    assert np.all(pm.march_bricks[..., 1] >= pm.bricks[..., 1])

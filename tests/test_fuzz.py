@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from mpp_render import kernels, kernels_np
+from mpp_render.media import brick_bounds
 
 pytestmark = pytest.mark.skipif(kernels._c is None, reason="compiled kernels not built")
 ROUNDS = int(os.environ.get("MPP_FUZZ_ROUNDS", "60"))
@@ -61,14 +62,71 @@ def test_fuzz_march_and_optical_depth():
             s, t, dep = kernels._c.march(*args)[:3]
         except ValueError:
             continue   # rejected input is fine; a crash is not
+        # with brick bounds (some spoiled) and longer steps in thin media
+        bricks = [spoil(brick_bounds(np.ascontiguousarray(f[..., 0]), th), rng, 0.05).astype(np.float32)
+                  for f, th in zip(args[6], args[11])]
+        try:
+            kernels._c.march(*args, None, None, bricks, 4, float(rng.choice([0.0, 0.1, 5.0])))
+        except ValueError:
+            pass
         n = len(args[0])
         assert len(s) == 24 * n and len(t) == 24 * n and len(dep) == 8 * n
         fields, w2is, st, thr = args[6], args[7], args[9], args[11]
+        grids = [np.ascontiguousarray(f[..., 0]) for f in fields]
+        brick = int(rng.choice([1, 2, 4]))
+        bricks = [spoil(brick_bounds(g, t, brick), rng, 0.05).astype(np.float32)
+                  for g, t in zip(grids, thr)]
+        for extra in ((), (bricks, brick), (bricks, brick, True), (None, 4, True)):
+            try:
+                kernels._c.optical_depth(args[0], args[1], args[3], grids, w2is, st, thr, args[15],
+                                         0.5, *extra)
+            except ValueError:
+                pass
+
+
+def random_sweep(rng):
+    """Arguments of _kernels.light_sweep: valid, extreme but finite, or with one spoiled field."""
+    args = random_case(rng)
+    grids = [np.ascontiguousarray(f[..., 0]) for f in args[6]]
+    w2is = [np.nan_to_num(w, nan=0.5, posinf=3.0, neginf=-3.0) for w in args[7]]
+    shape = tuple(int(x) for x in rng.integers(2, 9, 3))
+    out = np.zeros(shape + (int(rng.integers(3, 8)),), np.float32)
+    axis, sign = int(rng.integers(0, 3)), int(rng.choice([-1, 1]))
+    ends = sorted(int(x) for x in rng.integers(0, shape[axis], 2))
+    i_first, i_last = ends if sign > 0 else ends[::-1]
+    n_p, n_q = int(rng.integers(2, 12)), int(rng.integers(2, 12))
+    coef = rng.normal(size=6) * rng.choice([0.5, 10.0, 1e6])
+    coef[4], coef[5] = rng.uniform(0.05, 3), 0.0 if rng.random() < 0.5 else rng.uniform(-0.01, 0.01)
+    init = rng.uniform(0, 3, (n_p, n_q, 3))
+    p_lo = int(rng.integers(0, n_p - 1))
+    p_hi = int(rng.integers(p_lo + 1, n_p))
+    a2w = np.hstack([np.diag(rng.uniform(0.2, 2, 3)), rng.uniform(-3, 3, (3, 1))])
+    call = [out, int(rng.integers(0, out.shape[3] - 2)), a2w, axis, sign, i_first, i_last, coef,
+            rng.uniform(-10, 10, 3), int(rng.integers(0, 2)), init, p_lo, p_hi,
+            int(rng.integers(1, 4)), grids, w2is, args[9], args[11]]
+    if rng.random() < 0.4:  # spoil one thing
+        k = int(rng.choice([1, 2, 3, 4, 5, 6, 7, 8, 10, 11, 12, 13]))
+        v = call[k]
+        if isinstance(v, np.ndarray):
+            call[k] = spoil(v, rng, 0.3)
+        else:
+            call[k] = int(v + rng.choice([-100, -3, -1, 1, 3, 100]))
+    return call
+
+
+def test_fuzz_light_sweep():
+    """Random column layouts, grids and spoiled fields: the sweep writes only inside ``out``
+    (ASan checks this in test_sanitizers.py) or raises ValueError; most calls run."""
+    rng = np.random.default_rng(777)
+    ran = 0
+    for _ in range(ROUNDS):
+        call = random_sweep(rng)
         try:
-            kernels._c.optical_depth(args[0], args[1], args[3], [np.ascontiguousarray(f[..., 0]) for f in fields],
-                                     w2is, st, thr, args[15], 0.5)
+            kernels._c.light_sweep(*call)
+            ran += 1
         except ValueError:
-            pass
+            continue
+    assert ran > ROUNDS // 3
 
 
 def test_wrong_types_and_shapes_raise():

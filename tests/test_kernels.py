@@ -12,8 +12,8 @@ needs_c = pytest.mark.skipif(kernels.backend() != "c" and kernels._c is None,
                              reason="compiled kernels not built")
 
 
-def random_media(rng):
-    a = rng.random((10, 9, 8)).astype(np.float32) * 2
+def random_media(rng, density=2.0):
+    a = rng.random((10, 9, 8)).astype(np.float32) * density
     i2w = np.eye(4)
     i2w[:3, :3] = np.diag([0.3, 0.35, 0.4])
     i2w[:3, 3] = [-1.4, -1.3, -1.5]
@@ -40,11 +40,24 @@ def all_lights():
             Light("POINT", "dark", np.zeros(3), position=np.zeros(3))]
 
 
+def unjittered_lights():
+    """A sun, a point and a spot without radius: lights sampled without jitter, so the march
+    may lengthen its steps in thin media."""
+    spot_m = np.eye(4)
+    spot_m[:3, 3] = [0.3, 0.2, 3.0]
+    return [Light("SUN", "sun", np.array([3.0, 2.5, 2.0]), direction=np.array([0.3, 0.2, -0.93])),
+            Light("POINT", "pt", np.array([50.0, 40.0, 30.0]), position=np.array([1.5, -1.0, 0.5])),
+            Light("SPOT", "spot", np.array([300.0, 300, 300]), position=spot_m[:3, 3],
+                  direction=np.array([0, 0, -1.0]), matrix=spot_m, spot_size=0.8, spot_blend=0.3)]
+
+
 @needs_c
-def test_march_twins_agree_on_random_rays():
+@pytest.mark.parametrize("lights,density", [(all_lights(), 2.0), (unjittered_lights(), 2.0),
+                                            (unjittered_lights(), 0.1)],
+                         ids=["all", "unjittered", "unjittered-thin"])
+def test_march_twins_agree_on_random_rays(lights, density):
     rng = np.random.default_rng(5)
-    media = random_media(rng)
-    lights = all_lights()
+    media = random_media(rng, density)
     cam = Camera("PERSP", np.eye(4), 8, 8, (-0.5, 0.5, -0.5, 0.5))
     cam.cam_to_world[:3, 3] = [0, 0, 6]
     pre = precompute(media, lights, World(np.array([0.2, 0.3, 0.5])), cam, n_dirs=8,
@@ -69,6 +82,22 @@ def test_march_twins_agree_on_random_rays():
     for x, y, name in zip(a, b, ("single", "T", "depth", "multiple", "steps", "emission")):
         assert np.all(np.isfinite(y)), name
         assert np.all(np.abs(x - y) <= 1e-4 * np.maximum(np.abs(x), 1e-6)), name
+    # skipping empty bricks changes nothing but the count of samples taken; longer steps in
+    # thin media (adapt_tau) change the samples: the twins still agree, sample for sample
+    bricks = [m.bricks for m in media]
+    for adapt in (0.0, 0.3):
+        c_np = kernels_np.march(*args, bricks=bricks, adapt_tau=adapt)
+        c = kernels.c_march(*args, bricks=bricks, adapt_tau=adapt)
+        for x, y, name in zip(c_np, c, ("single", "T", "depth", "multiple", "steps", "emission")):
+            assert np.all(np.abs(x - y) <= 1e-4 * np.maximum(np.abs(x), 1e-6)), (name, adapt)
+        assert np.all(c[4] <= a[4]) and c[4].sum() < 0.9 * a[4].sum()
+        if adapt == 0:
+            skipped = c[4].sum()
+        elif density < 1.0 and len(lights) == 3:
+            assert c[4].sum() < 0.6 * skipped  # the thin smoke takes longer steps
+        if adapt == 0:
+            for x, y in zip(a[:4], c[:4]):
+                assert np.all(np.abs(x - y) <= 1e-4 * np.maximum(np.abs(x), 1e-6))
     assert a[0].max() > 0.01 and a[1].min() < 0.5   # the rays did see the media
     assert a[3].max() > 0.01                         # and multiple scattering
     assert a[5].max() > 0.01                         # and the smoke's emission

@@ -64,3 +64,29 @@ def test_every_level_covers_the_whole_base_lattice():
     for k, lv in enumerate(levels):
         for ax in range(3):
             assert (lv.shape[ax] - 1) * 2 ** k >= base.shape[ax] - 1, (k, ax, lv.shape)
+
+
+def test_upsample_into_twins_agree_and_write_only_the_given_voxels():
+    import pytest
+    from mpp_render import kernels, kernels_np
+    if kernels._c is None:
+        pytest.skip("compiled kernels not built")
+    rng = np.random.default_rng(4)
+    for shape, stride in (((17, 12, 9), 3), ((10, 10, 10), 1), ((9, 14, 5), 4)):
+        cshape = tuple((s - 1 + stride - 1) // stride + 1 for s in shape)
+        lat = rng.random(cshape + (3,)).astype(np.float32)
+        flat = np.flatnonzero(rng.random(int(np.prod(shape))) < 0.6)
+        a = np.full(shape + (7,), -1.0, np.float32)
+        b = a.copy()
+        kernels_np.upsample_into(a, 2, lat, stride, flat)
+        kernels.c_upsample_into(b, 2, lat, stride, flat)
+        assert np.allclose(a, b, rtol=1e-5, atol=1e-6)
+        untouched = np.ones(int(np.prod(shape)), bool)
+        untouched[flat] = False
+        assert np.all(b.reshape(-1, 7)[untouched] == -1.0) and np.all(b[..., [0, 1, 5, 6]] == -1.0)
+    with pytest.raises(ValueError):
+        kernels.c_upsample_into(b, 5, lat, stride, flat)      # channels past the field
+    with pytest.raises(ValueError):
+        kernels.c_upsample_into(b, 0, lat, stride, np.array([10 ** 9]))
+    with pytest.raises(ValueError):
+        kernels.c_upsample_into(b, 0, lat, 0, flat)

@@ -25,7 +25,7 @@ def test_kernels_under_asan_and_ubsan(tmp_path):
     shutil.copytree(REPO / "mpp_render", work / "mpp_render",
                     ignore=shutil.ignore_patterns("*.so", "__pycache__", "blender"))
     (work / "tests").mkdir()
-    for name in ("test_fuzz.py", "test_kernels.py"):
+    for name in ("test_fuzz.py", "test_kernels.py", "test_sweep.py", "test_skip.py", "test_pyramid.py"):
         shutil.copy(REPO / "tests" / name, work / "tests" / name)
     shutil.copy(REPO / "setup.py", work / "setup.py")
     env = dict(os.environ, MPP_SANITIZE="1")
@@ -39,7 +39,9 @@ def test_kernels_under_asan_and_ubsan(tmp_path):
                            cwd=work, env=env, capture_output=True, text=True)
     assert where.stdout.strip().startswith(str(work)), where.stdout + where.stderr[-2000:]
     run = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
-                          "tests/test_fuzz.py", "tests/test_kernels.py"], cwd=work, env=env,
+                          "tests/test_fuzz.py", "tests/test_kernels.py", "tests/test_sweep.py",
+                          "tests/test_skip.py", "tests/test_pyramid.py"],
+                         cwd=work, env=env,
                          capture_output=True, text=True, timeout=900)
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
     assert " passed" in run.stdout and "skipped" not in run.stdout, run.stdout[-2000:]
