@@ -257,13 +257,13 @@ def _light_channels(lights) -> list:
 
 
 def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, surfaces=None,
-                      threads: int = 0, multiple: bool = False,
+                      threads: int = 0, multiple: bool = False, multiple_resolution=None,
                       should_cancel: Optional[Callable[[], bool]] = None,
                       progress=None, cache: Optional[Cache] = None):
     """``precompute.precompute`` reusing earlier results kept in ``cache`` (default ``CACHE``).
 
     One entry (kind 'precompute') per *light key* -- the media, lights, surfaces, multiple
-    scattering, thread count and whether the world is lit -- holds the fields and pyramids
+    scattering and its resolution, thread count and whether the world is lit -- holds the fields and pyramids
     and the *world key* they were computed for (world colour, camera position, ambient
     directions, seed).  Then:
 
@@ -283,15 +283,19 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
     from .scene import World
 
     cache = CACHE if cache is None else cache
+    if multiple_resolution is None:
+        multiple_resolution = pre_mod.MULTIPLE_RESOLUTION
     has_world = bool(np.any(np.asarray(world.color, np.float64) > 0))
     # the thread count does not change the numbers; it is keyed anyway so that a render with
     # other threads still runs (and checks) the precompute
-    common = (media_key(media), surfaces_key(surfaces), bool(multiple), int(threads))
+    common = (media_key(media), surfaces_key(surfaces), bool(multiple),
+              int(multiple_resolution) if multiple else 0, int(threads))
     light_key = digest("lights", common, list(lights), has_world)
     world_key = digest("world", common, np.asarray(world.color, np.float64), camera_key(camera),
                        int(n_dirs), int(seed)) if has_world else None
     kw = dict(n_dirs=n_dirs, seed=seed, should_cancel=should_cancel, progress=progress,
-              surfaces=surfaces, threads=threads, multiple=multiple)
+              surfaces=surfaces, threads=threads, multiple=multiple,
+              multiple_resolution=multiple_resolution)
 
     def result(pre, reused):
         return pre_mod.Precomputed(pre.fields, pre.layout, pre.multiple, pre.seconds,

@@ -423,12 +423,13 @@ def cell_mean_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel:
 
 
 def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int,
-                   max_levels=8) -> Optional[MultipleField]:
+                   max_levels=8, resolution: int = MULTIPLE_RESOLUTION) -> Optional[MultipleField]:
     """The light pyramid of ``light`` on medium ``pm`` from its precomputed field ``fld``
-    (optical depth at ``channel``), see MultipleField."""
+    (optical depth at ``channel``), see MultipleField, on a lattice of about ``resolution``
+    points along the grid's longest side (never finer than the voxels)."""
     from . import pyramid
     from .lights import incident
-    stride = max(1, int(np.ceil(max(pm.grid.shape) / MULTIPLE_RESOLUTION)))
+    stride = max(1, int(np.ceil(max(pm.grid.shape) / max(int(resolution), 2))))
     shape = tuple((s - 1 + stride - 1) // stride + 1 for s in pm.grid.shape)
     ijk = np.stack(np.unravel_index(np.arange(int(np.prod(shape))), shape), axis=1) * float(stride)
     pts = ijk @ pm.i2w[:3, :3].T + pm.i2w[:3, 3]
@@ -695,7 +696,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                n_dirs: int = 64, step_factor: float = 1.0, seed: int = 0,
                should_cancel: Optional[Callable[[], bool]] = None,
                progress: Optional[Callable[[float, str], None]] = None,
-               surfaces=None, threads: int = 0, multiple: bool = False) -> Optional[Precomputed]:
+               surfaces=None, threads: int = 0, multiple: bool = False,
+               multiple_resolution: int = MULTIPLE_RESOLUTION) -> Optional[Precomputed]:
     """Field arrays for every medium, and with ``multiple`` the light pyramids; None when
     cancelled.  ``surfaces`` (a SurfaceSet or None) shadow the lights and the sky.  Media
     that cannot scatter (sigma_s = 0) get no multiple-scattering data."""
@@ -786,7 +788,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                     continue
                 if progress:
                     progress(0.0, f"Light pyramid: {light.name} on {pm.medium.name}")
-                ms[li] = multiple_field(pm, f, light, chans[li])
+                ms[li] = multiple_field(pm, f, light, chans[li], resolution=multiple_resolution)
                 if should_cancel and should_cancel():  # a pyramid is not cut into chunks
                     return None
         ms_all.append(ms)

@@ -122,7 +122,8 @@ def render(desc: SceneDescription,
                                       n_dirs=st.ambient_directions, seed=st.seed,
                                       should_cancel=cancel, progress=progress,
                                       surfaces=None if surf.empty else surf, threads=st.threads,
-                                      multiple=st.multiple)
+                                      multiple=st.multiple,
+                                      multiple_resolution=st.multiple_resolution)
         if pre is None:
             return RenderOutput(out, {"precompute": time.perf_counter() - t_pre}, warnings, True)
     timings["precompute"] = time.perf_counter() - t_pre

@@ -178,6 +178,8 @@ class Settings:
     ``multiple``: compute multiple scattering (MPP).  ``film_transparent``: alpha from
     transmittance instead of 1.  ``seed``: jitter seed (same seed, same image).
     ``ambient_directions``: directions used to integrate the world light's transmittance.
+    ``multiple_resolution``: lattice points along a medium's longest side for the light
+    pyramids of multiple scattering (precompute.multiple_field; never finer than the voxels).
     ``passes``: names of the passes to fill; None means every pass the engine has.
     ``voxel_resolution``: voxels along the longest side when a mesh volume is voxelised.
     ``threads``: worker threads for the march; 0 means one per core.
@@ -191,6 +193,7 @@ class Settings:
     film_transparent: bool = False
     seed: int = 0
     ambient_directions: int = 32
+    multiple_resolution: int = 64
     passes: Optional[List[str]] = None
     threads: int = 0
     voxel_resolution: int = 128

@@ -67,6 +67,9 @@ class MPP_PT_light_paths(MPPPanel, bpy.types.Panel):
         mpp = context.scene.mpp
         col = layout.column()
         col.prop(mpp, "multiple")
+        sub = col.column()
+        sub.active = mpp.multiple
+        sub.prop(mpp, "multiple_resolution")
         col.prop(mpp, "ambient_directions")
 
 

@@ -87,11 +87,14 @@ def test_engine_and_settings_register(empty_scene):
     empty_scene.render.engine = "MPP_RENDER"
     assert empty_scene.render.engine == "MPP_RENDER"
     assert empty_scene.mpp.samples == 16 and empty_scene.mpp.multiple
+    assert empty_scene.mpp.multiple_resolution == Settings().multiple_resolution == 64
     empty_scene.mpp.samples = 7
+    empty_scene.mpp.multiple_resolution = 24
     empty_scene.render.film_transparent = True
     st = properties.settings_from_scene(empty_scene)
     assert isinstance(st, Settings)
     assert st.samples == 7 and st.film_transparent and st.voxel_resolution == 128
+    assert st.multiple_resolution == 24
 
 
 def test_render_writes_every_pass_to_blenders_multilayer_exr(empty_scene, tmp_path):
