@@ -104,6 +104,29 @@ def test_one_pixel_image():
     assert p["Combined"].shape == (1, 1, 4)
 
 
+def test_a_4096_by_4096_image():
+    """16.7 M pixels (the Combined pass only, as a farm frame that wants just the image): every
+    pixel finite and non-negative, and the picture the same as a 256 x 256 render of the
+    scene: the 16 x 16 block means of the big one match the small one's pixels (both are
+    box-filtered averages of the same picture), the image means within 1 %."""
+    def at(size, spp):
+        desc = scene([cube(sigma_s=2.0, n=8)], width=size, height=size)
+        desc.camera.plane = (-4.0, 4.0, -4.0, 4.0)   # the cube fills a tenth of the frame
+        desc.settings.passes = ["Combined"]
+        desc.settings.samples = spp
+        return check(render(desc))["Combined"]
+    big = at(4096, 1)
+    assert big.shape == (4096, 4096, 4)
+    small = at(256, 64)
+    blocks = big.reshape(256, 16, 256, 16, 4).mean(axis=(1, 3))
+    lit = small[..., :3].mean(-1) > small[0, 0, :3].mean() + 1e-3
+    assert 0.05 < lit.mean() < 0.15
+    assert abs(blocks[..., :3].mean() / small[..., :3].mean() - 1.0) < 0.01
+    err = np.sqrt(np.mean((blocks[lit, :3] - small[lit, :3]) ** 2)) / small[lit, :3].mean()
+    print("4096^2 block means against 256^2 at 64 spp: rel rmse", err)
+    assert err < 0.02, err
+
+
 def test_zero_and_negative_light_power_and_no_lights():
     dark = [Light("POINT", "zero", np.zeros(3), position=np.array([0, 0, 3.0])),
             Light("POINT", "neg", np.full(3, -5.0), position=np.array([0, 0, 3.0]))]
