@@ -929,6 +929,10 @@ done:
 #define KIND_SUN 2
 #define KIND_AREA 3
 #define DIM_JITTER 1000
+#define SPOT_DISC_POINTS 8  /* kernels_np.SPOT_DISC_POINTS */
+#define SPOT_DISC_PHI 0.6180339887498949
+#define SPOT_GATE_MARGIN 1.05
+#define L_COND 35
 #define REFINE_STEPS 8
 #define EDGE_EPS 1e-6
 #define T_MIN 1e-6
@@ -983,34 +987,72 @@ static void light_sample(const double *L, const double x[3], double u1, double u
     double pa, pb;
     disc_map(u1, u2, kind != KIND_AREA || L[L_ROUND] > 0, &pa, &pb);
     if (kind == KIND_POINT || kind == KIND_SPOT) {
-        double radius = L[L_RADIUS], src[3] = {c[0], c[1], c[2]};
+        double radius = L[L_RADIUS], t1[3] = {0, 0, 0}, t2[3] = {0, 0, 0};
         if (radius > 0.0) {
-            double nn[3] = {-wc[0], -wc[1], -wc[2]}, t1[3], t2[3];
+            double nn[3] = {-wc[0], -wc[1], -wc[2]};
             basis(nn, t1, t2);
-            for (int a = 0; a < 3; a++) src[a] = c[a] + radius * (t1[a] * pa + t2[a] * pb);
         }
-        double v[3] = {x[0] - src[0], x[1] - src[1], x[2] - src[2]};
-        double dist = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-        double id = 1.0 / (dist > 1e-30 ? dist : 1e-30);
-        for (int a = 0; a < 3; a++) d[a] = v[a] * id;
-        double rmin = radius > 1e-4 ? radius : 1e-4;
-        double r2 = dist * dist > rmin * rmin ? dist * dist : rmin * rmin;
-        double att = 1.0;
-        if (kind == KIND_SPOT) {
+        /* a spot with a radius averages its cone over SPOT_DISC_POINTS points of the disc:
+         * (u1, u2) shifts a fixed lattice (Cranley-Patterson), so each point is uniform and
+         * the mean irradiance unbiased; one random point would light x or not (noise) */
+        int n_pts = (kind == KIND_SPOT && radius > 0.0) ? SPOT_DISC_POINTS : 1;
+        if (n_pts > 1 && radius < dcc) {
+            /* one point where the cone is the same over the whole disc: the disc's directions
+             * lie within alpha of the centre's (wider in the light's frame by L_COND) */
             const double *M = L + L_INV;
             double loc[3];
-            for (int r = 0; r < 3; r++) loc[r] = M[3 * r] * d[0] + M[3 * r + 1] * d[1] + M[3 * r + 2] * d[2];
+            for (int r = 0; r < 3; r++) loc[r] = -(M[3 * r] * wc[0] + M[3 * r + 1] * wc[1] + M[3 * r + 2] * wc[2]);
             double ln = sqrt(loc[0] * loc[0] + loc[1] * loc[1] + loc[2] * loc[2]);
-            double cos_t = -loc[2] / (ln > 1e-30 ? ln : 1e-30);
+            double cc = -loc[2] / (ln > 1e-30 ? ln : 1e-30);
+            cc = cc < -1.0 ? -1.0 : (cc > 1.0 ? 1.0 : cc);
+            double th = acos(cc), spread = SPOT_GATE_MARGIN * L[L_COND] * asin(radius / dcc);
             double ch = L[L_COSHALF], bl = L[L_BLEND];
-            if (bl <= 0.0) att = cos_t > ch ? 1.0 : 0.0;
-            else {
-                double q = (cos_t - ch) / ((1.0 - ch) * bl);
-                q = q < 0.0 ? 0.0 : (q > 1.0 ? 1.0 : q);
-                att = q * q * (3.0 - 2.0 * q);
-            }
+            double th_out = acos(ch), cin = ch + (1.0 - ch) * bl;
+            double th_in = bl > 0.0 ? acos(cin < 1.0 ? cin : 1.0) : th_out;
+            if (th - spread > th_out || th + spread < th_in) n_pts = 1;
         }
-        for (int a = 0; a < 3; a++) e[a] = L[L_STRENGTH + a] / (4.0 * M_PI) / r2 * att;
+        double rmin = radius > 1e-4 ? radius : 1e-4, esum = 0.0, dsum[3] = {0, 0, 0};
+        for (int i = 0; i < n_pts; i++) {
+            if (i > 0) {
+                double ua = u1 + (double)i / (double)SPOT_DISC_POINTS, ub = (double)i * SPOT_DISC_PHI;
+                ub = u2 + (ub - floor(ub));
+                if (ua >= 1.0) ua -= 1.0;
+                if (ub >= 1.0) ub -= 1.0;
+                disc_map(ua, ub, 1, &pa, &pb);
+            }
+            double src[3];
+            for (int a = 0; a < 3; a++) src[a] = c[a] + radius * (t1[a] * pa + t2[a] * pb);
+            double v[3] = {x[0] - src[0], x[1] - src[1], x[2] - src[2]};
+            double dist = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+            double id = 1.0 / (dist > 1e-30 ? dist : 1e-30), di[3];
+            for (int a = 0; a < 3; a++) di[a] = v[a] * id;
+            if (i == 0)
+                for (int a = 0; a < 3; a++) d[a] = di[a];
+            double r2 = dist * dist > rmin * rmin ? dist * dist : rmin * rmin;
+            double att = 1.0;
+            if (kind == KIND_SPOT) {
+                const double *M = L + L_INV;
+                double loc[3];
+                for (int r = 0; r < 3; r++) loc[r] = M[3 * r] * di[0] + M[3 * r + 1] * di[1] + M[3 * r + 2] * di[2];
+                double ln = sqrt(loc[0] * loc[0] + loc[1] * loc[1] + loc[2] * loc[2]);
+                double cos_t = -loc[2] / (ln > 1e-30 ? ln : 1e-30);
+                double ch = L[L_COSHALF], bl = L[L_BLEND];
+                if (bl <= 0.0) att = cos_t > ch ? 1.0 : 0.0;
+                else {
+                    double q = (cos_t - ch) / ((1.0 - ch) * bl);
+                    q = q < 0.0 ? 0.0 : (q > 1.0 ? 1.0 : q);
+                    att = q * q * (3.0 - 2.0 * q);
+                }
+            }
+            esum += att / r2;
+            for (int a = 0; a < 3; a++) dsum[a] += att / r2 * di[a];
+        }
+        /* the direction: the irradiance-weighted mean over the points, so that the phase
+         * function sees the light from the part of the disc that lights x */
+        double dn = sqrt(dsum[0] * dsum[0] + dsum[1] * dsum[1] + dsum[2] * dsum[2]);
+        if (n_pts > 1 && dn > 0.0)
+            for (int a = 0; a < 3; a++) d[a] = dsum[a] / dn;
+        for (int a = 0; a < 3; a++) e[a] = L[L_STRENGTH + a] / (4.0 * M_PI) * (esum / (double)n_pts);
         return;
     }
     /* AREA */

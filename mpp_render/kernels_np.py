@@ -289,6 +289,10 @@ LIGHT_FIELDS = 40
 L_KIND, L_STRENGTH, L_POS, L_DIR, L_INV, L_COSHALF, L_BLEND, L_RADIUS = 0, 1, 4, 7, 10, 19, 20, 21
 L_AX, L_AY, L_AREA, L_NORMAL, L_NORMALIZE, L_ROUND, L_CHANNEL = 22, 25, 28, 29, 32, 33, 34
 KIND_POINT, KIND_SPOT, KIND_SUN, KIND_AREA = 0, 1, 2, 3
+SPOT_DISC_POINTS = 8    # points of a sphere spot's disc its cone is averaged over (C twin)
+SPOT_DISC_PHI = 0.6180339887498949  # the lattice's second coordinate steps by the golden ratio
+SPOT_GATE_MARGIN = 1.05  # widens the disc's angular radius in the one-point test
+L_COND = 35  # condition number of the spot's inverse matrix (how much it can widen angles)
 DIM_JITTER = 1000       # random dimension of the step jitter; lights use 2*i, 2*i + 1
 REFINE_STEPS = 8
 EDGE_EPS = 1e-6        # occupancies within this of 0 or 1 count as outside / inside
@@ -324,27 +328,68 @@ def light_sample(rec, x, u1, u2):
     a, b = _disc(2.0 * u1 - 1.0, 2.0 * u2 - 1.0, kind != KIND_AREA or rec[L_ROUND] > 0)
     if kind in (KIND_POINT, KIND_SPOT):
         radius = rec[L_RADIUS]
-        src = np.broadcast_to(centre, (n, 3))
+        t1 = t2 = np.zeros((n, 3))
         if radius > 0.0:
             t1, t2 = orthonormal_basis(-wc)
-            src = centre + radius * (t1 * a[:, None] + t2 * b[:, None])
-        v = x - src
-        dist = np.sqrt(np.einsum("ij,ij->i", v, v))
-        d = v / np.maximum(dist, 1e-30)[:, None]
-        r2 = np.maximum(dist * dist, max(radius, 1e-4) ** 2)
-        e = s[None, :] / (4.0 * np.pi) / r2[:, None]
-        if kind == KIND_SPOT:
+        # a spot with a radius averages its cone over SPOT_DISC_POINTS points of the disc
+        n_pts = SPOT_DISC_POINTS if (kind == KIND_SPOT and radius > 0.0) else 1
+        many = np.full(n, n_pts > 1)
+        if n_pts > 1:  # one point where the cone is the same over the whole disc
             inv = rec[L_INV:L_INV + 9].reshape(3, 3)
-            loc = d @ inv.T
+            loc = -wc @ inv.T
             loc = loc / np.maximum(np.sqrt(np.einsum("ij,ij->i", loc, loc)), 1e-30)[:, None]
-            cos_t = -loc[:, 2]
+            th = np.arccos(np.clip(-loc[:, 2], -1.0, 1.0))
+            inside = radius < dc
+            spread = SPOT_GATE_MARGIN * rec[L_COND] * np.arcsin(np.where(inside, radius / np.where(inside, dc, 1.0), 1.0))
             ch, bl = rec[L_COSHALF], rec[L_BLEND]
-            if bl <= 0.0:
-                att = (cos_t > ch).astype(np.float64)
+            th_out = np.arccos(ch)
+            th_in = np.arccos(min(ch + (1.0 - ch) * bl, 1.0)) if bl > 0.0 else th_out
+            many = ~(inside & ((th - spread > th_out) | (th + spread < th_in)))
+        esum = np.zeros(n)
+        dsum = np.zeros((n, 3))
+        d = None
+        for i in range(n_pts):
+            if i > 0:
+                if not many.any():
+                    break
+                ua = u1 + i / SPOT_DISC_POINTS
+                ub = i * SPOT_DISC_PHI
+                ub = u2 + (ub - np.floor(ub))
+                ua = np.where(ua >= 1.0, ua - 1.0, ua)
+                ub = np.where(ub >= 1.0, ub - 1.0, ub)
+                a, b = _disc(2.0 * ua - 1.0, 2.0 * ub - 1.0, True)
+            a, b = np.broadcast_to(a, (n,)), np.broadcast_to(b, (n,))
+            src = centre + radius * (t1 * a[:, None] + t2 * b[:, None])
+            v = x - src
+            dist = np.sqrt(np.einsum("ij,ij->i", v, v))
+            di = v / np.maximum(dist, 1e-30)[:, None]
+            if i == 0:
+                d = di
+            r2 = np.maximum(dist * dist, max(radius, 1e-4) ** 2)
+            att = 1.0
+            if kind == KIND_SPOT:
+                inv = rec[L_INV:L_INV + 9].reshape(3, 3)
+                loc = di @ inv.T
+                loc = loc / np.maximum(np.sqrt(np.einsum("ij,ij->i", loc, loc)), 1e-30)[:, None]
+                cos_t = -loc[:, 2]
+                ch, bl = rec[L_COSHALF], rec[L_BLEND]
+                if bl <= 0.0:
+                    att = (cos_t > ch).astype(np.float64)
+                else:
+                    q = np.clip((cos_t - ch) / ((1.0 - ch) * bl), 0.0, 1.0)
+                    att = q * q * (3.0 - 2.0 * q)
+            w = np.broadcast_to(att / r2, (n,))
+            if i == 0:
+                e1 = w.copy()
             else:
-                q = np.clip((cos_t - ch) / ((1.0 - ch) * bl), 0.0, 1.0)
-                att = q * q * (3.0 - 2.0 * q)
-            e = e * att[:, None]
+                w = np.where(many, w, 0.0)
+            esum = esum + w
+            dsum = dsum + w[:, None] * di
+        if n_pts > 1:  # the irradiance-weighted mean direction, as the phase function sees it
+            dn = np.sqrt(np.einsum("ij,ij->i", dsum, dsum))
+            d = np.where((many & (dn > 0.0))[:, None], dsum / np.where(dn > 0.0, dn, 1.0)[:, None], d)
+            esum = np.where(many, esum / n_pts, e1)
+        e = s[None, :] / (4.0 * np.pi) * esum[:, None]
         return d, e, wc, dc
     # AREA
     src = centre + rec[L_AX:L_AX + 3] * a[:, None] + rec[L_AY:L_AY + 3] * b[:, None]

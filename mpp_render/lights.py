@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from .kernels_np import (KIND_AREA, KIND_POINT, KIND_SPOT, KIND_SUN, L_AREA, L_AX, L_AY,
-                         L_BLEND, L_CHANNEL, L_COSHALF, L_DIR, L_INV, L_KIND, L_NORMAL,
+                         L_BLEND, L_CHANNEL, L_COND, L_COSHALF, L_DIR, L_INV, L_KIND, L_NORMAL,
                          L_NORMALIZE, L_POS, L_RADIUS, L_ROUND, L_STRENGTH, LIGHT_FIELDS,
                          light_sample)
 from .scene import Light
@@ -60,6 +60,8 @@ def pack_light(light: Light, channel: int = -1) -> np.ndarray:
         r[L_INV:L_INV + 9] = np.linalg.inv(m[:3, :3]).ravel()
     except np.linalg.LinAlgError:  # a zero-scaled light: its cone is measured unscaled
         r[L_INV:L_INV + 9] = np.eye(3).ravel()
+    sv = np.linalg.svd(r[L_INV:L_INV + 9].reshape(3, 3), compute_uv=False)
+    r[L_COND] = sv[0] / sv[-1] if sv[-1] > 0.0 and np.isfinite(sv[0] / sv[-1]) else 1e30
     r[L_COSHALF] = np.cos(0.5 * light.spot_size)
     r[L_BLEND] = max(light.spot_blend, 0.0)
     r[L_RADIUS] = max(light.radius, 0.0)

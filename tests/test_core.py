@@ -113,6 +113,44 @@ def test_point_light_inverse_square_and_spot_cone():
     assert att[0] == 1.0 and att[-1] == 0.0 and att[4] == 0.0
 
 
+def test_sphere_spot_averages_its_cone_over_the_disc(monkeypatch):
+    """A spot with a radius (fog_beam's: 0.1 m, 8 degrees, blend 0.1) is lit through its cone
+    from every point of its disc.  The 8-point lattice estimate has the mean of one random
+    point (unbiased irradiance, and the phase function seen from the lit part of the disc),
+    far less noise in the penumbra, and is the one-point estimate where the cone is the same
+    over the whole disc."""
+    m = np.eye(4)
+    m[:3, :3] = [[0, 0, -1.0], [0, 1, 0], [1, 0, 0]]  # local -Z along world +X
+    L = Light("SPOT", "s", np.full(3, 2000.0), position=np.zeros(3), direction=np.array([1.0, 0, 0]),
+              matrix=m, radius=0.1, spot_size=math.radians(8), spot_blend=0.1)
+    from mpp_render.lights import pack_light
+    rec = pack_light(L)
+    k = 300
+    u = (np.arange(k) + 0.5) / k
+    u1, u2 = (a.ravel() for a in np.meshgrid(u, u))
+    view = np.array([-0.4, 0.916, 0.0]) / np.linalg.norm([-0.4, 0.916, 0.0])
+    one, eight = {}, {}
+    pts = {"axis": (1.5, 0, 0), "penumbra": (1.5, 0.1, 0), "edge": (1.5, -0.15, 0.05),
+           "dark": (1.5, 0.6, 0), "lit_far": (40.0, 0.5, 0)}
+    for n, store in ((1, one), (8, eight)):
+        monkeypatch.setattr(kernels_np, "SPOT_DISC_POINTS", n)
+        for name, p in pts.items():
+            d, e, _, _ = kernels_np.light_sample(rec, np.tile(np.array(p, float), (len(u1), 1)), u1, u2)
+            store[name] = (d, e[:, 0])
+    for name in ("axis", "penumbra", "edge"):
+        (d1, e1), (d8, e8) = one[name], eight[name]
+        assert e8.mean() == pytest.approx(e1.mean(), rel=2e-3), name
+        p1 = (hg(-(d1 @ view), 0.85) * e1).mean()
+        p8 = (hg(-(d8 @ view), 0.85) * e8).mean()
+        assert p8 == pytest.approx(p1, rel=0.01), name  # one random direction: 8-11 % off
+    for name in ("penumbra", "edge"):
+        assert eight[name][1].std() < 0.3 * one[name][1].std(), name
+    for name in ("dark", "lit_far"):  # the cone is the same over the disc: one point
+        np.testing.assert_array_equal(eight[name][1], one[name][1])
+        np.testing.assert_array_equal(eight[name][0], one[name][0])
+    assert one["dark"][1].max() == 0.0 and one["lit_far"][1].min() > 0.0
+
+
 def test_sun_irradiance_is_constant():
     L = Light("SUN", "s", np.array([3.0, 3.0, 3.0]), direction=np.array([0.0, 0.0, -1.0]))
     d, e = incident(L, np.random.default_rng(0).normal(size=(10, 3)))

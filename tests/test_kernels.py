@@ -34,7 +34,8 @@ def all_lights():
     return [Light("SUN", "sun", np.array([3.0, 2.5, 2.0]), direction=np.array([0.3, 0.2, -0.93])),
             Light("POINT", "pt", np.array([50.0, 40.0, 30.0]), position=np.array([1.5, -1.0, 0.5]), radius=0.2),
             Light("SPOT", "spot", np.array([300.0, 300, 300]), position=spot_m[:3, 3],
-                  direction=np.array([0, 0, -1.0]), matrix=spot_m, spot_size=0.8, spot_blend=0.3),
+                  direction=np.array([0, 0, -1.0]), matrix=spot_m, spot_size=0.8, spot_blend=0.3,
+                  radius=0.3),
             Light("AREA", "area", np.array([80.0, 80, 80]), matrix=area_m, shape="ELLIPSE",
                   size_x=0.5, size_y=0.3),
             Light("POINT", "dark", np.zeros(3), position=np.zeros(3))]
