@@ -24,6 +24,9 @@ import time
 import numpy as np
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+# Every render is timed cold: the precompute cache (mpp_render/cache.py) kept between
+# settings or repeats would hide the precompute's seconds.
+os.environ["MPP_CACHE_MB"] = "0"
 sys.path.insert(0, REPO)
 SCENES = os.path.join(os.path.dirname(REPO), "shared", "scenes")
 

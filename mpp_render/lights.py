@@ -8,7 +8,10 @@ point is then sigma_s * p(cos) * E * T_light.
 * POINT / SPOT: radiant intensity I = P / (4 pi) W/sr (Cycles' point and spot convention), so
   E = I / d^2.  A light with a radius is a sphere: the emission point is jittered over the
   disc of that radius facing the shading point, which softens the spot cone as Cycles' sphere
-  lights do; inside the sphere d is held at the radius.
+  lights do; inside the sphere d is held at the radius.  A spot with a radius averages its
+  cone over 8 points of that disc (a lattice shifted by the jitter: the same mean as one
+  point, far less noise in the penumbra) and reports the irradiance-weighted direction;
+  where the cone is the same over the whole disc one point does.
 * SPOT cone: smoothstep((cos(theta) - cos(size/2)) / ((1 - cos(size/2)) * blend)), theta
   measured in the light's local frame (non-uniform scale included); no normalisation by the
   cone's solid angle.
