@@ -28,6 +28,21 @@ def backend() -> str:
     return "numpy" if (_c is None or _FORCE_NUMPY) else "c"
 
 
+FALLBACK_MESSAGE = ("MPP: the compiled kernels are not installed; rendering on the numpy path, "
+                    "which gives the same image several times slower")
+_fallback_said = False
+
+
+def fallback_notice():
+    """``FALLBACK_MESSAGE`` the first time it is asked for in a process whose compiled kernels
+    are missing (not when ``MPP_KERNELS=numpy`` chose numpy), None otherwise: said once."""
+    global _fallback_said
+    if _c is not None or _fallback_said:
+        return None
+    _fallback_said = True
+    return FALLBACK_MESSAGE
+
+
 def _f64(a):
     return np.ascontiguousarray(a, np.float64)
 

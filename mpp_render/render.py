@@ -79,6 +79,9 @@ def render(desc: SceneDescription,
     cam = desc.camera
     W, H = int(cam.width), int(cam.height)
     warnings = list(desc.warnings)
+    notice = kernels.fallback_notice()
+    if notice:
+        warnings.append(notice)
     from .budget import apply_budget  # large grids are downsampled to fit the memory budget
     desc = apply_budget(desc, warnings)
     timings = {}

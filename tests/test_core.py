@@ -240,3 +240,18 @@ def test_emissive_cube_glows_as_the_integral_says():
     assert np.allclose(out.passes["Combined"][5:11, 6:18, :3], e + out.passes["Volume Multiple"][5:11, 6:18]
                        + out.passes["Volume Single"][5:11, 6:18], rtol=1e-5)
     assert np.all(out.passes["Emission"][:, :2] == 0)
+
+
+def test_without_the_compiled_kernels_the_render_says_so_once(monkeypatch):
+    """No compiled module: the render still runs (on the numpy twins), the first render's
+    warnings say so, the next one's do not."""
+    monkeypatch.setattr(kernels, "_c", None)
+    monkeypatch.setattr(kernels, "_fallback_said", False)
+    assert kernels.backend() == "numpy"
+    desc = slab_scene(width=8, height=6, samples=1, sigma_s=(0.5, 0.5, 0.5))
+    first, second = render(desc), render(desc)
+    assert first.warnings.count(kernels.FALLBACK_MESSAGE) == 1
+    assert kernels.FALLBACK_MESSAGE not in second.warnings
+    assert first.stats["backend"] == "numpy"
+    assert first.passes["Transmittance"].min() < 0.9
+    np.testing.assert_array_equal(first.passes["Combined"], second.passes["Combined"])
