@@ -968,6 +968,16 @@ static inline void basis(const double n[3], double t1[3], double t2[3]) {
     t2[0] = b; t2[1] = sign + n[1] * n[1] * a; t2[2] = -n[1];
 }
 
+/* Cosine between the spot's axis and the propagation direction v (world), measured in the
+ * light's local frame (its inverse matrix L_INV: non-uniform scale included). */
+static inline double spot_cos(const double *L, const double v[3]) {
+    const double *M = L + L_INV;
+    double loc[3];
+    for (int r = 0; r < 3; r++) loc[r] = M[3 * r] * v[0] + M[3 * r + 1] * v[1] + M[3 * r + 2] * v[2];
+    double ln = sqrt(loc[0] * loc[0] + loc[1] * loc[1] + loc[2] * loc[2]);
+    return -loc[2] / (ln > 1e-30 ? ln : 1e-30);
+}
+
 /* Light record `L` at point x: propagation direction d, irradiance e, unit direction to the
  * centre wc and its distance dc (INFINITY for the sun). */
 static void light_sample(const double *L, const double x[3], double u1, double u2,
@@ -999,11 +1009,8 @@ static void light_sample(const double *L, const double x[3], double u1, double u
         if (n_pts > 1 && radius < dcc) {
             /* one point where the cone is the same over the whole disc: the disc's directions
              * lie within alpha of the centre's (wider in the light's frame by L_COND) */
-            const double *M = L + L_INV;
-            double loc[3];
-            for (int r = 0; r < 3; r++) loc[r] = -(M[3 * r] * wc[0] + M[3 * r + 1] * wc[1] + M[3 * r + 2] * wc[2]);
-            double ln = sqrt(loc[0] * loc[0] + loc[1] * loc[1] + loc[2] * loc[2]);
-            double cc = -loc[2] / (ln > 1e-30 ? ln : 1e-30);
+            double out[3] = {-wc[0], -wc[1], -wc[2]};
+            double cc = spot_cos(L, out);
             cc = cc < -1.0 ? -1.0 : (cc > 1.0 ? 1.0 : cc);
             double th = acos(cc), spread = SPOT_GATE_MARGIN * L[L_COND] * asin(radius / dcc);
             double ch = L[L_COSHALF], bl = L[L_BLEND];
@@ -1031,11 +1038,7 @@ static void light_sample(const double *L, const double x[3], double u1, double u
             double r2 = dist * dist > rmin * rmin ? dist * dist : rmin * rmin;
             double att = 1.0;
             if (kind == KIND_SPOT) {
-                const double *M = L + L_INV;
-                double loc[3];
-                for (int r = 0; r < 3; r++) loc[r] = M[3 * r] * di[0] + M[3 * r + 1] * di[1] + M[3 * r + 2] * di[2];
-                double ln = sqrt(loc[0] * loc[0] + loc[1] * loc[1] + loc[2] * loc[2]);
-                double cos_t = -loc[2] / (ln > 1e-30 ? ln : 1e-30);
+                double cos_t = spot_cos(L, di);
                 double ch = L[L_COSHALF], bl = L[L_BLEND];
                 if (bl <= 0.0) att = cos_t > ch ? 1.0 : 0.0;
                 else {

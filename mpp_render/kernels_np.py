@@ -312,6 +312,13 @@ def _disc(a, b, round_shape):
     return r * np.cos(phi), r * np.sin(phi)
 
 
+def _spot_cos(rec, v):
+    """(N,) cosines between the spot's axis and propagation directions ``v`` (N,3), measured
+    in the light's local frame (its inverse matrix: non-uniform scale included)."""
+    loc = v @ rec[L_INV:L_INV + 9].reshape(3, 3).T
+    return -loc[:, 2] / np.maximum(np.sqrt(np.einsum("ij,ij->i", loc, loc)), 1e-30)
+
+
 def light_sample(rec, x, u1, u2):
     """(propagation direction (N,3), irradiance (N,3), unit direction to the light centre
     (N,3), distance to the centre (N,)) of packed light ``rec`` at points ``x``."""
@@ -335,10 +342,7 @@ def light_sample(rec, x, u1, u2):
         n_pts = SPOT_DISC_POINTS if (kind == KIND_SPOT and radius > 0.0) else 1
         many = np.full(n, n_pts > 1)
         if n_pts > 1:  # one point where the cone is the same over the whole disc
-            inv = rec[L_INV:L_INV + 9].reshape(3, 3)
-            loc = -wc @ inv.T
-            loc = loc / np.maximum(np.sqrt(np.einsum("ij,ij->i", loc, loc)), 1e-30)[:, None]
-            th = np.arccos(np.clip(-loc[:, 2], -1.0, 1.0))
+            th = np.arccos(np.clip(_spot_cos(rec, -wc), -1.0, 1.0))
             inside = radius < dc
             spread = SPOT_GATE_MARGIN * rec[L_COND] * np.arcsin(np.where(inside, radius / np.where(inside, dc, 1.0), 1.0))
             ch, bl = rec[L_COSHALF], rec[L_BLEND]
@@ -368,10 +372,7 @@ def light_sample(rec, x, u1, u2):
             r2 = np.maximum(dist * dist, max(radius, 1e-4) ** 2)
             att = 1.0
             if kind == KIND_SPOT:
-                inv = rec[L_INV:L_INV + 9].reshape(3, 3)
-                loc = di @ inv.T
-                loc = loc / np.maximum(np.sqrt(np.einsum("ij,ij->i", loc, loc)), 1e-30)[:, None]
-                cos_t = -loc[:, 2]
+                cos_t = _spot_cos(rec, di)
                 ch, bl = rec[L_COSHALF], rec[L_BLEND]
                 if bl <= 0.0:
                     att = (cos_t > ch).astype(np.float64)
