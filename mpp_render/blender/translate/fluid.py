@@ -80,7 +80,8 @@ from ...cache import CACHE, digest
 from ...media import sanitise
 from ...scene import Medium
 from . import vdb as vdb_reader
-from .vdb import emission_grids, lattice_emission, missing_strength_grids
+from .vdb import (emission_grids, lattice_emission, missing_strength_grids, translation,
+                  uniform_medium)
 from .convert import scalar
 from .materials import ClosureInputs, VolumeCoefficients, merge, principled_volume, volume_shading
 from .nodes import closures, output_node
@@ -592,18 +593,15 @@ class FluidTranslator:
             full = blocks.get(base_name)
             first, last = _support_box(full, full)  # with the reach of its interpolation
             block = (_crop(full[0], first, last), tuple(int(v) for v in first), full[2])
-        values, origin, i2o = block
-        emission, grid, lost = lattice_emission(coeff, block, blocks, zero=SCALAR_GRIDS)
+        medium, lost = uniform_medium(f"{ob.name}:uniform", coeff, block, blocks, world_matrix,
+                                      "FLUID", zero=SCALAR_GRIDS)
         for name, outside in lost.items():
             self.warnings.append(f"{where}: {outside:.0%} of grid '{name}' lies outside the "
                                  f"cells of '{base_name}'; that part of its emission is not "
                                  "rendered")
         self.warnings.append(f"{where}: shaders with a uniform density are approximated inside "
                              f"the non-zero voxels of '{base_name}'")
-        media.append(Medium(name=f"{ob.name}:uniform", density=(values > 0).astype(np.float32),
-                            index_to_world=world_matrix @ i2o @ _shift(origin),
-                            sigma_s=coeff.sigma_s, sigma_a=coeff.sigma_a, g=coeff.g,
-                            emission=emission, source="FLUID", emission_grid=grid))
+        media.append(medium)
 
     def _grid_medium(self, ob, co, attr, blocks, world_matrix, where, several):
         """``(medium, its block)`` of a closure whose density is grid ``attr``, or None.  The
@@ -631,7 +629,7 @@ class FluidTranslator:
         if not np.any(crop > 0) and (grid is None or not np.any(grid > 0)):
             return None
         medium = Medium(name=f"{ob.name}:{attr}" if several else ob.name, density=crop,
-                        index_to_world=world_matrix @ i2o @ _shift(block[1]),
+                        index_to_world=world_matrix @ i2o @ translation(block[1]),
                         sigma_s=co.sigma_s, sigma_a=co.sigma_a, g=float(co.g),
                         emission=emission, source="FLUID", emission_grid=grid)
         return medium, block
@@ -682,12 +680,6 @@ class _Blocks:
         return block
 
 
-def _shift(origin) -> np.ndarray:
-    m = np.eye(4)
-    m[:3, 3] = origin
-    return m
-
-
 def _nonzero_box(values):
     """``(first, last)`` ijk of the non-zero cells of ``values`` (3-D), or None."""
     nz = np.nonzero(values > 0)
@@ -708,7 +700,7 @@ def _support_box(src, dst):
     box = _nonzero_box(src[0])
     if box is None:
         return None
-    to_dst = np.linalg.inv(dst[2] @ _shift(dst[1])) @ src[2] @ _shift(src[1])
+    to_dst = np.linalg.inv(dst[2] @ translation(dst[1])) @ src[2] @ translation(src[1])
     lo, hi = box[0] - 1.0, box[1] + 1.0
     corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
                         for z in (lo[2], hi[2])]) @ to_dst.T

@@ -96,7 +96,8 @@ def read_window(vdb, path: str, name: str, dtype, lo=None, shape=None):
     return a.astype(np.float32, copy=False), tuple(a_lo), background, clipped
 
 
-def _offset(origin) -> np.ndarray:
+def translation(origin) -> np.ndarray:
+    """4x4 matrix moving index (0, 0, 0) to ``origin`` (a block's ijk origin, voxels)."""
     m = np.eye(4)
     m[:3, 3] = origin
     return m
@@ -113,7 +114,8 @@ def resample(src, dst):
     from ...media import trilinear
     values, origin, i2o = src
     shape = dst[0].shape
-    a = np.linalg.inv(np.asarray(i2o) @ _offset(origin)) @ np.asarray(dst[2]) @ _offset(dst[1])
+    a = (np.linalg.inv(np.asarray(i2o) @ translation(origin)) @ np.asarray(dst[2])
+         @ translation(dst[1]))
     padded = np.zeros(tuple(n + 2 for n in values.shape), np.float32)
     padded[1:-1, 1:-1, 1:-1] = values
     if np.allclose(a, np.round(a)) and np.allclose(a[:3, :3], np.eye(3)):  # the same lattice
@@ -174,6 +176,21 @@ def lattice_emission(co, block, blocks, zero=()):
         grid = per if grid is None else grid + per
         emission = emission - term.constant
     return np.maximum(emission, 0.0), grid, lost
+
+
+def uniform_medium(name, coeff, block, blocks, world_matrix, source, zero=()):
+    """``(Medium, lost)`` for closures of uniform density ``coeff`` (merged
+    materials.VolumeCoefficients) filling the non-zero voxels of grid block ``block``
+    (values, ijk origin, index->object 4x4), with the emission the grids in ``blocks`` drive
+    on its lattice (see lattice_emission, which also gives ``lost`` and reads ``zero``).
+    Volume objects and fluid domains both approximate Cycles' hull of the grids this way."""
+    values, origin, index_to_object = block
+    emission, grid, lost = lattice_emission(coeff, block, blocks, zero=zero)
+    medium = Medium(name=name, density=(values > 0).astype(np.float32),
+                    index_to_world=np.asarray(world_matrix) @ np.asarray(index_to_object)
+                    @ translation(origin), sigma_s=coeff.sigma_s, sigma_a=coeff.sigma_a,
+                    g=coeff.g, emission=emission, source=source, emission_grid=grid)
+    return medium, lost
 
 
 def emission_grids(shading) -> List[str]:
@@ -389,7 +406,8 @@ class VolumeTranslator:
         emission, grid, lost = lattice_emission(co, block, blocks)
         self._warn_lost(lost, g.name, where)
         return Medium(name=f"{ob.name}:{g.name}" if several else ob.name, density=values,
-                      index_to_world=np.asarray(world_matrix) @ index_to_object @ _offset(origin),
+                      index_to_world=(np.asarray(world_matrix) @ index_to_object
+                                      @ translation(origin)),
                       sigma_s=co.sigma_s, sigma_a=co.sigma_a, g=float(co.g),
                       emission=emission, source="VDB", emission_grid=grid)
 
@@ -419,14 +437,10 @@ class VolumeTranslator:
                                      "grid it renders nothing; skipped")
                 return
             base_name, block = found[0], blocks[found[0]]
-        values, origin, index_to_object = block
-        emission, grid, lost = lattice_emission(coeff, block, blocks)
+        medium, lost = uniform_medium(f"{ob.name}:uniform", coeff, block, blocks, world_matrix,
+                                      "VDB")
         self._warn_lost(lost, base_name, where)
         self.warnings.append(f"{where}: shaders with a uniform density are approximated inside "
                              f"the non-zero voxels of '{base_name}'")
-        media.append(Medium(name=f"{ob.name}:uniform", density=(values > 0).astype(np.float32),
-                            index_to_world=np.asarray(world_matrix) @ index_to_object
-                            @ _offset(origin), sigma_s=coeff.sigma_s,
-                            sigma_a=coeff.sigma_a, g=coeff.g, emission=emission,
-                            source="VDB", emission_grid=grid))
+        media.append(medium)
 
