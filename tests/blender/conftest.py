@@ -30,6 +30,16 @@ SCENES = find_scenes()
 
 
 @pytest.fixture
+def registered():
+    """The MPP engine and its scene settings registered (use with
+    ``pytestmark = pytest.mark.usefixtures("registered")``)."""
+    from mpp_render.blender import engine, properties
+    properties.register()
+    engine.register()
+    yield
+
+
+@pytest.fixture
 def empty_scene():
     """A factory-empty file with a world; returns bpy.context.scene."""
     bpy.ops.wm.read_factory_settings(use_empty=True)

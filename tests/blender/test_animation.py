@@ -14,18 +14,13 @@ bpy = pytest.importorskip("bpy")
 
 from mpp_render import cache, exr  # noqa: E402
 from mpp_render import precompute as pre_mod  # noqa: E402
-from mpp_render.blender import engine, properties  # noqa: E402
+from mpp_render.blender import engine  # noqa: E402
+from parts import add_camera, add_cube, add_light, mpp_output, volume_material  # noqa: E402
 
 from conftest import REPO  # noqa: E402
 
 W, H = 32, 24
-
-
-@pytest.fixture(autouse=True)
-def registered():
-    properties.register()
-    engine.register()
-    yield
+pytestmark = pytest.mark.usefixtures("registered")
 
 
 @pytest.fixture
@@ -57,50 +52,19 @@ def frames(monkeypatch):
     return seen
 
 
-def cube_volume(scene, name="Cloud", location=(0.0, 0.0, 0.0)):
-    mesh = bpy.data.meshes.new(name)
-    v = [(x, y, z) for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]
-    f = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
-    mesh.from_pydata(v, [], f)
-    mat = bpy.data.materials.new(name + "Vol")
-    nt = mat.node_tree
-    nt.nodes.clear()
-    pv = nt.nodes.new("ShaderNodeVolumePrincipled")
-    pv.inputs["Density"].default_value = 3.0
-    out = nt.nodes.new("ShaderNodeOutputMaterial")
-    nt.links.new(pv.outputs["Volume"], out.inputs["Volume"])
-    mesh.materials.append(mat)
-    ob = bpy.data.objects.new(name, mesh)
-    ob.location = location
-    scene.collection.objects.link(ob)
-    return ob
-
-
 def animated_scene(scene, out_dir, animate_light=True):
     """A volume cube, a sun whose power goes 1 -> 3 W/m^2 over frames 1..3 (or stays 2), a
     grey world, a fixed camera; frames written to ``out_dir/f_####.exr`` (multilayer)."""
-    cube_volume(scene)
-    sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
-    sun.rotation_euler = (0.5, 0.3, 0.0)
-    scene.collection.objects.link(sun)
+    add_cube(scene, "Cloud", mat=volume_material("CloudVol", density=3.0, color=None))
+    sun = add_light(scene, energy=2.0, rotation=(0.5, 0.3, 0.0))
     if animate_light:
         sun.data.energy = 1.0
         sun.data.keyframe_insert("energy", frame=1)
         sun.data.energy = 3.0
         sun.data.keyframe_insert("energy", frame=3)
-    else:
-        sun.data.energy = 2.0
     scene.world.color = (0.05, 0.05, 0.06)
-    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    cam.location = (0.0, -8.0, 0.0)
-    cam.rotation_euler = (np.pi / 2, 0.0, 0.0)
-    scene.collection.objects.link(cam)
-    scene.camera = cam
-    r = scene.render
-    r.resolution_x, r.resolution_y, r.resolution_percentage = W, H, 100
-    r.engine = "MPP_RENDER"
-    scene.mpp.samples = 4
-    scene.mpp.voxel_resolution = 16
+    add_camera(scene)
+    r = mpp_output(scene, W, H).render
     scene.frame_start, scene.frame_end = 1, 3
     ims = r.image_settings
     ims.media_type = "MULTI_LAYER_IMAGE"

@@ -16,81 +16,33 @@ bpy = pytest.importorskip("bpy")
 
 from mpp_render.blender import engine, properties  # noqa: E402
 from mpp_render.blender.translate.vdb import openvdb_module  # noqa: E402
+from parts import (add_camera, add_cube, add_light, link, mpp_output,  # noqa: E402
+                   volume_material)
 
 W, H = 32, 24
 LEFT, RIGHT = (-1.5, 0.0, 0.0), (1.5, 0.0, 0.0)
-
-
-@pytest.fixture(autouse=True)
-def registered():
-    properties.register()
-    engine.register()
-    yield
+pytestmark = pytest.mark.usefixtures("registered")
 
 
 # -- scene building -----------------------------------------------------------------------
-
-def link(ob):
-    bpy.context.scene.collection.objects.link(ob)
-    return ob
-
-
-def volume_material(name, density=4.0):
-    mat = bpy.data.materials.new(name)
-    nt = mat.node_tree
-    nt.nodes.clear()
-    pv = nt.nodes.new("ShaderNodeVolumePrincipled")
-    pv.inputs["Density"].default_value = density
-    pv.inputs["Color"].default_value = (0.9, 0.9, 0.9, 1.0)
-    out = nt.nodes.new("ShaderNodeOutputMaterial")
-    nt.links.new(pv.outputs["Volume"], out.inputs["Volume"])
-    return mat
-
-
-def add_cube(name, location, mat=None, scale=(1, 1, 1)):
-    mesh = bpy.data.meshes.new(name)
-    v = [(x, y, z) for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]
-    f = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
-    mesh.from_pydata(v, [], f)
-    mesh.materials.append(mat if mat is not None else volume_material(f"{name}Vol"))
-    ob = link(bpy.data.objects.new(name, mesh))
-    ob.location, ob.scale = location, scale
-    return ob
-
 
 def add_volume(name, path, location=RIGHT, scale=(1, 1, 1)):
     vol = bpy.data.volumes.new(name)
     vol.filepath = str(path)
     vol.materials.append(volume_material(f"{name}Vol"))
-    ob = link(bpy.data.objects.new(name, vol))
+    ob = link(bpy.context.scene, bpy.data.objects.new(name, vol))
     ob.location, ob.scale = location, scale
-    return ob
-
-
-def add_light(name="Sun", kind="SUN", energy=3.0, location=(0.0, -4.0, 4.0)):
-    ob = link(bpy.data.objects.new(name, bpy.data.lights.new(name, kind)))
-    ob.data.energy = energy
-    ob.location = location
-    ob.rotation_euler = (0.6, 0.2, 0.0)
     return ob
 
 
 def setup(scene, good=True, light=True):
     """Camera, render settings, the good cube on the left and (``light``) a sun."""
     if good:
-        add_cube("Good", LEFT)
+        add_cube(scene, "Good", LEFT)
     if light:
-        add_light()
-    cam = link(bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera")))
-    cam.location = (0.0, -8.0, 0.0)
-    cam.rotation_euler = (np.pi / 2, 0.0, 0.0)
-    scene.camera = cam
-    r = scene.render
-    r.resolution_x, r.resolution_y, r.resolution_percentage = W, H, 100
-    r.engine = "MPP_RENDER"
-    scene.mpp.samples = 4
-    scene.mpp.voxel_resolution = 16
-    return scene
+        add_light(scene)
+    add_camera(scene)
+    return mpp_output(scene, W, H)
 
 
 def write_vdb(path, values, name="density", voxel=0.25):
@@ -197,8 +149,8 @@ def test_randomly_damaged_vdbs_never_crash(tmp_path):
         import numpy as np
         import bpy
         import test_bad_input as t
-        from mpp_render.blender import engine
-        t.properties.register(); engine.register()
+        from mpp_render.blender import engine, properties
+        properties.register(); engine.register()
         bpy.ops.wm.read_factory_settings(use_empty=True)
         sc = bpy.context.scene
         sc.world = bpy.data.worlds.new("World")
@@ -296,7 +248,7 @@ def test_no_media(empty_scene):
 def test_zero_and_negative_light_power(empty_scene, energy):
     setup(empty_scene, light=False)
     empty_scene.world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0
-    add_light("Dark", "POINT", energy=energy)
+    add_light(empty_scene, "Dark", "POINT", energy=energy)
     out = render()
     assert any("no light of the scene has positive power" in w for w in out.warnings)
     assert any("'Dark'" in w and "negative" in w for w in out.warnings) == (energy < 0)
@@ -306,7 +258,7 @@ def test_zero_and_negative_light_power(empty_scene, energy):
 
 def test_negative_light_beside_a_positive_one(empty_scene):
     setup(empty_scene)
-    add_light("Dark", "POINT", energy=-500.0, location=(-1.5, -2.5, 0.0))
+    add_light(empty_scene, "Dark", "POINT", energy=-500.0, location=(-1.5, -2.5, 0.0))
     out = render()
     assert warnings_about(out, "Dark") == ["light 'Dark': negative power is not supported; "
                                            "the light emits nothing"]
@@ -317,7 +269,7 @@ def test_negative_light_beside_a_positive_one(empty_scene):
 @pytest.mark.parametrize("scale", [(0.0, 1.0, 1.0), (0.0, 0.0, 0.0)])
 def test_zero_scale_mesh_volume(empty_scene, scale):
     setup(empty_scene)
-    add_cube("Flat", RIGHT, scale=scale)
+    add_cube(empty_scene, "Flat", RIGHT, scale=scale)
     out = render()
     warnings_about(out, "Flat")
     left_is_rendered(out)

@@ -8,49 +8,23 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from mpp_render.blender import engine, properties  # noqa: E402
+from mpp_render.blender import engine  # noqa: E402
+from parts import add_camera, add_cube, add_light, mpp_output, volume_material  # noqa: E402
 
 LATENCY_S = 0.5
 
 
-@pytest.fixture(autouse=True)
-def registered():
-    properties.register()
-    engine.register()
-    yield
+pytestmark = pytest.mark.usefixtures("registered")
 
 
 def scene(sc, resolution, width, height, samples):
     """A Principled Volume cube voxelised at ``resolution``, a sun and a grey sky (so the
     world light is precomputed too), a camera 8 m away."""
-    mat = bpy.data.materials.new("Vol")
-    nt = mat.node_tree
-    nt.nodes.clear()
-    pv = nt.nodes.new("ShaderNodeVolumePrincipled")
-    pv.inputs["Density"].default_value = 2.0
-    out = nt.nodes.new("ShaderNodeOutputMaterial")
-    nt.links.new(pv.outputs["Volume"], out.inputs["Volume"])
-    mesh = bpy.data.meshes.new("Cube")
-    v = [(x, y, z) for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]
-    f = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
-    mesh.from_pydata(v, [], f)
-    mesh.materials.append(mat)
-    sc.collection.objects.link(bpy.data.objects.new("Cube", mesh))
-    sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", 'SUN'))
-    sun.data.energy = 3.0
-    sun.rotation_euler = (0.6, 0.2, 0.0)
-    sc.collection.objects.link(sun)
+    add_cube(sc, "Cube", mat=volume_material("Vol", density=2.0, color=None))
+    add_light(sc)
     sc.world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.1, 0.1, 0.1, 1)
-    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    cam.location = (0.0, -8.0, 0.0)
-    cam.rotation_euler = (np.pi / 2, 0.0, 0.0)
-    sc.collection.objects.link(cam)
-    sc.camera = cam
-    r = sc.render
-    r.resolution_x, r.resolution_y, r.resolution_percentage = width, height, 100
-    r.engine = "MPP_RENDER"
-    sc.mpp.samples = samples
-    sc.mpp.voxel_resolution = resolution
+    add_camera(sc)
+    mpp_output(sc, width, height, samples, resolution)
     sc.mpp.threads = 2
     return sc
 

@@ -12,62 +12,23 @@ from mpp_render.blender import engine, properties
 from mpp_render.passes import PASSES
 from mpp_render.scene import Settings
 
+from parts import add_camera, add_cube, add_light, mpp_output, volume_material
+
 W, H = 32, 24
 
 
-@pytest.fixture(autouse=True)
-def registered():
-    properties.register()
-    engine.register()
-    yield
-
-
-def volume_material(name, density=4.0):
-    """A Principled Volume material (albedo 0.9, anisotropy 0.3)."""
-    mat = bpy.data.materials.new(name)
-    nt = mat.node_tree
-    nt.nodes.clear()
-    pv = nt.nodes.new("ShaderNodeVolumePrincipled")
-    pv.inputs["Density"].default_value = density
-    pv.inputs["Color"].default_value = (0.9, 0.9, 0.9, 1.0)
-    pv.inputs["Anisotropy"].default_value = 0.3
-    out = nt.nodes.new("ShaderNodeOutputMaterial")
-    nt.links.new(pv.outputs["Volume"], out.inputs["Volume"])
-    return mat
-
-
-def add_cube(name, location, mat):
-    mesh = bpy.data.meshes.new(name)
-    v = [(x, y, z) for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]
-    f = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
-    mesh.from_pydata(v, [], f)
-    mesh.materials.append(mat)
-    ob = bpy.data.objects.new(name, mesh)
-    ob.location = location
-    bpy.context.scene.collection.objects.link(ob)
-    return ob
+pytestmark = pytest.mark.usefixtures("registered")
 
 
 def small_scene(scene, width=W, height=H, cubes=((0.0, 0.0, 0.0),)):
-    """Cubes of Principled Volume under a 3 W/m^2 sun, a camera 8 m away; samples 4 and a
-    coarse voxelisation (16 voxels a side) keep each render well under a second."""
+    """Cubes of Principled Volume (density 4, albedo 0.9, anisotropy 0.3) under a 3 W/m^2
+    sun, a camera 8 m away; samples 4 and a coarse voxelisation (16 voxels a side) keep
+    each render well under a second."""
     for i, loc in enumerate(cubes):
-        add_cube(f"Cube{i}", loc, volume_material(f"Vol{i}"))
-    sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", 'SUN'))
-    sun.data.energy = 3.0
-    sun.rotation_euler = (0.6, 0.2, 0.0)
-    scene.collection.objects.link(sun)
-    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    cam.location = (0.0, -8.0, 0.0)
-    cam.rotation_euler = (np.pi / 2, 0.0, 0.0)
-    scene.collection.objects.link(cam)
-    scene.camera = cam
-    r = scene.render
-    r.resolution_x, r.resolution_y, r.resolution_percentage = width, height, 100
-    r.engine = "MPP_RENDER"
-    scene.mpp.samples = 4
-    scene.mpp.voxel_resolution = 16
-    return scene
+        add_cube(scene, f"Cube{i}", loc, volume_material(f"Vol{i}", anisotropy=0.3))
+    add_light(scene)
+    add_camera(scene)
+    return mpp_output(scene, width, height)
 
 
 def exr_parts(path):

@@ -9,15 +9,14 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 import operators  # the repository root's ``operators`` package
-from mpp_render.blender import engine, properties
+from mpp_render.blender import engine
+from parts import add_camera, add_cube, add_light, mpp_output, volume_material
 
 W, H = 32, 24
 
 
 @pytest.fixture(autouse=True)
-def registered():
-    properties.register()
-    engine.register()
+def operators_registered(registered):
     operators.register()
     yield
 
@@ -25,34 +24,10 @@ def registered():
 def tiny_scene(scene):
     """A 2 m cube of Principled Volume (density 2, albedo 0.9) under a 3 W/m^2 sun, seen
     from 8 m at W x H; MPP at 4 samples and 16 voxels a side."""
-    mat = bpy.data.materials.new("Vol")
-    nt = mat.node_tree
-    nt.nodes.clear()
-    pv = nt.nodes.new("ShaderNodeVolumePrincipled")
-    pv.inputs["Density"].default_value = 2.0
-    pv.inputs["Color"].default_value = (0.9, 0.9, 0.9, 1.0)
-    out = nt.nodes.new("ShaderNodeOutputMaterial")
-    nt.links.new(pv.outputs["Volume"], out.inputs["Volume"])
-    mesh = bpy.data.meshes.new("Cube")
-    v = [(x, y, z) for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]
-    f = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
-    mesh.from_pydata(v, [], f)
-    mesh.materials.append(mat)
-    scene.collection.objects.link(bpy.data.objects.new("Cube", mesh))
-    sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", 'SUN'))
-    sun.data.energy = 3.0
-    sun.rotation_euler = (0.6, 0.2, 0.0)
-    scene.collection.objects.link(sun)
-    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    cam.location = (0.0, -8.0, 0.0)
-    cam.rotation_euler = (math.pi / 2, 0.0, 0.0)
-    scene.collection.objects.link(cam)
-    scene.camera = cam
-    r = scene.render
-    r.resolution_x, r.resolution_y, r.resolution_percentage = W, H, 100
-    scene.mpp.samples = 4
-    scene.mpp.voxel_resolution = 16
-    return scene
+    add_cube(scene, "Cube", mat=volume_material("Vol", density=2.0))
+    add_light(scene)
+    add_camera(scene)
+    return mpp_output(scene, W, H)
 
 
 def test_compare_with_cycles_stores_metrics_and_difference_image(empty_scene, capfd):
