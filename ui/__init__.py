@@ -33,7 +33,9 @@ class MPPPanel:
 
     def split_layout(self):
         """The panel's layout with labels beside the values, as Cycles' panels draw."""
-        layout = self.split_layout()
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
         return layout
 
 
