@@ -300,6 +300,9 @@ BOUNDS = {
 }
 
 
+SPEEDUP_TARGET_SCENES = ("slab_forward", "cloud_vdb", "fog_beam")  # the issue's speedup target
+
+
 def targets_section(res):
     """Measured values against the issue's targets, with what bounds the ones missed."""
     L = ["## Targets", "", "| target | measured | |", "|---|---|---|"]
@@ -318,6 +321,8 @@ def targets_section(res):
             L.append(f"| 1920x1080 cloud_vdb <= 5 s | {r['setting'][10:]}: {r['render']:.1f} s | "
                      f"{'met' if r['render'] <= 5 else 'missed'} |")
     for row in res.get("speedups") or []:
+        if row["scene"] not in SPEEDUP_TARGET_SCENES:
+            continue  # error_vs_time.md has every scene; the target names these
         for o in row["ours"]:
             sp = o.get("speedup")
             if sp is None:
@@ -427,7 +432,13 @@ def main(argv=None):
     ap.add_argument("--out", default=os.path.join(REPO, "docs"))
     ap.add_argument("--speedups", default=None,
                     help="error_vs_time.json of benchmarks/error_vs_time.py to quote in the targets")
+    ap.add_argument("--rewrite", action="store_true",
+                    help="write the report again from OUT/performance.json (no measuring)")
     args = ap.parse_args(argv)
+    if args.rewrite:
+        with open(os.path.join(args.out, "performance.json")) as f:
+            write(json.load(f), args.out)
+        return 0
     res = {"machine": {"cores": os.cpu_count() or 1, "backend": kernels.backend()}}
     if args.speedups:
         with open(args.speedups) as f:
