@@ -8,12 +8,13 @@ import bpy
 ENGINE = "MPP_RENDER"
 
 # Blender's own panels an MPP user needs (light settings, volume materials, world colour,
-# VDB data): they show only for engines listed in their COMPAT_ENGINES.
+# VDB data): they show only for engines listed in their COMPAT_ENGINES.  A name this Blender
+# lacks is skipped (the material slots are EEVEE_MATERIAL_PT_context_material in 4.2 to 5.0).
 STOCK_PANELS = (
     "DATA_PT_context_light", "DATA_PT_light", "DATA_PT_spot", "DATA_PT_EEVEE_light",
     "DATA_PT_context_volume", "DATA_PT_volume_file", "DATA_PT_volume_grids",
     "DATA_PT_volume_render", "DATA_PT_volume_viewport_display",
-    "MATERIAL_PT_context_material", "MATERIAL_PT_preview",
+    "EEVEE_MATERIAL_PT_context_material", "MATERIAL_PT_context_material", "MATERIAL_PT_preview",
     "EEVEE_MATERIAL_PT_surface", "EEVEE_MATERIAL_PT_volume",
     "EEVEE_WORLD_PT_surface", "EEVEE_WORLD_PT_volume", "WORLD_PT_context_world",
     "RENDER_PT_format", "RENDER_PT_frame_range", "RENDER_PT_output", "RENDER_PT_color_management",

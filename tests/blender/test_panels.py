@@ -81,3 +81,27 @@ def test_tools_panel_and_render_menu_draw(empty_scene):
     assert props == ["mpp.compare_with_cycles", "mpp.clear_cache"]
     props, _ = draw(operators.draw_render_menu, object, empty_scene)
     assert props == ["mpp.compare_with_cycles", "mpp.clear_cache"]
+
+
+# What an artist must see with MPP as the engine, each as the panels that can show it.
+NEEDED = {
+    "material slots": ("EEVEE_MATERIAL_PT_context_material", "MATERIAL_PT_context_material"),
+    "volume material": ("EEVEE_MATERIAL_PT_volume",),
+    "world colour": ("EEVEE_WORLD_PT_surface",),
+    "light settings": ("DATA_PT_EEVEE_light", "DATA_PT_light"),
+    "spot shape": ("DATA_PT_spot",),
+    "VDB file": ("DATA_PT_volume_file",),
+    "output": ("RENDER_PT_format", "RENDER_PT_output"),
+}
+
+
+def test_stock_panels_show_for_mpp_and_are_given_back():
+    ui.register()
+    try:
+        for what, names in NEEDED.items():
+            shown = [n for n in names if ui.ENGINE in getattr(getattr(bpy.types, n, None),
+                                                               "COMPAT_ENGINES", ())]
+            assert shown, f"no panel shows the {what} for MPP (tried {names})"
+    finally:
+        ui.unregister()
+    assert not any(ui.ENGINE in p.COMPAT_ENGINES for p in ui._stock_panels())
