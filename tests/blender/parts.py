@@ -18,18 +18,26 @@ def link(scene, ob):
 def volume_material(name, density=4.0, color=(0.9, 0.9, 0.9), anisotropy=None):
     """A Principled Volume material of ``density``; ``color`` (the albedo) None and
     ``anisotropy`` None keep Blender's defaults."""
+    inputs = {"Density": density}
+    if color is not None:
+        inputs["Color"] = (*color, 1.0)
+    if anisotropy is not None:
+        inputs["Anisotropy"] = anisotropy
+    return node_material(name, "ShaderNodeVolumePrincipled", "Volume", **inputs)[0]
+
+
+def node_material(name, node, output="Volume", **inputs):
+    """``(material, node)``: one shader ``node`` (a bl_idname) with ``inputs`` (socket name
+    -> default value) linked to the material output's ``output`` socket."""
     mat = bpy.data.materials.new(name)
     nt = mat.node_tree
     nt.nodes.clear()
-    pv = nt.nodes.new("ShaderNodeVolumePrincipled")
-    pv.inputs["Density"].default_value = density
-    if color is not None:
-        pv.inputs["Color"].default_value = (*color, 1.0)
-    if anisotropy is not None:
-        pv.inputs["Anisotropy"].default_value = anisotropy
+    n = nt.nodes.new(node)
+    for k, v in inputs.items():
+        n.inputs[k].default_value = v
     out = nt.nodes.new("ShaderNodeOutputMaterial")
-    nt.links.new(pv.outputs["Volume"], out.inputs["Volume"])
-    return mat
+    nt.links.new(n.outputs[0], out.inputs[output])
+    return mat, n
 
 
 def add_cube(scene, name, location=(0.0, 0.0, 0.0), mat=None, scale=(1, 1, 1)):

@@ -12,6 +12,7 @@ from mpp_render.blender import engine  # noqa: E402
 from mpp_render.blender.translate import scene_from_depsgraph  # noqa: E402
 from mpp_render.blender.translate.vdb import openvdb_module  # noqa: E402
 from mpp_render.scene import Settings  # noqa: E402
+from parts import node_material  # noqa: E402
 
 SIGMA = 5.670373e-8 * 1e-6 / np.pi  # Cycles' Stefan-Boltzmann factor (W/(m^2 K^4) / pi, 1e-6)
 
@@ -30,15 +31,7 @@ def camera(sc, res=(24, 16)):
 
 
 def volume_material(kind="ShaderNodeVolumePrincipled", **inputs):
-    mat = bpy.data.materials.new("fire")
-    nt = mat.node_tree
-    nt.nodes.clear()
-    node = nt.nodes.new(kind)
-    for k, v in inputs.items():
-        node.inputs[k].default_value = v
-    out = nt.nodes.new("ShaderNodeOutputMaterial")
-    nt.links.new(node.outputs[0], out.inputs["Volume"])
-    return mat, node
+    return node_material("fire", kind, "Volume", **inputs)
 
 
 def render_cycles(sc, tmp_path, spp=16):

@@ -10,6 +10,7 @@ from mpp_render.blender import engine  # noqa: E402
 from mpp_render.blender.translate import scene_from_depsgraph  # noqa: E402
 from mpp_render.metrics import compare  # noqa: E402
 from mpp_render.scene import Settings  # noqa: E402
+from parts import node_material  # noqa: E402
 
 
 def new_scene(sc, res, location=(0, -9, 2.0), tilt=85.0):
@@ -38,15 +39,7 @@ def world(sc, background=(0, 0, 0), kind="ShaderNodeVolumeScatter", **inputs):
 
 
 def surface_material(name, node="ShaderNodeBsdfDiffuse", **inputs):
-    mat = bpy.data.materials.new(name)
-    nt = mat.node_tree
-    nt.nodes.clear()
-    n = nt.nodes.new(node)
-    for k, v in inputs.items():
-        n.inputs[k].default_value = v
-    out = nt.nodes.new("ShaderNodeOutputMaterial")
-    nt.links.new(n.outputs[0], out.inputs["Surface"])
-    return mat
+    return node_material(name, node, "Surface", **inputs)[0]
 
 
 def render_cycles(sc, tmp_path, spp, seed):
