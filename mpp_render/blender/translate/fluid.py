@@ -80,8 +80,7 @@ from ...cache import CACHE, digest
 from ...media import sanitise
 from ...scene import Medium
 from . import vdb as vdb_reader
-from .vdb import (emission_grids, lattice_emission, missing_strength_grids, translation,
-                  uniform_medium)
+from .vdb import block_medium, emission_grids, missing_strength_grids, translation
 from .convert import scalar
 from .materials import ClosureInputs, VolumeCoefficients, merge, principled_volume, volume_shading
 from .nodes import closures, output_node
@@ -593,8 +592,8 @@ class FluidTranslator:
             full = blocks.get(base_name)
             first, last = _support_box(full, full)  # with the reach of its interpolation
             block = (_crop(full[0], first, last), tuple(int(v) for v in first), full[2])
-        medium, lost = uniform_medium(f"{ob.name}:uniform", coeff, block, blocks, world_matrix,
-                                      "FLUID", zero=SCALAR_GRIDS)
+        medium, lost = block_medium(f"{ob.name}:uniform", coeff, block, blocks, world_matrix,
+                                    "FLUID", zero=SCALAR_GRIDS, uniform=True)
         for name, outside in lost.items():
             self.warnings.append(f"{where}: {outside:.0%} of grid '{name}' lies outside the "
                                  f"cells of '{base_name}'; that part of its emission is not "
@@ -624,14 +623,11 @@ class FluidTranslator:
         last = np.max([b[1] for b in boxes], axis=0)
         block = (_crop(values, first, last), tuple(int(v) for v in first), i2o)
         # the box holds the emission grids' reach: nothing is lost
-        emission, grid, _ = lattice_emission(co, block, blocks, zero=SCALAR_GRIDS)
-        crop = block[0]
-        if not np.any(crop > 0) and (grid is None or not np.any(grid > 0)):
+        medium, _ = block_medium(f"{ob.name}:{attr}" if several else ob.name, co, block, blocks,
+                                 world_matrix, "FLUID", zero=SCALAR_GRIDS)
+        grid = medium.emission_grid
+        if not np.any(medium.density > 0) and (grid is None or not np.any(grid > 0)):
             return None
-        medium = Medium(name=f"{ob.name}:{attr}" if several else ob.name, density=crop,
-                        index_to_world=world_matrix @ i2o @ translation(block[1]),
-                        sigma_s=co.sigma_s, sigma_a=co.sigma_a, g=float(co.g),
-                        emission=emission, source="FLUID", emission_grid=grid)
         return medium, block
 
 

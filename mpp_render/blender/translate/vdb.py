@@ -178,18 +178,20 @@ def lattice_emission(co, block, blocks, zero=()):
     return np.maximum(emission, 0.0), grid, lost
 
 
-def uniform_medium(name, coeff, block, blocks, world_matrix, source, zero=()):
-    """``(Medium, lost)`` for closures of uniform density ``coeff`` (merged
-    materials.VolumeCoefficients) filling the non-zero voxels of grid block ``block``
-    (values, ijk origin, index->object 4x4), with the emission the grids in ``blocks`` drive
-    on its lattice (see lattice_emission, which also gives ``lost`` and reads ``zero``).
-    Volume objects and fluid domains both approximate Cycles' hull of the grids this way."""
+def block_medium(name, coeff, block, blocks, world_matrix, source, zero=(), uniform=False):
+    """``(Medium, lost)`` of closures ``coeff`` (materials.VolumeCoefficients) on grid block
+    ``block`` (values, ijk origin, index->object 4x4): the block's values are the density,
+    or with ``uniform`` (closures of uniform density) 1 in its non-zero voxels -- how Volume
+    objects and fluid domains approximate Cycles' hull of the grids a material reads.  The
+    emission the grids in ``blocks`` drive is resampled onto the block (lattice_emission,
+    which also gives ``lost`` and reads ``zero``)."""
     values, origin, index_to_object = block
     emission, grid, lost = lattice_emission(coeff, block, blocks, zero=zero)
-    medium = Medium(name=name, density=(values > 0).astype(np.float32),
+    density = (values > 0).astype(np.float32) if uniform else values
+    medium = Medium(name=name, density=density,
                     index_to_world=np.asarray(world_matrix) @ np.asarray(index_to_object)
                     @ translation(origin), sigma_s=coeff.sigma_s, sigma_a=coeff.sigma_a,
-                    g=coeff.g, emission=emission, source=source, emission_grid=grid)
+                    g=float(coeff.g), emission=emission, source=source, emission_grid=grid)
     return medium, lost
 
 
@@ -402,14 +404,10 @@ class VolumeTranslator:
         return f"of '{path}' could not be loaded; the file may be truncated or corrupt"
 
     def _medium(self, ob, co, block, g, world_matrix, several, blocks, where) -> Medium:
-        values, origin, index_to_object = block
-        emission, grid, lost = lattice_emission(co, block, blocks)
+        medium, lost = block_medium(f"{ob.name}:{g.name}" if several else ob.name, co, block,
+                                    blocks, world_matrix, "VDB")
         self._warn_lost(lost, g.name, where)
-        return Medium(name=f"{ob.name}:{g.name}" if several else ob.name, density=values,
-                      index_to_world=(np.asarray(world_matrix) @ index_to_object
-                                      @ translation(origin)),
-                      sigma_s=co.sigma_s, sigma_a=co.sigma_a, g=float(co.g),
-                      emission=emission, source="VDB", emission_grid=grid)
+        return medium
 
     def _warn_lost(self, lost, onto, where):
         for name, outside in lost.items():
@@ -437,8 +435,8 @@ class VolumeTranslator:
                                      "grid it renders nothing; skipped")
                 return
             base_name, block = found[0], blocks[found[0]]
-        medium, lost = uniform_medium(f"{ob.name}:uniform", coeff, block, blocks, world_matrix,
-                                      "VDB")
+        medium, lost = block_medium(f"{ob.name}:uniform", coeff, block, blocks, world_matrix,
+                                    "VDB", uniform=True)
         self._warn_lost(lost, base_name, where)
         self.warnings.append(f"{where}: shaders with a uniform density are approximated inside "
                              f"the non-zero voxels of '{base_name}'")
