@@ -49,9 +49,8 @@ def draw(draw_function, panel_class, scene):
     """Run ``draw_function`` as a method of a stand-in for ``panel_class``; what it drew."""
     props = []
     panel = types.SimpleNamespace(layout=Layout(props))
-    for name in ("split_layout",):
-        if hasattr(panel_class, name):
-            setattr(panel, name, types.MethodType(getattr(panel_class, name), panel))
+    if hasattr(panel_class, "split_layout"):
+        panel.split_layout = types.MethodType(panel_class.split_layout, panel)
     context = types.SimpleNamespace(scene=scene, engine=ui.ENGINE)
     draw_function(panel, context)
     return props, panel.layout
