@@ -7,11 +7,13 @@ first) and hit/miss counters:
 
 * ``'precompute'``: the precompute fields and light pyramids, under a key of what the light
   part reads -- the prepared media (grids, maps, coefficients), the lights, the opaque
-  surfaces' geometry, multiple scattering on/off -- with the key of the world-light part
+  surfaces' geometry, multiple scattering on/off and, with it on, the camera position that
+  ``precompute.drift_levels`` reads -- with the key of the world-light part
   they hold: the world colour, the ambient directions, the seed and the camera *position*
   (the direction for an orthographic camera), which ``precompute.world_light`` reads.
-  Turning a perspective camera keeps everything; moving it recomputes the world light only;
-  changing a light keeps the world light (``precompute_cached``).
+  Turning a perspective camera keeps everything; moving it recomputes the world light only
+  (and the light pyramids, with multiple scattering on); changing a light keeps the world
+  light (``precompute_cached``).
 * the Blender glue stores grids it read or built: ``'voxels'`` (voxelised mesh interiors),
   ``'vdb'`` (grids of unchanged .vdb files), ``'fluid'`` (fluid cache frames).
 
@@ -263,7 +265,8 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
     """``precompute.precompute`` reusing earlier results kept in ``cache`` (default ``CACHE``).
 
     One entry (kind 'precompute') per *light key* -- the media, lights, surfaces, multiple
-    scattering and its resolution, thread count and whether the world is lit -- holds the fields and pyramids
+    scattering and its resolution (and then the camera position), thread count and whether
+    the world is lit -- holds the fields and pyramids
     and the *world key* they were computed for (world colour, camera position, ambient
     directions, seed).  Then:
 
@@ -290,7 +293,9 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
     # other threads still runs (and checks) the precompute
     common = (media_key(media), surfaces_key(surfaces), bool(multiple),
               int(multiple_resolution) if multiple else 0, int(threads))
-    light_key = digest("lights", common, list(lights), has_world)
+    # the light pyramids are moved towards what the camera sees (precompute.drift_levels)
+    light_key = digest("lights", common, list(lights), has_world,
+                       camera_key(camera) if multiple else None)
     world_key = digest("world", common, np.asarray(world.color, np.float64), camera_key(camera),
                        int(n_dirs), int(seed)) if has_world else None
     kw = dict(n_dirs=n_dirs, seed=seed, should_cancel=should_cancel, progress=progress,

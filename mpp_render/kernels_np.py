@@ -444,6 +444,26 @@ def walk_width_sq(u, g):
     return np.maximum((2.0 * (u - e) - g * g * e * e) / 3.0, 0.0)
 
 
+def walk_displacement(u, g):
+    """Mean displacement of the walk of ``walk_width_sq`` after path length u l_tr, in units
+    of the transport length l_tr, for the light that leaves its last scattering towards a
+    given direction v: (drift, beta) with
+
+        E[x | v] = drift d + beta (v - g^2 e^-u d)            (d: the light's direction, unit)
+
+    drift = g (1 - e^-u) is the walk's mean progress along d.  beta is the regression of the
+    position on the direction scattered into at the end (HG of anisotropy g): Cov(x, v) /
+    Var(v) = g (1 - e^-u) (1 - g^2 e^-u) / (1 - g^4 e^-2u), traces over the three axes, with
+    Cov(x, u) from E[u(t) . u(t')] = e^-(t' - t) / l_tr and E[v | u] = g u.  beta -> g u / (1 + g^2)
+    for u << 1 (a straight flight: the light that heads towards v came from behind it, along
+    v), 0 for g = 0 (an isotropic last scattering forgets the path)."""
+    u = np.asarray(u, np.float64)
+    e = np.exp(-u)
+    em = -np.expm1(-u)
+    beta = g * em * (1.0 - g * g * e) / np.maximum(1.0 - g ** 4 * e * e, 1e-300)
+    return g * em, beta
+
+
 _U_TABLE = np.logspace(-6, 7, 521)
 
 
@@ -465,6 +485,20 @@ LOG_RHO0 = float(np.log(RHO_TABLE[0]))
 DLOG_RHO = float(np.log(RHO_TABLE[1]) - np.log(RHO_TABLE[0]))
 
 
+def level_paths(h, levels, l_tr, g):
+    """Per pyramid level k (width W_k = h 2^k, m; level 0 unblurred) the range [lo, hi] of the
+    path lengths (m) it stands for -- spreads w(l) within a factor sqrt(2) of W_k -- and
+    their representative length l_k (geometric mean; hi / 2 on level 0): a list of
+    (lo, hi, l_k), arrays shaped like ``l_tr`` (m)."""
+    out = []
+    lo = np.zeros(np.shape(l_tr))
+    for k in range(levels):
+        hi = path_length_for_width((h * 2.0 ** (k + 0.5)) ** 2, l_tr, g)
+        out.append((lo, hi, np.sqrt(lo * hi) if k else 0.5 * hi))
+        lo = hi
+    return out
+
+
 def level_table(g, sigma_s, sigma_a, h, levels):
     """Per pyramid level k and density rho (RHO_TABLE), the path-length weight
     int e^(-sigma_a rho l) dl (m) over the paths the level stands for, and the anisotropy
@@ -479,13 +513,9 @@ def level_table(g, sigma_s, sigma_a, h, levels):
     with np.errstate(divide="ignore"):
         l_tr = np.where(ss > 0, 1.0 / (ss * b1), np.inf)
     out = np.zeros((levels, len(rho), 2))
-    lo = np.zeros(len(rho))
-    for k in range(levels):
-        hi = path_length_for_width((h * 2.0 ** (k + 0.5)) ** 2, l_tr, g)
-        l_k = np.sqrt(lo * hi) if k else 0.5 * hi
+    for k, (lo, hi, l_k) in enumerate(level_paths(h, levels, l_tr, g)):
         out[k, :, 0] = np.exp(-sa * lo) * (hi - lo) * _phi1(sa * (hi - lo))
         out[k, :, 1] = g * g * np.exp(-l_k / l_tr)
-        lo = hi
     return out
 
 
@@ -507,9 +537,10 @@ def multiple_source(ms_fields, table, rho, x, w2i, cos):
     ``ms_fields``: per light None or (levels, stride, h) of precompute.MultipleField;
     ``table``: the medium's level_table; ``w2i`` world -> padded index map; ``cos`` (L,N)
     the cosine between each light's propagation direction and the direction to the camera.
-    Level k adds pyramid_k(x) weight_k HG(cos; g_k).  The blur is centred on the sample (no
-    drift along the beam) and ignores the medium's surface (no image term): both were tried
-    and measured worse, see docs/method.md."""
+    Level k adds pyramid_k(x) weight_k HG(cos; g_k).  The levels come moved by their paths'
+    drift towards what the camera sees (precompute.drift_levels); the blur ignores the
+    medium's surface (no image term, no boundary loss: tried and measured worse on the
+    forward slab, see docs/method.md)."""
     out = np.zeros((len(x), 3))
     tab = table_lookup(table, rho)
     for li, msf in enumerate(ms_fields):

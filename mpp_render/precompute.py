@@ -370,9 +370,9 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
 class MultipleField:
     """Multiple-scattering data of one light on one medium: the light pyramid (pyramid.py) of
     the first-scattering source and the medium's occupancy, on a lattice ``stride`` voxels
-    apart (spacing ``h`` metres).  Level channels: 0-2 the RGB power per volume (W/m^3) that
-    the light's unscattered beam scatters, Q = sigma_s E exp(-tau) (the start of every
-    multiply scattered path); 3 the fraction of space inside the medium (density > 0)."""
+    apart (spacing ``h`` metres).  Level channels: the RGB power per volume (W/m^3) that the
+    light's unscattered beam scatters, Q = sigma_s E exp(-tau) (the start of every multiply
+    scattered path), each level moved by its paths' drift (``drift_levels``)."""
 
     stride: int
     h: float
@@ -423,10 +423,13 @@ def cell_mean_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel:
 
 
 def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int,
-                   max_levels=8, resolution: int = MULTIPLE_RESOLUTION) -> Optional[MultipleField]:
+                   camera: Camera, max_levels=8,
+                   resolution: int = MULTIPLE_RESOLUTION) -> Optional[MultipleField]:
     """The light pyramid of ``light`` on medium ``pm`` from its precomputed field ``fld``
     (optical depth at ``channel``), see MultipleField, on a lattice of about ``resolution``
-    points along the grid's longest side (never finer than the voxels)."""
+    points along the grid's longest side (never finer than the voxels); each level moved
+    along the light by the mean displacement of its paths (``drift_levels``), for the light
+    that ``camera`` sees."""
     from . import pyramid
     from .lights import incident
     stride = max(1, int(np.ceil(max(pm.grid.shape) / max(int(resolution), 2))))
@@ -444,7 +447,53 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
             base[near] = cell_mean_source(pm, fld, light, channel, stride, shape, near)
     h = stride * float(np.cbrt(abs(np.linalg.det(pm.i2w[:3, :3]))))
     levels = pyramid.build(base.astype(np.float32).reshape(shape + (3,)), max_levels)
+    inside = rho[rho > 0]
+    sigma_s = float(np.mean(pm.sigma_s)) * (float(np.mean(inside)) if inside.size else 0.0)
+    drift_levels(levels, pm, light, camera, stride, h, sigma_s)
     return MultipleField(stride, h, levels)
+
+
+def drift_levels(levels, pm: PreparedMedium, light: Light, camera: Camera, stride: int,
+                 h: float, sigma_s: float):
+    """Move each level of a light pyramid (in place) so that level k at x reads the first
+    scatterings at x - E[x_k | v]: the paths the level stands for (``level_paths``, of
+    representative length l_k) start from a first scattering of the light travelling along d
+    and drift forward along it; of the light that leaves x towards the camera (v, unit,
+    towards the camera's position; its axis for an orthographic camera), those that arrive
+    heading towards v came further along v (``kernels_np.walk_displacement``).  d is the
+    light's direction at x: radial from a point or spot light, the sun's or area light's
+    axis.  ``sigma_s``: the medium's mean scattering coefficient where it has density (1/m),
+    giving the transport length l_tr = 1 / (sigma_s (1 - g)) of the paths.  Beyond the
+    lattice the source is zero.  Nothing moves for g = 0 or a medium that does not scatter
+    (docs/method.md, "Drift along the light")."""
+    from .kernels_np import level_paths, walk_displacement
+    g = float(pm.g)
+    if g == 0.0 or sigma_s <= 0.0:
+        return
+    l_tr = 1.0 / (sigma_s * max(1.0 - g, 1e-6))
+    c2w = np.asarray(camera.cam_to_world, np.float64)
+    for k, (_, _, l_k) in enumerate(level_paths(h, len(levels), l_tr, g)):
+        lev = levels[k]
+        n = lev.shape[:3]
+        idx = np.stack(np.unravel_index(np.arange(int(np.prod(n))), n), axis=1).astype(np.float64)
+        x = (idx * (stride * 2.0 ** k)) @ pm.i2w[:3, :3].T + pm.i2w[:3, 3]
+        d = _unit(x - light.position) if light.kind in ("POINT", "SPOT") else \
+            np.broadcast_to(_unit(np.asarray(light.direction, np.float64)), x.shape)
+        view = np.broadcast_to(c2w[:3, 2], x.shape) if camera.projection == "ORTHO" else \
+            _unit(c2w[:3, 3] - x)
+        u = float(l_k) / l_tr
+        drift, beta = walk_displacement(u, g)
+        shift = l_tr * (float(drift) * d + float(beta) * (view - g * g * np.exp(-u) * d))
+        src = idx - (shift @ pm.w2i[:3, :3].T) / (stride * 2.0 ** k)
+        padded = np.pad(lev, ((1, 1), (1, 1), (1, 1), (0, 0)))
+        levels[k] = np.ascontiguousarray(
+            trilinear(padded, src + 1.0).reshape(lev.shape), dtype=np.float32)
+
+
+def _unit(a):
+    """Rows of ``a`` scaled to unit length (zero rows stay zero)."""
+    n = np.linalg.norm(a, axis=-1, keepdims=True)
+    return a / np.maximum(n, 1e-30)
 
 
 @dataclass
@@ -788,7 +837,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                     continue
                 if progress:
                     progress(0.0, f"Light pyramid: {light.name} on {pm.medium.name}")
-                ms[li] = multiple_field(pm, f, light, chans[li], resolution=multiple_resolution)
+                ms[li] = multiple_field(pm, f, light, chans[li], camera,
+                                        resolution=multiple_resolution)
                 if should_cancel and should_cancel():  # a pyramid is not cut into chunks
                     return None
         ms_all.append(ms)

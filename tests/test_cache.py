@@ -123,21 +123,24 @@ def assert_same_precompute(a, b):
                     np.testing.assert_array_equal(lx, ly)
 
 
-@pytest.mark.parametrize("change", ["nothing", "camera", "light"])
+@pytest.mark.parametrize("change", ["nothing", "camera", "camera_single", "light"])
 def test_cached_precompute_equals_the_cold_one(warm, change):
     """Each way of reuse (all kept; world light recomputed in place; light part recomputed
-    with the world channels copied) gives exactly the fields of a cold precompute."""
-    kw = dict(n_dirs=8, seed=3, threads=2, multiple=True)
+    with the world channels copied) gives exactly the fields of a cold precompute.  A moved
+    camera keeps the light part only without multiple scattering: the light pyramids drift
+    towards what the camera sees."""
+    kw = dict(n_dirs=8, seed=3, threads=2, multiple=change != "camera_single")
     first = scene()
     media, surf = prepared(first)
     cache.precompute_cached(media, first.lights, first.world, first.camera, surfaces=surf, **kw)
-    second = {"nothing": scene(), "camera": scene(cam_pos=(0.5, -0.2, 3.5)),
+    moved = scene(cam_pos=(0.5, -0.2, 3.5))
+    second = {"nothing": scene(), "camera": moved, "camera_single": moved,
               "light": scene(power=400.0)}[change]
     media, surf = prepared(second)
     got = cache.precompute_cached(media, second.lights, second.world, second.camera,
                                   surfaces=surf, **kw)
-    assert got.stats["reused"] == {"nothing": ["lights", "world"], "camera": ["lights"],
-                                   "light": ["world"]}[change]
+    assert got.stats["reused"] == {"nothing": ["lights", "world"], "camera": [],
+                                   "camera_single": ["lights"], "light": ["world"]}[change]
     cold = pre_mod.precompute(media, second.lights, second.world, second.camera, surfaces=surf,
                               **kw)
     assert_same_precompute(got, cold)
@@ -167,10 +170,20 @@ def test_changed_light_power_recomputes_the_lights_only(warm, calls):
 
 
 def test_camera_moves_recompute_the_world_light_only(warm, calls):
+    """Without multiple scattering; with it the light pyramids follow the camera too."""
+    render(scene(multiple=False))
+    calls.clear()
+    moved = render(scene(cam_pos=(0.4, -0.3, 4.2), multiple=False))
+    assert calls == ["world"] and moved.stats["reused"] == ["lights"]
+    cache.clear()
+    assert_same_image(render(scene(cam_pos=(0.4, -0.3, 4.2), multiple=False)), moved)
+
+
+def test_camera_moves_recompute_the_light_pyramids(warm, calls):
     render(scene())
     calls.clear()
     moved = render(scene(cam_pos=(0.4, -0.3, 4.2)))
-    assert calls == ["world"] and moved.stats["reused"] == ["lights"]
+    assert calls == ["all"] and moved.stats["reused"] == []
     cache.clear()
     assert_same_image(render(scene(cam_pos=(0.4, -0.3, 4.2))), moved)
 
@@ -186,9 +199,9 @@ def test_rotating_the_camera_keeps_everything(warm, calls):
 
 
 def test_black_world_ignores_the_camera(warm, calls):
-    render(scene(world=(0, 0, 0)))
+    render(scene(world=(0, 0, 0), multiple=False))
     calls.clear()
-    moved = render(scene(world=(0, 0, 0), cam_pos=(1.0, 0.0, 3.0)))
+    moved = render(scene(world=(0, 0, 0), cam_pos=(1.0, 0.0, 3.0), multiple=False))
     assert calls == [] and moved.stats["reused"] == ["lights"]
 
 

@@ -1,0 +1,141 @@
+"""The drift of the light pyramid along the light (docs/method.md, "Drift along the light"):
+the walk's mean displacement and its regression on the direction towards the camera against a
+photon walk, and the levels moved by it."""
+import numpy as np
+import pytest
+
+from mpp_render import precompute, pyramid
+from mpp_render.kernels_np import level_paths, walk_displacement
+from mpp_render.phase import sample_hg
+from mpp_render.scene import Camera, Light
+
+
+def test_walk_displacement_limits():
+    g = 0.8
+    u = np.array([1e-6, 1e-3])
+    drift, beta = walk_displacement(u, g)
+    np.testing.assert_allclose(drift, g * u, rtol=1e-3)
+    np.testing.assert_allclose(beta, g * u / (1 + g * g), rtol=1e-2)
+    drift, beta = walk_displacement(np.array([50.0, 1e4]), g)
+    np.testing.assert_allclose(drift, g, rtol=1e-9)
+    np.testing.assert_allclose(beta, g, rtol=1e-9)
+    drift, beta = walk_displacement(np.logspace(-4, 3, 50), 0.0)
+    assert np.all(drift == 0) and np.all(beta == 0)
+    d, b = walk_displacement(np.logspace(-4, 3, 50), 0.95)
+    assert np.all(np.diff(d) >= 0) and np.all(np.diff(b) >= 0) and np.all(np.isfinite(b))
+    d, b = walk_displacement(np.logspace(-4, 1, 50), 0.95)
+    assert np.all(np.diff(d) > 0) and np.all(np.diff(b) > 0)
+
+
+def walk(g, length, n, rng):
+    """Photons after a first scattering at the origin of light travelling along +z: HG
+    flights at rate 1/m for ``length`` m, then scattered once more (towards v).  Returns the
+    positions (n,3) and the final directions v (n,3)."""
+    z = np.tile([0.0, 0.0, 1.0], (n, 1))
+    d = sample_hg(rng.random(n), rng.random(n), g, z)
+    x = np.zeros((n, 3))
+    left = np.full(n, float(length))
+    while True:
+        live = np.flatnonzero(left > 0)
+        if not live.size:
+            break
+        step = np.minimum(rng.exponential(1.0, live.size), left[live])
+        x[live] += step[:, None] * d[live]
+        left[live] -= step
+        turn = live[left[live] > 0]
+        d[turn] = sample_hg(rng.random(turn.size), rng.random(turn.size), g, d[turn])
+    v = sample_hg(rng.random(n), rng.random(n), g, d)
+    return x, v
+
+
+@pytest.mark.parametrize("g, length", [(0.5, 0.7), (0.85, 0.7), (0.85, 3.0), (0.3, 4.0)])
+def test_walk_displacement_matches_a_photon_walk(g, length):
+    """sigma_s = 1/m: l_tr = 1/(1 - g).  The mean progress along the light and the regression
+    Cov(x, v) / Var(v) (traces over the axes) within 3 % of a 200 000-photon walk."""
+    rng = np.random.default_rng(7)
+    x, v = walk(g, length, 200_000, rng)
+    l_tr = 1.0 / (1.0 - g)
+    drift, beta = walk_displacement(length / l_tr, g)
+    mx, mv = x.mean(0), v.mean(0)
+    cov = np.mean(np.sum(x * v, 1)) - mx @ mv
+    var = np.mean(np.sum(v * v, 1)) - mv @ mv
+    assert abs(mx[2] / (drift * l_tr) - 1) < 0.03, (mx[2], drift * l_tr)
+    assert abs(cov / var / (beta * l_tr) - 1) < 0.03, (cov / var, beta * l_tr)
+
+
+def blob_pyramid(n=33):
+    base = np.zeros((n, n, n, 3), np.float32)
+    base[16, 16, 16] = 1.0
+    return pyramid.build(base, max_levels=4)
+
+
+class _Medium:
+    """What drift_levels reads of a prepared medium: g and the index <-> world maps."""
+
+    def __init__(self, g, spacing=0.1):
+        self.g = g
+        self.i2w = np.eye(4)
+        self.i2w[:3, :3] *= spacing
+        self.i2w[:3, 3] = -16 * spacing
+        self.w2i = np.linalg.inv(self.i2w)[:3, :]
+
+
+def centroid(level, k, med):
+    w = level[..., 0].astype(np.float64)
+    idx = np.stack(np.meshgrid(*[np.arange(s) for s in w.shape], indexing="ij"), -1) * 2.0 ** k
+    i = np.tensordot(w, idx, axes=3) / w.sum()
+    return i @ med.i2w[:3, :3].T + med.i2w[:3, 3]
+
+
+def test_levels_move_along_the_sun_and_towards_the_camera():
+    """A point source blurred: each level's centroid moves by E[x_k | v] of its paths (an
+    orthographic camera, so v is the same everywhere), and not at all for g = 0."""
+    sun = Light("SUN", "sun", np.ones(3), direction=np.array([0.0, 0.0, -1.0]))
+    c2w = np.eye(4)
+    c2w[:3, :3] = [[1, 0, 0], [0, 0, -1], [0, 1, 0]]  # looks along +y: v = (0, -1, 0)
+    cam = Camera("ORTHO", c2w, 8, 8, (-1, 1, -1, 1))
+    sigma_s, h = 4.0, 0.1
+    for g in (0.0, 0.7):
+        med = _Medium(g, h)
+        levels = blob_pyramid()
+        before = [centroid(lv, k, med) for k, lv in enumerate(levels)]
+        precompute.drift_levels(levels, med, sun, cam, 1, h, sigma_s)
+        after = [centroid(lv, k, med) for k, lv in enumerate(levels)]
+        if g == 0.0:
+            for a, b in zip(before, after):
+                np.testing.assert_allclose(a, b, atol=1e-9)
+            continue
+        l_tr = 1.0 / (sigma_s * (1 - g))
+        for k, (_, _, l_k) in enumerate(level_paths(h, len(levels), l_tr, g)):
+            u = float(l_k) / l_tr
+            drift, beta = walk_displacement(u, g)
+            d, v = np.array([0, 0, -1.0]), np.array([0, -1.0, 0])
+            want = l_tr * (drift * d + beta * (v - g * g * np.exp(-u) * d))
+            assert np.linalg.norm(want) > 0.02
+            np.testing.assert_allclose(after[k] - before[k], want, atol=0.1 * h * 2 ** k + 0.01)
+
+
+@pytest.mark.parametrize("side", [True, False])
+def test_point_light_levels_move_away_from_the_light(side):
+    """Radial drift: a source beside a point light moves away from it and, seen from the
+    side, towards the camera.  Seen from the light (v = -d; a sun, so that d is the same
+    everywhere) nothing moves: the light that turns back towards the light has, on average,
+    not gone anywhere."""
+    med = _Medium(0.8, 0.1)
+    light = Light("POINT", "pt", np.ones(3), position=np.array([-3.0, 0.0, 0.0])) if side else \
+        Light("SUN", "sun", np.ones(3), direction=np.array([1.0, 0.0, 0.0]))
+    c2w = np.eye(4)
+    if side:
+        c2w[:3, :3] = [[1, 0, 0], [0, 0, -1], [0, 1, 0]]  # v = (0, -1, 0)
+    else:
+        c2w[:3, :3] = [[0, 0, -1], [0, 1, 0], [1, 0, 0]]  # v = (-1, 0, 0), towards the light
+    cam = Camera("ORTHO", c2w, 8, 8, (-1, 1, -1, 1))
+    levels = blob_pyramid()
+    before = [centroid(lv, k, med) for k, lv in enumerate(levels)]
+    precompute.drift_levels(levels, med, light, cam, 1, 0.1, 3.0)
+    moved = [centroid(lv, k, med) - b for k, (lv, b) in enumerate(zip(levels, before))]
+    assert all(abs(m[2]) < 1e-3 for m in moved)
+    if side:
+        assert moved[1][0] > 0.02 and moved[1][1] < -0.02
+    else:
+        assert all(np.linalg.norm(m) < 1e-5 for m in moved), moved
