@@ -113,3 +113,14 @@ def primary_rays(camera, px, py):
     t_min = float(camera.clip_start) / axial
     t_max = float(camera.clip_end) / axial
     return origins, directions, t_min, t_max, axial
+
+
+def towards_camera(camera, points):
+    """Unit directions (N,3) from world ``points`` (N,3, m) to the camera: to its position
+    for PERSP, its view axis reversed (+Z of the camera) for ORTHO, the same for every point."""
+    points = np.asarray(points, np.float64).reshape(-1, 3)
+    c2w = np.asarray(camera.cam_to_world, np.float64)
+    if str(camera.projection).upper() == "ORTHO":
+        return np.broadcast_to(c2w[:3, 2], points.shape)
+    v = c2w[:3, 3] - points
+    return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-30)

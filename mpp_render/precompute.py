@@ -39,6 +39,7 @@ from typing import Callable, List, Optional
 import numpy as np
 
 from . import kernels, kernels_np
+from .camera import towards_camera
 from .lights import is_dark, towards_light
 from .media import PreparedMedium, trilinear, union_interval
 from .phase import sample_hg
@@ -328,7 +329,6 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
     # every optical depth is 0
     sig_t = np.stack([m.sigma_t for m in media]) if media else np.zeros((0, 3))
     sig_s = np.stack([m.sigma_s for m in media]) if media else np.zeros((0, 3))
-    c2w = np.asarray(camera.cam_to_world, np.float64)
     out = np.zeros((n, 3))
     out_ms = np.zeros((n, 3))
     golden = 0.6180339887498949
@@ -338,11 +338,7 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
     def work(a, b):
         p = points[a:b]
         m = len(p)
-        if camera.projection == "ORTHO":
-            to_cam = np.broadcast_to(c2w[:3, 2], (m, 3))
-        else:
-            to_cam = c2w[:3, 3] - p
-            to_cam = to_cam / np.maximum(np.linalg.norm(to_cam, axis=1, keepdims=True), 1e-30)
+        to_cam = towards_camera(camera, p)
         r = _block_uniforms(seed, a, b)
         u1 = np.mod((j[None, :] + 0.5) / n_dirs + r[:, :1], 1.0).ravel()
         u2 = np.mod(j[None, :] * golden + r[:, 1:], 1.0).ravel()
@@ -434,7 +430,7 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
     from .lights import incident
     stride = max(1, int(np.ceil(max(pm.grid.shape) / max(int(resolution), 2))))
     shape = tuple((s - 1 + stride - 1) // stride + 1 for s in pm.grid.shape)
-    ijk = np.stack(np.unravel_index(np.arange(int(np.prod(shape))), shape), axis=1) * float(stride)
+    ijk = lattice_index(shape) * float(stride)
     pts = ijk @ pm.i2w[:3, :3].T + pm.i2w[:3, 3]
     v = trilinear(fld, ijk)
     from .media import density_from
@@ -471,16 +467,16 @@ def drift_levels(levels, pm: PreparedMedium, light: Light, camera: Camera, strid
     if g == 0.0 or sigma_s <= 0.0:
         return
     l_tr = 1.0 / (sigma_s * max(1.0 - g, 1e-6))
-    c2w = np.asarray(camera.cam_to_world, np.float64)
+    axis = np.asarray(light.direction, np.float64)
     for k, (_, _, l_k) in enumerate(level_paths(h, len(levels), l_tr, g)):
         lev = levels[k]
-        n = lev.shape[:3]
-        idx = np.stack(np.unravel_index(np.arange(int(np.prod(n))), n), axis=1).astype(np.float64)
+        idx = lattice_index(lev.shape[:3])
         x = (idx * (stride * 2.0 ** k)) @ pm.i2w[:3, :3].T + pm.i2w[:3, 3]
-        d = _unit(x - light.position) if light.kind in ("POINT", "SPOT") else \
-            np.broadcast_to(_unit(np.asarray(light.direction, np.float64)), x.shape)
-        view = np.broadcast_to(c2w[:3, 2], x.shape) if camera.projection == "ORTHO" else \
-            _unit(c2w[:3, 3] - x)
+        if light.kind == "AREA":  # along its axis, not from its centre as towards_light
+            d = np.broadcast_to(axis / np.linalg.norm(axis), x.shape)
+        else:
+            d = -towards_light(light, x)[0]
+        view = towards_camera(camera, x)
         u = float(l_k) / l_tr
         drift, beta = walk_displacement(u, g)
         shift = l_tr * (float(drift) * d + float(beta) * (view - g * g * np.exp(-u) * d))
@@ -490,10 +486,11 @@ def drift_levels(levels, pm: PreparedMedium, light: Light, camera: Camera, strid
             trilinear(padded, src + 1.0).reshape(lev.shape), dtype=np.float32)
 
 
-def _unit(a):
-    """Rows of ``a`` scaled to unit length (zero rows stay zero)."""
-    n = np.linalg.norm(a, axis=-1, keepdims=True)
-    return a / np.maximum(n, 1e-30)
+def lattice_index(shape) -> np.ndarray:
+    """Index coordinates (N,3) float64 of every point of a lattice of ``shape`` (3 ints), in
+    C order (the order of ``reshape(-1)``)."""
+    return np.stack(np.unravel_index(np.arange(int(np.prod(shape))), tuple(shape)),
+                    axis=1).astype(np.float64)
 
 
 @dataclass
