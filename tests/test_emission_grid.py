@@ -10,6 +10,7 @@ from mpp_render.media import prepare
 from mpp_render.precompute import precompute
 from mpp_render.render import render
 from mpp_render.scene import Camera, Light, Medium, SceneDescription, Settings, World
+from rays import downward_rays
 
 needs_c = pytest.mark.skipif(kernels._c is None, reason="compiled kernels not built")
 
@@ -30,13 +31,7 @@ def hot_medium(shape=(10, 9, 8), emission=(0.0, 0.0, 0.0)):
 
 
 def march_args(rng, media, lights, pre, n=2000):
-    o = rng.uniform(-1.5, 1.5, (n, 3))
-    o[:, 2] = 4.0
-    d = rng.normal(size=(n, 3)) * [0.2, 0.2, 0.0]
-    d[:, 2] = -1
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    t0 = rng.uniform(0.5, 2.0, n)
-    t1 = t0 + rng.uniform(0, 6, n)
+    o, d, t0, t1 = downward_rays(rng, n, 1.5, 0.2, 2.0)
     ec = [-1 if c is None else c for c in pre.layout.emission_channels]
     return (o, d, t0, t1, np.ones(n), rng.integers(0, 2**32, n, dtype=np.uint32), pre.fields,
             [m.w2i for m in media], [m.sigma_s for m in media], [m.sigma_t for m in media],

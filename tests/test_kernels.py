@@ -7,6 +7,7 @@ from mpp_render.march import MarchContext, pack_lights
 from mpp_render.media import prepare
 from mpp_render.precompute import precompute
 from mpp_render.scene import Camera, Light, Medium, World
+from rays import downward_rays
 
 needs_c = pytest.mark.skipif(kernels.backend() != "c" and kernels._c is None,
                              reason="compiled kernels not built")
@@ -65,13 +66,7 @@ def test_march_twins_agree_on_random_rays(lights, density):
                      multiple=True)
     multiple = MarchContext(media, pre.fields, pre.layout, lights, 0.07, pre.multiple).multiple
     n = 3000
-    o = rng.uniform(-2, 2, (n, 3))
-    o[:, 2] = 4.0
-    d = rng.normal(size=(n, 3)) * [0.3, 0.3, 0.0]
-    d[:, 2] = -1
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    t0 = rng.uniform(0.5, 2.5, n)
-    t1 = t0 + rng.uniform(0, 6, n)
+    o, d, t0, t1 = downward_rays(rng, n, 2.0, 0.3, 2.5)
     args = (o, d, t0, t1, rng.uniform(0.5, 1, n), rng.integers(0, 2**32, n, dtype=np.uint32),
             pre.fields, [m.w2i for m in media], [m.sigma_s for m in media],
             [m.sigma_t for m in media], [m.g for m in media], [m.threshold for m in media],
