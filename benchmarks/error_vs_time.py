@@ -147,8 +147,8 @@ def main(argv=None):
     ap.add_argument("--single", action="store_true", help="single scattering only")
     ap.add_argument("--out", default=os.path.join(REPO, "docs"))
     args = ap.parse_args(argv)
-    names = args.scenes.split(",") if args.scenes else sorted(
-        d for d in os.listdir(SCENES) if os.path.isfile(os.path.join(SCENES, d, "scene.blend")))
+    from mpp_render.metrics import scene_names
+    names = scene_names(SCENES, args.scenes)
     from mpp_render import cli
     cli._bpy()
     results = []

@@ -447,8 +447,8 @@ def main(argv=None):
         res["speedups_from"] = os.path.basename(args.speedups)
     res["scenes"] = None
     if not args.no_blender:
-        names = args.scenes.split(",") if args.scenes else sorted(
-            d for d in os.listdir(SCENES) if os.path.isfile(os.path.join(SCENES, d, "scene.blend")))
+        from mpp_render.metrics import scene_names
+        names = scene_names(SCENES, args.scenes)
         res["scenes"] = public_scenes(names)
     res["skips"], res["skip_others"] = skip_tables(args.quick)
     res.update(core_tables(args.quick))

@@ -99,6 +99,14 @@ def resolution_factor(ref_hw, cand_hw) -> int:
                      "divided by an integer")
 
 
+def scene_names(root: str, chosen: Optional[str] = None) -> List[str]:
+    """The scenes to run: ``chosen`` (comma-separated names) or else every folder of the
+    suite ``root`` that holds a ``scene.blend``, sorted."""
+    if chosen:
+        return chosen.split(",")
+    return sorted(d for d in os.listdir(root) if os.path.isfile(os.path.join(root, d, "scene.blend")))
+
+
 def reference_paths(scene_dir: str, single: bool = False) -> List[str]:
     """The scene's reference runs: ``ref_s<seed>.exr`` (or ``ss_s<seed>.exr``, single
     scattering only, when ``single``), sorted by seed."""

@@ -95,3 +95,13 @@ def test_compare_files_reads_reference_runs(tmp_path):
     assert m["bias"] == pytest.approx(0.1, rel=1e-5)
     s = metrics.compare_files(str(cand), str(tmp_path), single=True)
     assert s["references"] == ["ss_s1.exr", "ss_s2.exr"]
+
+
+def test_scene_names_lists_the_folders_with_a_blend_file(tmp_path):
+    for name in ("b_scene", "a_scene", "no_blend"):
+        (tmp_path / name).mkdir()
+    (tmp_path / "a_scene" / "scene.blend").write_bytes(b"")
+    (tmp_path / "b_scene" / "scene.blend").write_bytes(b"")
+    (tmp_path / "scene.blend").write_bytes(b"")
+    assert metrics.scene_names(str(tmp_path)) == ["a_scene", "b_scene"]
+    assert metrics.scene_names(str(tmp_path), "x,y") == ["x", "y"]
