@@ -70,6 +70,7 @@ def write_report(rows, out, samples):
               "and its brightness depends on the lattice spacing (see method.md, *Checks of the "
               "assembled model*): the setting is a quality knob that also shifts the Volume "
               "Multiple pass, little in the clouds, more in thin slabs and beams.", ""]
+    os.makedirs(out, exist_ok=True)
     with open(os.path.join(out, "ms_resolution.md"), "w") as f:
         f.write("\n".join(lines))
     with open(os.path.join(out, "ms_resolution.json"), "w") as f:
