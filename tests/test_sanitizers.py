@@ -25,7 +25,8 @@ def test_kernels_under_asan_and_ubsan(tmp_path):
     shutil.copytree(REPO / "mpp_render", work / "mpp_render",
                     ignore=shutil.ignore_patterns("*.so", "__pycache__", "blender"))
     (work / "tests").mkdir()
-    for name in ("test_fuzz.py", "test_kernels.py", "test_sweep.py", "test_skip.py", "test_pyramid.py"):
+    for name in ("test_fuzz.py", "test_kernels.py", "test_sweep.py", "test_skip.py", "test_pyramid.py",
+                 "rays.py"):  # the tests' ray helper (test_kernels imports it)
         shutil.copy(REPO / "tests" / name, work / "tests" / name)
     shutil.copy(REPO / "setup.py", work / "setup.py")
     env = dict(os.environ, MPP_SANITIZE="1")
