@@ -442,48 +442,103 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
         if near.size:
             base[near] = cell_mean_source(pm, fld, light, channel, stride, shape, near)
     h = stride * float(np.cbrt(abs(np.linalg.det(pm.i2w[:3, :3]))))
-    levels = pyramid.build(base.astype(np.float32).reshape(shape + (3,)), max_levels)
+    directions = None
+    if light.kind in ("POINT", "SPOT") and float(pm.g) != 0.0:
+        # the light's direction at each first scattering, weighted by its power, blurred with
+        # the source: level k then holds the mean direction of the sources each point gathers
+        power = base.sum(axis=1, keepdims=True)
+        base = np.concatenate([base, power * light_direction(light, pts), power], axis=1)
+    levels = pyramid.build(base.astype(np.float32).reshape(shape + (base.shape[1],)), max_levels)
+    if base.shape[1] > 3:
+        directions = [np.ascontiguousarray(lev[..., 3:]) for lev in levels]
+        levels = [np.ascontiguousarray(lev[..., :3]) for lev in levels]
     inside = rho[rho > 0]
     sigma_s = float(np.mean(pm.sigma_s)) * (float(np.mean(inside)) if inside.size else 0.0)
-    drift_levels(levels, pm, light, camera, stride, h, sigma_s)
+    drift_levels(levels, pm, light, camera, stride, h, sigma_s, directions)
     return MultipleField(stride, h, levels)
 
 
 def drift_levels(levels, pm: PreparedMedium, light: Light, camera: Camera, stride: int,
-                 h: float, sigma_s: float):
+                 h: float, sigma_s: float, directions=None):
     """Move each level of a light pyramid (in place) so that level k at x reads the first
     scatterings at x - E[x_k | v]: the paths the level stands for (``level_paths``, of
     representative length l_k) start from a first scattering of the light travelling along d
     and drift forward along it; of the light that leaves x towards the camera (v, unit,
     towards the camera's position; its axis for an orthographic camera), those that arrive
-    heading towards v came further along v (``kernels_np.walk_displacement``).  d is the
-    light's direction at x: radial from a point or spot light, the sun's or area light's
-    axis.  ``sigma_s``: the medium's mean scattering coefficient where it has density (1/m),
-    giving the transport length l_tr = 1 / (sigma_s (1 - g)) of the paths.  Beyond the
-    lattice the source is zero.  Nothing moves for g = 0 or a medium that does not scatter
+    heading towards v came further along v (``kernels_np.walk_displacement``).
+
+    d belongs to the first scatterings read, not to x: ``directions`` (one (X,Y,Z,4) array
+    per level, blurred with it) holds the power-weighted sum of the light's direction at the
+    first scatterings and their power, so d at the point read is their mean (shorter than 1
+    where sources of several directions mix, as round a point light); the point read is
+    found by a few fixed-point steps y = x - shift(d(y)).  Without ``directions``, or where a
+    level holds no power, d is the light's own direction there (``light_direction``).
+    ``sigma_s``: the medium's mean scattering coefficient where it has density (1/m), giving
+    the transport length l_tr = 1 / (sigma_s (1 - g)) of the paths.  Beyond the lattice the
+    source is zero.  Nothing moves for g = 0 or a medium that does not scatter
     (docs/method.md, "Drift along the light")."""
     from .kernels_np import level_paths, walk_displacement
     g = float(pm.g)
     if g == 0.0 or sigma_s <= 0.0:
         return
     l_tr = 1.0 / (sigma_s * max(1.0 - g, 1e-6))
-    axis = np.asarray(light.direction, np.float64)
+    pad = ((1, 1), (1, 1), (1, 1), (0, 0))
+    if directions is not None:
+        mean_directions = mean_source_directions(directions, light, pm, stride)
     for k, (_, _, l_k) in enumerate(level_paths(h, len(levels), l_tr, g)):
         lev = levels[k]
         idx = lattice_index(lev.shape[:3])
-        x = (idx * (stride * 2.0 ** k)) @ pm.i2w[:3, :3].T + pm.i2w[:3, 3]
-        if light.kind == "AREA":  # along its axis, not from its centre as towards_light
-            d = np.broadcast_to(axis / np.linalg.norm(axis), x.shape)
-        else:
-            d = -towards_light(light, x)[0]
+        to_world = pm.i2w[:3, :3].T * (stride * 2.0 ** k)
+        x = idx @ to_world + pm.i2w[:3, 3]
         view = towards_camera(camera, x)
         u = float(l_k) / l_tr
         drift, beta = walk_displacement(u, g)
-        shift = l_tr * (float(drift) * d + float(beta) * (view - g * g * np.exp(-u) * d))
-        src = idx - (shift @ pm.w2i[:3, :3].T) / (stride * 2.0 ** k)
-        padded = np.pad(lev, ((1, 1), (1, 1), (1, 1), (0, 0)))
+
+        def source_index(d):
+            shift = l_tr * (float(drift) * d + float(beta) * (view - g * g * np.exp(-u) * d))
+            return idx - (shift @ pm.w2i[:3, :3].T) / (stride * 2.0 ** k)
+
+        src = source_index(light_direction(light, x))
+        if directions is not None:
+            mean = mean_directions[k]
+            top = np.array(mean.shape[:3], np.float64) - 1.0 - 1e-9
+            for _ in range(3):  # beyond the lattice, the direction at its nearest edge
+                src = source_index(trilinear(mean, np.clip(src, 0.0, top)))
         levels[k] = np.ascontiguousarray(
-            trilinear(padded, src + 1.0).reshape(lev.shape), dtype=np.float32)
+            trilinear(np.pad(lev, pad), src + 1.0).reshape(lev.shape), dtype=np.float32)
+
+
+def mean_source_directions(directions, light: Light, pm: PreparedMedium, stride: int):
+    """Per level, the mean direction (X,Y,Z,3) of the light at the first scatterings that
+    level's points gather, from their power-weighted sums ``directions`` (see drift_levels).
+    Where a level holds (next to) no power the next coarser level's mean stands in, and
+    beyond the coarsest the light's own direction there: what a source would have if some
+    of the light's power reached it."""
+    out = [None] * len(directions)
+    for k in range(len(directions) - 1, -1, -1):
+        sums = directions[k].astype(np.float64)
+        idx = lattice_index(sums.shape[:3])
+        if k + 1 < len(directions):
+            coarser = np.pad(out[k + 1], ((1, 1), (1, 1), (1, 1), (0, 0)), mode="edge")
+            mean = trilinear(coarser, idx / 2.0 + 1.0)
+        else:
+            mean = light_direction(light, idx @ (pm.i2w[:3, :3].T * (stride * 2.0 ** k))
+                                   + pm.i2w[:3, 3])
+        power = sums[..., 3].reshape(-1)
+        held = power > 1e-6 * max(float(power.max()), 1e-300)
+        mean[held] = sums[..., :3].reshape(-1, 3)[held] / power[held, None]
+        out[k] = mean.reshape(sums.shape[:3] + (3,))
+    return out
+
+
+def light_direction(light: Light, points) -> np.ndarray:
+    """The direction (N,3, unit) the light travels at ``points`` (N,3, m): radial from a point
+    or spot light, the axis of a sun or area light."""
+    points = np.asarray(points, np.float64).reshape(-1, 3)
+    if light.kind in ("SUN", "AREA"):
+        axis = np.asarray(light.direction, np.float64)
+        return np.tile(axis / np.linalg.norm(axis), (len(points), 1))
+    return -towards_light(light, points)[0]
 
 
 def lattice_index(shape) -> np.ndarray:

@@ -139,3 +139,77 @@ def test_point_light_levels_move_away_from_the_light(side):
         assert moved[1][0] > 0.02 and moved[1][1] < -0.02
     else:
         assert all(np.linalg.norm(m) < 1e-5 for m in moved), moved
+
+
+def source_pyramid(base, light, med, levels=4):
+    """A light pyramid with the power-weighted light directions of its sources, as
+    multiple_field builds it: (levels, directions)."""
+    idx = precompute.lattice_index(base.shape[:3])
+    pts = idx @ med.i2w[:3, :3].T + med.i2w[:3, 3]
+    flat = base.reshape(-1, 3).astype(np.float64)
+    power = flat.sum(1, keepdims=True)
+    full = np.concatenate([flat, power * precompute.light_direction(light, pts), power], 1)
+    built = pyramid.build(full.astype(np.float32).reshape(base.shape[:3] + (7,)), levels)
+    return [lv[..., :3].copy() for lv in built], [lv[..., 3:].copy() for lv in built]
+
+
+def test_a_spot_beam_drifts_along_the_beam_not_from_the_light():
+    """A beam along a spot light's axis, seen from the side: every level moves along the
+    axis, also beside the beam and close to the light, where the direction from the light
+    to the point itself is far from the axis (what the levels read before the sources'
+    directions were carried: that spread the beam's glow into a cone)."""
+    med = _Medium(0.85, 0.1)
+    spot = Light("SPOT", "spot", np.ones(3), position=np.array([-1.8, 0.0, 0.0]),
+                 direction=np.array([1.0, 0.0, 0.0]))
+    base = np.zeros((33, 33, 33, 3), np.float32)
+    base[:, 16, 16] = np.exp(-0.1 * np.arange(33))[:, None]
+    c2w = np.eye(4)
+    c2w[:3, :3] = [[1, 0, 0], [0, 0, -1], [0, 1, 0]]  # looks along +y: v = (0, -1, 0)
+    cam = Camera("ORTHO", c2w, 8, 8, (-1, 1, -1, 1))
+    sigma_s, h, g = 2.0, 0.1, med.g
+    l_tr = 1.0 / (sigma_s * (1 - g))
+    levels, directions = source_pyramid(base, spot, med)
+    before = [lv.copy() for lv in levels]
+    radial = [lv.copy() for lv in levels]
+    precompute.drift_levels(levels, med, spot, cam, 1, h, sigma_s, directions)
+    precompute.drift_levels(radial, med, spot, cam, 1, h, sigma_s)
+    d, v = np.array([1.0, 0, 0]), np.array([0, -1.0, 0])
+    for k, (_, _, l_k) in enumerate(level_paths(h, len(levels), l_tr, g)):
+        u = float(l_k) / l_tr
+        drift, beta = walk_displacement(u, g)
+        shift = l_tr * (drift * d + beta * (v - g * g * np.exp(-u) * d)) / (h * 2 ** k)
+        idx = precompute.lattice_index(before[k].shape[:3])
+        padded = np.pad(before[k], ((1, 1), (1, 1), (1, 1), (0, 0)))
+        want = precompute.trilinear(padded, idx - shift + 1.0).reshape(before[k].shape)
+        top = float(before[k].max())
+        np.testing.assert_allclose(levels[k], want, atol=1e-4 * top)
+        if k >= 1:
+            assert np.abs(radial[k] - want).max() > 0.05 * top, k
+
+
+def test_mean_source_directions_round_a_point_light():
+    """Round a point light inside the medium its sources' directions cancel (the mean is short
+    on coarse levels and radial far from it), and a level without power nearby takes the
+    coarser level's mean: a blob lit from the side lends its direction to the empty space."""
+    med = _Medium(0.8, 0.1)
+    light = Light("POINT", "pt", np.ones(3), position=np.zeros(3))
+    idx = precompute.lattice_index((33, 33, 33))
+    pts = idx @ med.i2w[:3, :3].T + med.i2w[:3, 3]
+    r2 = np.maximum(np.sum(pts * pts, 1), 0.01)
+    base = np.repeat((1.0 / r2)[:, None], 3, 1).reshape(33, 33, 33, 3)
+    _, directions = source_pyramid(base, light, med)
+    mean = precompute.mean_source_directions(directions, light, med, 1)
+    assert np.linalg.norm(mean[3][2, 2, 2]) < 0.5  # level 3, at the light (level-0 index 16)
+    assert mean[1][16, 8, 8] @ np.array([1.0, 0, 0]) > 0.9  # 1.6 m out along +x: radial
+    far = Light("POINT", "pt", np.ones(3), position=np.array([-1.6, 1.5, 0.0]))
+    blob = np.zeros((33, 33, 33, 3), np.float32)
+    blob[14:19, 14:19, 14:19] = 1.0
+    _, directions = source_pyramid(blob, far, med)
+    mean = precompute.mean_source_directions(directions, far, med, 1)
+    to_blob = -far.position / np.linalg.norm(far.position)
+    point = np.array([16.0, 30.0, 16.0])  # empty on level 0, 1.4 m beside the blob
+    assert directions[0][16, 30, 16, 3] == 0.0
+    own = precompute.light_direction(far, point @ med.i2w[:3, :3].T + med.i2w[:3, 3])[0]
+    assert own @ to_blob < 0.8
+    got = mean[0][16, 30, 16]
+    assert got @ to_blob / np.linalg.norm(got) > 0.95
