@@ -1108,7 +1108,7 @@ typedef struct {
     int first[MAX_MEDIA][MAX_LIGHTS];   /* index of level 0 in `lv`, or -1 */
     int nlev[MAX_MEDIA][MAX_LIGHTS];
     double stride[MAX_MEDIA][MAX_LIGHTS], h[MAX_MEDIA][MAX_LIGHTS];
-    const double *tab[MAX_MEDIA];       /* per medium (K, nr, 2): weight, anisotropy per level */
+    const double *tab[MAX_MEDIA];       /* per medium (K, nr, 6): weight R,G,B, anisotropy R,G,B */
     int tabk[MAX_MEDIA];
     Py_ssize_t nr;
     double lr0, dlr;                    /* log density of table entry 0, spacing */
@@ -1134,14 +1134,18 @@ static void multiple_source_c(const MS *ms, const Grid *lv, int m, int nl, const
         if (K > ms->tabk[m]) K = ms->tabk[m];
         double stride = ms->stride[m][l];
         for (int k = 0; k < K; k++) {
-            const double *e0 = tab + ((Py_ssize_t)k * ms->nr + i) * 2, *e1 = e0 + 2;
-            double weight = e0[0] * (1.0 - t) + e1[0] * t;
-            double gk = e0[1] * (1.0 - t) + e1[1] * t;
+            const double *e0 = tab + ((Py_ssize_t)k * ms->nr + i) * 6, *e1 = e0 + 6;
             double scale = stride * ldexp(1.0, k), idx[3], q[3];
             for (int a = 0; a < 3; a++) idx[a] = idx_w[a] / scale;
             if (trilinear(&lv[f0 + k], idx, 0, 3, q)) {
-                double p = weight * hg_phase(cosl[l], gk);
-                for (int a = 0; a < 3; a++) out[a] += q[a] * p;
+                double phase = 0.0, g_prev = 0.0;
+                for (int a = 0; a < 3; a++) {  /* by channel; one phase when they agree */
+                    double gk = e0[3 + a] * (1.0 - t) + e1[3 + a] * t;
+                    if (a == 0 || gk != g_prev) phase = hg_phase(cosl[l], gk);
+                    g_prev = gk;
+                    double weight = e0[a] * (1.0 - t) + e1[a] * t;
+                    out[a] += q[a] * (weight * phase);
+                }
             }
         }
     }
@@ -1319,7 +1323,7 @@ static PyObject *march(PyObject *self, PyObject *args) {
         }
     if (pms != Py_None) {
         /* (amb_ms, levels list, table (M, L, 4) [first, count, stride, h],
-         *  per-medium level tables [(K, nr, 2)], log density of entry 0, spacing) */
+         *  per-medium level tables [(K, nr, 6)], log density of entry 0, spacing) */
         PyObject *plv, *ptab, *ptabs;
         int amb_ms;
         double lr0, dlr;
@@ -1353,7 +1357,7 @@ static PyObject *march(PyObject *self, PyObject *args) {
         }
         Py_ssize_t nr = -1;
         for (int m = 0; m < ng; m++) {
-            Py_ssize_t st[3] = {-1, nr, 2};
+            Py_ssize_t st[3] = {-1, nr, 6};
             if (get_buf(PyList_GET_ITEM(ptabs, m), &btabs[m], 'd', 3, st, "level table") < 0) goto done;
             ntabs = m + 1;
             if (st[0] < 1 || st[0] > MAX_LEVELS || st[1] < 2) {

@@ -500,27 +500,32 @@ def level_paths(h, levels, l_tr, g):
 
 
 def level_table(g, sigma_s, sigma_a, h, levels):
-    """Per pyramid level k and density rho (RHO_TABLE), the path-length weight
-    int e^(-sigma_a rho l) dl (m) over the paths the level stands for, and the anisotropy
-    g^2 e^(-l_k / l_tr) of the last scattering: (levels, len(RHO_TABLE), 2) float64.
+    """Per pyramid level k, density rho (RHO_TABLE) and colour channel, the path-length
+    weight int e^(-sigma_a rho l) dl (m) over the paths the level stands for, and the
+    anisotropy g^2 e^(-l_k / l_tr) of the last scattering: (levels, len(RHO_TABLE), 6)
+    float64, the weights of R, G, B then their anisotropies.
 
-    ``sigma_s``, ``sigma_a``: the medium's mean coefficients per unit density (1/m); ``h``
-    the pyramid's lattice spacing (m).  Level k (width W_k = h 2^k, level 0 unblurred)
-    stands for the paths whose spread w(l) lies within a factor sqrt(2) of W_k."""
+    ``sigma_s``, ``sigma_a``: the medium's coefficients per unit density (1/m), one per
+    channel (3) or one for all: a chromatic medium absorbs along its paths, and spreads
+    them, by channel; ``h`` the pyramid's lattice spacing (m).  Level k (width W_k = h 2^k,
+    level 0 unblurred) stands for the paths whose spread w(l) lies within a factor sqrt(2)
+    of W_k."""
     rho = RHO_TABLE
-    ss, sa = rho * sigma_s, rho * sigma_a
     b1 = max(1.0 - g, 1e-6)
-    with np.errstate(divide="ignore"):
-        l_tr = np.where(ss > 0, 1.0 / (ss * b1), np.inf)
-    out = np.zeros((levels, len(rho), 2))
-    for k, (lo, hi, l_k) in enumerate(level_paths(h, levels, l_tr, g)):
-        out[k, :, 0] = np.exp(-sa * lo) * (hi - lo) * _phi1(sa * (hi - lo))
-        out[k, :, 1] = g * g * np.exp(-l_k / l_tr)
+    out = np.zeros((levels, len(rho), 6))
+    for c, (s_c, a_c) in enumerate(zip(np.broadcast_to(np.asarray(sigma_s, np.float64), (3,)),
+                                       np.broadcast_to(np.asarray(sigma_a, np.float64), (3,)))):
+        ss, sa = rho * s_c, rho * a_c
+        with np.errstate(divide="ignore"):
+            l_tr = np.where(ss > 0, 1.0 / (ss * b1), np.inf)
+        for k, (lo, hi, l_k) in enumerate(level_paths(h, levels, l_tr, g)):
+            out[k, :, c] = np.exp(-sa * lo) * (hi - lo) * _phi1(sa * (hi - lo))
+            out[k, :, 3 + c] = g * g * np.exp(-l_k / l_tr)
     return out
 
 
 def table_lookup(table, rho):
-    """Linear interpolation of ``table`` (levels, R, 2) in log density; (levels, N, 2)."""
+    """Linear interpolation of ``table`` (levels, R, C) in log density; (levels, N, C)."""
     f = (np.log(np.maximum(rho, 1e-300)) - LOG_RHO0) / DLOG_RHO
     f = np.clip(f, 0.0, table.shape[1] - 1.0)
     i = np.minimum(np.floor(f).astype(np.int64), table.shape[1] - 2)
@@ -537,7 +542,7 @@ def multiple_source(ms_fields, table, rho, x, w2i, cos):
     ``ms_fields``: per light None or (levels, stride, h) of precompute.MultipleField;
     ``table``: the medium's level_table; ``w2i`` world -> padded index map; ``cos`` (L,N)
     the cosine between each light's propagation direction and the direction to the camera.
-    Level k adds pyramid_k(x) weight_k HG(cos; g_k).  The levels come moved by their paths'
+    Level k adds pyramid_k(x) weight_k HG(cos; g_k), by colour channel.  The levels come moved by their paths'
     drift towards what the camera sees (precompute.drift_levels); the blur ignores the
     medium's surface (no image term, no boundary loss: tried and measured worse on the
     forward slab, see docs/method.md)."""
@@ -550,7 +555,7 @@ def multiple_source(ms_fields, table, rho, x, w2i, cos):
         idx0 = (x @ w2i[:, :3].T + w2i[:, 3]) / float(stride)
         for k in range(min(len(levels), len(tab))):
             q = trilinear(levels[k], idx0 / float(2 ** k))
-            out += q[:, :3] * (tab[k, :, 0] * hg(cos[li], tab[k, :, 1]))[:, None]
+            out += q[:, :3] * (tab[k, :, :3] * hg(cos[li][:, None], tab[k, :, 3:]))
     return out
 
 

@@ -96,9 +96,8 @@ class MarchContext:
             for pm, mfs in zip(self.media, self.multiple_fields):
                 per_medium.append([None if m is None else (m.levels, m.stride, m.h) for m in mfs])
                 ref = next((m for m in mfs if m is not None), None)
-                tables.append(np.zeros((1, len(RHO_TABLE), 2)) if ref is None else
-                              level_table(pm.g, float(np.mean(pm.sigma_s)),
-                                          float(np.mean(pm.sigma_a)), ref.h, len(ref.levels)))
+                tables.append(np.zeros((1, len(RHO_TABLE), 6)) if ref is None else
+                              level_table(pm.g, pm.sigma_s, pm.sigma_a, ref.h, len(ref.levels)))
             self.multiple = (-1 if amb is None else amb, per_medium, tables)
 
 

@@ -453,7 +453,7 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
         directions = [np.ascontiguousarray(lev[..., 3:]) for lev in levels]
         levels = [np.ascontiguousarray(lev[..., :3]) for lev in levels]
     inside = rho[rho > 0]
-    sigma_s = float(np.mean(pm.sigma_s)) * (float(np.mean(inside)) if inside.size else 0.0)
+    sigma_s = np.asarray(pm.sigma_s, np.float64) * (float(np.mean(inside)) if inside.size else 0.0)
     drift_levels(levels, pm, light, camera, stride, h, sigma_s, directions)
     return MultipleField(stride, h, levels)
 
@@ -473,39 +473,48 @@ def drift_levels(levels, pm: PreparedMedium, light: Light, camera: Camera, strid
     where sources of several directions mix, as round a point light); the point read is
     found by a few fixed-point steps y = x - shift(d(y)).  Without ``directions``, or where a
     level holds no power, d is the light's own direction there (``light_direction``).
-    ``sigma_s``: the medium's mean scattering coefficient where it has density (1/m), giving
-    the transport length l_tr = 1 / (sigma_s (1 - g)) of the paths.  Beyond the lattice the
+    ``sigma_s``: the medium's mean scattering coefficient where it has density (1/m; one per
+    colour channel, or one for all), giving the transport length l_tr = 1 / (sigma_s (1 - g))
+    of the paths: each channel drifts by its own.  Beyond the lattice the
     source is zero.  Nothing moves for g = 0 or a medium that does not scatter
     (docs/method.md, "Drift along the light")."""
     from .kernels_np import level_paths, walk_displacement
     g = float(pm.g)
-    if g == 0.0 or sigma_s <= 0.0:
+    sigma_s = np.broadcast_to(np.asarray(sigma_s, np.float64), (3,))
+    if g == 0.0 or not np.all(sigma_s > 0.0):
         return
-    l_tr = 1.0 / (sigma_s * max(1.0 - g, 1e-6))
+    # channels scattering alike drift alike: one resample for a grey medium
+    groups = [(float(sigma_s[0]), [0, 1, 2])] if np.all(sigma_s == sigma_s[0]) else \
+        [(float(sigma_s[c]), [c]) for c in range(3)]
     pad = ((1, 1), (1, 1), (1, 1), (0, 0))
     if directions is not None:
         mean_directions = mean_source_directions(directions, light, pm, stride)
-    for k, (_, _, l_k) in enumerate(level_paths(h, len(levels), l_tr, g)):
+    paths = [level_paths(h, len(levels), 1.0 / (s_c * max(1.0 - g, 1e-6)), g) for s_c, _ in groups]
+    for k in range(len(levels)):
         lev = levels[k]
         idx = lattice_index(lev.shape[:3])
         to_world = pm.i2w[:3, :3].T * (stride * 2.0 ** k)
         x = idx @ to_world + pm.i2w[:3, 3]
         view = towards_camera(camera, x)
-        u = float(l_k) / l_tr
-        drift, beta = walk_displacement(u, g)
+        moved = np.empty(lev.shape, np.float32)
+        for (s_c, chans), per_level in zip(groups, paths):
+            l_tr = 1.0 / (s_c * max(1.0 - g, 1e-6))
+            u = float(per_level[k][2]) / l_tr
+            drift, beta = walk_displacement(u, g)
 
-        def source_index(d):
-            shift = l_tr * (float(drift) * d + float(beta) * (view - g * g * np.exp(-u) * d))
-            return idx - (shift @ pm.w2i[:3, :3].T) / (stride * 2.0 ** k)
+            def source_index(d):
+                shift = l_tr * (float(drift) * d + float(beta) * (view - g * g * np.exp(-u) * d))
+                return idx - (shift @ pm.w2i[:3, :3].T) / (stride * 2.0 ** k)
 
-        src = source_index(light_direction(light, x))
-        if directions is not None:
-            mean = mean_directions[k]
-            top = np.array(mean.shape[:3], np.float64) - 1.0 - 1e-9
-            for _ in range(3):  # beyond the lattice, the direction at its nearest edge
-                src = source_index(trilinear(mean, np.clip(src, 0.0, top)))
-        levels[k] = np.ascontiguousarray(
-            trilinear(np.pad(lev, pad), src + 1.0).reshape(lev.shape), dtype=np.float32)
+            src = source_index(light_direction(light, x))
+            if directions is not None:
+                mean = mean_directions[k]
+                top = np.array(mean.shape[:3], np.float64) - 1.0 - 1e-9
+                for _ in range(3):  # beyond the lattice, the direction at its nearest edge
+                    src = source_index(trilinear(mean, np.clip(src, 0.0, top)))
+            moved[..., chans] = trilinear(np.pad(lev[..., chans], pad), src + 1.0).reshape(
+                lev.shape[:3] + (len(chans),))
+        levels[k] = moved
 
 
 def mean_source_directions(directions, light: Light, pm: PreparedMedium, stride: int):
