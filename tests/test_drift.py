@@ -80,8 +80,8 @@ class _Medium:
         self.w2i = np.linalg.inv(self.i2w)[:3, :]
 
 
-def centroid(level, k, med):
-    w = level[..., 0].astype(np.float64)
+def centroid(level, k, med, c=0):
+    w = level[..., c].astype(np.float64)
     idx = np.stack(np.meshgrid(*[np.arange(s) for s in w.shape], indexing="ij"), -1) * 2.0 ** k
     i = np.tensordot(w, idx, axes=3) / w.sum()
     return i @ med.i2w[:3, :3].T + med.i2w[:3, 3]
@@ -213,3 +213,24 @@ def test_mean_source_directions_round_a_point_light():
     assert own @ to_blob < 0.8
     got = mean[0][16, 30, 16]
     assert got @ to_blob / np.linalg.norm(got) > 0.95
+
+
+def test_each_colour_channel_drifts_by_its_own_transport_length():
+    """A chromatic medium: each channel's levels move as a grey medium of that channel's
+    sigma_s would move them (the channel that scatters more drifts less)."""
+    sun = Light("SUN", "sun", np.ones(3), direction=np.array([0.0, 0.0, -1.0]))
+    c2w = np.eye(4)
+    c2w[:3, :3] = [[1, 0, 0], [0, 0, -1], [0, 1, 0]]
+    cam = Camera("ORTHO", c2w, 8, 8, (-1, 1, -1, 1))
+    med, h = _Medium(0.7, 0.1), 0.1
+    sigma = np.array([2.0, 4.0, 8.0])
+    levels = blob_pyramid()
+    precompute.drift_levels(levels, med, sun, cam, 1, h, sigma)
+    for c, s_c in enumerate(sigma):
+        grey = blob_pyramid()
+        precompute.drift_levels(grey, med, sun, cam, 1, h, s_c)
+        for k in range(len(levels)):
+            np.testing.assert_allclose(levels[k][..., c], grey[k][..., c], rtol=1e-6, atol=1e-9)
+    moved = [np.linalg.norm(centroid(levels[2], 2, med, c) - centroid(blob_pyramid()[2], 2, med, c))
+             for c in range(3)]
+    assert moved[0] > moved[1] > moved[2] > 0.0, moved
