@@ -426,13 +426,11 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
     points along the grid's longest side (never finer than the voxels); each level moved
     along the light by the mean displacement of its paths (``drift_levels``), for the light
     that ``camera`` sees."""
-    from . import pyramid
     from .lights import incident
     stride = max(1, int(np.ceil(max(pm.grid.shape) / max(int(resolution), 2))))
     shape = tuple((s - 1 + stride - 1) // stride + 1 for s in pm.grid.shape)
-    ijk = lattice_index(shape) * float(stride)
-    pts = ijk @ pm.i2w[:3, :3].T + pm.i2w[:3, 3]
-    v = trilinear(fld, ijk)
+    idx, pts = lattice_points(pm, shape, stride)
+    v = trilinear(fld, idx * float(stride))
     from .media import density_from
     rho = density_from(v[:, 0], pm.threshold)
     _, e = incident(light, pts)
@@ -442,24 +440,33 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
         if near.size:
             base[near] = cell_mean_source(pm, fld, light, channel, stride, shape, near)
     h = stride * float(np.cbrt(abs(np.linalg.det(pm.i2w[:3, :3]))))
-    directions = None
-    if light.kind in ("POINT", "SPOT") and float(pm.g) != 0.0:
-        # the light's direction at each first scattering, weighted by its power, blurred with
-        # the source: level k then holds the mean direction of the sources each point gathers
-        power = base.sum(axis=1, keepdims=True)
-        base = np.concatenate([base, power * light_direction(light, pts), power], axis=1)
-    levels = pyramid.build(base.astype(np.float32).reshape(shape + (base.shape[1],)), max_levels)
-    if base.shape[1] > 3:
-        directions = [np.ascontiguousarray(lev[..., 3:]) for lev in levels]
-        levels = [np.ascontiguousarray(lev[..., :3]) for lev in levels]
+    levels, directions = source_pyramid(base, light, pts, shape, float(pm.g), max_levels)
     inside = rho[rho > 0]
     sigma_s = np.asarray(pm.sigma_s, np.float64) * (float(np.mean(inside)) if inside.size else 0.0)
     drift_levels(levels, pm, light, camera, stride, h, sigma_s, directions)
     return MultipleField(stride, h, levels)
 
 
+def source_pyramid(base, light: Light, pts, shape, g: float, max_levels: int):
+    """(levels, directions): the pyramid (pyramid.build) of the source ``base`` ((N,3) W/m^3
+    at the lattice points ``pts`` (N,3, m) of ``shape``) and, for a point or spot light in a
+    medium with g != 0, the pyramid of the light's direction at each first scattering
+    weighted by its power, and that power ((X,Y,Z,4) per level, blurred with the source:
+    level k then holds the sums from which drift_levels takes the mean direction of the
+    sources each point gathers); None for the others, whose direction is the same
+    everywhere or does not drift."""
+    from . import pyramid
+    if light.kind not in ("POINT", "SPOT") or g == 0.0:
+        return pyramid.build(base.astype(np.float32).reshape(tuple(shape) + (3,)), max_levels), None
+    power = base.sum(axis=1, keepdims=True)
+    full = np.concatenate([base, power * light_direction(light, pts), power], axis=1)
+    built = pyramid.build(full.astype(np.float32).reshape(tuple(shape) + (7,)), max_levels)
+    return ([np.ascontiguousarray(lev[..., :3]) for lev in built],
+            [np.ascontiguousarray(lev[..., 3:]) for lev in built])
+
+
 def drift_levels(levels, pm: PreparedMedium, light: Light, camera: Camera, stride: int,
-                 h: float, sigma_s: float, directions=None):
+                 h: float, sigma_s, directions=None):
     """Move each level of a light pyramid (in place) so that level k at x reads the first
     scatterings at x - E[x_k | v]: the paths the level stands for (``level_paths``, of
     representative length l_k) start from a first scattering of the light travelling along d
@@ -484,21 +491,19 @@ def drift_levels(levels, pm: PreparedMedium, light: Light, camera: Camera, strid
     if g == 0.0 or not np.all(sigma_s > 0.0):
         return
     # channels scattering alike drift alike: one resample for a grey medium
-    groups = [(float(sigma_s[0]), [0, 1, 2])] if np.all(sigma_s == sigma_s[0]) else \
-        [(float(sigma_s[c]), [c]) for c in range(3)]
-    pad = ((1, 1), (1, 1), (1, 1), (0, 0))
+    l_tr = 1.0 / (sigma_s * max(1.0 - g, 1e-6))
+    groups = [(float(l_tr[0]), [0, 1, 2])] if np.all(sigma_s == sigma_s[0]) else \
+        [(float(l_tr[c]), [c]) for c in range(3)]
+    paths = [level_paths(h, len(levels), l_c, g) for l_c, _ in groups]
     if directions is not None:
         mean_directions = mean_source_directions(directions, light, pm, stride)
-    paths = [level_paths(h, len(levels), 1.0 / (s_c * max(1.0 - g, 1e-6)), g) for s_c, _ in groups]
     for k in range(len(levels)):
         lev = levels[k]
-        idx = lattice_index(lev.shape[:3])
-        to_world = pm.i2w[:3, :3].T * (stride * 2.0 ** k)
-        x = idx @ to_world + pm.i2w[:3, 3]
+        idx, x = lattice_points(pm, lev.shape[:3], stride * 2 ** k)
         view = towards_camera(camera, x)
+        padded = np.pad(lev, ((1, 1), (1, 1), (1, 1), (0, 0)))
         moved = np.empty(lev.shape, np.float32)
-        for (s_c, chans), per_level in zip(groups, paths):
-            l_tr = 1.0 / (s_c * max(1.0 - g, 1e-6))
+        for (l_tr, chans), per_level in zip(groups, paths):
             u = float(per_level[k][2]) / l_tr
             drift, beta = walk_displacement(u, g)
 
@@ -512,7 +517,7 @@ def drift_levels(levels, pm: PreparedMedium, light: Light, camera: Camera, strid
                 top = np.array(mean.shape[:3], np.float64) - 1.0 - 1e-9
                 for _ in range(3):  # beyond the lattice, the direction at its nearest edge
                     src = source_index(trilinear(mean, np.clip(src, 0.0, top)))
-            moved[..., chans] = trilinear(np.pad(lev[..., chans], pad), src + 1.0).reshape(
+            moved[..., chans] = trilinear(padded[..., chans], src + 1.0).reshape(
                 lev.shape[:3] + (len(chans),))
         levels[k] = moved
 
@@ -526,13 +531,12 @@ def mean_source_directions(directions, light: Light, pm: PreparedMedium, stride:
     out = [None] * len(directions)
     for k in range(len(directions) - 1, -1, -1):
         sums = directions[k].astype(np.float64)
-        idx = lattice_index(sums.shape[:3])
+        idx, x = lattice_points(pm, sums.shape[:3], stride * 2 ** k)
         if k + 1 < len(directions):
             coarser = np.pad(out[k + 1], ((1, 1), (1, 1), (1, 1), (0, 0)), mode="edge")
             mean = trilinear(coarser, idx / 2.0 + 1.0)
         else:
-            mean = light_direction(light, idx @ (pm.i2w[:3, :3].T * (stride * 2.0 ** k))
-                                   + pm.i2w[:3, 3])
+            mean = light_direction(light, x)
         power = sums[..., 3].reshape(-1)
         held = power > 1e-6 * max(float(power.max()), 1e-300)
         mean[held] = sums[..., :3].reshape(-1, 3)[held] / power[held, None]
@@ -548,6 +552,14 @@ def light_direction(light: Light, points) -> np.ndarray:
         axis = np.asarray(light.direction, np.float64)
         return np.tile(axis / np.linalg.norm(axis), (len(points), 1))
     return -towards_light(light, points)[0]
+
+
+def lattice_points(pm: PreparedMedium, shape, spacing: int):
+    """(index coordinates (N,3), world positions (N,3, m)) of a lattice of ``shape`` whose
+    points lie ``spacing`` padded-grid voxels apart from the grid's origin (a pyramid level k:
+    stride 2^k), in C order."""
+    idx = lattice_index(shape)
+    return idx, (idx * float(spacing)) @ pm.i2w[:3, :3].T + pm.i2w[:3, 3]
 
 
 def lattice_index(shape) -> np.ndarray:

@@ -144,13 +144,10 @@ def test_point_light_levels_move_away_from_the_light(side):
 def source_pyramid(base, light, med, levels=4):
     """A light pyramid with the power-weighted light directions of its sources, as
     multiple_field builds it: (levels, directions)."""
-    idx = precompute.lattice_index(base.shape[:3])
-    pts = idx @ med.i2w[:3, :3].T + med.i2w[:3, 3]
-    flat = base.reshape(-1, 3).astype(np.float64)
-    power = flat.sum(1, keepdims=True)
-    full = np.concatenate([flat, power * precompute.light_direction(light, pts), power], 1)
-    built = pyramid.build(full.astype(np.float32).reshape(base.shape[:3] + (7,)), levels)
-    return [lv[..., :3].copy() for lv in built], [lv[..., 3:].copy() for lv in built]
+    shape = base.shape[:3]
+    _, pts = precompute.lattice_points(med, shape, 1)
+    return precompute.source_pyramid(base.reshape(-1, 3).astype(np.float64), light, pts, shape,
+                                     float(med.g), levels)
 
 
 def test_a_spot_beam_drifts_along_the_beam_not_from_the_light():
@@ -193,8 +190,7 @@ def test_mean_source_directions_round_a_point_light():
     coarser level's mean: a blob lit from the side lends its direction to the empty space."""
     med = _Medium(0.8, 0.1)
     light = Light("POINT", "pt", np.ones(3), position=np.zeros(3))
-    idx = precompute.lattice_index((33, 33, 33))
-    pts = idx @ med.i2w[:3, :3].T + med.i2w[:3, 3]
+    _, pts = precompute.lattice_points(med, (33, 33, 33), 1)
     r2 = np.maximum(np.sum(pts * pts, 1), 0.01)
     base = np.repeat((1.0 / r2)[:, None], 3, 1).reshape(33, 33, 33, 3)
     _, directions = source_pyramid(base, light, med)
