@@ -543,9 +543,8 @@ def multiple_source(ms_fields, table, rho, x, w2i, cos):
     ``table``: the medium's level_table; ``w2i`` world -> padded index map; ``cos`` (L,N)
     the cosine between each light's propagation direction and the direction to the camera.
     Level k adds pyramid_k(x) weight_k HG(cos; g_k), by colour channel.  The levels come
-    moved by their paths' drift towards what the camera sees (precompute.drift_levels); the
-    blur ignores the medium's surface (no image term, no boundary loss: tried and measured
-    worse on the forward slab, see docs/method.md)."""
+    moved by their paths' drift towards what the camera sees (precompute.drift_levels), having
+    lost the light that leaves through the medium's surface (boundary.py)."""
     out = np.zeros((len(x), 3))
     tab = table_lookup(table, rho)
     for li, msf in enumerate(ms_fields):

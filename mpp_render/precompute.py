@@ -418,49 +418,127 @@ def cell_mean_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel:
     return q.reshape(len(cells), len(offs), 3).mean(axis=1)
 
 
+def _tent_restrict(a: np.ndarray, axis: int, stride: int, n_out: int) -> np.ndarray:
+    """``a`` restricted along ``axis`` to every ``stride``-th point with the tent weights
+    (stride - |t|) / stride^2, t = -(stride-1)..stride-1 (zero beyond the ends): each point's
+    value shared among the lattice points around it in proportion to their nearness, so that
+    the sum times the lattice spacing keeps the sum times the voxel size."""
+    n = a.shape[axis]
+    pad = [(0, 0)] * a.ndim
+    pad[axis] = (stride - 1, stride * n_out - n + stride)
+    p = np.pad(a, pad)
+    out = 0.0
+    for i, t in enumerate(range(-(stride - 1), stride)):
+        sl = [slice(None)] * a.ndim
+        sl[axis] = slice(i, i + stride * n_out, stride)
+        out = out + ((stride - abs(t)) / float(stride * stride)) * p[tuple(sl)]
+    return out
+
+
+def lattice_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int,
+                   stride: int, shape, chunk: int = 16,
+                   should_cancel: Optional[Callable[[], bool]] = None) -> Optional[np.ndarray]:
+    """The first-scattering source Q = sigma_s E exp(-tau) (W/m^3, (N,3) in the C order of
+    the lattice ``shape`` ``stride`` voxels apart) from every voxel of the field ``fld``
+    (optical depth at ``channel``), each voxel's power shared among the lattice points
+    around it (``_tent_restrict`` along each axis): the lattice holds the voxels' power, where
+    reading Q at the lattice points alone missed (or doubled) the thin layer a light lights
+    inside a dense medium's face as the lattice fell against it (docs/ms_resolution.md).
+    Stride 1 reads the voxels themselves.  Made ``chunk`` voxel planes at a time; None when
+    ``should_cancel`` says so between them."""
+    from .lights import incident
+    from .media import density_from
+    nx = pm.grid.shape[0]
+    rows = np.zeros((nx, shape[1], shape[2], 3))
+    flat_fld = fld.reshape(nx, -1, fld.shape[-1])
+    for a in range(0, nx, chunk):
+        if should_cancel and should_cancel():
+            return None
+        b = min(a + chunk, nx)
+        ijk = np.stack(np.meshgrid(np.arange(a, b), np.arange(pm.grid.shape[1]),
+                                   np.arange(pm.grid.shape[2]), indexing="ij"), -1).reshape(-1, 3)
+        v = flat_fld[a:b].reshape(-1, fld.shape[-1])
+        rho = density_from(v[:, 0], pm.threshold)
+        live = rho > 0.0
+        q = np.zeros((len(v), 3))
+        if np.any(live):
+            pts = ijk[live].astype(np.float64) @ pm.i2w[:3, :3].T + pm.i2w[:3, 3]
+            _, e = incident(light, pts)
+            q[live] = (rho[live, None] * pm.sigma_s[None, :]) * e * \
+                np.exp(-v[live, channel:channel + 3].astype(np.float64))
+        q = q.reshape((b - a,) + tuple(pm.grid.shape[1:]) + (3,))
+        if stride > 1:
+            q = _tent_restrict(_tent_restrict(q, 1, stride, shape[1]), 2, stride, shape[2])
+        rows[a:b] = q
+    if stride > 1:
+        rows = _tent_restrict(rows, 0, stride, shape[0])
+    return rows.reshape(-1, 3)
+
+
 def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int,
-                   camera: Camera, max_levels=8,
-                   resolution: int = MULTIPLE_RESOLUTION) -> Optional[MultipleField]:
+                   camera: Camera, max_levels=8, resolution: int = MULTIPLE_RESOLUTION,
+                   should_cancel: Optional[Callable[[], bool]] = None) -> Optional[MultipleField]:
     """The light pyramid of ``light`` on medium ``pm`` from its precomputed field ``fld``
     (optical depth at ``channel``), see MultipleField, on a lattice of about ``resolution``
-    points along the grid's longest side (never finer than the voxels); each level moved
-    along the light by the mean displacement of its paths (``drift_levels``), for the light
-    that ``camera`` sees."""
-    from .lights import incident
+    points along the grid's longest side (never finer than the voxels): the source
+    (``lattice_source``) spread level by level, each level losing what leaves through the
+    medium's surface (boundary.py) and then moved along the light by the mean displacement
+    of its paths (``drift_levels``), for the light that ``camera`` sees.  None when
+    ``should_cancel`` says so."""
+    from . import boundary
+    from .kernels_np import level_paths, walk_displacement
+    from .media import density_from
     stride = max(1, int(np.ceil(max(pm.grid.shape) / max(int(resolution), 2))))
     shape = tuple((s - 1 + stride - 1) // stride + 1 for s in pm.grid.shape)
     idx, pts = lattice_points(pm, shape, stride)
-    v = trilinear(fld, idx * float(stride))
-    from .media import density_from
-    rho = density_from(v[:, 0], pm.threshold)
-    _, e = incident(light, pts)
-    base = (rho[:, None] * pm.sigma_s[None, :]) * e * np.exp(-v[:, channel:channel + 3])
+    rho = density_from(trilinear(fld, idx * float(stride))[:, 0], pm.threshold)
+    base = lattice_source(pm, fld, light, channel, stride, shape, should_cancel=should_cancel)
+    if base is None:
+        return None
     if light.kind in ("POINT", "SPOT"):
         near = near_light_cells(pm, light, stride, shape)
         if near.size:
             base[near] = cell_mean_source(pm, fld, light, channel, stride, shape, near)
     h = stride * float(np.cbrt(abs(np.linalg.det(pm.i2w[:3, :3]))))
-    levels, directions = source_pyramid(base, light, pts, shape, float(pm.g), max_levels)
     inside = rho[rho > 0]
-    sigma_s = np.asarray(pm.sigma_s, np.float64) * (float(np.mean(inside)) if inside.size else 0.0)
+    mean_rho = float(np.mean(inside)) if inside.size else 0.0
+    sigma_s = np.asarray(pm.sigma_s, np.float64) * mean_rho
+    g = float(pm.g)
+    # the walk's loss through the surface, for the medium's mean (grey) coefficients
+    ss, sa = float(np.mean(sigma_s)), float(np.mean(pm.sigma_a)) * mean_rho
+    z_b = boundary.extrapolation_length(ss, sa, g)
+    keep = None
+    if np.isfinite(z_b) and ss > 0.0:
+        l_tr = 1.0 / (ss * max(1.0 - g, 1e-6))
+        drifts = [float(walk_displacement(float(l_k) / l_tr, g)[0]) * l_tr
+                  for _, _, l_k in level_paths(h, max_levels, l_tr, g)]
+        keep = boundary.survival(pm, (rho > 0).reshape(shape), light, stride, h, z_b, drifts,
+                                 lambda x: light_direction(light, x))
+    if should_cancel and should_cancel():
+        return None
+    levels, directions = source_pyramid(base, light, pts, shape, g, max_levels, keep)
+    if should_cancel and should_cancel():
+        return None
     drift_levels(levels, pm, light, camera, stride, h, sigma_s, directions)
     return MultipleField(stride, h, levels)
 
 
-def source_pyramid(base, light: Light, pts, shape, g: float, max_levels: int):
+def source_pyramid(base, light: Light, pts, shape, g: float, max_levels: int, keep=None):
     """(levels, directions): the pyramid (pyramid.build) of the source ``base`` ((N,3) W/m^3
     at the lattice points ``pts`` (N,3, m) of ``shape``) and, for a point or spot light in a
     medium with g != 0, the pyramid of the light's direction at each first scattering
     weighted by its power, and that power ((X,Y,Z,4) per level, blurred with the source:
     level k then holds the sums from which drift_levels takes the mean direction of the
     sources each point gathers); None for the others, whose direction is the same
-    everywhere or does not drift."""
+    everywhere or does not drift.  ``keep``: pyramid.build's loss on the way (boundary.py),
+    applied to the directions as to the light they travel with."""
     from . import pyramid
     if light.kind not in ("POINT", "SPOT") or g == 0.0:
-        return pyramid.build(base.astype(np.float32).reshape(tuple(shape) + (3,)), max_levels), None
+        return pyramid.build(base.astype(np.float32).reshape(tuple(shape) + (3,)), max_levels,
+                             keep), None
     power = base.sum(axis=1, keepdims=True)
     full = np.concatenate([base, power * light_direction(light, pts), power], axis=1)
-    built = pyramid.build(full.astype(np.float32).reshape(tuple(shape) + (7,)), max_levels)
+    built = pyramid.build(full.astype(np.float32).reshape(tuple(shape) + (7,)), max_levels, keep)
     return ([np.ascontiguousarray(lev[..., :3]) for lev in built],
             [np.ascontiguousarray(lev[..., 3:]) for lev in built])
 
@@ -911,8 +989,9 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                 if progress:
                     progress(0.0, f"Light pyramid: {light.name} on {pm.medium.name}")
                 ms[li] = multiple_field(pm, f, light, chans[li], camera,
-                                        resolution=multiple_resolution)
-                if should_cancel and should_cancel():  # a pyramid is not cut into chunks
+                                        resolution=multiple_resolution,
+                                        should_cancel=should_cancel)
+                if should_cancel and should_cancel():
                     return None
         ms_all.append(ms)
         fields.append(f)

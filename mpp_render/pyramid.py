@@ -13,7 +13,7 @@ level 0 unblurred, widths beyond the coarsest level read the coarsest level.
 """
 from __future__ import annotations
 
-from typing import List
+from typing import Callable, List, Optional
 
 import numpy as np
 
@@ -44,8 +44,12 @@ def gaussian_blur(a: np.ndarray, sigma: float) -> np.ndarray:
     return out
 
 
-def build(base: np.ndarray, max_levels: int = 8) -> List[np.ndarray]:
-    """Levels [base, blur 2h, blur 4h, ...] until a level is 2 points wide or ``max_levels``."""
+def build(base: np.ndarray, max_levels: int = 8,
+          keep: Optional[Callable[[int, tuple], np.ndarray]] = None) -> List[np.ndarray]:
+    """Levels [base, blur 2h, blur 4h, ...] until a level is 2 points wide or ``max_levels``.
+    ``keep(k, shape)``, where given, is the fraction (shape (X,Y,Z)) of level k's content that
+    each of its points keeps, applied as the level is made and so carried into the coarser
+    ones: what a walk loses on the way (boundary.survival)."""
     levels = [np.ascontiguousarray(base, np.float32)]
     while len(levels) < max_levels and min(levels[-1].shape[:3]) > 2:
         k = len(levels)
@@ -55,8 +59,11 @@ def build(base: np.ndarray, max_levels: int = 8) -> List[np.ndarray]:
         pad = [(0, (n + 1) % 2) for n in src.shape[:3]] + [(0, 0)] * (src.ndim - 3)
         src = np.pad(src, pad)
         sigma = SQRT3 if k > 1 else 2.0  # level 1: from the unblurred base to 2h
-        blurred = gaussian_blur(src, sigma)
-        levels.append(np.ascontiguousarray(blurred[::2, ::2, ::2]))
+        level = gaussian_blur(src, sigma)[::2, ::2, ::2]
+        if keep is not None:
+            kept = np.asarray(keep(k, level.shape[:3]), np.float32)
+            level = level * kept.reshape(kept.shape + (1,) * (level.ndim - 3))
+        levels.append(np.ascontiguousarray(level))
     return levels
 
 
