@@ -9,8 +9,9 @@ one sun, a sky, multiple scattering on, 160 x 120 at 1 spp):
 
 * ``static``: nothing moves (a re-render, or a held shot): the whole precompute is reused;
 * ``light``: the sun's power changes every frame: the world light is reused;
-* ``camera_orbit``: the camera moves every frame: the light fields and pyramids are reused,
-  the world light (which depends on the camera position) is recomputed.
+* ``camera_orbit``: the camera moves every frame: the world light (which depends on the
+  camera position) is recomputed, and with multiple scattering on the light fields and
+  pyramids too (the pyramids drift towards what the camera sees, precompute.drift_levels).
 
 With Blender (bpy) also ``blender_static``: ``render.render()`` of a scene with a 128^3
 voxelised mesh volume, cold (cache off) and reused (the voxelisation and the precompute

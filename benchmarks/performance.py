@@ -290,14 +290,13 @@ BOUNDS = {
         "box), so the per-sample cost above bounds it; per-tile numpy work is ~5 % since the "
         "tiles grew to 64 px."),
     "speedup": (
-        "Our error on slab_forward (0.14-0.26) and fog_beam (0.92-0.95) is the multiple "
+        "Our error on slab_forward (0.11-0.14) and fog_beam (0.97-1.07) is the multiple "
         "scattering model's bias, not noise: more samples do not lower it, and Cycles reaches "
-        "it in ~1 s (slab_forward, 16 spp) or never within 64 spp (fog_beam: the speedup is a "
-        "lower bound, 64-spp seconds over ours).  30x would need our whole render in ~30 ms "
-        "(slab_forward) or ~70 ms (fog_beam), below the precompute of a 128^3 mesh volume.  "
-        "cloud_vdb is closest: since the light pyramid drifts (docs/method.md) our error there "
-        "(0.030) is below Cycles' at 64 spp, so its speedup is a lower bound too, and Cycles "
-        "spends ~2.5 s of fixed set-up there."),
+        "it in ~2 s (slab_forward, 32-64 spp) or never within 64 spp (fog_beam: the speedup is "
+        "a lower bound, 64-spp seconds over ours).  30x would need our whole render in ~70 ms "
+        "(slab_forward) or ~60 ms (fog_beam), below the precompute of a 128^3 mesh volume.  "
+        "cloud_vdb is closest (error 0.046, which Cycles reaches at ~64 spp), and Cycles spends "
+        "~2.5 s of fixed set-up there."),
 }
 
 
