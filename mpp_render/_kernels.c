@@ -933,6 +933,7 @@ done:
 #define SPOT_DISC_PHI 0.6180339887498949
 #define SPOT_GATE_MARGIN 1.05
 #define L_COND 35
+#define L_BEAM 36   /* the beam's channel through the delta-scaled media, < 1: none */
 #define REFINE_STEPS 8
 #define EDGE_EPS 1e-6
 #define T_MIN 1e-6
@@ -1302,9 +1303,16 @@ static PyObject *march(PyObject *self, PyObject *args) {
         goto done;
     }
     const double *LR = (const double *)bl.view.buf;
-    int chan[MAX_LIGHTS];
+    int chan[MAX_LIGHTS], beam[MAX_LIGHTS];
     for (Py_ssize_t l = 0; l < nl; l++) {
         double cf = LR[l * LIGHT_FIELDS + L_CHANNEL], kf = LR[l * LIGHT_FIELDS + L_KIND];
+        double bf = LR[l * LIGHT_FIELDS + L_BEAM];
+        beam[l] = (cf >= 0 && bf >= 1.0 && bf < 1e9) ? (int)bf : -1;
+        for (int m = 0; m < ng; m++)
+            if (beam[l] >= 0 && beam[l] + 3 > g[m].nc) {
+                PyErr_SetString(PyExc_ValueError, "lights: beam channel outside the fields");
+                goto done;
+            }
         if (!(kf == 0 || kf == 1 || kf == 2 || kf == 3)) {
             PyErr_SetString(PyExc_ValueError, "lights: unknown kind");
             goto done;
@@ -1502,16 +1510,27 @@ static PyObject *march(PyObject *self, PyObject *args) {
                     if (use_em)
                         for (int a = 0; a < 3; a++) src_em[a] += emit[m][a];
                     int edge = g[m].thr >= 0.0 && v[0] > EDGE_EPS && v[0] < 1.0 - EDGE_EPS;
-                    double inc[3] = {0, 0, 0};
+                    double inc[3] = {0, 0, 0}, beam_inc[3] = {0, 0, 0};
                     for (Py_ssize_t l = 0; l < nl; l++) {
                         int c = chan[l];
                         if (c < 0) continue;
-                        double tau[3] = {v[c], v[c + 1], v[c + 2]};
+                        double tau[3] = {v[c], v[c + 1], v[c + 2]}, tb[3];
                         if (edge) refined_tau(g, ng, m, c, x, wc[l], dc[l], 0.5 * voxel[m], tau);
+                        int cb = use_ms ? beam[l] : -1;
+                        if (cb >= 0)  /* kernels_np.beam_depth */
+                            for (int a = 0; a < 3; a++)
+                                tb[a] = v[c + a] > 1e-12 ? tau[a] * (v[cb + a] / v[c + a]) : v[cb + a];
                         double cs = -(wi[l][0] * d[0] + wi[l][1] * d[1] + wi[l][2] * d[2]);
                         double p = hg_phase(cs, gg[m]);
                         exp3(tau, tau);
                         for (int a = 0; a < 3; a++) inc[a] += p * e[l][a] * tau[a];
+                        if (cb >= 0) {
+                            exp3(tb, tb);
+                            for (int a = 0; a < 3; a++) {
+                                double extra = tb[a] - tau[a];
+                                beam_inc[a] += p * e[l][a] * (extra > 0.0 ? extra : 0.0);
+                            }
+                        }
                     }
                     if (ambient >= 0)
                         for (int a = 0; a < 3; a++) inc[a] += v[ambient + a];
@@ -1523,7 +1542,7 @@ static PyObject *march(PyObject *self, PyObject *args) {
                         multiple_source_c(&ms, lv, m, (int)nl, cosl, rho, x, g[m].w2i, msi);
                         if (ms.amb >= 0)
                             for (int a = 0; a < 3; a++) msi[a] += v[ms.amb + a];
-                        for (int a = 0; a < 3; a++) src_ms[a] += rho * sig_s[m][a] * msi[a];
+                        for (int a = 0; a < 3; a++) src_ms[a] += rho * sig_s[m][a] * (msi[a] + beam_inc[a]);
                     }
                 }
                 taken++;

@@ -293,6 +293,8 @@ SPOT_DISC_POINTS = 8    # points of a sphere spot's disc its cone is averaged ov
 SPOT_DISC_PHI = 0.6180339887498949  # the lattice's second coordinate steps by the golden ratio
 SPOT_GATE_MARGIN = 1.05  # widens the disc's angular radius in the one-point test
 L_COND = 35  # condition number of the spot's inverse matrix (how much it can widen angles)
+L_BEAM = 36  # the channel of the light's beam through the delta-scaled media, or < 1: none
+# (precompute.FieldLayout.beam_channels; read by the march with multiple scattering only)
 DIM_JITTER = 1000       # random dimension of the step jitter; lights use 2*i, 2*i + 1
 REFINE_STEPS = 8
 EDGE_EPS = 1e-6        # occupancies within this of 0 or 1 count as outside / inside
@@ -502,25 +504,31 @@ def level_paths(h, levels, l_tr, g):
 def level_table(g, sigma_s, sigma_a, h, levels):
     """Per pyramid level k, density rho (RHO_TABLE) and colour channel, the path-length
     weight int e^(-sigma_a rho l) dl (m) over the paths the level stands for, and the
-    anisotropy g^2 e^(-l_k / l_tr) of the last scattering: (levels, len(RHO_TABLE), 6)
+    anisotropy g g* e^(-l_k / l_tr) of the last scattering: (levels, len(RHO_TABLE), 6)
     float64, the weights of R, G, B then their anisotropies.
 
-    ``sigma_s``, ``sigma_a``: the medium's coefficients per unit density (1/m), one per
-    channel (3) or one for all: a chromatic medium absorbs along its paths, and spreads
-    them, by channel; ``h`` the pyramid's lattice spacing (m).  Level k (width W_k = h 2^k,
-    level 0 unblurred) stands for the paths whose spread w(l) lies within a factor sqrt(2)
-    of W_k."""
+    ``g``, ``sigma_s``, ``sigma_a``: the medium's HG anisotropy and coefficients per unit
+    density (1/m), one per channel (3) or one for all: a chromatic medium absorbs along its
+    paths, and spreads them, by channel; ``h`` the pyramid's lattice spacing (m).  The walk
+    is the delta-scaled medium's (phase.delta_fraction: g* = g / (1 + g), sigma_s* = sigma_s
+    (1 - g^2) for g > 0; the same transport length l_tr = 1 / (sigma_s (1 - g))), started
+    with mean cosine g* where the beam first scatters out of the forward peak; the last
+    scattering, towards the camera, is the medium's own HG(g) of light whose mean cosine is
+    g* e^(-u).  Level k (width W_k = h 2^k, level 0 unblurred) stands for the paths whose
+    spread w(l) lies within a factor sqrt(2) of W_k."""
+    from .phase import delta_g
     rho = RHO_TABLE
     b1 = max(1.0 - g, 1e-6)
+    g_walk = delta_g(g)
     out = np.zeros((levels, len(rho), 6))
     for c, (s_c, a_c) in enumerate(zip(np.broadcast_to(np.asarray(sigma_s, np.float64), (3,)),
                                        np.broadcast_to(np.asarray(sigma_a, np.float64), (3,)))):
         ss, sa = rho * s_c, rho * a_c
         with np.errstate(divide="ignore"):
             l_tr = np.where(ss > 0, 1.0 / (ss * b1), np.inf)
-        for k, (lo, hi, l_k) in enumerate(level_paths(h, levels, l_tr, g)):
+        for k, (lo, hi, l_k) in enumerate(level_paths(h, levels, l_tr, g_walk)):
             out[k, :, c] = np.exp(-sa * lo) * (hi - lo) * _phi1(sa * (hi - lo))
-            out[k, :, 3 + c] = g * g * np.exp(-l_k / l_tr)
+            out[k, :, 3 + c] = g * g_walk * np.exp(-l_k / l_tr)
     return out
 
 
@@ -556,6 +564,17 @@ def multiple_source(ms_fields, table, rho, x, w2i, cos):
             q = trilinear(levels[k], idx0 / float(2 ** k))
             out += q[:, :3] * (tab[k, :, :3] * hg(cos[li][:, None], tab[k, :, 3:]))
     return out
+
+
+def beam_depth(tau, raw, raw_beam):
+    """The optical depth of the beam of unscattered and forward-scattered light at march
+    points, (N,3): the field's ``raw_beam`` scaled as the unscattered light's ``raw`` was
+    refined into ``tau`` next to a sharp surface (by their ratio; where the field's depth is
+    0, the beam's own).  Its light beyond the unscattered light's, scattered towards the camera
+    with the medium's HG, is the multiply scattered light of the forward peak
+    (docs/method.md, "The forward peak")."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(raw > 1e-12, tau * (raw_beam / np.where(raw > 1e-12, raw, 1.0)), raw_beam)
 
 
 SUPER = 4  # march steps per super-step (the compiled twin's SUPER)
@@ -748,22 +767,30 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
                 edge = np.flatnonzero((v[:, 0] > EDGE_EPS) & (v[:, 0] < 1.0 - EDGE_EPS) & (rho > 0)) \
                     if thresholds[mi] >= 0 else np.zeros(0, np.int64)
                 inc = np.zeros((m, 3))
+                beam_inc = np.zeros((m, 3))
                 for li, rec in enumerate(lights):
                     c = int(rec[L_CHANNEL])
                     if c < 0:
                         continue
                     wi, e, wc, dc = emit[li]
-                    tau = v[:, c:c + 3]
+                    raw = v[:, c:c + 3]
+                    tau = raw
                     if edge.size:
                         tau = tau.copy()
                         tau[edge] = _refined_tau(fields, w2is, thresholds, sigma_ts, mi, c, x[edge],
                                                  wc[edge], dc[edge], 0.5 * voxels[mi])
                     cos = -np.einsum("ij,ij->i", wi, d)
-                    inc += (hg(cos, gs[mi])[:, None] * e) * np.exp(-tau)
+                    pe = hg(cos, gs[mi])[:, None] * e
+                    inc += pe * np.exp(-tau)
+                    cb = int(rec[L_BEAM])
+                    if multiple is not None and cb >= 1:  # channel 0 is the density: none
+                        tau_b = beam_depth(tau, raw, v[:, cb:cb + 3])
+                        beam_inc += pe * np.maximum(np.exp(-tau_b) - np.exp(-tau), 0.0)
                 if ambient >= 0:
                     inc += v[:, ambient:ambient + 3]
                 src += rho[:, None] * sigma_ss[mi][None, :] * inc
                 if multiple is not None:
+                    src_ms += rho[:, None] * sigma_ss[mi][None, :] * beam_inc
                     amb_ms, per_medium, tables = multiple
                     ms_fields = per_medium[mi]
                     live = np.flatnonzero(rho > 0)

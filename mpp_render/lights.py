@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from .kernels_np import (KIND_AREA, KIND_POINT, KIND_SPOT, KIND_SUN, L_AREA, L_AX, L_AY,
-                         L_BLEND, L_CHANNEL, L_COND, L_COSHALF, L_DIR, L_INV, L_KIND, L_NORMAL,
+                         L_BEAM, L_BLEND, L_CHANNEL, L_COND, L_COSHALF, L_DIR, L_INV, L_KIND, L_NORMAL,
                          L_NORMALIZE, L_POS, L_RADIUS, L_ROUND, L_STRENGTH, LIGHT_FIELDS,
                          light_sample)
 from .scene import Light
@@ -47,9 +47,10 @@ def area_geometry(light: Light):
 _KINDS = {"POINT": KIND_POINT, "SPOT": KIND_SPOT, "SUN": KIND_SUN, "AREA": KIND_AREA}
 
 
-def pack_light(light: Light, channel: int = -1) -> np.ndarray:
+def pack_light(light: Light, channel: int = -1, beam: int = -1) -> np.ndarray:
     """The light as one float64 record of ``LIGHT_FIELDS`` (layout in kernels_np), the form
-    the kernels read; ``channel`` is its optical-depth channel in the media fields or -1."""
+    the kernels read; ``channel`` is its optical-depth channel in the media fields or -1,
+    ``beam`` that of its beam through the delta-scaled media (precompute.FieldLayout) or -1."""
     if light.kind not in _KINDS:
         raise ValueError(f"unsupported light type {light.kind!r}")
     r = np.zeros(LIGHT_FIELDS)
@@ -76,6 +77,7 @@ def pack_light(light: Light, channel: int = -1) -> np.ndarray:
         r[L_NORMALIZE] = 1.0 if light.normalize else 0.0
         r[L_ROUND] = 1.0 if light.shape in ("DISK", "ELLIPSE") else 0.0
     r[L_CHANNEL] = channel
+    r[L_BEAM] = beam
     return r
 
 

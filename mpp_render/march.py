@@ -62,9 +62,10 @@ SKIP_EMPTY = True  # hand the kernel the media's brick bounds (empty super-steps
 def pack_lights(lights: List[Light], layout: FieldLayout) -> np.ndarray:
     """(L, LIGHT_FIELDS) float64 records of the lights for the march kernel."""
     out = np.zeros((len(lights), LIGHT_FIELDS))
+    beams = layout.beam_channels or [None] * len(lights)
     for i, light in enumerate(lights):
-        c = layout.light_channels[i]
-        out[i] = pack_light(light, -1 if c is None else c)
+        c, b = layout.light_channels[i], beams[i]
+        out[i] = pack_light(light, -1 if c is None else c, -1 if b is None else b)
     return out
 
 

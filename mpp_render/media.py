@@ -12,7 +12,7 @@ from typing import List, Optional
 
 import numpy as np
 
-from .phase import clamp_g
+from .phase import clamp_g, delta_fraction, delta_g
 from .scene import Medium
 
 
@@ -67,6 +67,23 @@ class PreparedMedium:
     @property
     def shape(self):
         return self.grid.shape
+
+
+def delta_scaled(pm: PreparedMedium) -> PreparedMedium:
+    """``pm`` with its phase split by delta-Eddington (phase.delta_fraction): the forward peak
+    f sigma_s taken as no scattering at all, sigma_s* = sigma_s (1 - f), sigma_t* = sigma_s* +
+    sigma_a, g* = g / (1 + g).  Light scattered into the peak goes on along the beam: the
+    beam that the delta-scaled medium attenuates (optical depth with sigma_t*) holds the
+    unscattered light and the forward-scattered light together (docs/method.md, "The
+    forward peak").  ``pm`` itself where g <= 0."""
+    import dataclasses
+    f = delta_fraction(pm.g)
+    if f <= 0.0:
+        return pm
+    ss = pm.sigma_s * (1.0 - f)
+    out = dataclasses.replace(pm, sigma_s=ss, sigma_t=ss + pm.sigma_a, g=delta_g(pm.g))
+    out._bricks = getattr(pm, "_bricks", None)  # the same density: the same bounds
+    return out
 
 
 def sanitise(density) -> tuple:

@@ -57,3 +57,18 @@ def orthonormal_basis(n):
     t1 = np.stack([1.0 + sign * n[:, 0] ** 2 * a, sign * b, -sign * n[:, 0]], axis=1)
     t2 = np.stack([b, sign + n[:, 1] ** 2 * a, -n[:, 1]], axis=1)
     return t1, t2
+
+
+def delta_fraction(g: float) -> float:
+    """The forward peak f = g^2 of the delta-Eddington split of HG (Joseph, Wiscombe and
+    Weinman, J. Atmos. Sci. 33, 1976): HG(g) ~ f delta(forward) + (1 - f) HG(g*) with
+    g* = (g - f) / (1 - f) = g / (1 + g), which keeps the transport coefficient:
+    sigma_s (1 - f) (1 - g*) = sigma_s (1 - g).  0 for g <= 0 (no forward peak to split)."""
+    g = clamp_g(g)
+    return g * g if g > 0.0 else 0.0
+
+
+def delta_g(g: float) -> float:
+    """g* of the delta-Eddington split (``delta_fraction``): g / (1 + g) for g > 0, else g."""
+    g = clamp_g(g)
+    return g / (1.0 + g) if g > 0.0 else g

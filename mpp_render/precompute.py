@@ -57,13 +57,17 @@ class FieldLayout:
     """Channel offsets in a medium's field array.  ``light_channels[i]`` is the offset of
     light i's optical depth, or None when the light is skipped (dark).  ``channels``: the
     channels every medium's field has; ``emission_channels[m]``: the offset of medium m's
-    emission grid (its field then has ``channels + 3``), or None."""
+    emission grid (its field then has ``channels + 3``), or None.  ``beam_channels[i]``
+    (multiple scattering on, some medium with a forward peak): the offset of light i's
+    optical depth through the delta-scaled media (media.delta_scaled), the beam of its
+    unscattered and forward-scattered light; right after the lights' channels."""
 
     light_channels: List[Optional[int]]
     ambient_channel: Optional[int]
     channels: int
     ambient_multiple_channel: Optional[int] = None
     emission_channels: Optional[List[Optional[int]]] = None
+    beam_channels: Optional[List[Optional[int]]] = None
 
 
 @dataclass
@@ -484,7 +488,8 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
     (``lattice_source``) spread level by level, each level losing what leaves through the
     medium's surface (boundary.py) and then moved along the light by the mean displacement
     of its paths (``drift_levels``), for the light that ``camera`` sees.  None when
-    ``should_cancel`` says so."""
+    ``should_cancel`` says so.  ``pm`` is the medium as the walk sees it: precompute hands
+    the delta-scaled medium (media.delta_scaled) and the optical depth of its beam."""
     from . import boundary
     from .kernels_np import level_paths, walk_displacement
     from .media import density_from
@@ -903,12 +908,20 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
     that cannot scatter (sigma_s = 0) get no multiple-scattering data."""
     import time
     t_start = time.perf_counter()
+    from .media import delta_scaled
     chans = [None] * len(lights)
     c = 1
     for i, light in enumerate(lights):
         if not is_dark(light):
             chans[i] = c
             c += 3
+    beams = [None] * len(lights)
+    delta = [delta_scaled(pm) for pm in media]
+    if multiple and any(d is not pm for d, pm in zip(delta, media)):
+        for i in range(len(lights)):
+            if chans[i] is not None:
+                beams[i] = c
+                c += 3
     amb = c if np.any(np.asarray(world.color) > 0) else None
     amb_ms = None
     if amb is not None:
@@ -917,11 +930,15 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
             amb_ms = c
             c += 3
     layout = FieldLayout(chans, amb, c, amb_ms,
-                         [c if pm.emission_grid is not None else None for pm in media])
+                         [c if pm.emission_grid is not None else None for pm in media],
+                         beams if any(b is not None for b in beams) else None)
     ms_all = []
     step = step_factor * min(pm.voxel_size for pm in media) if media else 1.0
     solid, fog = split_fog(media)
     fog_st = None if fog is None else fog.sigma_t
+    delta_of = {id(pm): d for pm, d in zip(media, delta)}
+    solid_delta = [delta_of[id(pm)] for pm in solid]
+    fog_delta = None if fog is None else delta_of[id(fog)].sigma_t
     shadowed = surfaces is not None and not surfaces.empty
     fields = []
     n_pts = 0
@@ -941,28 +958,36 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                 continue
             if progress:
                 progress(0.0, f"Light attenuation: {light.name} on {pm.medium.name}")
-            swept = None
-            if pm is not fog:
-                swept = sweep_light(solid, pm, light, f, chans[li], step, surfaces=surfaces,
-                                    threads=threads, should_cancel=should_cancel,
-                                    needed=None if pts is None else (flat, pts),
-                                    fog_sigma_t=fog_st)
-            if swept is False:
-                return None
-            if swept is None:  # the fog, or not sweepable: march from every needed voxel
-                pts = grid_points(pm, flat) if pts is None else pts
-                tau = light_optical_depth(solid, light, pts, step, should_cancel=should_cancel,
-                                          surfaces=None if pm is fog else surfaces,
-                                          threads=threads, fog_sigma_t=fog_st)
-                if tau is None:
+            # the unscattered beam through the media, then (multiple scattering with a forward
+            # peak) the beam of unscattered and forward-scattered light: the same optical depth
+            # through the delta-scaled media, the surfaces as opaque
+            for ch, through, own, through_fog in ((chans[li], solid, pm, fog_st),
+                                                  (beams[li], solid_delta, delta[mi], fog_delta)):
+                if ch is None:
+                    continue
+                swept = None
+                if pm is not fog:
+                    swept = sweep_light(through, own, light, f, ch, step, surfaces=surfaces,
+                                        threads=threads, should_cancel=should_cancel,
+                                        needed=None if pts is None else (flat, pts),
+                                        fog_sigma_t=through_fog)
+                if swept is False:
                     return None
-                if pm is fog and shadowed:
-                    vis = soft_visibility(surfaces, light, pm, flat, pts, threads=threads,
-                                          should_cancel=should_cancel)
-                    if vis is None:
+                if swept is None:  # the fog, or not sweepable: march from every needed voxel
+                    pts = grid_points(pm, flat) if pts is None else pts
+                    tau = light_optical_depth(through, light, pts, step,
+                                              should_cancel=should_cancel,
+                                              surfaces=None if pm is fog else surfaces,
+                                              threads=threads, fog_sigma_t=through_fog)
+                    if tau is None:
                         return None
-                    tau = tau - np.log(np.maximum(vis, np.exp(-SHADOW_TAU)))[:, None]
-                view[flat, chans[li]:chans[li] + 3] = tau
+                    if pm is fog and shadowed:
+                        vis = soft_visibility(surfaces, light, pm, flat, pts, threads=threads,
+                                              should_cancel=should_cancel)
+                        if vis is None:
+                            return None
+                        tau = tau - np.log(np.maximum(vis, np.exp(-SHADOW_TAU)))[:, None]
+                    view[flat, ch:ch + 3] = tau
         if amb is not None:
             if progress:
                 progress(0.0, f"World light on {pm.medium.name}")
@@ -988,7 +1013,10 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                     continue
                 if progress:
                     progress(0.0, f"Light pyramid: {light.name} on {pm.medium.name}")
-                ms[li] = multiple_field(pm, f, light, chans[li], camera,
+                # the walk starts where the beam of unscattered and forward-scattered light
+                # first scatters out of the forward peak (docs/method.md, "The forward peak")
+                beam = chans[li] if beams[li] is None else beams[li]
+                ms[li] = multiple_field(delta[mi], f, light, beam, camera,
                                         resolution=multiple_resolution,
                                         should_cancel=should_cancel)
                 if should_cancel and should_cancel():
