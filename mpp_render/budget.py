@@ -2,7 +2,9 @@
 
 The precompute (precompute.py) holds one float32 field per medium on its padded grid
 (nx+2, ny+2, nz+2) with ``1 + 3 L + 6`` channels: density, the optical depth to each of the L
-lights that emit, and the world light (single and multiply scattered).  ``field_bytes`` is
+lights that emit, and the world light (single and multiply scattered); 3 L more with
+multiple scattering in a forward-scattering medium (the optical depth of each light's beam
+through the delta-scaled media, precompute.FieldLayout.beam_channels).  ``field_bytes`` is
 that size; it dominates the render's memory.  When the sum over media exceeds the budget,
 the grid with the largest field is made one integer factor coarser, again and again, until
 the sum fits (so the largest grids shrink first and end up about equally coarse).
@@ -30,15 +32,23 @@ MB = 1 << 20  # bytes in the MB of ``Settings.memory_budget_mb``
 WORLD_CHANNELS = 6  # world light, single and multiply scattered (counted even when unused)
 
 
-def field_channels(lights: Sequence[Light]) -> int:
-    """Channels of a medium's precompute field: density, 3 per emitting light, 6 of world
-    light."""
-    return 1 + 3 * sum(1 for light in lights if not is_dark(light)) + WORLD_CHANNELS
+def field_channels(lights: Sequence[Light], beams: bool = False) -> int:
+    """Channels of a medium's precompute field: density, 3 per emitting light (6 with
+    ``beams``: multiple scattering in a medium with a forward peak), 6 of world light."""
+    per_light = 6 if beams else 3
+    return 1 + per_light * sum(1 for light in lights if not is_dark(light)) + WORLD_CHANNELS
 
 
-def field_bytes(shape: Tuple[int, ...], lights: Sequence[Light]) -> int:
+def field_bytes(shape: Tuple[int, ...], lights: Sequence[Light], beams: bool = False) -> int:
     """Bytes of the float32 precompute field of a medium whose density has ``shape``."""
-    return 4 * field_channels(lights) * int(np.prod([int(s) + 2 for s in shape]))
+    return 4 * field_channels(lights, beams) * int(np.prod([int(s) + 2 for s in shape]))
+
+
+def has_beams(media: Sequence[Medium], multiple: bool) -> bool:
+    """Whether the precompute gives each light a beam channel: multiple scattering on and a
+    medium with a forward peak (phase.delta_fraction > 0)."""
+    from .phase import delta_fraction
+    return bool(multiple) and any(delta_fraction(float(m.g)) > 0.0 for m in media)
 
 
 def reduced_shape(shape: Tuple[int, ...], factor: int) -> Tuple[int, ...]:
@@ -46,7 +56,8 @@ def reduced_shape(shape: Tuple[int, ...], factor: int) -> Tuple[int, ...]:
     return tuple(max(1, -(-int(s) // int(factor))) for s in shape)
 
 
-def plan(shapes: Sequence[Tuple[int, ...]], lights: Sequence[Light], budget_mb: float) -> List[int]:
+def plan(shapes: Sequence[Tuple[int, ...]], lights: Sequence[Light], budget_mb: float,
+         beams: bool = False) -> List[int]:
     """Integer downsampling factor of each grid (1: kept) so the fields of all fit in
     ``budget_mb`` MB (<= 0: unlimited).  The grid with the largest field is coarsened one
     factor at a time; when even one voxel per medium would not fit, the factors stop there."""
@@ -54,7 +65,7 @@ def plan(shapes: Sequence[Tuple[int, ...]], lights: Sequence[Light], budget_mb: 
     if budget_mb <= 0 or not shapes:
         return factors
     budget = float(budget_mb) * MB
-    sizes = [field_bytes(s, lights) for s in shapes]
+    sizes = [field_bytes(s, lights, beams) for s in shapes]
     while sum(sizes) > budget:
         order = sorted(range(len(shapes)), key=lambda i: -sizes[i])
         i = next((i for i in order if max(reduced_shape(shapes[i], factors[i])) > 1), None)
@@ -66,7 +77,7 @@ def plan(shapes: Sequence[Tuple[int, ...]], lights: Sequence[Light], budget_mb: 
         while f < max(shapes[i]) and reduced_shape(shapes[i], f) == now:
             f += 1
         factors[i] = f
-        sizes[i] = field_bytes(reduced_shape(shapes[i], f), lights)
+        sizes[i] = field_bytes(reduced_shape(shapes[i], f), lights, beams)
     return factors
 
 
@@ -120,14 +131,14 @@ def _describe(shape) -> str:
 
 
 def fit_media(media: Sequence[Medium], lights: Sequence[Light], budget_mb: float,
-              warnings: List[str]) -> List[Medium]:
+              warnings: List[str], multiple: bool = False) -> List[Medium]:
     """``media`` with the grids that do not fit ``budget_mb`` MB downsampled (new Medium
     objects; the others are returned as they are) and a warning for each.  Media sharing
     one density array share the downsampled array too."""
     shapes = [tuple(np.shape(m.density)) for m in media]
     if any(len(s) != 3 for s in shapes):  # prepare() reports those
         return list(media)
-    factors = plan(shapes, lights, budget_mb)
+    factors = plan(shapes, lights, budget_mb, has_beams(media, multiple))
     out, done = [], {}
     for m, shape, f in zip(media, shapes, factors):
         if f == 1:
@@ -164,7 +175,8 @@ def apply_budget(desc: SceneDescription, warnings: List[str]) -> SceneDescriptio
     budget = float(getattr(desc.settings, "memory_budget_mb", 0) or 0)
     if budget <= 0 or not desc.media:
         return desc
-    media = fit_media(desc.media, desc.lights, budget, warnings)
+    media = fit_media(desc.media, desc.lights, budget, warnings,
+                      bool(getattr(desc.settings, "multiple", False)))
     if all(a is b for a, b in zip(media, desc.media)):
         return desc
     return dataclasses.replace(desc, media=media)

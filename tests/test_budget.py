@@ -37,6 +37,33 @@ def test_field_bytes_counts_density_lights_and_world():
     assert field_bytes((10, 20, 30), []) == 4 * 7 * 12 * 22 * 32
 
 
+def test_the_beams_of_a_forward_scattering_medium_are_counted():
+    """With multiple scattering on and a forward peak, each light has a beam channel too
+    (precompute.FieldLayout.beam_channels): the budget counts what the precompute makes."""
+    from mpp_render.budget import field_channels, has_beams
+    from mpp_render.media import prepare
+    from mpp_render.precompute import precompute
+    m = cloud(8)   # g = 0.2
+    assert has_beams([m], True) and not has_beams([m], False)
+    iso = Medium("iso", m.density, m.index_to_world, m.sigma_s, m.sigma_a, 0.0)
+    assert not has_beams([iso], True)
+    cam = Camera("PERSP", np.eye(4), 4, 4, (-1, 1, -1, 1))
+    world = World(np.array([0.1, 0.2, 0.3]))
+    for media, multiple in (([m], True), ([m], False), ([iso], True)):
+        pre = precompute([prepare(x) for x in media], [SUN, DARK], world, cam, n_dirs=4,
+                         multiple=multiple)
+        # (the budget counts the world's multiply scattered channels even when off)
+        unused = 0 if multiple else 3
+        assert pre.fields[0].shape[-1] == field_channels([SUN, DARK], has_beams(media, multiple)) - unused
+    assert field_bytes((10, 20, 30), [SUN, DARK], True) == 4 * (1 + 6 + 6) * 12 * 22 * 32
+    # a budget that holds the field without beams but not with them
+    need = field_bytes((64,) * 3, [SUN])
+    assert fit_media([cloud(64)], [SUN], 1.1 * need / MB, [])[0].density.shape == (64,) * 3
+    warnings = []
+    (out,) = fit_media([cloud(64)], [SUN], 1.1 * need / MB, warnings, multiple=True)
+    assert out.density.shape[0] < 64 and warnings
+
+
 def test_plan_keeps_grids_that_fit_and_zero_is_unlimited():
     assert plan([(64, 64, 64)], [SUN], 0) == [1]
     assert plan([(64, 64, 64)], [SUN], 100) == [1]
