@@ -281,7 +281,8 @@ BOUNDS = {
         "directions through a grid larger than the cache)."),
     "march": (
         "A sample reads every field channel (density, 3 per light, 3 world light, 3 more with "
-        "multiple scattering) trilinearly (8 corners each), evaluates the phase function and "
+        "multiple scattering, and 3 per light for its beam in a forward-scattering medium) "
+        "trilinearly (8 corners each), evaluates the phase function and "
         "two or three exponentials: ~150-200 ns on this machine in scalar C.  With multiple "
         "scattering, multiple_source_c (left as it is for the model's rework: per light and "
         "pyramid level a trilinear fetch, a table lookup and a phase function) doubles it."),
@@ -290,12 +291,12 @@ BOUNDS = {
         "box), so the per-sample cost above bounds it; per-tile numpy work is ~5 % since the "
         "tiles grew to 64 px."),
     "speedup": (
-        "Our error on slab_forward (0.11-0.14) and fog_beam (0.97-1.07) is the multiple "
+        "Our error on slab_forward (0.12-0.13) and fog_beam (0.56-0.58) is the multiple "
         "scattering model's bias, not noise: more samples do not lower it, and Cycles reaches "
-        "it in ~2 s (slab_forward, 32-64 spp) or never within 64 spp (fog_beam: the speedup is "
-        "a lower bound, 64-spp seconds over ours).  30x would need our whole render in ~70 ms "
+        "it in ~2.5 s (slab_forward, 64 spp) or never within 64 spp (fog_beam: the speedup is "
+        "a lower bound, 64-spp seconds over ours).  30x would need our whole render in ~80 ms "
         "(slab_forward) or ~60 ms (fog_beam), below the precompute of a 128^3 mesh volume.  "
-        "cloud_vdb is closest (error 0.046, which Cycles reaches at ~64 spp), and Cycles spends "
+        "cloud_vdb is closest (error 0.052, which Cycles reaches at ~45 spp), and Cycles spends "
         "~2.5 s of fixed set-up there."),
 }
 
