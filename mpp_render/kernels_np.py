@@ -446,23 +446,27 @@ def walk_width_sq(u, g):
     return np.maximum((2.0 * (u - e) - g * g * e * e) / 3.0, 0.0)
 
 
-def walk_displacement(u, g):
+def walk_displacement(u, g, g_last=None):
     """Mean displacement of the walk of ``walk_width_sq`` after path length u l_tr, in units
     of the transport length l_tr, for the light that leaves its last scattering towards a
     given direction v: (drift, beta) with
 
-        E[x | v] = drift d + beta (v - g^2 e^-u d)            (d: the light's direction, unit)
+        E[x | v] = drift d + beta (v - g_last g e^-u d)      (d: the light's direction, unit)
 
-    drift = g (1 - e^-u) is the walk's mean progress along d.  beta is the regression of the
-    position on the direction scattered into at the end (HG of anisotropy g): Cov(x, v) /
-    Var(v) = g (1 - e^-u) (1 - g^2 e^-u) / (1 - g^4 e^-2u), traces over the three axes, with
-    Cov(x, u) from E[u(t) . u(t')] = e^-(t' - t) / l_tr and E[v | u] = g u.  beta -> g u / (1 + g^2)
-    for u << 1 (a straight flight: the light that heads towards v came from behind it, along
-    v), 0 for g = 0 (an isotropic last scattering forgets the path)."""
+    drift = g (1 - e^-u) is the walk's mean progress along d (g: the walk's mean cosine after
+    its first scattering).  beta is the regression of the position on the direction
+    scattered into at the end by HG of anisotropy ``g_last`` (the medium's own g, where the
+    walk is the delta-scaled medium's, phase.delta_g; g when None): Cov(x, v) / Var(v) =
+    g_last (1 - e^-u) (1 - g^2 e^-u) / (1 - g_last^2 g^2 e^-2u), traces over the three axes,
+    with Cov(x, u) from E[u(t) . u(t')] = e^-(t' - t) / l_tr and E[v | u] = g_last u.
+    beta -> g_last u / (1 + g^2) for u << 1 when g_last = g (a straight flight: the light
+    that heads towards v came from behind it, along v), 0 for g_last = 0 (an isotropic last
+    scattering forgets the path)."""
     u = np.asarray(u, np.float64)
+    g_last = g if g_last is None else g_last
     e = np.exp(-u)
     em = -np.expm1(-u)
-    beta = g * em * (1.0 - g * g * e) / np.maximum(1.0 - g ** 4 * e * e, 1e-300)
+    beta = g_last * em * (1.0 - g * g * e) / np.maximum(1.0 - (g_last * g * e) ** 2, 1e-300)
     return g * em, beta
 
 

@@ -481,7 +481,8 @@ def lattice_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
 
 def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int,
                    camera: Camera, max_levels=8, resolution: int = MULTIPLE_RESOLUTION,
-                   should_cancel: Optional[Callable[[], bool]] = None) -> Optional[MultipleField]:
+                   should_cancel: Optional[Callable[[], bool]] = None,
+                   g_last: Optional[float] = None) -> Optional[MultipleField]:
     """The light pyramid of ``light`` on medium ``pm`` from its precomputed field ``fld``
     (optical depth at ``channel``), see MultipleField, on a lattice of about ``resolution``
     points along the grid's longest side (never finer than the voxels): the source
@@ -489,7 +490,8 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
     medium's surface (boundary.py) and then moved along the light by the mean displacement
     of its paths (``drift_levels``), for the light that ``camera`` sees.  None when
     ``should_cancel`` says so.  ``pm`` is the medium as the walk sees it: precompute hands
-    the delta-scaled medium (media.delta_scaled) and the optical depth of its beam."""
+    the delta-scaled medium (media.delta_scaled) and the optical depth of its beam, and
+    ``g_last`` the medium's own g, that of the last scattering towards the camera."""
     from . import boundary
     from .kernels_np import level_paths, walk_displacement
     from .media import density_from
@@ -524,7 +526,7 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
     levels, directions = source_pyramid(base, light, pts, shape, g, max_levels, keep)
     if should_cancel and should_cancel():
         return None
-    drift_levels(levels, pm, light, camera, stride, h, sigma_s, directions)
+    drift_levels(levels, pm, light, camera, stride, h, sigma_s, directions, g_last)
     return MultipleField(stride, h, levels)
 
 
@@ -549,7 +551,7 @@ def source_pyramid(base, light: Light, pts, shape, g: float, max_levels: int, ke
 
 
 def drift_levels(levels, pm: PreparedMedium, light: Light, camera: Camera, stride: int,
-                 h: float, sigma_s, directions=None):
+                 h: float, sigma_s, directions=None, g_last: Optional[float] = None):
     """Move each level of a light pyramid (in place) so that level k at x reads the first
     scatterings at x - E[x_k | v]: the paths the level stands for (``level_paths``, of
     representative length l_k) start from a first scattering of the light travelling along d
@@ -565,11 +567,14 @@ def drift_levels(levels, pm: PreparedMedium, light: Light, camera: Camera, strid
     level holds no power, d is the light's own direction there (``light_direction``).
     ``sigma_s``: the medium's mean scattering coefficient where it has density (1/m; one per
     colour channel, or one for all), giving the transport length l_tr = 1 / (sigma_s (1 - g))
-    of the paths: each channel drifts by its own.  Beyond the lattice the
+    of the paths: each channel drifts by its own.  ``g_last``: the anisotropy of the last
+    scattering, towards the camera (the medium's own g where ``pm`` is delta-scaled; pm.g
+    when None).  Beyond the lattice the
     source is zero.  Nothing moves for g = 0 or a medium that does not scatter
     (docs/method.md, "Drift along the light")."""
     from .kernels_np import level_paths, walk_displacement
     g = float(pm.g)
+    g_last = g if g_last is None else float(g_last)
     sigma_s = np.broadcast_to(np.asarray(sigma_s, np.float64), (3,))
     if g == 0.0 or not np.all(sigma_s > 0.0):
         return
@@ -588,10 +593,10 @@ def drift_levels(levels, pm: PreparedMedium, light: Light, camera: Camera, strid
         moved = np.empty(lev.shape, np.float32)
         for (l_tr, chans), per_level in zip(groups, paths):
             u = float(per_level[k][2]) / l_tr
-            drift, beta = walk_displacement(u, g)
+            drift, beta = walk_displacement(u, g, g_last)
 
             def source_index(d):
-                shift = l_tr * (float(drift) * d + float(beta) * (view - g * g * np.exp(-u) * d))
+                shift = l_tr * (float(drift) * d + float(beta) * (view - g_last * g * np.exp(-u) * d))
                 return idx - (shift @ pm.w2i[:3, :3].T) / (stride * 2.0 ** k)
 
             src = source_index(light_direction(light, x))
@@ -1018,7 +1023,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                 beam = chans[li] if beams[li] is None else beams[li]
                 ms[li] = multiple_field(delta[mi], f, light, beam, camera,
                                         resolution=multiple_resolution,
-                                        should_cancel=should_cancel)
+                                        should_cancel=should_cancel, g_last=float(pm.g))
                 if should_cancel and should_cancel():
                     return None
         ms_all.append(ms)
