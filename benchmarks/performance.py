@@ -291,13 +291,13 @@ BOUNDS = {
         "box), so the per-sample cost above bounds it; per-tile numpy work is ~5 % since the "
         "tiles grew to 64 px."),
     "speedup": (
-        "Our error on slab_forward (0.12-0.13) and fog_beam (0.56-0.58) is the multiple "
-        "scattering model's bias, not noise: more samples do not lower it, and Cycles reaches "
-        "it in ~2.5 s (slab_forward, 64 spp) or never within 64 spp (fog_beam: the speedup is "
-        "a lower bound, 64-spp seconds over ours).  30x would need our whole render in ~80 ms "
-        "(slab_forward) or ~60 ms (fog_beam), below the precompute of a 128^3 mesh volume.  "
-        "cloud_vdb is closest (error 0.052, which Cycles reaches at ~45 spp), and Cycles spends "
-        "~2.5 s of fixed set-up there."),
+        "Our error on slab_forward (0.075-0.082) and fog_beam (0.46-0.49) is the multiple "
+        "scattering model's bias, not noise: more samples do not lower it, and Cycles does not "
+        "reach it within 64 spp on either (the speedups are lower bounds, 64-spp seconds over "
+        "ours).  30x would need our whole render in ~80 ms (slab_forward) or ~60 ms "
+        "(fog_beam), below the precompute of a 128^3 mesh volume.  cloud_vdb is closest: our "
+        "error there (0.039) is below Cycles' at 64 spp, so its speedup is a lower bound too, "
+        "and Cycles spends ~2.5 s of fixed set-up there."),
 }
 
 
