@@ -31,7 +31,6 @@ from typing import Callable
 import numpy as np
 
 from .media import PreparedMedium, trilinear
-from .scene import Light
 
 MILNE_EXTRAPOLATION = 0.7104  # z_b sigma_tr' for a medium without index mismatch
 MAX_REACH = 24  # lattice cells beyond the medium searched for its nearest point
@@ -46,8 +45,8 @@ def extrapolation_length(sigma_s: float, sigma_a: float, g: float) -> float:
 
 def outside_distance(occupied: np.ndarray, h: float, reach: int) -> np.ndarray:
     """Euclidean distance (m, float64, shaped like ``occupied``) from each lattice point
-    (spacing ``h`` m) to the nearest occupied one: 0 on the medium; points further than
-    ``reach`` cells along every axis pass read at least reach h (exact below that).
+    (spacing ``h`` m) to the nearest occupied one: 0 on the medium, exact up to ``reach``
+    cells along each axis; a point with no occupied one that near reads at least reach h.
     Separable squared-distance minimisation over a window of +-reach cells per axis."""
     big = float((reach + 1) ** 2 * 3)
     f = np.where(occupied, 0.0, big)
@@ -65,8 +64,8 @@ def outside_distance(occupied: np.ndarray, h: float, reach: int) -> np.ndarray:
     return np.sqrt(np.minimum(f, big)) * h
 
 
-def survival(pm: PreparedMedium, occupied: np.ndarray, light: Light, stride: int, h: float,
-             z_b: float, drifts, light_direction: Callable) -> Callable:
+def survival(pm: PreparedMedium, occupied: np.ndarray, stride: int, h: float, z_b: float,
+             drifts, light_direction: Callable) -> Callable:
     """``keep(k, shape)`` for pyramid.build: the fraction (float32, ``shape``) each point of
     level k keeps (module docstring).  ``occupied``: the medium on the pyramid's lattice
     (bool (X,Y,Z), ``stride`` voxels apart, spacing ``h`` m); ``z_b`` the extrapolation

@@ -519,7 +519,7 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
         l_tr = 1.0 / (ss * max(1.0 - g, 1e-6))
         drifts = [float(walk_displacement(float(l_k) / l_tr, g)[0]) * l_tr
                   for _, _, l_k in level_paths(h, max_levels, l_tr, g)]
-        keep = boundary.survival(pm, (rho > 0).reshape(shape), light, stride, h, z_b, drifts,
+        keep = boundary.survival(pm, (rho > 0).reshape(shape), stride, h, z_b, drifts,
                                  lambda x: light_direction(light, x))
     if should_cancel and should_cancel():
         return None

@@ -48,13 +48,13 @@ def test_survival_ramps_from_the_surface_to_the_extrapolated_boundary():
     occ = np.zeros((33, 9, 9), bool)
     occ[:17] = True   # the medium fills x <= 1.6 m
     z_b = 0.5
-    keep = boundary.survival(med, occ, None, 1, h, z_b, [0.0] * 4, None)
+    keep = boundary.survival(med, occ, 1, h, z_b, [0.0] * 4, None)
     k1 = keep(1, (17, 5, 5))   # level 1: points every 2 lattice cells
     x = np.arange(17) * 2 * h
     want = np.clip(1.0 - np.maximum(x - 1.6, 0.0) / z_b, 0.0, 1.0)
     np.testing.assert_allclose(k1[:, 2, 2], want, atol=1e-6)
     assert np.all(k1[x <= 1.6] == 1.0) and np.all(k1[x >= 1.6 + z_b] == 0.0)
-    full = boundary.survival(med, np.ones((9, 9, 9), bool), None, 1, h, z_b, [0.0] * 4, None)
+    full = boundary.survival(med, np.ones((9, 9, 9), bool), 1, h, z_b, [0.0] * 4, None)
     assert np.all(full(2, (3, 3, 3)) == 1.0)
 
 
@@ -68,7 +68,7 @@ def face_pyramid(direction, drift, z_b=0.3):
     base = np.zeros((49, 17, 17, 3), np.float32)
     base[31:33] = 1.0
     drifts = [drift * 2.0 ** k / 8.0 for k in range(5)]
-    keep = boundary.survival(med, occ, None, 1, h, z_b, drifts,
+    keep = boundary.survival(med, occ, 1, h, z_b, drifts,
                              lambda x: np.tile(direction, (len(x), 1)))
     lev = pyramid.build(base, max_levels=5, keep=keep)
     return np.array([lv.sum() * 8.0 ** k for k, lv in enumerate(lev)])
