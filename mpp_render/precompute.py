@@ -394,6 +394,14 @@ def near_light_cells(pm: PreparedMedium, light: Light, stride: int, shape) -> np
     return np.ravel_multi_index(tuple(g.reshape(-1, 3).T), shape)
 
 
+def first_scattering(pm: PreparedMedium, rho, e, tau) -> np.ndarray:
+    """The power per volume (W/m^3, (N,3)) the light's unscattered beam scatters at points of
+    density ``rho`` (N,), irradiance ``e`` (N,3, W/m^2) and optical depth ``tau`` (N,3) from
+    the light: Q = rho sigma_s E exp(-tau), where every multiply scattered path starts."""
+    return (np.asarray(rho)[:, None] * pm.sigma_s[None, :]) * e * \
+        np.exp(-np.asarray(tau, np.float64))
+
+
 def cell_mean_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int,
                      stride: int, shape, cells: np.ndarray) -> np.ndarray:
     """The first-scattering source Q = sigma_s E exp(-tau) (W/m^3, (len(cells), 3)) averaged
@@ -418,7 +426,7 @@ def cell_mean_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel:
     r2 = np.einsum("ij,ij->i", pts - light.position, pts - light.position)
     held = max(float(light.radius), 1e-4) ** 2  # lights.light_sample's own floor on r^2
     e = e * (np.maximum(r2, held) / np.maximum(r2, r_min2))[:, None]
-    q = (rho[:, None] * pm.sigma_s[None, :]) * e * np.exp(-v[:, channel:channel + 3])
+    q = first_scattering(pm, rho, e, v[:, channel:channel + 3])
     return q.reshape(len(cells), len(offs), 3).mean(axis=1)
 
 
@@ -468,8 +476,7 @@ def lattice_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
         if np.any(live):
             pts = ijk[live].astype(np.float64) @ pm.i2w[:3, :3].T + pm.i2w[:3, 3]
             _, e = incident(light, pts)
-            q[live] = (rho[live, None] * pm.sigma_s[None, :]) * e * \
-                np.exp(-v[live, channel:channel + 3].astype(np.float64))
+            q[live] = first_scattering(pm, rho[live], e, v[live, channel:channel + 3])
         q = q.reshape((b - a,) + tuple(pm.grid.shape[1:]) + (3,))
         if stride > 1:
             q = _tent_restrict(_tent_restrict(q, 1, stride, shape[1]), 2, stride, shape[2])
