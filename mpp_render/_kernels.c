@@ -933,7 +933,7 @@ done:
 #define SPOT_DISC_PHI 0.6180339887498949
 #define SPOT_GATE_MARGIN 1.05
 #define L_COND 35
-#define L_BEAM 36   /* the beam's channel through the delta-scaled media, < 1: none */
+#define L_BEAM 36   /* the channel of the forward peak's light (W/m^2), < 1: none */
 #define REFINE_STEPS 8
 #define EDGE_EPS 1e-6
 #define T_MIN 1e-6
@@ -1514,23 +1514,16 @@ static PyObject *march(PyObject *self, PyObject *args) {
                     for (Py_ssize_t l = 0; l < nl; l++) {
                         int c = chan[l];
                         if (c < 0) continue;
-                        double tau[3] = {v[c], v[c + 1], v[c + 2]}, tb[3];
+                        double tau[3] = {v[c], v[c + 1], v[c + 2]};
                         if (edge) refined_tau(g, ng, m, c, x, wc[l], dc[l], 0.5 * voxel[m], tau);
                         int cb = use_ms ? beam[l] : -1;
-                        if (cb >= 0)  /* kernels_np.beam_depth */
-                            for (int a = 0; a < 3; a++)
-                                tb[a] = v[c + a] > 1e-12 ? tau[a] * (v[cb + a] / v[c + a]) : v[cb + a];
                         double cs = -(wi[l][0] * d[0] + wi[l][1] * d[1] + wi[l][2] * d[2]);
                         double p = hg_phase(cs, gg[m]);
                         exp3(tau, tau);
                         for (int a = 0; a < 3; a++) inc[a] += p * e[l][a] * tau[a];
-                        if (cb >= 0) {
-                            exp3(tb, tb);
-                            for (int a = 0; a < 3; a++) {
-                                double extra = tb[a] - tau[a];
-                                beam_inc[a] += p * e[l][a] * (extra > 0.0 ? extra : 0.0);
-                            }
-                        }
+                        if (cb >= 0)  /* the forward peak's light (precompute.peak_light) */
+                            for (int a = 0; a < 3; a++)
+                                beam_inc[a] += p * (v[cb + a] > 0.0 ? v[cb + a] : 0.0);
                     }
                     if (ambient >= 0)
                         for (int a = 0; a < 3; a++) inc[a] += v[ambient + a];

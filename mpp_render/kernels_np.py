@@ -293,7 +293,7 @@ SPOT_DISC_POINTS = 8    # points of a sphere spot's disc its cone is averaged ov
 SPOT_DISC_PHI = 0.6180339887498949  # the lattice's second coordinate steps by the golden ratio
 SPOT_GATE_MARGIN = 1.05  # widens the disc's angular radius in the one-point test
 L_COND = 35  # condition number of the spot's inverse matrix (how much it can widen angles)
-L_BEAM = 36  # the channel of the light's beam through the delta-scaled media, or < 1: none
+L_BEAM = 36  # the channel of the light's forward-peak light (W/m^2), or < 1: none
 # (precompute.FieldLayout.beam_channels; read by the march with multiple scattering only)
 DIM_JITTER = 1000       # random dimension of the step jitter; lights use 2*i, 2*i + 1
 REFINE_STEPS = 8
@@ -570,17 +570,6 @@ def multiple_source(ms_fields, table, rho, x, w2i, cos):
     return out
 
 
-def beam_depth(tau, raw, raw_beam):
-    """The optical depth of the beam of unscattered and forward-scattered light at march
-    points, (N,3): the field's ``raw_beam`` scaled as the unscattered light's ``raw`` was
-    refined into ``tau`` next to a sharp surface (by their ratio; where the field's depth is
-    0, the beam's own).  Its light beyond the unscattered light's, scattered towards the camera
-    with the medium's HG, is the multiply scattered light of the forward peak
-    (docs/method.md, "The forward peak")."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(raw > 1e-12, tau * (raw_beam / np.where(raw > 1e-12, raw, 1.0)), raw_beam)
-
-
 SUPER = 4  # march steps per super-step (the compiled twin's SUPER)
 
 
@@ -788,8 +777,7 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
                     inc += pe * np.exp(-tau)
                     cb = int(rec[L_BEAM])
                     if multiple is not None and cb >= 1:  # channel 0 is the density: none
-                        tau_b = beam_depth(tau, raw, v[:, cb:cb + 3])
-                        beam_inc += pe * np.maximum(np.exp(-tau_b) - np.exp(-tau), 0.0)
+                        beam_inc += hg(cos, gs[mi])[:, None] * np.maximum(v[:, cb:cb + 3], 0.0)
                 if ambient >= 0:
                     inc += v[:, ambient:ambient + 3]
                 src += rho[:, None] * sigma_ss[mi][None, :] * inc

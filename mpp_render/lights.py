@@ -50,7 +50,7 @@ _KINDS = {"POINT": KIND_POINT, "SPOT": KIND_SPOT, "SUN": KIND_SUN, "AREA": KIND_
 def pack_light(light: Light, channel: int = -1, beam: int = -1) -> np.ndarray:
     """The light as one float64 record of ``LIGHT_FIELDS`` (layout in kernels_np), the form
     the kernels read; ``channel`` is its optical-depth channel in the media fields or -1,
-    ``beam`` that of its beam through the delta-scaled media (precompute.FieldLayout) or -1."""
+    ``beam`` that of its forward peak's light (precompute.FieldLayout.beam_channels) or -1."""
     if light.kind not in _KINDS:
         raise ValueError(f"unsupported light type {light.kind!r}")
     r = np.zeros(LIGHT_FIELDS)

@@ -11,6 +11,8 @@ read by the march with a single trilinear fetch per step:
   A(x) = L_world * integral p(w_in . w_cam(x)) T(x, -w_in) dw_in, estimated with directions
   drawn from the phase lobe (so the estimate is the mean transmittance).  w_cam(x) points
   from x to the camera, which is exact for camera rays through x.
+* with multiple scattering in a forward-scattering medium, for each lit light 3 channels of
+  the light of its forward peak, W/m^2 (``FieldLayout.beam_channels``, ``peak_light``);
 * last, for a medium with an emission grid (scene.Medium.emission_grid) only, 3 channels of
   its emitted radiance per metre (W/(m^3 sr)), copied from the grid
   (``FieldLayout.emission_channels``); the march adds them to the Emission pass.
@@ -41,7 +43,7 @@ import numpy as np
 from . import kernels, kernels_np
 from .camera import towards_camera
 from .lights import is_dark, towards_light
-from .media import PreparedMedium, trilinear, union_interval
+from .media import PreparedMedium, density_from, trilinear, union_interval
 from .phase import sample_hg
 from .scene import Camera, Light, World
 from .surfaces import occluded
@@ -50,6 +52,7 @@ from .worldfog import optical_depth as fog_optical_depth
 
 AMBIENT_RESOLUTION = 32  # lattice points along the longest side for the world light
 MULTIPLE_RESOLUTION = 64  # lattice points along the longest side for the light pyramid
+PEAK_PAD = 4  # lattice points beyond the grid where peak_light follows the light on
 
 
 @dataclass
@@ -59,8 +62,9 @@ class FieldLayout:
     channels every medium's field has; ``emission_channels[m]``: the offset of medium m's
     emission grid (its field then has ``channels + 3``), or None.  ``beam_channels[i]``
     (multiple scattering on, some medium with a forward peak): the offset of light i's
-    optical depth through the delta-scaled media (media.delta_scaled), the beam of its
-    unscattered and forward-scattered light; right after the lights' channels."""
+    forward peak's light (W/m^2, ``peak_light``: what has scattered into the peak and not
+    out of it, spread sideways), first the optical depth through the delta-scaled media
+    (media.delta_scaled) from which it is made; right after the lights' channels."""
 
     light_channels: List[Optional[int]]
     ambient_channel: Optional[int]
@@ -394,16 +398,113 @@ def near_light_cells(pm: PreparedMedium, light: Light, stride: int, shape) -> np
     return np.ravel_multi_index(tuple(g.reshape(-1, 3).T), shape)
 
 
-def first_scattering(pm: PreparedMedium, rho, e, tau) -> np.ndarray:
+def first_scattering(pm: PreparedMedium, rho, e, tau, peak=None) -> np.ndarray:
     """The power per volume (W/m^3, (N,3)) the light's unscattered beam scatters at points of
     density ``rho`` (N,), irradiance ``e`` (N,3, W/m^2) and optical depth ``tau`` (N,3) from
-    the light: Q = rho sigma_s E exp(-tau), where every multiply scattered path starts."""
-    return (np.asarray(rho)[:, None] * pm.sigma_s[None, :]) * e * \
-        np.exp(-np.asarray(tau, np.float64))
+    the light: Q = rho sigma_s E exp(-tau), where every multiply scattered path starts; with
+    the forward peak's light ``peak`` (N,3, W/m^2, ``peak_light``) beside the unscattered
+    light, Q = rho sigma_s (E exp(-tau) + peak) (``pm`` then the delta-scaled medium)."""
+    light = e * np.exp(-np.asarray(tau, np.float64))
+    if peak is not None:
+        light = light + np.asarray(peak, np.float64)
+    return (np.asarray(rho)[:, None] * pm.sigma_s[None, :]) * light
+
+
+def cell_mean_irradiance(light: Light, pts, cell: np.ndarray, n: int = 2) -> np.ndarray:
+    """The light's irradiance (W/m^2, (N,3)) averaged over the lattice cells centred on
+    ``pts`` (N,3, m) with edges the columns of ``cell`` (3,3, m): n^3 points each (midpoint
+    rule).  A spot's cone narrower than the lattice (fog_beam's is 0.2 m wide where it
+    enters, two lattice spacings) read at the points alone is over- or under-counted as the
+    lattice falls; a sun's irradiance is the same everywhere and read once."""
+    from .lights import incident
+    if light.kind == "SUN":
+        return incident(light, pts)[1]
+    t = (np.arange(n) + 0.5) / n - 0.5
+    offs = np.stack(np.meshgrid(t, t, t, indexing="ij"), -1).reshape(-1, 3) @ np.asarray(cell).T
+    acc = np.zeros((len(pts), 3))
+    for o in offs:
+        acc += incident(light, pts + o)[1]
+    return acc / len(offs)
+
+
+def peak_light(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int, beam: int,
+               mean_sigma_s: float, flat, step: float,
+               resolution: int = MULTIPLE_RESOLUTION,
+               should_cancel: Optional[Callable[[], bool]] = None):
+    """The light of the forward peak, W/m^2: what has scattered into the peak
+    (phase.delta_fraction) and not yet out of it, spread sideways as the peak's angles take
+    it (docs/method.md, "The forward peak spreads").  Returns (lattice (X,Y,Z,3) float32,
+    stride): on a lattice ``stride`` voxels apart, about ``resolution`` points along the
+    grid's longest side, for ``kernels.upsample_into``; None when ``should_cancel`` says so.
+
+    Along a line from the light the beam's light beyond the unscattered light is
+    B = E (exp(-tau*) - exp(-tau)) (``fld``'s ``beam`` and ``channel`` optical depths at the
+    voxels ``flat`` where they were computed; elsewhere, also beyond the grid, through
+    ``pm`` and its delta-scaled self alone, marched with ``step`` m, so that the light that
+    has left the medium goes on).  Light that scattered into the peak at a distance s'
+    from where the line entered the medium is off the line by about theta (s - s') at s,
+    theta^2 the peak's mean squared angle (phase.peak_msa); with the scatterings spread
+    evenly along the way, the spread per axis is w^2 = (theta^2 / 2) (s^2 / 3) [m^2],
+    s = (tau - tau*) / (f sigma_s) (m; the medium's mean sigma_s ``mean_sigma_s``, 1/m).
+    That is the first scattering's spread: later scatterings into the peak are the walk's
+    (the delta-scaled walk carries the whole transport of the phase function).  B is
+    blurred by that width, read from a pyramid of Gaussians: beside a narrow beam the peak's
+    light lights the medium, and beside a medium's sides it has left through them."""
+    from . import pyramid
+    from .media import delta_scaled
+    from .phase import delta_fraction, peak_msa
+    stride = max(1, int(np.ceil(max(pm.grid.shape) / max(int(resolution), 2))))
+    shape = tuple((s - 1 + stride - 1) // stride + 1 for s in pm.grid.shape)
+    f = delta_fraction(pm.g)
+    h = stride * float(np.cbrt(abs(np.linalg.det(pm.i2w[:3, :3]))))
+    pad = 0
+    if f > 0.0 and mean_sigma_s > 0.0:   # room for the widest spread beyond the grid
+        deepest = np.nan_to_num(float(np.max(fld[..., channel:channel + 3]
+                                             - fld[..., beam:beam + 3])), nan=0.0, posinf=1e30)
+        reach = 3.0 * np.sqrt(0.5 * peak_msa(pm.g) / 3.0) * max(deepest, 0.0) / (f * mean_sigma_s)
+        pad = int(min(np.ceil(reach / h), PEAK_PAD))
+    ext = tuple(n + 2 * pad for n in shape)
+    idx = lattice_index(ext) - pad
+    pts = (idx * float(stride)) @ pm.i2w[:3, :3].T + pm.i2w[:3, 3]
+    ijk = idx.astype(np.int64) * stride
+    inside = np.all((ijk >= 0) & (ijk < np.array(pm.grid.shape)), axis=1)
+    gflat = np.ravel_multi_index(tuple(np.where(inside[:, None], ijk, 0).T), pm.grid.shape)
+    known = np.zeros(pm.grid.size, bool)
+    known[flat] = True
+    known = inside & known[gflat]
+    tau = np.zeros((len(idx), 3))
+    tau_b = np.zeros((len(idx), 3))
+    v = fld.reshape(-1, fld.shape[-1])[gflat[known]]
+    tau[known] = v[:, channel:channel + 3]
+    tau_b[known] = v[:, beam:beam + 3]
+    rest = np.flatnonzero(~known)
+    if rest.size and f > 0.0:
+        for out, through in ((tau, pm), (tau_b, delta_scaled(pm))):
+            got = light_optical_depth([through], light, pts[rest], step,
+                                      should_cancel=should_cancel)
+            if got is None:
+                return None
+            out[rest] = got
+    if should_cancel and should_cancel():
+        return None
+    e = cell_mean_irradiance(light, pts, stride * pm.i2w[:3, :3])
+    b = e * np.maximum(np.exp(-tau_b) - np.exp(-tau), 0.0)
+    if f > 0.0 and mean_sigma_s > 0.0:
+        with np.errstate(invalid="ignore"):
+            n = np.mean(tau - tau_b, axis=1)
+        s = np.nan_to_num(np.maximum(n, 0.0), nan=0.0, posinf=1e30) / (f * mean_sigma_s)
+        width = np.sqrt(0.5 * peak_msa(pm.g) / 3.0) * s
+        levels = pyramid.build(b.astype(np.float32).reshape(ext + (3,)), 10)
+        if should_cancel and should_cancel():
+            return None
+        core = np.all((idx >= 0) & (idx < np.array(shape)), axis=1)
+        b = pyramid.lookup(levels, idx[core] + pad, width[core], h)
+    return np.ascontiguousarray(b.reshape(shape + (3,)), np.float32), stride
 
 
 def cell_mean_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int,
-                     stride: int, shape, cells: np.ndarray) -> np.ndarray:
+                     stride: int, shape, cells: np.ndarray,
+                     beam: Optional[int] = None) -> np.ndarray:
     """The first-scattering source Q = sigma_s E exp(-tau) (W/m^3, (len(cells), 3)) averaged
     over the voxels of each lattice cell in ``cells`` (the voxels nearest to the cell's
     point), with a point light's E ~ 1/r^2 read as 1/max(r^2, R^2/3): the exact mean of
@@ -426,7 +527,8 @@ def cell_mean_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel:
     r2 = np.einsum("ij,ij->i", pts - light.position, pts - light.position)
     held = max(float(light.radius), 1e-4) ** 2  # lights.light_sample's own floor on r^2
     e = e * (np.maximum(r2, held) / np.maximum(r2, r_min2))[:, None]
-    q = first_scattering(pm, rho, e, v[:, channel:channel + 3])
+    q = first_scattering(pm, rho, e, v[:, channel:channel + 3],
+                         None if beam is None else v[:, beam:beam + 3])
     return q.reshape(len(cells), len(offs), 3).mean(axis=1)
 
 
@@ -449,7 +551,8 @@ def _tent_restrict(a: np.ndarray, axis: int, stride: int, n_out: int) -> np.ndar
 
 def lattice_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int,
                    stride: int, shape, chunk: int = 16,
-                   should_cancel: Optional[Callable[[], bool]] = None) -> Optional[np.ndarray]:
+                   should_cancel: Optional[Callable[[], bool]] = None,
+                   beam: Optional[int] = None) -> Optional[np.ndarray]:
     """The first-scattering source Q = sigma_s E exp(-tau) (W/m^3, (N,3) in the C order of
     the lattice ``shape`` ``stride`` voxels apart) from every voxel of the field ``fld``
     (optical depth at ``channel``), each voxel's power shared among the lattice points
@@ -476,7 +579,8 @@ def lattice_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
         if np.any(live):
             pts = ijk[live].astype(np.float64) @ pm.i2w[:3, :3].T + pm.i2w[:3, 3]
             _, e = incident(light, pts)
-            q[live] = first_scattering(pm, rho[live], e, v[live, channel:channel + 3])
+            q[live] = first_scattering(pm, rho[live], e, v[live, channel:channel + 3],
+                                       None if beam is None else v[live, beam:beam + 3])
         q = q.reshape((b - a,) + tuple(pm.grid.shape[1:]) + (3,))
         if stride > 1:
             q = _tent_restrict(_tent_restrict(q, 1, stride, shape[1]), 2, stride, shape[2])
@@ -489,7 +593,8 @@ def lattice_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
 def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int,
                    camera: Camera, max_levels=8, resolution: int = MULTIPLE_RESOLUTION,
                    should_cancel: Optional[Callable[[], bool]] = None,
-                   g_last: Optional[float] = None) -> Optional[MultipleField]:
+                   g_last: Optional[float] = None,
+                   beam: Optional[int] = None) -> Optional[MultipleField]:
     """The light pyramid of ``light`` on medium ``pm`` from its precomputed field ``fld``
     (optical depth at ``channel``), see MultipleField, on a lattice of about ``resolution``
     points along the grid's longest side (never finer than the voxels): the source
@@ -506,13 +611,14 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
     shape = tuple((s - 1 + stride - 1) // stride + 1 for s in pm.grid.shape)
     idx, pts = lattice_points(pm, shape, stride)
     rho = density_from(trilinear(fld, idx * float(stride))[:, 0], pm.threshold)
-    base = lattice_source(pm, fld, light, channel, stride, shape, should_cancel=should_cancel)
+    base = lattice_source(pm, fld, light, channel, stride, shape, should_cancel=should_cancel,
+                          beam=beam)
     if base is None:
         return None
     if light.kind in ("POINT", "SPOT"):
         near = near_light_cells(pm, light, stride, shape)
         if near.size:
-            base[near] = cell_mean_source(pm, fld, light, channel, stride, shape, near)
+            base[near] = cell_mean_source(pm, fld, light, channel, stride, shape, near, beam)
     h = stride * float(np.cbrt(abs(np.linalg.det(pm.i2w[:3, :3]))))
     inside = rho[rho > 0]
     mean_rho = float(np.mean(inside)) if inside.size else 0.0
@@ -1000,6 +1106,17 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                             return None
                         tau = tau - np.log(np.maximum(vis, np.exp(-SHADOW_TAU)))[:, None]
                     view[flat, ch:ch + 3] = tau
+            if beams[li] is not None:
+                # the beam channels: from the beam's optical depth to the forward peak's own
+                # light, spread sideways (W/m^2)
+                rho = density_from(pm.grid.reshape(-1)[flat], pm.threshold)
+                occ = rho[rho > 0]
+                mean_ss = float(np.mean(pm.sigma_s)) * (float(occ.mean()) if occ.size else 0.0)
+                peak = peak_light(pm, f, light, chans[li], beams[li], mean_ss, flat, step,
+                                  multiple_resolution, should_cancel)
+                if peak is None:
+                    return None
+                kernels.get("upsample_into")(f, beams[li], peak[0], peak[1], flat)
         if amb is not None:
             if progress:
                 progress(0.0, f"World light on {pm.medium.name}")
@@ -1027,8 +1144,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                     progress(0.0, f"Light pyramid: {light.name} on {pm.medium.name}")
                 # the walk starts where the beam of unscattered and forward-scattered light
                 # first scatters out of the forward peak (docs/method.md, "The forward peak")
-                beam = chans[li] if beams[li] is None else beams[li]
-                ms[li] = multiple_field(delta[mi], f, light, beam, camera,
+                ms[li] = multiple_field(delta[mi], f, light, chans[li], camera, beam=beams[li],
                                         resolution=multiple_resolution,
                                         should_cancel=should_cancel, g_last=float(pm.g))
                 if should_cancel and should_cancel():
