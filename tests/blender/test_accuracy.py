@@ -27,9 +27,12 @@ TARGET = {"rel_rmse_4": 0.03, "bias": 0.02}
 # fog_beam 0.918 -> 1.013 up), and again when the forward peak was split off ("The forward
 # peak": fog_beam 1.013 -> 0.473, slab_forward 0.144 -> 0.082, cloud_vdb 0.046 -> 0.039,
 # colored_sphere 0.070 -> 0.061 down, smoke_plume 0.080 -> 0.085 up; its bound was 0.092
-# then).  The trades are measured and stated there.
-FULL_BOUND = {"cloud_vdb": 0.045, "colored_sphere": 0.070, "fog_beam": 0.54,
-              "slab_forward": 0.094, "slab_isotropic": 0.054, "smoke_plume": 0.098}
+# then), and again when the forward peak's light began to spread ("The forward peak
+# spreads": fog_beam 0.473 -> 0.447, slab_forward 0.082 -> 0.075, cloud_vdb 0.039 -> 0.035
+# down, colored_sphere 0.061 -> 0.064 up, within its bound, kept).  The trades are measured
+# and stated there.
+FULL_BOUND = {"cloud_vdb": 0.040, "colored_sphere": 0.070, "fog_beam": 0.51,
+              "slab_forward": 0.086, "slab_isotropic": 0.054, "smoke_plume": 0.098}
 SCENE_NAMES = sorted(FULL_BOUND)
 
 
