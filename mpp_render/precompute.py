@@ -430,7 +430,7 @@ def cell_mean_irradiance(light: Light, pts, cell: np.ndarray, n: int = 2) -> np.
 def peak_light(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int, beam: int,
                mean_sigma_s: float, flat, step: float,
                resolution: int = MULTIPLE_RESOLUTION,
-               should_cancel: Optional[Callable[[], bool]] = None):
+               should_cancel: Optional[Callable[[], bool]] = None, fog: bool = False):
     """The light of the forward peak, W/m^2: what has scattered into the peak
     (phase.delta_fraction) and not yet out of it, spread sideways as the peak's angles take
     it (docs/method.md, "The forward peak spreads").  Returns (lattice (X,Y,Z,3) float32,
@@ -440,8 +440,8 @@ def peak_light(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int, 
     Along a line from the light the beam's light beyond the unscattered light is
     B = E (exp(-tau*) - exp(-tau)) (``fld``'s ``beam`` and ``channel`` optical depths at the
     voxels ``flat`` where they were computed; elsewhere, also beyond the grid, through
-    ``pm`` and its delta-scaled self alone, marched with ``step`` m, so that the light that
-    has left the medium goes on).  Light that scattered into the peak at a distance s'
+    ``pm`` and its delta-scaled self alone, marched with ``step`` m, or for the world's
+    ``fog`` sigma_t x distance, so that the light that has left the medium goes on).  Light that scattered into the peak at a distance s'
     from where the line entered the medium is off the line by about theta (s - s') at s,
     theta^2 the peak's mean squared angle (phase.peak_msa); with the scatterings spread
     evenly along the way, the spread per axis is w^2 = (theta^2 / 2) (s^2 / 3) [m^2],
@@ -480,8 +480,9 @@ def peak_light(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int, 
     rest = np.flatnonzero(~known)
     if rest.size and f > 0.0:
         for out, through in ((tau, pm), (tau_b, delta_scaled(pm))):
-            got = light_optical_depth([through], light, pts[rest], step,
-                                      should_cancel=should_cancel)
+            got = fog_optical_depth(through.sigma_t, towards_light(light, pts[rest])[1]) if fog \
+                else light_optical_depth([through], light, pts[rest], step,
+                                         should_cancel=should_cancel)
             if got is None:
                 return None
             out[rest] = got
@@ -1113,7 +1114,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                 occ = rho[rho > 0]
                 mean_ss = float(np.mean(pm.sigma_s)) * (float(occ.mean()) if occ.size else 0.0)
                 peak = peak_light(pm, f, light, chans[li], beams[li], mean_ss, flat, step,
-                                  multiple_resolution, should_cancel)
+                                  multiple_resolution, should_cancel, fog=pm is fog)
                 if peak is None:
                     return None
                 kernels.get("upsample_into")(f, beams[li], peak[0], peak[1], flat)

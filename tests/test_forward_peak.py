@@ -97,8 +97,10 @@ def test_a_narrow_beam_spreads_its_forward_peak_and_keeps_its_power():
     i2w[:3, 3] = -2.95
     pm = prepare(Medium("box", np.ones((n, n, n), np.float32), i2w, np.full(3, 0.9),
                         np.full(3, 0.1), 0.85))
+    m = np.eye(4)
+    m[:3, 3] = (0.0, 0.0, 4.0)   # pointing down (the light's -Z)
     spot = Light("SPOT", "spot", np.full(3, 500.0), position=np.array([0.0, 0.0, 4.0]),
-                 direction=np.array([0.0, 0.0, -1.0]), spot_size=np.radians(8.0),
+                 direction=np.array([0.0, 0.0, -1.0]), matrix=m, spot_size=np.radians(8.0),
                  spot_blend=0.0)
     pre, tau, peak = peak_fields(pm, spot)
     ratio = (delta_scaled(pm).sigma_t / pm.sigma_t)[None, :]
