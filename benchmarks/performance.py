@@ -281,7 +281,8 @@ BOUNDS = {
         "directions through a grid larger than the cache)."),
     "march": (
         "A sample reads every field channel (density, 3 per light, 3 world light, 3 more with "
-        "multiple scattering, and 3 per light for its beam in a forward-scattering medium) "
+        "multiple scattering, and 3 per light for its forward peak's light in a forward-scattering "
+        "medium) "
         "trilinearly (8 corners each), evaluates the phase function and "
         "two or three exponentials: ~150-200 ns on this machine in scalar C.  With multiple "
         "scattering, multiple_source_c (left as it is for the model's rework: per light and "
@@ -291,12 +292,12 @@ BOUNDS = {
         "box), so the per-sample cost above bounds it; per-tile numpy work is ~5 % since the "
         "tiles grew to 64 px."),
     "speedup": (
-        "Our error on slab_forward (0.075-0.082) and fog_beam (0.46-0.49) is the multiple "
+        "Our error on slab_forward (0.072-0.074) and fog_beam (0.45-0.46) is the multiple "
         "scattering model's bias, not noise: more samples do not lower it, and Cycles does not "
         "reach it within 64 spp on either (the speedups are lower bounds, 64-spp seconds over "
         "ours).  30x would need our whole render in ~80 ms (slab_forward) or ~60 ms "
         "(fog_beam), below the precompute of a 128^3 mesh volume.  cloud_vdb is closest: our "
-        "error there (0.039) is below Cycles' at 64 spp, so its speedup is a lower bound too, "
+        "error there (0.035) is below Cycles' at 64 spp, so its speedup is a lower bound too, "
         "and Cycles spends ~2.5 s of fixed set-up there."),
 }
 

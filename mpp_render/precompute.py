@@ -459,8 +459,9 @@ def peak_light(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int, 
     h = stride * float(np.cbrt(abs(np.linalg.det(pm.i2w[:3, :3]))))
     pad = 0
     if f > 0.0 and mean_sigma_s > 0.0:   # room for the widest spread beyond the grid
-        deepest = np.nan_to_num(float(np.max(fld[..., channel:channel + 3]
-                                             - fld[..., beam:beam + 3])), nan=0.0, posinf=1e30)
+        sub = fld[::stride, ::stride, ::stride]   # the lattice's points, a view
+        deepest = np.nan_to_num(float(np.max(sub[..., channel:channel + 3]
+                                             - sub[..., beam:beam + 3])), nan=0.0, posinf=1e30)
         reach = 3.0 * np.sqrt(0.5 * peak_msa(pm.g) / 3.0) * max(deepest, 0.0) / (f * mean_sigma_s)
         pad = int(min(np.ceil(reach / h), PEAK_PAD))
     ext = tuple(n + 2 * pad for n in shape)
@@ -477,7 +478,8 @@ def peak_light(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int, 
     v = fld.reshape(-1, fld.shape[-1])[gflat[known]]
     tau[known] = v[:, channel:channel + 3]
     tau_b[known] = v[:, beam:beam + 3]
-    rest = np.flatnonzero(~known)
+    e = cell_mean_irradiance(light, pts, stride * pm.i2w[:3, :3])
+    rest = np.flatnonzero(~known & np.any(e > 0.0, axis=1))  # no light, no peak: no depth
     if rest.size and f > 0.0:
         for out, through in ((tau, pm), (tau_b, delta_scaled(pm))):
             got = fog_optical_depth(through.sigma_t, towards_light(light, pts[rest])[1]) if fog \
@@ -488,7 +490,6 @@ def peak_light(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int, 
             out[rest] = got
     if should_cancel and should_cancel():
         return None
-    e = cell_mean_irradiance(light, pts, stride * pm.i2w[:3, :3])
     b = e * np.maximum(np.exp(-tau_b) - np.exp(-tau), 0.0)
     if f > 0.0 and mean_sigma_s > 0.0:
         with np.errstate(invalid="ignore"):
