@@ -905,7 +905,10 @@ def near_sharp_surfaces(pm: PreparedMedium, media: List[PreparedMedium]):
                                    indexing="ij"), -1).reshape(-1, 3)
         world = ijk @ pm.i2w[:3, :3].T + pm.i2w[:3, 3]
         for m in others:
-            inside = (trilinear(m.grid, world @ m.w2i[:, :3].T + m.w2i[:, 3]) >= m.threshold)
+            idx = world @ m.w2i[:, :3].T + m.w2i[:, 3]
+            near = np.flatnonzero(np.all((idx > -1.0) & (idx < np.array(m.grid.shape)), axis=1))
+            inside = np.zeros(len(world), bool)   # beyond m's grid m has no density
+            inside[near] = trilinear(m.grid, idx[near]) >= m.threshold
             inside = inside.reshape(pm.grid.shape)
             out |= _dilate(inside) & _dilate(~inside)
     return np.flatnonzero(out)
@@ -918,7 +921,7 @@ SWEEP_CELLS = 16  # column cells per sweep chunk (at least): chunks run in paral
 
 def sweep_light(media: List[PreparedMedium], pm: PreparedMedium, light: Light, field: np.ndarray,
                 channel: int, step: float, surfaces=None, threads=0, should_cancel=None,
-                needed=None, fog_sigma_t=None):
+                needed=None, fog_sigma_t=None, sharp=None):
     """Fill ``field[..., channel:channel+3]`` with the RGB optical depth from every voxel of
     ``pm``'s grid to ``light`` through all media, with ``kernels.light_sweep``: the light's
     rays are followed slab by slab across the grid, so the cost is that of a few passes over
@@ -929,7 +932,9 @@ def sweep_light(media: List[PreparedMedium], pm: PreparedMedium, light: Light, f
     ``SHADOW_TAU`` is added where an opaque surface (``surfaces``) lies between a voxel and
     the light, tested per voxel at ``needed`` = (flat indices, world points) (all voxels by
     default), as before the sweep: shadow edges stay sharp; so is the world fog's optical
-    depth with ``fog_sigma_t`` (RGB 1/m; ``media`` must not hold the fog).  Returns True when done, False
+    depth with ``fog_sigma_t`` (RGB 1/m; ``media`` must not hold the fog).  ``sharp``: the
+    flat indices ``near_sharp_surfaces(pm, media)`` gives, where the caller has them (they
+    depend on the media's grids only, not on the light).  Returns True when done, False
     when cancelled, None when the light cannot be swept (the caller then marches every
     voxel)."""
     plan = sweep_pyramids(pm, light) if SWEEP else None
@@ -967,7 +972,7 @@ def sweep_light(media: List[PreparedMedium], pm: PreparedMedium, light: Light, f
         # interpolation would smear over a voxel; the voxels there (for the medium's own
         # surface its inside layer, what the march reads once its refinement, march.py, has
         # stepped off the surface) march exactly.
-        flat = near_sharp_surfaces(pm, media)
+        flat = near_sharp_surfaces(pm, media) if sharp is None else sharp
         tau = light_optical_depth(media, light, grid_points(pm, flat), step,
                                   should_cancel=should_cancel, threads=threads)
         if tau is None:
@@ -1073,6 +1078,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
         n_pts += len(flat)
         pts = grid_points(pm, flat) if shadowed or fog is not None else None
         view = f.reshape(-1, cm)
+        sharp = None
         for li, light in enumerate(lights):
             if chans[li] is None:
                 continue
@@ -1087,10 +1093,13 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                     continue
                 swept = None
                 if pm is not fog:
+                    if sharp is None and (own.sharp or any(m.sharp for m in through)):
+                        # the same voxels for every light and for the delta-scaled media
+                        sharp = near_sharp_surfaces(own, through)
                     swept = sweep_light(through, own, light, f, ch, step, surfaces=surfaces,
                                         threads=threads, should_cancel=should_cancel,
                                         needed=None if pts is None else (flat, pts),
-                                        fog_sigma_t=through_fog)
+                                        fog_sigma_t=through_fog, sharp=sharp)
                 if swept is False:
                     return None
                 if swept is None:  # the fog, or not sweepable: march from every needed voxel

@@ -232,3 +232,37 @@ def test_lights_that_cannot_be_swept_fall_back_to_the_exact_march():
     got = pre.fields[0].reshape(-1, pre.layout.channels)[flat, 1:4]
     want = P.light_optical_depth([pm], far, pts, pm.voxel_size)
     assert np.allclose(got, want, rtol=1e-5, atol=1e-6) and got.max() > 0.1
+
+
+def test_voxels_near_sharp_surfaces_as_a_full_interpolation_finds_them():
+    """precompute.near_sharp_surfaces interpolates another medium's grid only where its box
+    reaches: the voxels it finds are those of interpolating every voxel, for a cloud beside a
+    sharp box and for two overlapping sharp boxes; and a sweep handed them gives the field
+    it computes itself."""
+    from mpp_render.media import trilinear
+    cloud, box = prepare(smooth_cloud(n=24)), prepare(sharp_box())
+    other = prepare(sharp_box(n=10, centre=(-0.2, 0.3, 0.0), size=1.0))
+    for pm, media in ((cloud, [cloud, box]), (box, [box, other]), (other, [box, other])):
+        got = P.near_sharp_surfaces(pm, media)
+        want = np.zeros(pm.grid.shape, bool)
+        if pm.sharp:
+            inside = pm.grid >= pm.threshold
+            want |= inside & P._dilate(~inside)
+        ijk = np.stack(np.meshgrid(*[np.arange(n, dtype=np.float64) for n in pm.grid.shape],
+                                   indexing="ij"), -1).reshape(-1, 3)
+        world = ijk @ pm.i2w[:3, :3].T + pm.i2w[:3, 3]
+        for m in media:
+            if m is pm or not m.sharp:
+                continue
+            ins = (trilinear(m.grid, world @ m.w2i[:, :3].T + m.w2i[:, 3]) >= m.threshold)
+            ins = ins.reshape(pm.grid.shape)
+            want |= P._dilate(ins) & P._dilate(~ins)
+        assert got.size > 0 and np.array_equal(got, np.flatnonzero(want))
+    step = min(m.voxel_size for m in (cloud, box))
+    light = lights()[0]
+    a = np.zeros(cloud.grid.shape + (4,), np.float32)
+    b = np.zeros_like(a)
+    assert P.sweep_light([cloud, box], cloud, light, a, 1, step) is True
+    assert P.sweep_light([cloud, box], cloud, light, b, 1, step,
+                         sharp=P.near_sharp_surfaces(cloud, [cloud, box])) is True
+    assert np.array_equal(a, b)
