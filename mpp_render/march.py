@@ -45,7 +45,7 @@ from .lights import pack_light
 from .media import PreparedMedium
 from .passes import DEPTH_MISS, DEPTH_OPACITY
 from .precompute import FieldLayout
-from .scene import Light
+from .scene import Camera, Light
 
 __all__ = ["MarchContext", "march_rays", "pack_lights", "ray_keys", "REFINE_STEPS", "T_MIN"]
 
@@ -86,6 +86,7 @@ class MarchContext:
     lights: List[Light]
     step: float
     multiple_fields: Optional[list] = None
+    camera: Optional[Camera] = None
 
     def __post_init__(self):
         self.packed = pack_lights(self.lights, self.layout)
@@ -95,11 +96,62 @@ class MarchContext:
             from .kernels_np import level_table
             per_medium, tables = [], []
             for pm, mfs in zip(self.media, self.multiple_fields):
-                per_medium.append([None if m is None else (m.levels, m.stride, m.h) for m in mfs])
                 ref = next((m for m in mfs if m is not None), None)
-                tables.append(np.zeros((1, len(RHO_TABLE), 6)) if ref is None else
-                              level_table(pm.g, pm.sigma_s, pm.sigma_a, ref.h, len(ref.levels)))
+                table = np.zeros((1, len(RHO_TABLE), 6)) if ref is None else \
+                    level_table(pm.g, pm.sigma_s, pm.sigma_a, ref.h, len(ref.levels))
+                if FLATTEN and ref is not None and pm.threshold >= 0.0 and \
+                        self.camera is not None and \
+                        str(self.camera.projection).upper() in ("PERSP", "ORTHO"):
+                    flat = flatten_levels(pm, mfs, self.lights, table, self.camera)
+                    per_medium.append([([flat], ref.stride, ref.h)] + [None] * (len(mfs) - 1))
+                    tables.append(FLAT_TABLE)
+                    continue
+                per_medium.append([None if m is None else (m.levels, m.stride, m.h) for m in mfs])
+                tables.append(table)
             self.multiple = (-1 if amb is None else amb, per_medium, tables)
+
+
+# A medium of one density wherever it has any (a mesh volume: density_from thresholds its
+# grid) reads the same weights and anisotropies of its level table at every march sample, and
+# the direction from a sample to the camera is that of the camera ray through it: its light
+# pyramids are summed over levels and lights once, with those weights and the phase
+# function towards the camera at each lattice point, into one level (``flatten_levels``)
+# that the march reads through this table (weight 4 pi, anisotropy 0: the factor 1).
+# ``FLATTEN`` is a switch for benchmarks/performance.py.
+FLATTEN = True
+FLAT_TABLE = np.concatenate([np.full((1, len(RHO_TABLE), 3), 4.0 * np.pi),
+                             np.zeros((1, len(RHO_TABLE), 3))], axis=2)
+
+
+def flatten_levels(pm: PreparedMedium, mfs, lights: List[Light], table: np.ndarray,
+                   camera: Camera) -> np.ndarray:
+    """One level (X,Y,Z,3) float32 on the light pyramids' finest lattice: at each point y,
+    sum over lights l and levels k of the level read at y times the level's weight and
+    HG(cos_l(y); g_k) at density 1 (``table``: kernels_np.level_table), cos_l(y) the cosine
+    between the light's propagation at y and the direction from y to the ``camera``: what
+    kernels_np.multiple_source computes at a march sample of a density-1 medium, with the
+    phase factor interpolated between lattice points instead of taken at the sample (it
+    varies over metres, the lattice is centimetres).  An area light's direction is its
+    centre's (the march jitters it over the area)."""
+    from .camera import towards_camera
+    from .kernels_np import hg, light_sample, table_lookup, upsample
+    from .precompute import lattice_points
+    ref = next(m for m in mfs if m is not None)
+    shape = ref.levels[0].shape[:3]
+    _, x = lattice_points(pm, shape, ref.stride)
+    v = towards_camera(camera, x)
+    tab = table_lookup(table, np.ones(1))[:, 0, :]   # (levels, 6) at density 1
+    out = np.zeros(tuple(shape) + (3,), np.float64)
+    for light, msf in zip(lights, mfs):
+        if msf is None:
+            continue
+        half = np.full(len(x), 0.5)
+        wi = light_sample(pack_light(light), x, half, half)[0]
+        cos = -np.einsum("ij,ij->i", wi, -v)   # the kernels' -(wi . d), d = -v
+        for k, lev in enumerate(msf.levels[:len(tab)]):
+            up = upsample(lev, 2 ** k, shape).reshape(-1, 3)
+            out += (up * (tab[k, :3] * hg(cos[:, None], tab[k, 3:]))).reshape(out.shape)
+    return np.ascontiguousarray(out, np.float32)
 
 
 def march_rays(ctx: MarchContext, origins, dirs, t0, t1, axial, keys):

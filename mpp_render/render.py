@@ -134,7 +134,8 @@ def render(desc: SceneDescription,
     bg = np.asarray(world.color, np.float64)
     step = auto_step(desc, media)
     ctx = MarchContext(media, pre.fields if pre else [], pre.layout if pre else None,
-                       lights, step, pre.multiple if st.multiple else None) if media else None
+                       lights, step, pre.multiple if st.multiple else None,
+                       cam) if media else None
     od = kernels.get("optical_depth")
     step_light = step
 

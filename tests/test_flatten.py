@@ -1,0 +1,59 @@
+"""A mesh volume's light pyramids summed once over levels and lights (march.flatten_levels):
+the march reads one level instead of every level of every light, and renders what it did."""
+import numpy as np
+import pytest
+
+from mpp_render import march
+from mpp_render.render import render
+from mpp_render.scene import Camera, Light, Medium, SceneDescription, Settings, World
+
+
+def scene(projection="PERSP"):
+    n = 24
+    i2w = np.eye(4)
+    i2w[:3, :3] *= 1.6 / n
+    i2w[:3, 3] = -0.8 + 0.8 / n
+    box = Medium("box", np.ones((n, n, n), np.float32), i2w, np.array([3.0, 2.2, 1.5]),
+                 np.array([0.2, 0.4, 0.8]), 0.5, source="MESH")
+    c2w = np.array([[1.0, 0, 0, 0.3], [0, 0, -1, -4.0], [0, 1, 0, 0.4], [0, 0, 0, 1]])
+    cam = Camera(projection, c2w, 40, 30, (-0.3, 0.3, -0.225, 0.225) if projection == "PERSP"
+                 else (-1.2, 1.2, -0.9, 0.9), 0.1, 100.0)
+    lights = [Light("SUN", "sun", np.full(3, 3.0), direction=np.array([0.4, 0.5, -0.77])),
+              Light("POINT", "pt", np.array([40.0, 60.0, 90.0]),
+                    position=np.array([-1.5, -1.2, 0.3]))]
+    return SceneDescription(cam, media=[box], lights=lights, world=World(color=np.full(3, 0.05)),
+                            settings=Settings(samples=4, multiple=True, voxel_resolution=24))
+
+
+@pytest.mark.parametrize("projection", ["PERSP", "ORTHO"])
+def test_flattened_pyramids_render_what_the_levels_did(projection, monkeypatch):
+    desc = scene(projection)
+    flat = render(desc).passes["Volume Multiple"][..., :3]
+    monkeypatch.setattr(march, "FLATTEN", False)
+    levels = render(desc).passes["Volume Multiple"][..., :3]
+    lit = levels.sum(axis=2) > 0.05 * levels.sum(axis=2).max()
+    rel = np.abs(flat - levels)[lit] / levels[lit]
+    print(projection, "mean", flat.mean(), levels.mean(), "median rel", np.median(rel), rel.max())
+    assert lit.sum() > 200
+    assert abs(flat.mean() / levels.mean() - 1.0) < 0.01
+    assert np.median(rel) < 0.002 and rel.max() < 0.01
+
+
+def test_only_mesh_volumes_are_flattened():
+    """A medium whose density varies reads its levels with the local density's weights."""
+    desc = scene()
+    from mpp_render.media import prepare
+    from mpp_render.precompute import precompute
+    pm = prepare(desc.media[0])
+    pre = precompute([pm], desc.lights, desc.world, desc.camera, multiple=True)
+    ctx = march.MarchContext([pm], pre.fields, pre.layout, desc.lights, 0.05, pre.multiple,
+                             desc.camera)
+    per_medium = ctx.multiple[1][0]
+    assert len(per_medium[0][0]) == 1 and per_medium[1] is None
+    assert ctx.multiple[2][0] is march.FLAT_TABLE
+    cloud = prepare(Medium("cloud", np.linspace(0.1, 1.0, 24 ** 3, dtype=np.float32).reshape(
+        (24,) * 3), desc.media[0].index_to_world, desc.media[0].sigma_s, desc.media[0].sigma_a, 0.5))
+    pre = precompute([cloud], desc.lights, desc.world, desc.camera, multiple=True)
+    ctx = march.MarchContext([cloud], pre.fields, pre.layout, desc.lights, 0.05, pre.multiple,
+                             desc.camera)
+    assert all(m is not None and len(m[0]) > 1 for m in ctx.multiple[1][0])
