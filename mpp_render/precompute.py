@@ -478,7 +478,13 @@ def peak_light(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int, 
     v = fld.reshape(-1, fld.shape[-1])[gflat[known]]
     tau[known] = v[:, channel:channel + 3]
     tau_b[known] = v[:, beam:beam + 3]
-    e = cell_mean_irradiance(light, pts, stride * pm.i2w[:3, :3])
+    # the light is needed where a blur reaches the medium: within ``pad`` points of it
+    near = known.reshape(ext)
+    for _ in range(pad):
+        near = _dilate(near)
+    near = np.flatnonzero(near)
+    e = np.zeros((len(idx), 3))
+    e[near] = cell_mean_irradiance(light, pts[near], stride * pm.i2w[:3, :3])
     rest = np.flatnonzero(~known & np.any(e > 0.0, axis=1))  # no light, no peak: no depth
     if rest.size and f > 0.0:
         for out, through in ((tau, pm), (tau_b, delta_scaled(pm))):
