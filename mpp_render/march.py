@@ -147,7 +147,7 @@ def flatten_levels(pm: PreparedMedium, mfs, lights: List[Light], table: np.ndarr
             continue
         half = np.full(len(x), 0.5)
         wi = light_sample(pack_light(light), x, half, half)[0]
-        cos = -np.einsum("ij,ij->i", wi, -v)   # the kernels' -(wi . d), d = -v
+        cos = np.einsum("ij,ij->i", wi, v)   # the kernels' -(wi . d): d = -v
         for k, lev in enumerate(msf.levels[:len(tab)]):
             up = upsample(lev, 2 ** k, shape).reshape(-1, 3)
             out += (up * (tab[k, :3] * hg(cos[:, None], tab[k, 3:]))).reshape(out.shape)

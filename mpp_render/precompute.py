@@ -410,6 +410,20 @@ def first_scattering(pm: PreparedMedium, rho, e, tau, peak=None) -> np.ndarray:
     return (np.asarray(rho)[:, None] * pm.sigma_s[None, :]) * light
 
 
+def lattice_shape(shape, stride: int) -> tuple:
+    """Points along each axis of a lattice ``stride`` voxels apart that covers a grid of
+    ``shape`` (its last point at or beyond the grid's last voxel)."""
+    return tuple((s - 1 + stride - 1) // stride + 1 for s in shape)
+
+
+def pyramid_lattice(pm: PreparedMedium, resolution: int = MULTIPLE_RESOLUTION):
+    """(stride, shape, h) of the light pyramid's lattice on ``pm``: about ``resolution``
+    points along the grid's longest side, never finer than the voxels; h its spacing, m."""
+    stride = max(1, int(np.ceil(max(pm.grid.shape) / max(int(resolution), 2))))
+    h = stride * float(np.cbrt(abs(np.linalg.det(pm.i2w[:3, :3]))))
+    return stride, lattice_shape(pm.grid.shape, stride), h
+
+
 def cell_mean_irradiance(light: Light, pts, cell: np.ndarray, n: int = 2) -> np.ndarray:
     """The light's irradiance (W/m^2, (N,3)) averaged over the lattice cells centred on
     ``pts`` (N,3, m) with edges the columns of ``cell`` (3,3, m): n^3 points each (midpoint
@@ -453,10 +467,8 @@ def peak_light(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int, 
     from . import pyramid
     from .media import delta_scaled
     from .phase import delta_fraction, peak_msa
-    stride = max(1, int(np.ceil(max(pm.grid.shape) / max(int(resolution), 2))))
-    shape = tuple((s - 1 + stride - 1) // stride + 1 for s in pm.grid.shape)
+    stride, shape, h = pyramid_lattice(pm, resolution)
     f = delta_fraction(pm.g)
-    h = stride * float(np.cbrt(abs(np.linalg.det(pm.i2w[:3, :3]))))
     pad = 0
     if f > 0.0 and mean_sigma_s > 0.0:   # room for the widest spread beyond the grid
         sub = fld[::stride, ::stride, ::stride]   # the lattice's points, a view
@@ -615,8 +627,7 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
     from . import boundary
     from .kernels_np import level_paths, walk_displacement
     from .media import density_from
-    stride = max(1, int(np.ceil(max(pm.grid.shape) / max(int(resolution), 2))))
-    shape = tuple((s - 1 + stride - 1) // stride + 1 for s in pm.grid.shape)
+    stride, shape, h = pyramid_lattice(pm, resolution)
     idx, pts = lattice_points(pm, shape, stride)
     rho = density_from(trilinear(fld, idx * float(stride))[:, 0], pm.threshold)
     base = lattice_source(pm, fld, light, channel, stride, shape, should_cancel=should_cancel,
@@ -627,7 +638,6 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
         near = near_light_cells(pm, light, stride, shape)
         if near.size:
             base[near] = cell_mean_source(pm, fld, light, channel, stride, shape, near, beam)
-    h = stride * float(np.cbrt(abs(np.linalg.det(pm.i2w[:3, :3]))))
     inside = rho[rho > 0]
     mean_rho = float(np.mean(inside)) if inside.size else 0.0
     sigma_s = np.asarray(pm.sigma_s, np.float64) * mean_rho
@@ -1012,7 +1022,7 @@ def coarse_lattice(pm: PreparedMedium, stride: int):
     """Index points of ``pm``'s padded grid taken every ``stride`` voxels (covering the whole
     grid) whose neighbourhood of radius ``stride`` holds density.  Returns (shape, flat
     indices into that coarse shape, world positions (K,3))."""
-    shape = tuple((s - 1 + stride - 1) // stride + 1 for s in pm.grid.shape)
+    shape = lattice_shape(pm.grid.shape, stride)
     occ = pm.grid > 0.0
     dil = occ.copy()
     for ax in range(3):
@@ -1085,6 +1095,10 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
         pts = grid_points(pm, flat) if shadowed or fog is not None else None
         view = f.reshape(-1, cm)
         sharp = None
+        if any(b is not None for b in beams):   # the medium's mean sigma_s, for peak_light
+            rho = density_from(pm.grid.reshape(-1)[flat], pm.threshold)
+            occ = rho[rho > 0]
+            mean_ss = float(np.mean(pm.sigma_s)) * (float(occ.mean()) if occ.size else 0.0)
         for li, light in enumerate(lights):
             if chans[li] is None:
                 continue
@@ -1126,9 +1140,6 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
             if beams[li] is not None:
                 # the beam channels: from the beam's optical depth to the forward peak's own
                 # light, spread sideways (W/m^2)
-                rho = density_from(pm.grid.reshape(-1)[flat], pm.threshold)
-                occ = rho[rho > 0]
-                mean_ss = float(np.mean(pm.sigma_s)) * (float(occ.mean()) if occ.size else 0.0)
                 peak = peak_light(pm, f, light, chans[li], beams[li], mean_ss, flat, step,
                                   multiple_resolution, should_cancel, fog=pm is fog)
                 if peak is None:
