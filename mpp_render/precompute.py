@@ -469,12 +469,13 @@ def peak_light(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int, 
     from .phase import delta_fraction, peak_msa
     stride, shape, h = pyramid_lattice(pm, resolution)
     f = delta_fraction(pm.g)
+    per_metre = np.sqrt(peak_msa(pm.g) / 6.0)   # w / s, the first turn's spread per axis
     pad = 0
     if f > 0.0 and mean_sigma_s > 0.0:   # room for the widest spread beyond the grid
         sub = fld[::stride, ::stride, ::stride]   # the lattice's points, a view
         deepest = np.nan_to_num(float(np.max(sub[..., channel:channel + 3]
                                              - sub[..., beam:beam + 3])), nan=0.0, posinf=1e30)
-        reach = 3.0 * np.sqrt(0.5 * peak_msa(pm.g) / 3.0) * max(deepest, 0.0) / (f * mean_sigma_s)
+        reach = 3.0 * per_metre * max(deepest, 0.0) / (f * mean_sigma_s)
         pad = int(min(np.ceil(reach / h), PEAK_PAD))
     ext = tuple(n + 2 * pad for n in shape)
     idx = lattice_index(ext) - pad
@@ -513,7 +514,7 @@ def peak_light(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int, 
         with np.errstate(invalid="ignore"):
             n = np.mean(tau - tau_b, axis=1)
         s = np.nan_to_num(np.maximum(n, 0.0), nan=0.0, posinf=1e30) / (f * mean_sigma_s)
-        width = np.sqrt(0.5 * peak_msa(pm.g) / 3.0) * s
+        width = per_metre * s
         levels = pyramid.build(b.astype(np.float32).reshape(ext + (3,)), 10)
         if should_cancel and should_cancel():
             return None
