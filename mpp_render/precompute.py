@@ -429,9 +429,10 @@ def cell_mean_irradiance(light: Light, pts, cell: np.ndarray, n: int = 2) -> np.
     ``pts`` (N,3, m) with edges the columns of ``cell`` (3,3, m): n^3 points each (midpoint
     rule).  A spot's cone narrower than the lattice (fog_beam's is 0.2 m wide where it
     enters, two lattice spacings) read at the points alone is over- or under-counted as the
-    lattice falls; a sun's irradiance is the same everywhere and read once."""
+    lattice falls; a sun's irradiance is the same everywhere and read once, and an area
+    light's is already its emitter's integral (lights.area_incident), read once."""
     from .lights import incident
-    if light.kind == "SUN":
+    if light.kind in ("SUN", "AREA"):
         return incident(light, pts)[1]
     t = (np.arange(n) + 0.5) / n - 0.5
     offs = np.stack(np.meshgrid(t, t, t, indexing="ij"), -1).reshape(-1, 3) @ np.asarray(cell).T

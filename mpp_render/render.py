@@ -118,10 +118,16 @@ def render(desc: SceneDescription,
                             f"{box.depth:.3g} m is left out")
     t_pre = time.perf_counter()
     pre = None
+    media_lights = lights
+    if media and st.multiple and st.surface_bounce and desc.surfaces:
+        from .bounce import bounce_lights  # flat surfaces light the media back: indirect light,
+        # on with multiple scattering (Cycles' volume_bounces = 0 leaves it out too)
+        media_lights = list(lights) + bounce_lights(desc.surfaces, lights, media,
+                                                    auto_step(desc, media))
     if media:
         # the light and world-light parts are reused from earlier renders when their inputs
         # did not change (cache.py)
-        pre = cache.precompute_cached(media, lights, world, cam,
+        pre = cache.precompute_cached(media, media_lights, world, cam,
                                       n_dirs=st.ambient_directions, seed=st.seed,
                                       should_cancel=cancel, progress=progress,
                                       surfaces=None if surf.empty else surf, threads=st.threads,
@@ -134,7 +140,7 @@ def render(desc: SceneDescription,
     bg = np.asarray(world.color, np.float64)
     step = auto_step(desc, media)
     ctx = MarchContext(media, pre.fields if pre else [], pre.layout if pre else None,
-                       lights, step, pre.multiple if st.multiple else None,
+                       media_lights, step, pre.multiple if st.multiple else None,
                        cam) if media else None
     od = kernels.get("optical_depth")
     step_light = step

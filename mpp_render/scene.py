@@ -183,6 +183,8 @@ class Settings:
     ``passes``: names of the passes to fill; None means every pass the engine has.
     ``voxel_resolution``: voxels along the longest side when a mesh volume is voxelised.
     ``threads``: worker threads for the march; 0 means one per core.
+    ``surface_bounce``: flat diffuse surfaces reflect the lights into the media (bounce.py;
+    indirect light, so only with ``multiple``).
     ``memory_budget_mb``: megabytes (2^20 bytes) the precompute fields may take; larger grids
     are box-downsampled with a warning (budget.py); 0 means unlimited.
     """
@@ -198,6 +200,7 @@ class Settings:
     threads: int = 0
     voxel_resolution: int = 128
     memory_budget_mb: int = 2048
+    surface_bounce: bool = True
 
 
 @dataclass

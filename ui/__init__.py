@@ -73,6 +73,7 @@ class MPP_PT_light_paths(MPPPanel, bpy.types.Panel):
         sub = col.column()
         sub.active = mpp.multiple
         sub.prop(mpp, "multiple_resolution")
+        sub.prop(mpp, "surface_bounce")
         col.prop(mpp, "ambient_directions")
 
 

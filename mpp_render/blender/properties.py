@@ -47,6 +47,12 @@ class MPPRenderSettings(bpy.types.PropertyGroup):
                     "pass also shifts in brightness with it (measured between 16 and 128: "
                     "within 10% in the public smoke and clouds, up to 25% in thin slabs; "
                     "docs/ms_resolution.md). The accuracy figures in the docs are at 64")
+    surface_bounce: BoolProperty(
+        name="Surface Bounce", default=True,
+        description="Flat surfaces (a ground, a wall) reflect the lights' light into the "
+                    "volumes once, diffusely, as area lights over the part under the volumes "
+                    "(indirect light: with Multiple Scattering on). Off: the volumes are lit by "
+                    "the lights and the world alone")
     ambient_directions: IntProperty(
         name="Ambient Directions", default=32, min=1, soft_max=512,
         description="Directions (count) per voxel used to integrate the world light's "
@@ -82,6 +88,7 @@ def settings_from_scene(scene) -> Settings:
         threads=int(p.threads),
         voxel_resolution=int(p.voxel_resolution),
         memory_budget_mb=int(p.memory_budget_mb),
+        surface_bounce=bool(p.surface_bounce),
     )
 
 

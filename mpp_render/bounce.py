@@ -1,0 +1,157 @@
+"""Light that flat diffuse surfaces reflect into the media (one bounce), as area lights.
+
+A grey ground under a plume, lit by a point light, sends a good part of what it receives back
+up into the smoke: in smoke_plume Cycles' indirect light in the volume holds that bounce, and
+without it our Volume Multiple was 0.71 of Cycles' (docs/method.md, "Light from the ground").
+Each flat surface near a medium is cut into ``tiles`` x ``tiles`` rectangles over the part
+of it the media stand over; a rectangle becomes an AREA light (lights.py) facing the media,
+of power
+
+    P = R A <E>   (W, RGB),   radiance R <E> / pi   (W/(m^2 sr), Lambertian)
+
+where R = base colour x (1 - metallic) is the surface's diffuse albedo, A the rectangle's
+area (m^2) and <E> the irradiance the scene's lights bring onto it (W/m^2: cosine to the
+normal, attenuated through the media, averaged over ``SUB`` x ``SUB`` points of the
+rectangle, points off the mesh counting as dark).  The media then scatter the rectangle's
+light like any area light's, once exactly in the march and multiply through its pyramid.
+
+Left out: curved surfaces (no single plane to tile), the surfaces' shadows on each other,
+specular reflection, light that reaches the surface only after scattering in the media, and
+further bounces.  All lengths in metres, world space.
+"""
+from __future__ import annotations
+
+from typing import List
+
+import numpy as np
+
+from .lights import incident, is_dark
+from .media import PreparedMedium
+from .scene import Light, Surface
+
+TILES = 2          # rectangles along each side of the region a surface lights
+SUB = 6            # irradiance points along each side of a rectangle
+FLAT_TOLERANCE = 1e-4  # largest distance of a vertex from the plane, over the mesh's size
+DARK = 1e-6        # a rectangle below this fraction of the brightest one emits nothing
+MAX_LIGHTS = 8     # the brightest rectangles of all surfaces kept (each costs a light's precompute)
+
+
+def plane_of(surface: Surface):
+    """(origin (3,), unit axes e1, e2 in the plane, unit normal n) of a flat mesh, or None
+    when its vertices do not lie in one plane (within ``FLAT_TOLERANCE`` of its size)."""
+    v = np.asarray(surface.vertices, np.float64).reshape(-1, 3)
+    if len(v) < 3 or len(surface.triangles) == 0:
+        return None
+    o = v.mean(axis=0)
+    _, sv, vt = np.linalg.svd(v - o, full_matrices=False)
+    size = float(np.max(np.ptp(v, axis=0)))
+    if not (size > 0.0) or sv[1] <= 0.0:
+        return None
+    n = vt[2]
+    if np.max(np.abs((v - o) @ n)) > FLAT_TOLERANCE * size:
+        return None
+    return o, vt[0], vt[1], n
+
+
+def _on_mesh(st, tri_st):
+    """True for the plane points ``st`` (N,2) inside any of the triangles ``tri_st`` (T,3,2)."""
+    hit = np.zeros(len(st), bool)
+    for a in range(0, len(tri_st), 4096):
+        t = tri_st[a:a + 4096]
+        p0, e1, e2 = t[:, 0], t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
+        det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+        ok = np.abs(det) > 1e-30
+        d = st[:, None, :] - p0[None]
+        inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+        u = (d[..., 0] * e2[None, :, 1] - d[..., 1] * e2[None, :, 0]) * inv
+        w = (e1[None, :, 0] * d[..., 1] - e1[None, :, 1] * d[..., 0]) * inv
+        hit |= np.any(ok[None] & (u >= -1e-9) & (w >= -1e-9) & (u + w <= 1.0 + 1e-9), axis=1)
+    return hit
+
+
+def media_corners(media: List[PreparedMedium]) -> np.ndarray:
+    """World corners (8M,3) of the media's grid boxes."""
+    out = []
+    for pm in media:
+        n = np.array(pm.grid.shape, np.float64) - 1.0
+        c = np.stack(np.meshgrid(*[[0.0, x] for x in n], indexing="ij"), -1).reshape(-1, 3)
+        out.append(c @ pm.i2w[:3, :3].T + pm.i2w[:3, 3])
+    return np.concatenate(out) if out else np.zeros((0, 3))
+
+
+def surface_irradiance(media: List[PreparedMedium], lights: List[Light], pts, normal, step):
+    """Irradiance (N,3, W/m^2) the ``lights`` bring onto the plane points ``pts`` (N,3) of
+    unit ``normal``, through the media (optical depth marched with ``step`` m)."""
+    from .precompute import light_optical_depth
+    e = np.zeros((len(pts), 3))
+    for light in lights:
+        if is_dark(light):
+            continue
+        d, el = incident(light, pts)
+        cos = np.clip(-(d @ normal), 0.0, None)
+        lit = cos > 0.0
+        if not np.any(lit) or not np.any(el[lit] > 0.0):
+            continue
+        tau = np.zeros((len(pts), 3))
+        if media:
+            tau[lit] = light_optical_depth(media, light, pts[lit], step)
+        e += el * cos[:, None] * np.exp(-tau)
+    return e
+
+
+def bounce_lights(surfaces: List[Surface], lights: List[Light], media: List[PreparedMedium],
+                  step: float, tiles: int = TILES) -> List[Light]:
+    """AREA lights for the light the flat surfaces reflect into the media (module docstring):
+    ``tiles`` x ``tiles`` per flat, non-black surface under or beside a medium, those that
+    receive light, the ``MAX_LIGHTS`` brightest of them; [] without media or lights."""
+    live = [l for l in lights if not is_dark(l)]
+    corners = media_corners(media)
+    if not live or not len(corners) or tiles < 1:
+        return []
+    centre = corners.mean(axis=0)
+    out = []
+    for surface in surfaces:
+        albedo = np.clip(np.asarray(surface.base_color, np.float64).reshape(3), 0.0, 1.0) * \
+            (1.0 - float(np.clip(surface.metallic, 0.0, 1.0)))
+        plane = plane_of(surface)
+        if plane is None or not np.any(albedo > 0.0) or np.any(np.asarray(surface.emission) > 0):
+            continue
+        o, e1, e2, n = plane
+        if (centre - o) @ n < 0.0:  # the side the media stand on emits
+            n, e2 = -n, -e2
+        height = (corners - o) @ n
+        if not np.any(height > 0.0):
+            continue
+        reach = float(np.max(height))
+        mst = np.stack([(corners - o) @ e1, (corners - o) @ e2], 1)
+        v = np.asarray(surface.vertices, np.float64).reshape(-1, 3)
+        vst = np.stack([(v - o) @ e1, (v - o) @ e2], 1)
+        lo = np.maximum(mst.min(0) - reach, vst.min(0))
+        hi = np.minimum(mst.max(0) + reach, vst.max(0))
+        if np.any(hi <= lo):
+            continue
+        tri = vst[np.asarray(surface.triangles, np.int64)]
+        size = (hi - lo) / tiles
+        sub = ((np.arange(SUB) + 0.5) / SUB)
+        grid = np.stack(np.meshgrid(sub, sub, indexing="ij"), -1).reshape(-1, 2)
+        tiles_st = [(i, j) for i in range(tiles) for j in range(tiles)]
+        st = np.concatenate([lo + (np.array(ij) + grid) * size for ij in tiles_st])
+        on = _on_mesh(st, tri)
+        lift = 1e-3 * max(reach, 1.0)  # off the surface, so that its own mesh does not shadow it
+        pts = o + st[:, :1] * e1 + st[:, 1:] * e2 + lift * n
+        e = np.zeros((len(st), 3))
+        if np.any(on):
+            e[on] = surface_irradiance(media, live, pts[on], n, step)
+        power = albedo * e.reshape(len(tiles_st), SUB * SUB, 3).mean(axis=1) * float(np.prod(size))
+        top = float(power.max()) if power.size else 0.0
+        for (i, j), p in zip(tiles_st, power):
+            if not (top > 0.0) or p.max() <= DARK * top:
+                continue
+            c = o + (lo[0] + (i + 0.5) * size[0]) * e1 + (lo[1] + (j + 0.5) * size[1]) * e2 + lift * n
+            m = np.eye(4)
+            m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = e1 * size[0], e2 * size[1], -n, c
+            out.append(Light("AREA", f"{surface.name} (bounce {i},{j})", p, position=c.copy(),
+                             direction=n.copy(), matrix=m, shape="RECTANGLE", size_x=1.0,
+                             size_y=1.0, normalize=True))
+    out.sort(key=lambda l: -float(np.sum(l.strength)))
+    return out[:MAX_LIGHTS]
