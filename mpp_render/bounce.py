@@ -28,6 +28,7 @@ import numpy as np
 from .lights import incident, is_dark
 from .media import PreparedMedium
 from .scene import Light, Surface
+from .surfaces import intersect, prepare_surfaces
 
 TILES = 2          # rectangles along each side of the region a surface lights
 SUB = 6            # irradiance points along each side of a rectangle
@@ -51,22 +52,6 @@ def plane_of(surface: Surface):
     if np.max(np.abs((v - o) @ n)) > FLAT_TOLERANCE * size:
         return None
     return o, vt[0], vt[1], n
-
-
-def _on_mesh(st, tri_st):
-    """True for the plane points ``st`` (N,2) inside any of the triangles ``tri_st`` (T,3,2)."""
-    hit = np.zeros(len(st), bool)
-    for a in range(0, len(tri_st), 4096):
-        t = tri_st[a:a + 4096]
-        p0, e1, e2 = t[:, 0], t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
-        det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
-        ok = np.abs(det) > 1e-30
-        d = st[:, None, :] - p0[None]
-        inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
-        u = (d[..., 0] * e2[None, :, 1] - d[..., 1] * e2[None, :, 0]) * inv
-        w = (e1[None, :, 0] * d[..., 1] - e1[None, :, 1] * d[..., 0]) * inv
-        hit |= np.any(ok[None] & (u >= -1e-9) & (w >= -1e-9) & (u + w <= 1.0 + 1e-9), axis=1)
-    return hit
 
 
 def media_corners(media: List[PreparedMedium]) -> np.ndarray:
@@ -130,15 +115,17 @@ def bounce_lights(surfaces: List[Surface], lights: List[Light], media: List[Prep
         hi = np.minimum(mst.max(0) + reach, vst.max(0))
         if np.any(hi <= lo):
             continue
-        tri = vst[np.asarray(surface.triangles, np.int64)]
         size = (hi - lo) / tiles
         sub = ((np.arange(SUB) + 0.5) / SUB)
         grid = np.stack(np.meshgrid(sub, sub, indexing="ij"), -1).reshape(-1, 2)
         tiles_st = [(i, j) for i in range(tiles) for j in range(tiles)]
         st = np.concatenate([lo + (np.array(ij) + grid) * size for ij in tiles_st])
-        on = _on_mesh(st, tri)
         lift = 1e-3 * max(reach, 1.0)  # off the surface, so that its own mesh does not shadow it
         pts = o + st[:, :1] * e1 + st[:, 1:] * e2 + lift * n
+        # on the mesh where a ray straight down from the lifted point meets it
+        _, hit = intersect(prepare_surfaces([surface]), pts, np.broadcast_to(-n, pts.shape),
+                           np.full(len(pts), 2.0 * lift))
+        on = hit >= 0
         e = np.zeros((len(st), 3))
         if np.any(on):
             e[on] = surface_irradiance(media, live, pts[on], n, step)

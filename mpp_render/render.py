@@ -118,12 +118,12 @@ def render(desc: SceneDescription,
                             f"{box.depth:.3g} m is left out")
     t_pre = time.perf_counter()
     pre = None
+    step = auto_step(desc, media)
     media_lights = lights
     if media and st.multiple and st.surface_bounce and desc.surfaces:
         from .bounce import bounce_lights  # flat surfaces light the media back: indirect light,
         # on with multiple scattering (Cycles' volume_bounces = 0 leaves it out too)
-        media_lights = list(lights) + bounce_lights(desc.surfaces, lights, media,
-                                                    auto_step(desc, media))
+        media_lights = list(lights) + bounce_lights(desc.surfaces, lights, media, step)
     if media:
         # the light and world-light parts are reused from earlier renders when their inputs
         # did not change (cache.py)
@@ -138,7 +138,6 @@ def render(desc: SceneDescription,
     timings["precompute"] = time.perf_counter() - t_pre
 
     bg = np.asarray(world.color, np.float64)
-    step = auto_step(desc, media)
     ctx = MarchContext(media, pre.fields if pre else [], pre.layout if pre else None,
                        media_lights, step, pre.multiple if st.multiple else None,
                        cam) if media else None
