@@ -17,7 +17,10 @@ light like any area light's, once exactly in the march and multiply through its 
 
 Left out: curved surfaces (no single plane to tile), the surfaces' shadows on each other,
 specular reflection, light that reaches the surface only after scattering in the media, and
-further bounces.  All lengths in metres, world space.
+further bounces, and the world's volume (render.py makes no bounce lights under one: its grid
+spans the whole view, and each rectangle would cost a light's precompute over all of it; a
+ground under a lamp in fog, 64 x 48 pixels, took 10.3 s with them against 1.7 s without, for
+3.6 % more light).  All lengths in metres, world space.
 """
 from __future__ import annotations
 
@@ -37,9 +40,15 @@ DARK = 1e-6        # a rectangle below this fraction of the brightest one emits 
 MAX_LIGHTS = 8     # the brightest rectangles of all surfaces kept (each costs a light's precompute)
 
 
+EDGE_CANDIDATES = 64  # mesh edges tried as the direction of the rectangles' sides
+
+
 def plane_of(surface: Surface):
     """(origin (3,), unit axes e1, e2 in the plane, unit normal n) of a flat mesh, or None
-    when its vertices do not lie in one plane (within ``FLAT_TOLERANCE`` of its size)."""
+    when its vertices do not lie in one plane (within ``FLAT_TOLERANCE`` of its size).
+    e1 runs along the mesh edge (of the first ``EDGE_CANDIDATES``) whose direction gives the
+    vertices the smallest bounding rectangle, so that a square's rectangles follow its sides
+    (the plane's principal axes are any pair when its spread is the same both ways)."""
     v = np.asarray(surface.vertices, np.float64).reshape(-1, 3)
     if len(v) < 3 or len(surface.triangles) == 0:
         return None
@@ -51,7 +60,17 @@ def plane_of(surface: Surface):
     n = vt[2]
     if np.max(np.abs((v - o) @ n)) > FLAT_TOLERANCE * size:
         return None
-    return o, vt[0], vt[1], n
+    tri = np.asarray(surface.triangles, np.int64).reshape(-1, 3)[:EDGE_CANDIDATES]
+    edges = (v[np.roll(tri, -1, axis=1)] - v[tri]).reshape(-1, 3)
+    edges = edges - np.outer(edges @ n, n)
+    length = np.linalg.norm(edges, axis=1)
+    e1 = vt[0]
+    if np.any(length > 0.0):
+        cand = np.vstack([e1[None], edges[length > 0.0] / length[length > 0.0, None]])
+        rel = v - o
+        areas = [np.ptp(rel @ a) * np.ptp(rel @ np.cross(n, a)) for a in cand]
+        e1 = cand[int(np.argmin(np.round(areas, 12)))]
+    return o, e1, np.cross(n, e1), n
 
 
 def media_corners(media: List[PreparedMedium]) -> np.ndarray:

@@ -94,6 +94,15 @@ def incident(light: Light, points, u=None):
     return d, e
 
 
+def irradiance(light: Light, points) -> np.ndarray:
+    """The irradiance RGB (N,3, W/m^2) of ``incident(light, points)`` without its direction
+    (an area light's emitter integral then skips Lambert's vector, half its cost)."""
+    points = np.asarray(points, np.float64).reshape(-1, 3)
+    if light.kind == "AREA":
+        return area_incident(light, points, direction=False)[1]
+    return incident(light, points)[1]
+
+
 POLYGON_SIDES = 24  # sides of the polygon that stands for a disc or ellipse emitter
 
 
@@ -109,7 +118,7 @@ def emitter_polygon(light: Light) -> np.ndarray:
     return c + np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], np.float64) @ np.stack([ax, ay])
 
 
-def area_incident(light: Light, points):
+def area_incident(light: Light, points, direction: bool = True):
     """(direction (N,3), irradiance RGB (N,3)) of an AREA light integrated over its emitter:
     a Lambertian emitter of radiance L (W/(m^2 sr)) brings sum of L cos(theta_l) dA / d^2 =
     L Omega, Omega the solid angle (sr) the emitter subtends at the point (Van Oosterom and
@@ -117,7 +126,7 @@ def area_incident(light: Light, points):
     that of the light's mean propagation, minus Lambert's vector irradiance of the polygon
     (the sum over its edges of the angle each subtends times its unit normal, halved).  Exact
     also next to a large emitter, where one point of it read alone (1 / d^2) is not: a point
-    1 mm above a 4 m square reads 2 pi L."""
+    1 mm above a 4 m square reads 2 pi L.  ``direction=False``: None for the direction."""
     points = np.asarray(points, np.float64).reshape(-1, 3)
     rec = pack_light(light)
     c = np.asarray(light.matrix, np.float64)[:3, 3]
@@ -135,6 +144,10 @@ def area_incident(light: Light, points):
         den = (la * lb * lc + np.einsum("ij,ij->i", a, b) * lc
                + np.einsum("ij,ij->i", a, c2) * lb + np.einsum("ij,ij->i", b, c2) * la)
         omega += 2.0 * np.arctan2(num, den)
+    front = (points - c) @ normal > 0.0
+    e = np.where(front, omega, 0.0)[:, None] * radiance[None, :]
+    if not direction:
+        return None, e
     u = r / ln[..., None]
     un = np.roll(u, -1, axis=1)
     cr = np.cross(u, un)
@@ -146,8 +159,6 @@ def area_incident(light: Light, points):
     far = np.linalg.norm(towards, axis=1)
     d = np.where((nv > 1e-12)[:, None], -vec / np.maximum(nv, 1e-300)[:, None],
                  -towards / np.maximum(far, 1e-300)[:, None])
-    front = (points - c) @ normal > 0.0
-    e = np.where(front, omega, 0.0)[:, None] * radiance[None, :]
     return d, e
 
 

@@ -431,14 +431,14 @@ def cell_mean_irradiance(light: Light, pts, cell: np.ndarray, n: int = 2) -> np.
     enters, two lattice spacings) read at the points alone is over- or under-counted as the
     lattice falls; a sun's irradiance is the same everywhere and read once, and an area
     light's is already its emitter's integral (lights.area_incident), read once."""
-    from .lights import incident
+    from .lights import irradiance
     if light.kind in ("SUN", "AREA"):
-        return incident(light, pts)[1]
+        return irradiance(light, pts)
     t = (np.arange(n) + 0.5) / n - 0.5
     offs = np.stack(np.meshgrid(t, t, t, indexing="ij"), -1).reshape(-1, 3) @ np.asarray(cell).T
     acc = np.zeros((len(pts), 3))
     for o in offs:
-        acc += incident(light, pts + o)[1]
+        acc += irradiance(light, pts + o)
     return acc / len(offs)
 
 
@@ -583,7 +583,7 @@ def lattice_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
     inside a dense medium's face as the lattice fell against it (docs/ms_resolution.md).
     Stride 1 reads the voxels themselves.  Made ``chunk`` voxel planes at a time; None when
     ``should_cancel`` says so between them."""
-    from .lights import incident
+    from .lights import irradiance
     from .media import density_from
     nx = pm.grid.shape[0]
     rows = np.zeros((nx, shape[1], shape[2], 3))
@@ -600,7 +600,7 @@ def lattice_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
         q = np.zeros((len(v), 3))
         if np.any(live):
             pts = ijk[live].astype(np.float64) @ pm.i2w[:3, :3].T + pm.i2w[:3, 3]
-            _, e = incident(light, pts)
+            e = irradiance(light, pts)
             q[live] = first_scattering(pm, rho[live], e, v[live, channel:channel + 3],
                                        None if beam is None else v[live, beam:beam + 3])
         q = q.reshape((b - a,) + tuple(pm.grid.shape[1:]) + (3,))
@@ -631,7 +631,7 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
     from .media import density_from
     stride, shape, h = pyramid_lattice(pm, resolution)
     idx, pts = lattice_points(pm, shape, stride)
-    rho = density_from(trilinear(fld, idx * float(stride))[:, 0], pm.threshold)
+    rho = density_from(lattice_values(fld[..., 0], idx, stride), pm.threshold)
     base = lattice_source(pm, fld, light, channel, stride, shape, should_cancel=should_cancel,
                           beam=beam)
     if base is None:
@@ -781,6 +781,17 @@ def lattice_points(pm: PreparedMedium, shape, spacing: int):
     stride 2^k), in C order."""
     idx = lattice_index(shape)
     return idx, (idx * float(spacing)) @ pm.i2w[:3, :3].T + pm.i2w[:3, 3]
+
+
+def lattice_values(grid: np.ndarray, idx: np.ndarray, stride: int) -> np.ndarray:
+    """``grid`` (X,Y,Z) at the lattice points ``idx`` (N,3 index coordinates, ``stride``
+    voxels apart): the voxel itself, as media.trilinear reads a whole-voxel point, and 0 on
+    the grid's last plane and beyond (trilinear's outside), without reading every channel of
+    a field eight times."""
+    ijk = idx.astype(np.int64) * int(stride)
+    ok = np.all(ijk < np.array(grid.shape[:3]) - 1, axis=1)
+    flat = np.ravel_multi_index(tuple(np.where(ok[:, None], ijk, 0).T), grid.shape[:3])
+    return np.where(ok, grid.reshape(-1)[flat], 0.0)
 
 
 def lattice_index(shape) -> np.ndarray:

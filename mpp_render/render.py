@@ -120,9 +120,11 @@ def render(desc: SceneDescription,
     pre = None
     step = auto_step(desc, media)
     media_lights = lights
-    if media and st.multiple and st.surface_bounce and desc.surfaces:
+    if media and st.multiple and st.surface_bounce and desc.surfaces and fog_pm is None:
         from .bounce import bounce_lights  # flat surfaces light the media back: indirect light,
-        # on with multiple scattering (Cycles' volume_bounces = 0 leaves it out too)
+        # on with multiple scattering (Cycles' volume_bounces = 0 leaves it out too); not
+        # under a world volume, whose grid spans the whole view: each bounce light would cost
+        # a light's precompute over all of it (bounce.py)
         media_lights = list(lights) + bounce_lights(desc.surfaces, lights, media, step)
     if media:
         # the light and world-light parts are reused from earlier renders when their inputs

@@ -184,7 +184,7 @@ class Settings:
     ``voxel_resolution``: voxels along the longest side when a mesh volume is voxelised.
     ``threads``: worker threads for the march; 0 means one per core.
     ``surface_bounce``: flat diffuse surfaces reflect the lights into the media (bounce.py;
-    indirect light, so only with ``multiple``).
+    indirect light, so only with ``multiple``; not under a world volume).
     ``memory_budget_mb``: megabytes (2^20 bytes) the precompute fields may take; larger grids
     are box-downsampled with a warning (budget.py); 0 means unlimited.
     """

@@ -7,7 +7,7 @@ import pytest
 
 from mpp_render.bounce import SUB, TILES, bounce_lights, media_corners, plane_of
 from mpp_render.kernels_np import light_sample
-from mpp_render.lights import incident, pack_light
+from mpp_render.lights import incident, irradiance, pack_light
 from mpp_render.media import prepare
 from mpp_render.render import render
 from mpp_render.scene import Camera, Light, Medium, SceneDescription, Settings, Surface, World
@@ -60,6 +60,19 @@ def test_area_irradiance_next_to_a_large_emitter():
         assert np.allclose(d, [[0.0, 0.0, -1.0]], atol=1e-9)
 
 
+def test_irradiance_alone_is_incidents():
+    """lights.irradiance (the precompute's read, without the direction) equals incident's
+    irradiance for every kind of light, also in front of and behind an area emitter."""
+    pts = np.random.default_rng(5).normal(0.0, 2.0, (500, 3))
+    spot = Light("SPOT", "s", np.full(3, 40.0), position=np.array([0.0, 0.0, 3.0]),
+                 spot_size=0.6)
+    for light in (area("SQUARE"), area("DISK"), spot,
+                  Light("POINT", "p", np.array([1.0, 2.0, 3.0]), position=np.ones(3)),
+                  Light("SUN", "sun", np.full(3, 2.0), direction=np.array([0.0, 0.0, -1.0]))):
+        want = incident(light, pts)[1]
+        assert np.any(want > 0) and np.array_equal(irradiance(light, pts), want), light.kind
+
+
 def flat_ground(half=6.0, albedo=0.5, z=0.0):
     return quad(z, half, albedo=albedo, name="ground")
 
@@ -100,6 +113,39 @@ def test_what_does_not_bounce():
     dark = Light("SUN", "off", np.zeros(3), direction=np.array([0.0, 0.0, -1.0]))
     assert bounce_lights([flat_ground()], [dark], box, 0.05) == []
     assert bounce_lights([flat_ground()], [sun], [], 0.05) == []
+
+
+def test_a_turned_square_is_tiled_along_its_sides():
+    """A square ground turned 30 degrees about the vertical: the rectangles' sides follow its
+    sides (a square's principal axes are any pair), so that none hangs off the mesh."""
+    c, s = math.cos(math.pi / 6), math.sin(math.pi / 6)
+    ground = flat_ground(half=1.5)
+    ground.vertices = np.asarray(ground.vertices) @ np.array([[c, s, 0], [-s, c, 0], [0, 0, 1]])
+    o, e1, e2, n = plane_of(ground)
+    assert abs(n[2]) == pytest.approx(1.0)
+    sides = {round(float(abs(e1 @ np.array(a))), 9) for a in ((c, s, 0), (-s, c, 0))}
+    assert sides == {0.0, 1.0}
+    sun = Light("SUN", "sun", np.full(3, 2.0), direction=np.array([0.0, 0.0, -1.0]))
+    lights = bounce_lights([ground], [sun], [thin_box()], 0.05)
+    # the footprint (4 m wide) is wider than the 3 m square: the rectangles cover it all,
+    # each a quarter of its 9 m^2
+    assert len(lights) == TILES * TILES
+    for l in lights:
+        assert np.allclose(l.strength, 0.5 * 2.0 * 9.0 / 4, rtol=1e-9)
+
+
+def test_no_bounce_under_a_world_volume():
+    """Under the world's fog (whose grid spans the view) the setting changes nothing: the
+    ground's rectangles would each cost a light's precompute over the whole view."""
+    from test_worldfog import camera, fog, point
+    def go(bounce):
+        desc = SceneDescription(camera(12, 8, (0.0, -8.0, 1.0)), lights=[point((0.0, 0.0, 1.0))],
+                                surfaces=[flat_ground(half=20.0)], world=World(volume=fog()),
+                                settings=Settings(samples=1, surface_bounce=bounce,
+                                                  voxel_resolution=24, multiple_resolution=12))
+        return render(desc).passes["Combined"]
+    on = go(True)
+    assert np.all(np.isfinite(on)) and on[..., :3].mean() > 0 and np.array_equal(on, go(False))
 
 
 def test_a_ground_with_a_hole_reflects_only_where_it_is():

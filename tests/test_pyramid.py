@@ -90,3 +90,17 @@ def test_upsample_into_twins_agree_and_write_only_the_given_voxels():
         kernels.c_upsample_into(b, 0, lat, stride, np.array([10 ** 9]))
     with pytest.raises(ValueError):
         kernels.c_upsample_into(b, 0, lat, 0, flat)
+
+
+def test_lattice_values_read_what_trilinear_reads():
+    """precompute.lattice_values (the density at the pyramid's lattice points) equals
+    media.trilinear at those whole-voxel points, zero on the last plane and beyond."""
+    from mpp_render.media import trilinear
+    from mpp_render.precompute import lattice_index, lattice_shape, lattice_values
+    rng = np.random.default_rng(2)
+    for shape, stride in (((20, 17, 9), 2), ((16, 16, 16), 3), ((5, 6, 7), 1)):
+        f = rng.random(shape + (5,)).astype(np.float32) + 0.5
+        idx = lattice_index(lattice_shape(shape, stride))
+        got = lattice_values(f[..., 0], idx, stride)
+        assert np.array_equal(got, trilinear(f, idx * float(stride))[:, 0])
+        assert np.any(got == 0) and np.any(got > 0)

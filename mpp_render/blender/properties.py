@@ -51,8 +51,8 @@ class MPPRenderSettings(bpy.types.PropertyGroup):
         name="Surface Bounce", default=True,
         description="Flat surfaces (a ground, a wall) reflect the lights' light into the "
                     "volumes once, diffusely, as area lights over the part under the volumes "
-                    "(indirect light: with Multiple Scattering on). Off: the volumes are lit by "
-                    "the lights and the world alone")
+                    "(indirect light: with Multiple Scattering on; none under a World volume). "
+                    "Off: the volumes are lit by the lights and the world alone")
     ambient_directions: IntProperty(
         name="Ambient Directions", default=32, min=1, soft_max=512,
         description="Directions (count) per voxel used to integrate the world light's "
