@@ -30,7 +30,8 @@ from typing import Callable
 
 import numpy as np
 
-from .media import PreparedMedium, trilinear
+from . import kernels
+from .media import PreparedMedium
 
 MILNE_EXTRAPOLATION = 0.7104  # z_b sigma_tr' for a medium without index mismatch
 MAX_REACH = 24  # lattice cells beyond the medium searched for its nearest point
@@ -85,6 +86,7 @@ def survival(pm: PreparedMedium, occupied: np.ndarray, stride: int, h: float, z_
         q = idx * float(2 ** k) + pad
         if drifts[k] != 0.0:
             q = q + (float(drifts[k]) * light_direction(x)) @ w2i.T / float(stride)
-        return trilinear(ramp, np.clip(q, 0.0, top))[:, 0].reshape(shape).astype(np.float32)
+        return kernels.get("trilinear")(ramp, np.clip(q, 0.0, top))[:, 0].reshape(
+            shape).astype(np.float32)
 
     return keep

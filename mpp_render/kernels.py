@@ -84,6 +84,19 @@ def c_upsample_into(field, channel, lattice, stride, flat):
                      np.ascontiguousarray(flat, np.int64).reshape(-1))
 
 
+def c_trilinear(grid, idx):
+    """media.trilinear on the compiled path: (N,C) for a 4-D grid, (N,) for a 3-D one.  A grid
+    that is not float32 is read by the numpy twin (the kernel would round it to float32)."""
+    if np.asarray(grid).dtype != np.float32:
+        return kernels_np.trilinear(grid, idx)
+    g = np.ascontiguousarray(grid)
+    flat = g.ndim == 3
+    g4 = g.reshape(g.shape + (1,)) if flat else g
+    idx = _f64(idx).reshape(-1, 3)
+    out = np.frombuffer(_c.trilinear(g4, idx), np.float64).reshape(len(idx), g4.shape[3])
+    return out[:, 0] if flat else out
+
+
 def c_march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs,
             thresholds, voxels, lights, ambient, step, depth_opacity, depth_miss, multiple=None,
             emissions=None, bricks=None, adapt_tau=0.0, emission_channels=None):
@@ -121,7 +134,8 @@ def c_march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts
 
 
 _C_WRAPPERS = {"optical_depth": c_optical_depth, "march": c_march,
-               "light_sweep": c_light_sweep, "upsample_into": c_upsample_into}
+               "light_sweep": c_light_sweep, "upsample_into": c_upsample_into,
+               "trilinear": c_trilinear}
 
 
 def get(name: str):

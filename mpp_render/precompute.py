@@ -738,7 +738,7 @@ def drift_levels(levels, pm: PreparedMedium, light: Light, camera: Camera, strid
                 top = np.array(mean.shape[:3], np.float64) - 1.0 - 1e-9
                 for _ in range(3):  # beyond the lattice, the direction at its nearest edge
                     src = source_index(trilinear(mean, np.clip(src, 0.0, top)))
-            moved[..., chans] = trilinear(padded[..., chans], src + 1.0).reshape(
+            moved[..., chans] = kernels.get("trilinear")(padded[..., chans], src + 1.0).reshape(
                 lev.shape[:3] + (len(chans),))
         levels[k] = moved
 

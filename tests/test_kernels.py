@@ -118,3 +118,32 @@ def test_march_rejects_bad_input():
         args[i] = bad
         with pytest.raises(ValueError):
             kernels._c.march(*args)
+
+
+@needs_c
+def test_trilinear_twins_agree_and_read_nothing_outside():
+    """The compiled trilinear (the pyramid's lookups, the drift, the escape ramp) equals
+    media.trilinear exactly: inside, on the last plane and beyond (0), at NaN and at huge
+    coordinates (0, no read outside the grid); a float64 grid goes to the numpy twin whole."""
+    from mpp_render.media import trilinear
+    rng = np.random.default_rng(4)
+    c = kernels._C_WRAPPERS["trilinear"]
+    for shape in ((7, 5, 4, 3), (2, 2, 2, 1), (9, 1, 6, 2)):
+        g = rng.random(shape).astype(np.float32)
+        idx = rng.uniform(-1.5, max(shape[:3]) + 0.5, (4000, 3))
+        idx[:4] = [[np.nan, 0, 0], [1e300, 1, 1], [-1e300, 0, 0], [0, np.inf, 0]]
+        idx[4] = np.array(shape[:3]) - 1.0                       # the last corner: outside
+        idx[5] = np.array(shape[:3]) - 1.0 - 1e-9                # just inside where it can be
+        with np.errstate(invalid="ignore"):
+            want = trilinear(g, idx)
+        got = c(g, idx)
+        assert got.shape == want.shape and np.array_equal(got, want)
+        assert np.all(got[:5] == 0.0)
+        assert np.array_equal(c(g[..., 0].copy(), idx), want[:, 0])
+    g64 = rng.random((5, 5, 5, 2))
+    pts = rng.uniform(0, 4, (50, 3))
+    assert np.array_equal(c(g64, pts), trilinear(g64, pts))
+    with pytest.raises(ValueError):
+        kernels._c.trilinear(np.zeros((3, 3, 3, 1), np.float32), np.zeros((4, 2)))
+    with pytest.raises(ValueError):
+        kernels._c.trilinear(np.zeros((3, 3, 3), np.float32), np.zeros((4, 3)))
