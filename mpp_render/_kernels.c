@@ -934,6 +934,7 @@ done:
 #define SPOT_GATE_MARGIN 1.05
 #define L_COND 35
 #define L_BEAM 36   /* the channel of the forward peak's light (W/m^2), < 1: none */
+#define L_INDIRECT 37  /* 1: scattered light (a surface's bounce): its single scattering is multiple */
 #define REFINE_STEPS 8
 #define EDGE_EPS 1e-6
 #define T_MIN 1e-6
@@ -1303,9 +1304,10 @@ static PyObject *march(PyObject *self, PyObject *args) {
         goto done;
     }
     const double *LR = (const double *)bl.view.buf;
-    int chan[MAX_LIGHTS], beam[MAX_LIGHTS];
+    int chan[MAX_LIGHTS], beam[MAX_LIGHTS], indirect[MAX_LIGHTS];
     for (Py_ssize_t l = 0; l < nl; l++) {
         double cf = LR[l * LIGHT_FIELDS + L_CHANNEL], kf = LR[l * LIGHT_FIELDS + L_KIND];
+        indirect[l] = LR[l * LIGHT_FIELDS + L_INDIRECT] > 0.5;
         double bf = LR[l * LIGHT_FIELDS + L_BEAM];
         beam[l] = (cf >= 0 && bf >= 1.0 && bf < 1e9) ? (int)bf : -1;
         for (int m = 0; m < ng; m++)
@@ -1510,7 +1512,7 @@ static PyObject *march(PyObject *self, PyObject *args) {
                     if (use_em)
                         for (int a = 0; a < 3; a++) src_em[a] += emit[m][a];
                     int edge = g[m].thr >= 0.0 && v[0] > EDGE_EPS && v[0] < 1.0 - EDGE_EPS;
-                    double inc[3] = {0, 0, 0}, beam_inc[3] = {0, 0, 0};
+                    double inc[3] = {0, 0, 0}, beam_inc[3] = {0, 0, 0}, ind_inc[3] = {0, 0, 0};
                     for (Py_ssize_t l = 0; l < nl; l++) {
                         int c = chan[l];
                         if (c < 0) continue;
@@ -1520,7 +1522,8 @@ static PyObject *march(PyObject *self, PyObject *args) {
                         double cs = -(wi[l][0] * d[0] + wi[l][1] * d[1] + wi[l][2] * d[2]);
                         double p = hg_phase(cs, gg[m]);
                         exp3(tau, tau);
-                        for (int a = 0; a < 3; a++) inc[a] += p * e[l][a] * tau[a];
+                        double *to = indirect[l] ? ind_inc : inc;  /* a bounce's light: multiple */
+                        for (int a = 0; a < 3; a++) to[a] += p * e[l][a] * tau[a];
                         if (cb >= 0)  /* the forward peak's light (precompute.peak_light) */
                             for (int a = 0; a < 3; a++)
                                 beam_inc[a] += p * (v[cb + a] > 0.0 ? v[cb + a] : 0.0);
@@ -1528,6 +1531,7 @@ static PyObject *march(PyObject *self, PyObject *args) {
                     if (ambient >= 0)
                         for (int a = 0; a < 3; a++) inc[a] += v[ambient + a];
                     for (int a = 0; a < 3; a++) src[a] += rho * sig_s[m][a] * inc[a];
+                    for (int a = 0; a < 3; a++) src_ms[a] += rho * sig_s[m][a] * ind_inc[a];
                     if (use_ms) {
                         double cosl[MAX_LIGHTS], msi[3];
                         for (Py_ssize_t l = 0; l < nl; l++)

@@ -13,7 +13,9 @@ where R = base colour x (1 - metallic) is the surface's diffuse albedo, A the re
 area (m^2) and <E> the irradiance the scene's lights bring onto it (W/m^2: cosine to the
 normal, attenuated through the media, averaged over ``SUB`` x ``SUB`` points of the
 rectangle, points off the mesh counting as dark).  The media then scatter the rectangle's
-light like any area light's, once exactly in the march and multiply through its pyramid.
+light like any area light's, once exactly in the march and multiply through its pyramid;
+being light that has bounced, all of it lands in Volume Multiple (``Light.indirect``), as
+Cycles counts it in Volume Indirect.
 
 Left out: curved surfaces (no single plane to tile), the surfaces' shadows on each other,
 specular reflection, light that reaches the surface only after scattering in the media, and
@@ -158,6 +160,6 @@ def bounce_lights(surfaces: List[Surface], lights: List[Light], media: List[Prep
             m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = e1 * size[0], e2 * size[1], -n, c
             out.append(Light("AREA", f"{surface.name} (bounce {i},{j})", p, position=c.copy(),
                              direction=n.copy(), matrix=m, shape="RECTANGLE", size_x=1.0,
-                             size_y=1.0, normalize=True))
+                             size_y=1.0, normalize=True, indirect=True))
     out.sort(key=lambda l: -float(np.sum(l.strength)))
     return out[:MAX_LIGHTS]

@@ -295,6 +295,8 @@ SPOT_GATE_MARGIN = 1.05  # widens the disc's angular radius in the one-point tes
 L_COND = 35  # condition number of the spot's inverse matrix (how much it can widen angles)
 L_BEAM = 36  # the channel of the light's forward-peak light (W/m^2), or < 1: none
 # (precompute.FieldLayout.beam_channels; read by the march with multiple scattering only)
+L_INDIRECT = 37  # 1: the light is scattered light (scene.Light.indirect): its single
+# scattering is added to the multiple output
 DIM_JITTER = 1000       # random dimension of the step jitter; lights use 2*i, 2*i + 1
 REFINE_STEPS = 8
 EDGE_EPS = 1e-6        # occupancies within this of 0 or 1 count as outside / inside
@@ -761,6 +763,7 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
                     if thresholds[mi] >= 0 else np.zeros(0, np.int64)
                 inc = np.zeros((m, 3))
                 beam_inc = np.zeros((m, 3))
+                ind_inc = np.zeros((m, 3))   # indirect lights' single scattering
                 for li, rec in enumerate(lights):
                     c = int(rec[L_CHANNEL])
                     if c < 0:
@@ -774,13 +777,17 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
                                                  wc[edge], dc[edge], 0.5 * voxels[mi])
                     cos = -np.einsum("ij,ij->i", wi, d)
                     pe = hg(cos, gs[mi])[:, None] * e
-                    inc += pe * np.exp(-tau)
+                    if rec[L_INDIRECT] > 0.5:
+                        ind_inc += pe * np.exp(-tau)
+                    else:
+                        inc += pe * np.exp(-tau)
                     cb = int(rec[L_BEAM])
                     if multiple is not None and cb >= 1:  # channel 0 is the density: none
                         beam_inc += hg(cos, gs[mi])[:, None] * np.maximum(v[:, cb:cb + 3], 0.0)
                 if ambient >= 0:
                     inc += v[:, ambient:ambient + 3]
                 src += rho[:, None] * sigma_ss[mi][None, :] * inc
+                src_ms += rho[:, None] * sigma_ss[mi][None, :] * ind_inc
                 if multiple is not None:
                     src_ms += rho[:, None] * sigma_ss[mi][None, :] * beam_inc
                     amb_ms, per_medium, tables = multiple

@@ -25,7 +25,8 @@ from __future__ import annotations
 import numpy as np
 
 from .kernels_np import (KIND_AREA, KIND_POINT, KIND_SPOT, KIND_SUN, L_AREA, L_AX, L_AY,
-                         L_BEAM, L_BLEND, L_CHANNEL, L_COND, L_COSHALF, L_DIR, L_INV, L_KIND, L_NORMAL,
+                         L_BEAM, L_BLEND, L_CHANNEL, L_COND, L_COSHALF, L_DIR, L_INDIRECT, L_INV,
+                         L_KIND, L_NORMAL,
                          L_NORMALIZE, L_POS, L_RADIUS, L_ROUND, L_STRENGTH, LIGHT_FIELDS,
                          light_sample)
 from .scene import Light
@@ -78,6 +79,7 @@ def pack_light(light: Light, channel: int = -1, beam: int = -1) -> np.ndarray:
         r[L_ROUND] = 1.0 if light.shape in ("DISK", "ELLIPSE") else 0.0
     r[L_CHANNEL] = channel
     r[L_BEAM] = beam
+    r[L_INDIRECT] = 1.0 if getattr(light, "indirect", False) else 0.0
     return r
 
 

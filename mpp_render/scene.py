@@ -55,6 +55,9 @@ class Light:
     ``shape``: area shape 'SQUARE', 'RECTANGLE', 'DISK' or 'ELLIPSE'; ``size_x``/``size_y``:
     metres in the light's local X/Y (before the object's scale, which ``matrix`` carries).
     ``normalize``: area power is spread over the area (Cycles' default).
+    ``indirect``: the light is itself scattered light (bounce.py's light from a surface): its
+    first scattering in the media counts as multiple scattering (Cycles' Volume Indirect),
+    not single.
     """
 
     kind: str
@@ -71,6 +74,7 @@ class Light:
     size_x: float = 1.0
     size_y: float = 1.0
     normalize: bool = True
+    indirect: bool = False
 
 
 @dataclass

@@ -53,10 +53,18 @@ def unjittered_lights():
                   direction=np.array([0, 0, -1.0]), matrix=spot_m, spot_size=0.8, spot_blend=0.3)]
 
 
+def indirect_lights():
+    """all_lights with the point and the area light standing for scattered light (a
+    surface's bounce, scene.Light.indirect)."""
+    lights = all_lights()
+    lights[1].indirect = lights[3].indirect = True
+    return lights
+
+
 @needs_c
 @pytest.mark.parametrize("lights,density", [(all_lights(), 2.0), (unjittered_lights(), 2.0),
-                                            (unjittered_lights(), 0.1)],
-                         ids=["all", "unjittered", "unjittered-thin"])
+                                            (unjittered_lights(), 0.1), (indirect_lights(), 2.0)],
+                         ids=["all", "unjittered", "unjittered-thin", "indirect"])
 def test_march_twins_agree_on_random_rays(lights, density):
     rng = np.random.default_rng(5)
     media = random_media(rng, density)
@@ -147,3 +155,30 @@ def test_trilinear_twins_agree_and_read_nothing_outside():
         kernels._c.trilinear(np.zeros((3, 3, 3, 1), np.float32), np.zeros((4, 2)))
     with pytest.raises(ValueError):
         kernels._c.trilinear(np.zeros((3, 3, 3), np.float32), np.zeros((4, 3)))
+
+
+@pytest.mark.parametrize("backend", ["numpy", pytest.param("c", marks=needs_c)])
+def test_an_indirect_lights_single_scattering_is_multiple(backend):
+    """A light marked indirect (a surface's bounce) gives the same total, its single
+    scattering moved from the single output to the multiple one."""
+    rng = np.random.default_rng(8)
+    media = random_media(rng)
+    cam = Camera("PERSP", np.eye(4), 8, 8, (-0.5, 0.5, -0.5, 0.5))
+    cam.cam_to_world[:3, 3] = [0, 0, 6]
+    o, d, t0, t1 = downward_rays(rng, 500, 2.0, 0.3, 2.5)
+    axial, keys = rng.uniform(0.5, 1, 500), rng.integers(0, 2**32, 500, dtype=np.uint32)
+    march = kernels_np.march if backend == "numpy" else kernels.c_march
+    out = []
+    for lights in (all_lights(), indirect_lights()):
+        pre = precompute(media, lights, World(np.zeros(3)), cam, n_dirs=8, multiple=True)
+        multiple = MarchContext(media, pre.fields, pre.layout, lights, 0.07, pre.multiple).multiple
+        out.append(march(o, d, t0, t1, axial, keys, pre.fields, [m.w2i for m in media],
+                         [m.sigma_s for m in media], [m.sigma_t for m in media],
+                         [m.g for m in media], [m.threshold for m in media],
+                         [m.voxel_size for m in media], pack_lights(lights, pre.layout), -1,
+                         0.07, 0.01, 1e10, multiple))
+    (s0, T0, _, m0, _, _), (s1, T1, _, m1, _, _) = out
+    assert np.array_equal(T0, T1)
+    assert np.allclose(s0 + m0, s1 + m1, rtol=1e-9, atol=1e-15)
+    moved = s0.sum() - s1.sum()
+    assert moved > 0.2 * s0.sum() and np.allclose(m1.sum() - m0.sum(), moved, rtol=1e-9)
