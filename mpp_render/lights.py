@@ -79,7 +79,7 @@ def pack_light(light: Light, channel: int = -1, beam: int = -1) -> np.ndarray:
         r[L_ROUND] = 1.0 if light.shape in ("DISK", "ELLIPSE") else 0.0
     r[L_CHANNEL] = channel
     r[L_BEAM] = beam
-    r[L_INDIRECT] = 1.0 if getattr(light, "indirect", False) else 0.0
+    r[L_INDIRECT] = 1.0 if light.indirect else 0.0
     return r
 
 
