@@ -43,7 +43,7 @@ import numpy as np
 from . import kernels, kernels_np
 from .camera import towards_camera
 from .lights import is_dark, towards_light
-from .media import PreparedMedium, density_from, trilinear, union_interval
+from .media import PreparedMedium, density_from, union_interval
 from .phase import sample_hg
 from .scene import Camera, Light, World
 from .surfaces import occluded
@@ -718,6 +718,7 @@ def drift_levels(levels, pm: PreparedMedium, light: Light, camera: Camera, strid
     paths = [level_paths(h, len(levels), l_c, g) for l_c, _ in groups]
     if directions is not None:
         mean_directions = mean_source_directions(directions, light, pm, stride)
+    read = kernels.get("trilinear")   # a float64 grid (the mean directions) reads on numpy
     for k in range(len(levels)):
         lev = levels[k]
         idx, x = lattice_points(pm, lev.shape[:3], stride * 2 ** k)
@@ -737,8 +738,8 @@ def drift_levels(levels, pm: PreparedMedium, light: Light, camera: Camera, strid
                 mean = mean_directions[k]
                 top = np.array(mean.shape[:3], np.float64) - 1.0 - 1e-9
                 for _ in range(3):  # beyond the lattice, the direction at its nearest edge
-                    src = source_index(trilinear(mean, np.clip(src, 0.0, top)))
-            moved[..., chans] = kernels.get("trilinear")(padded[..., chans], src + 1.0).reshape(
+                    src = source_index(read(mean, np.clip(src, 0.0, top)))
+            moved[..., chans] = read(padded[..., chans], src + 1.0).reshape(
                 lev.shape[:3] + (len(chans),))
         levels[k] = moved
 
@@ -755,7 +756,7 @@ def mean_source_directions(directions, light: Light, pm: PreparedMedium, stride:
         idx, x = lattice_points(pm, sums.shape[:3], stride * 2 ** k)
         if k + 1 < len(directions):
             coarser = np.pad(out[k + 1], ((1, 1), (1, 1), (1, 1), (0, 0)), mode="edge")
-            mean = trilinear(coarser, idx / 2.0 + 1.0)
+            mean = kernels.get("trilinear")(coarser, idx / 2.0 + 1.0)
         else:
             mean = light_direction(light, x)
         power = sums[..., 3].reshape(-1)
@@ -937,7 +938,7 @@ def near_sharp_surfaces(pm: PreparedMedium, media: List[PreparedMedium]):
             idx = world @ m.w2i[:, :3].T + m.w2i[:, 3]
             near = np.flatnonzero(np.all((idx > -1.0) & (idx < np.array(m.grid.shape)), axis=1))
             inside = np.zeros(len(world), bool)   # beyond m's grid m has no density
-            inside[near] = trilinear(m.grid, idx[near]) >= m.threshold
+            inside[near] = kernels.get("trilinear")(m.grid, idx[near]) >= m.threshold
             inside = inside.reshape(pm.grid.shape)
             out |= _dilate(inside) & _dilate(~inside)
     return np.flatnonzero(out)
