@@ -6,6 +6,7 @@ import pytest
 
 from mpp_render import precompute, pyramid
 from mpp_render.kernels_np import level_paths, walk_displacement
+from mpp_render.media import trilinear
 from mpp_render.phase import sample_hg
 from mpp_render.scene import Camera, Light
 
@@ -182,7 +183,7 @@ def test_a_spot_beam_drifts_along_the_beam_not_from_the_light():
         shift = l_tr * (drift * d + beta * (v - g * g * np.exp(-u) * d)) / (h * 2 ** k)
         idx = precompute.lattice_index(before[k].shape[:3])
         padded = np.pad(before[k], ((1, 1), (1, 1), (1, 1), (0, 0)))
-        want = precompute.trilinear(padded, idx - shift + 1.0).reshape(before[k].shape)
+        want = trilinear(padded, idx - shift + 1.0).reshape(before[k].shape)
         top = float(before[k].max())
         np.testing.assert_allclose(levels[k], want, atol=1e-4 * top)
         if k >= 1:
