@@ -507,7 +507,7 @@ def level_paths(h, levels, l_tr, g):
     return out
 
 
-def level_table(g, sigma_s, sigma_a, h, levels):
+def level_table(g, sigma_s, sigma_a, h, levels, after_first=False):
     """Per pyramid level k, density rho (RHO_TABLE) and colour channel, the path-length
     weight int e^(-sigma_a rho l) dl (m) over the paths the level stands for, and the
     anisotropy g g* e^(-l_k / l_tr) of the last scattering: (levels, len(RHO_TABLE), 6)
@@ -521,11 +521,18 @@ def level_table(g, sigma_s, sigma_a, h, levels):
     with mean cosine g* where the beam first scatters out of the forward peak; the last
     scattering, towards the camera, is the medium's own HG(g) of light whose mean cosine is
     g* e^(-u).  Level k (width W_k = h 2^k, level 0 unblurred) stands for the paths whose
-    spread w(l) lies within a factor sqrt(2) of W_k."""
-    from .phase import delta_g
+    spread w(l) lies within a factor sqrt(2) of W_k.
+
+    ``after_first``: only the paths that have scattered again since their first scattering
+    (the first flight is then firstflight.py's): a path of length l has not with probability
+    P1 = e^(-sigma_s* l), so the weight is int e^(-sigma_a l) (1 - e^(-sigma_s* l)) dl, and
+    the mean cosine of those that have is g* (e^(-u) - P1) / (1 - P1) (the straight ones keep
+    g*)."""
+    from .phase import delta_fraction, delta_g
     rho = RHO_TABLE
     b1 = max(1.0 - g, 1e-6)
     g_walk = delta_g(g)
+    keep = 1.0 - delta_fraction(g)
     out = np.zeros((levels, len(rho), 6))
     for c, (s_c, a_c) in enumerate(zip(np.broadcast_to(np.asarray(sigma_s, np.float64), (3,)),
                                        np.broadcast_to(np.asarray(sigma_a, np.float64), (3,)))):
@@ -533,8 +540,17 @@ def level_table(g, sigma_s, sigma_a, h, levels):
         with np.errstate(divide="ignore"):
             l_tr = np.where(ss > 0, 1.0 / (ss * b1), np.inf)
         for k, (lo, hi, l_k) in enumerate(level_paths(h, levels, l_tr, g_walk)):
-            out[k, :, c] = np.exp(-sa * lo) * (hi - lo) * _phi1(sa * (hi - lo))
-            out[k, :, 3 + c] = g * g_walk * np.exp(-l_k / l_tr)
+            span = hi - lo
+            out[k, :, c] = np.exp(-sa * lo) * span * _phi1(sa * span)
+            mean_cos = np.exp(-l_k / l_tr)
+            if after_first:
+                st = sa + ss * keep
+                out[k, :, c] = np.maximum(
+                    out[k, :, c] - np.exp(-st * lo) * span * _phi1(st * span), 0.0)
+                p1 = np.exp(-ss * keep * l_k)
+                mean_cos = np.where(p1 < 1.0 - 1e-9,
+                                    (mean_cos - p1) / np.maximum(1.0 - p1, 1e-12), mean_cos)
+            out[k, :, 3 + c] = g * g_walk * mean_cos
     return out
 
 

@@ -102,7 +102,11 @@ class MarchContext:
                 if FLATTEN and ref is not None and pm.threshold >= 0.0 and \
                         self.camera is not None and \
                         str(self.camera.projection).upper() in ("PERSP", "ORTHO"):
-                    flat = flatten_levels(pm, mfs, self.lights, table, self.camera)
+                    after = None
+                    if any(m is not None and m.first is not None for m in mfs):
+                        after = level_table(pm.g, pm.sigma_s, pm.sigma_a, ref.h,
+                                            len(ref.levels), after_first=True)
+                    flat = flatten_levels(pm, mfs, self.lights, table, self.camera, after)
                     per_medium.append([([flat], ref.stride, ref.h)] + [None] * (len(mfs) - 1))
                     tables.append(FLAT_TABLE)
                     continue
@@ -124,7 +128,7 @@ FLAT_TABLE = np.concatenate([np.full((1, len(RHO_TABLE), 3), 4.0 * np.pi),
 
 
 def flatten_levels(pm: PreparedMedium, mfs, lights: List[Light], table: np.ndarray,
-                   camera: Camera) -> np.ndarray:
+                   camera: Camera, table_after: Optional[np.ndarray] = None) -> np.ndarray:
     """One level (X,Y,Z,3) float32 on the light pyramids' finest lattice: at each point y,
     sum over lights l and levels k of the level read at y times the level's weight and
     HG(cos_l(y); g_k) at density 1 (``table``: kernels_np.level_table), cos_l(y) the cosine
@@ -132,7 +136,12 @@ def flatten_levels(pm: PreparedMedium, mfs, lights: List[Light], table: np.ndarr
     kernels_np.multiple_source computes at a march sample of a density-1 medium, with the
     phase factor interpolated between lattice points instead of taken at the sample (it
     varies over metres, the lattice is centimetres).  An area light's direction is its
-    centre's (the march jitters it over the area)."""
+    centre's (the march jitters it over the area).
+
+    A light whose MultipleField carries an exact first flight (``first``, firstflight.py)
+    adds, by its weight w per channel, that flight plus the levels read through
+    ``table_after`` (level_table(..., after_first=True): the paths that scattered again),
+    and 1 - w of the levels through ``table``."""
     from .camera import towards_camera
     from .kernels_np import hg, light_sample, table_lookup, upsample
     from .precompute import lattice_points
@@ -141,6 +150,7 @@ def flatten_levels(pm: PreparedMedium, mfs, lights: List[Light], table: np.ndarr
     _, x = lattice_points(pm, shape, ref.stride)
     v = towards_camera(camera, x)
     tab = table_lookup(table, np.ones(1))[:, 0, :]   # (levels, 6) at density 1
+    tab_after = None if table_after is None else table_lookup(table_after, np.ones(1))[:, 0, :]
     out = np.zeros(tuple(shape) + (3,), np.float64)
     for light, msf in zip(lights, mfs):
         if msf is None:
@@ -148,9 +158,23 @@ def flatten_levels(pm: PreparedMedium, mfs, lights: List[Light], table: np.ndarr
         half = np.full(len(x), 0.5)
         wi = light_sample(pack_light(light), x, half, half)[0]
         cos = np.einsum("ij,ij->i", wi, v)   # the kernels' -(wi . d): d = -v
-        for k, lev in enumerate(msf.levels[:len(tab)]):
-            up = upsample(lev, 2 ** k, shape).reshape(-1, 3)
-            out += (up * (tab[k, :3] * hg(cos[:, None], tab[k, 3:]))).reshape(out.shape)
+        ups = [upsample(lev, 2 ** k, shape).reshape(-1, 3)
+               for k, lev in enumerate(msf.levels[:len(tab)])]
+
+        def summed(t):
+            acc = np.zeros((len(x), 3))
+            for k, up in enumerate(ups):
+                acc += up * (t[k, :3] * hg(cos[:, None], t[k, 3:]))
+            return acc.reshape(out.shape)
+
+        first = msf.first if tab_after is not None else None
+        if first is None:
+            out += summed(tab)
+            continue
+        w = np.asarray(first.weight, np.float64)
+        if np.any(w < 1.0):
+            out += (1.0 - w) * summed(tab)
+        out += w * (summed(tab_after) + first.field)
     return np.ascontiguousarray(out, np.float32)
 
 

@@ -46,6 +46,7 @@ from .lights import is_dark, towards_light
 from .media import PreparedMedium, density_from, union_interval
 from .phase import sample_hg
 from .scene import Camera, Light, World
+from .firstflight import FirstFlight, first_flight
 from .surfaces import occluded
 from .worldfog import optical_depth as fog_optical_depth
 
@@ -376,11 +377,15 @@ class MultipleField:
     the first-scattering source and the medium's occupancy, on a lattice ``stride`` voxels
     apart (spacing ``h`` metres).  Level channels: the RGB power per volume (W/m^3) that the
     light's unscattered beam scatters, Q = sigma_s E exp(-tau) (the start of every multiply
-    scattered path), each level moved by its paths' drift (``drift_levels``)."""
+    scattered path), each level moved by its paths' drift (``drift_levels``).  ``first``:
+    None, or for a mesh volume whose first flights mostly leave it the exact first flight
+    (firstflight.FirstFlight on the finest lattice) that replaces the walk's, by its weight
+    (march.flatten_levels)."""
 
     stride: int
     h: float
     levels: list
+    first: Optional["FirstFlight"] = None
 
 
 NEAR_LIGHT_CELLS = 3  # lattice cells around a point or spot light whose source is averaged
@@ -656,11 +661,23 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
                                  lambda x: light_direction(light, x))
     if should_cancel and should_cancel():
         return None
+    first = None
+    if pm.threshold >= 0.0 and camera is not None and \
+            str(camera.projection).upper() in ("PERSP", "ORTHO"):
+        # a mesh volume, whose levels the march sums once (march.flatten_levels): the first
+        # flight exact where the first flights mostly leave the medium (firstflight.py)
+        first = first_flight(base.reshape(tuple(shape) + (3,)), (rho > 0).reshape(shape),
+                             stride * pm.i2w[:3, :3], light_direction(light, pts),
+                             towards_camera(camera, pts), g,
+                             g if g_last is None else float(g_last),
+                             np.asarray(pm.sigma_t, np.float64) * mean_rho, should_cancel)
+        if should_cancel and should_cancel():
+            return None
     levels, directions = source_pyramid(base, light, pts, shape, g, max_levels, keep)
     if should_cancel and should_cancel():
         return None
     drift_levels(levels, pm, light, camera, stride, h, sigma_s, directions, g_last)
-    return MultipleField(stride, h, levels)
+    return MultipleField(stride, h, levels, first)
 
 
 def source_pyramid(base, light: Light, pts, shape, g: float, max_levels: int, keep=None):

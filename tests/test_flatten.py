@@ -27,6 +27,9 @@ def scene(projection="PERSP"):
 
 @pytest.mark.parametrize("projection", ["PERSP", "ORTHO"])
 def test_flattened_pyramids_render_what_the_levels_did(projection, monkeypatch):
+    # the exact first flight (firstflight.py) joins only the flattened level: compare the walk
+    from mpp_render import firstflight
+    monkeypatch.setattr(firstflight, "ENABLED", False)
     desc = scene(projection)
     flat = render(desc).passes["Volume Multiple"][..., :3]
     monkeypatch.setattr(march, "FLATTEN", False)
@@ -57,3 +60,30 @@ def test_only_mesh_volumes_are_flattened():
     ctx = march.MarchContext([cloud], pre.fields, pre.layout, desc.lights, 0.05, pre.multiple,
                              desc.camera)
     assert all(m is not None and len(m[0]) > 1 for m in ctx.multiple[1][0])
+
+
+def test_the_first_flight_joins_the_flattened_level():
+    """This box's blue channel flies far (sigma_t* 1.9 / m in a 1.6 m box): its first flights
+    mostly leave, and the exact flight changes the flattened level there, not elsewhere."""
+    from mpp_render import firstflight
+    from mpp_render.media import prepare
+    from mpp_render.precompute import precompute
+    desc = scene()
+    pm = prepare(desc.media[0])
+    pre = precompute([pm], desc.lights, desc.world, desc.camera, multiple=True)
+    firsts = [m.first for m in pre.multiple[0]]
+    assert all(f is not None for f in firsts)
+    for f in firsts:
+        assert f.weight[2] > 0.0 and np.all(np.isfinite(f.field)) and f.field[..., 2].max() > 0
+    ctx = march.MarchContext([pm], pre.fields, pre.layout, desc.lights, 0.05, pre.multiple,
+                             desc.camera)
+    with_first = ctx.multiple[1][0][0][0][0]
+    for m in pre.multiple[0]:
+        m.first = None
+    ctx = march.MarchContext([pm], pre.fields, pre.layout, desc.lights, 0.05, pre.multiple,
+                             desc.camera)
+    walk = ctx.multiple[1][0][0][0][0]
+    weight = np.max([f.weight for f in firsts], axis=0)
+    for c in range(3):
+        changed = not np.allclose(with_first[..., c], walk[..., c], rtol=1e-6, atol=0.0)
+        assert changed == (weight[c] > 0.0), (c, weight)

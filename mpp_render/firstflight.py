@@ -1,0 +1,306 @@
+"""The first flight of multiple scattering, evaluated exactly on the light pyramid's lattice.
+
+Every multiply scattered path starts at a first scattering out of the beam (the source Q of
+``precompute.lattice_source``, W/m^3) and flies straight to its next event.  The walk of the
+light pyramid spreads that first flight, like every later one, as an isotropic Gaussian about
+its mean displacement; where the first flights are long -- a medium thinner than its mean
+free path, such as fog round a spot light's beam -- that puts their light in the wrong place:
+a flight's direction is tied to where it goes, and the last scattering towards the camera
+(HG of the medium's own g) favours the flights that travel along the line of sight.  Here
+the first flight is instead the convolution
+
+    F1(x) = int Q(y) p1(d . r^) e^(-sigma_t* |r|) / |r|^2  p(r^ . w) d^3y ,   r = x - y
+
+(W/(m^2 sr) per unit sigma_s at x: the march multiplies by the local sigma_s), with p1 the
+walk's HG(g*) about the light's direction d at the sources, sigma_t* the delta-scaled
+medium's extinction (1/m; the forward peak's scatterings keep the light on its course), p the
+medium's own HG(g) and w the direction to the camera.  It is evaluated by FFT on the lattice,
+one kernel per colour channel and camera direction (a few directions spread over what the
+camera sees of the medium, interpolated between); the walk then carries only the paths with
+at least one more scattering (``kernels_np.level_table(..., after_first=True)``).  See
+docs/method.md, "The first flight, exact".
+
+Where the first flights mostly stay in the medium the walk's calibration (its escape through
+the surface) holds and the exact flight changes little or does worse (a dense, forward slab);
+where they mostly leave, the walk misplaces them.  The two are blended by the fraction of the
+first flights' power that leaves the medium before its next event (``escape_fraction``):
+the walk alone below ``ESCAPE_LOW``, the exact flight alone above ``ESCAPE_HIGH``, linear in
+between (thresholds from the public scenes: docs/method.md).
+
+Conventions: lattice index axes map to world by ``stride * pm.i2w[:3, :3]`` (metres per
+lattice step; any affine grid), directions are unit world vectors of propagation, sigma in
+1/m, HG in 1/sr.  No bpy.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Optional
+
+import numpy as np
+
+from .phase import hg
+
+ENABLED = True      # a switch for tests and benchmarks: False leaves the walk alone
+ESCAPE_LOW = 0.3    # escape fraction at or below which the walk alone is used
+ESCAPE_HIGH = 0.5   # escape fraction at or above which the exact first flight alone is used
+ESCAPE_RESOLUTION = 32   # lattice points along the longest axis for the escape fraction
+MAX_DIRECTIONS = 9       # camera directions convolved at most
+DIRECTION_STEP = np.radians(6.0)   # angle between neighbouring camera directions
+MAX_FFT_POINTS = 1 << 24   # larger lattices keep the walk alone (memory: ~0.2 GB per transform)
+NEAR_DIRECTIONS = 4096   # directions integrating the 27 cells round a flight's start
+
+
+@dataclass
+class FirstFlight:
+    """The exact first flight of one light on one medium: ``field`` (X,Y,Z,3) float32 on the
+    light pyramid's finest lattice (W/(m^2 sr) per unit sigma_s, RGB), and per channel the
+    ``weight`` (3,) in [0, 1] with which it replaces the walk's first flight."""
+
+    field: np.ndarray
+    weight: np.ndarray
+
+
+def sphere_directions(n: int) -> np.ndarray:
+    """``n`` unit vectors spread evenly over the sphere (a Fibonacci lattice), (n,3)."""
+    i = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * i / n
+    phi = np.pi * (1.0 + 5.0 ** 0.5) * i
+    s = np.sqrt(np.maximum(0.0, 1.0 - z * z))
+    return np.stack([s * np.cos(phi), s * np.sin(phi), z], axis=1)
+
+
+def near_cells(axes, d, g1: float, sigma_t: float, w=None, g2: float = 0.0,
+               n_dirs: int = NEAR_DIRECTIONS) -> np.ndarray:
+    """The kernel's integral over each of the 27 cells round the origin (3,3,3), exactly
+    along every ray from the origin -- the cell's share of int e^(-sigma_t r) dr = the
+    difference of e^(-sigma_t r) where the ray enters and leaves it, over sigma_t -- and by
+    ``n_dirs`` evenly spread directions over the sphere: the steep 1/r^2 and e^(-sigma_t r)
+    of a dense medium's first flights, which a few points per cell would miss."""
+    omega = sphere_directions(n_dirs)
+    ang = hg(omega @ np.asarray(d, np.float64), g1) * (4.0 * np.pi / n_dirs)
+    if w is not None:
+        ang = ang * hg(omega @ np.asarray(w, np.float64), g2)
+    step = omega @ np.linalg.inv(np.asarray(axes, np.float64)).T   # index units per metre
+    with np.errstate(divide="ignore"):
+        planes = np.concatenate([np.abs(0.5 / step), np.abs(1.5 / step)], axis=1)
+    exit_r = np.min(np.abs(1.5 / np.where(step != 0.0, step, 1e-300)), axis=1)
+    out = np.zeros((3, 3, 3))
+    rs = np.sort(np.where(np.isfinite(planes), planes, np.inf), axis=1)
+    rs = np.concatenate([np.zeros((len(omega), 1)), rs], axis=1)
+    for j in range(rs.shape[1] - 1):
+        a, b = rs[:, j], np.minimum(rs[:, j + 1], exit_r)
+        ok = b > a
+        if not np.any(ok):
+            continue
+        mid = 0.5 * (a[ok] + b[ok])
+        cell = np.rint(step[ok] * mid[:, None]).astype(np.int64) + 1
+        inside = np.all((cell >= 0) & (cell <= 2), axis=1)
+        mass = ang[ok] * (np.exp(-sigma_t * a[ok]) - np.exp(-sigma_t * b[ok])) / sigma_t
+        np.add.at(out, tuple(cell[inside].T), mass[inside])
+    return out
+
+
+def flight_kernel(axes, half, d, g1: float, sigma_t: float, w=None, g2: float = 0.0,
+                  n_dirs: int = NEAR_DIRECTIONS) -> np.ndarray:
+    """The first-flight kernel on the lattice offsets -(n-1)..(n-1) per axis (``half`` = n,
+    3 ints): each cell's integral of p1(d . r^) e^(-sigma_t |r|) / |r|^2 [p2(r^ . w)] over
+    its volume (m for the bare kernel: int of 1/m^2 over m^3; times 1/sr with ``w``).
+    ``axes`` (3,3): world vector (m) of one lattice step along each index axis (columns);
+    p1 = HG(g1), p2 = HG(g2) towards unit ``w`` (omitted when None).  The 27 cells round the
+    origin, where 1/r^2 is steep, are integrated along rays (``near_cells``); the others take
+    their centre's value.  Over all space the bare kernel integrates to 1 / sigma_t, and with
+    ``w`` to HG(d . w; g1 g2) / sigma_t (HG composed with HG)."""
+    axes = np.asarray(axes, np.float64)
+    d = np.asarray(d, np.float64)
+    vol = abs(float(np.linalg.det(axes)))
+    ranges = [np.arange(-(n - 1), n, dtype=np.float64) for n in half]
+    k = np.empty(tuple(len(r) for r in ranges))
+    yz = np.stack(np.meshgrid(ranges[1], ranges[2], indexing="ij"), -1) @ axes[:, 1:].T
+    for i, a in enumerate(ranges[0]):   # plane by plane: a few arrays of one plane at a time
+        r = yz + a * axes[:, 0]
+        with np.errstate(over="ignore", under="ignore", divide="ignore", invalid="ignore"):
+            rr = np.sqrt(np.einsum("...i,...i->...", r, r))
+            safe = np.maximum(rr, 1e-300)
+            u = r / safe[..., None]
+            plane = hg(u @ d, g1) * np.exp(-sigma_t * rr) / (safe * safe) * vol
+            if w is not None:
+                plane = plane * hg(u @ np.asarray(w, np.float64), g2)
+        k[i] = plane
+    near = near_cells(axes, d, g1, sigma_t, w, g2, n_dirs)
+    c = [n - 1 for n in half]
+    lo = [max(0, ci - 1) for ci in c]
+    hi = [min(k.shape[i], c[i] + 2) for i in range(3)]
+    k[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]] = near[lo[0] - c[0] + 1:hi[0] - c[0] + 1,
+                                                    lo[1] - c[1] + 1:hi[1] - c[1] + 1,
+                                                    lo[2] - c[2] + 1:hi[2] - c[2] + 1]
+    return k
+
+
+def _smooth_length(n: int) -> int:
+    """The smallest 2^a 3^b 5^c >= n: FFT lengths numpy transforms fast (2n - 1 is often a
+    prime, several times slower)."""
+    best = 1 << max(0, int(n - 1).bit_length())
+    p3 = 1
+    while p3 < best:
+        p35 = p3
+        while p35 < best:
+            m = p35
+            while m < n:
+                m *= 2
+            best = min(best, m)
+            p35 *= 5
+        p3 *= 3
+    return best
+
+
+def _fft_shape(shape):
+    """The FFT size of a linear convolution of a lattice of ``shape`` with a kernel over
+    its offsets -(n-1)..(n-1): at least 2n - 1 per axis (the periodic copies then fall
+    outside the part kept)."""
+    return tuple(_smooth_length(2 * n - 1) for n in shape)
+
+
+def spectrum(a, shape):
+    """The FFT of a source or kernel on the padded size of ``shape``'s linear convolution."""
+    return np.fft.rfftn(a, s=_fft_shape(shape))
+
+
+def convolve(fq, fk, shape) -> np.ndarray:
+    """The linear (not circular) convolution of a source on a lattice of ``shape`` with a
+    kernel of flight_kernel(half = shape), from their ``spectrum``s ``fq`` and ``fk``:
+    (X,Y,Z) float64 on the source's lattice."""
+    out = np.fft.irfftn(fq * fk, s=_fft_shape(shape))
+    return out[shape[0] - 1:2 * shape[0] - 1, shape[1] - 1:2 * shape[1] - 1,
+               shape[2] - 1:2 * shape[2] - 1]
+
+
+def _block_sum(a, c):
+    """Sum of ``a`` (X,Y,Z,...) over blocks of c^3 lattice points (zero-padded)."""
+    pad = [(0, (-n) % c) for n in a.shape[:3]] + [(0, 0)] * (a.ndim - 3)
+    p = np.pad(a, pad)
+    s = p.shape
+    return p.reshape(s[0] // c, c, s[1] // c, c, s[2] // c, c, *s[3:]).sum(axis=(1, 3, 5))
+
+
+def escape_fraction(q, inside, axes, d, g1: float, sigma_t) -> np.ndarray:
+    """Per colour channel, the fraction (3,) of the first flights' power that leaves the
+    medium before its next event: 1 - sigma_t int_inside phi / int Q, phi the fluence of the
+    first flights (Q convolved with the bare kernel).  ``q`` (X,Y,Z,3) W/m^3, ``inside``
+    (X,Y,Z) bool, ``sigma_t`` (3,) 1/m.  Computed on a lattice of at most
+    ESCAPE_RESOLUTION points along its longest axis (blocks of the source summed): it is one
+    number per channel.  Channels without power give 0."""
+    c = max(1, int(np.ceil(max(q.shape[:3]) / ESCAPE_RESOLUTION)))
+    qc = _block_sum(q, c) / float(c ** 3)               # mean power density per block
+    occ = _block_sum(inside.astype(np.float64), c) / float(c ** 3)
+    shape = qc.shape[:3]
+    out = np.zeros(3)
+    total = qc.sum(axis=(0, 1, 2))
+    kernels = {}
+    for ch in range(3):
+        if not total[ch] > 0.0:
+            continue
+        s = float(sigma_t[ch])
+        if s not in kernels:
+            kernels[s] = spectrum(flight_kernel(axes * c, shape, d, g1, s), shape)
+        phi = convolve(spectrum(qc[..., ch], shape), kernels[s], shape)
+        collided = s * float(np.sum(np.maximum(phi, 0.0) * occ))
+        out[ch] = min(1.0, max(0.0, 1.0 - collided / float(total[ch])))
+    return out
+
+
+def blend_weight(escape) -> np.ndarray:
+    """The exact first flight's weight from the escape fraction: 0 at ESCAPE_LOW and below,
+    1 at ESCAPE_HIGH and above, linear between."""
+    return np.clip((np.asarray(escape, np.float64) - ESCAPE_LOW) / (ESCAPE_HIGH - ESCAPE_LOW),
+                   0.0, 1.0)
+
+
+def camera_directions(v, inside_v):
+    """(directions (n,3), per point weights (N,n)) for the directions to the camera ``v``
+    (N,3, unit, one per lattice point): n directions spread along the principal axis of the
+    spread of ``inside_v`` (the directions from the medium's points) DIRECTION_STEP apart (at
+    most MAX_DIRECTIONS), each point interpolating the two nearest linearly."""
+    c0 = inside_v.mean(axis=0)
+    c0 = c0 / max(float(np.linalg.norm(c0)), 1e-30)
+    dev = inside_v - c0
+    if len(dev) > 1 and np.any(dev):
+        axis = np.linalg.svd(dev, full_matrices=False)[2][0]
+    else:
+        axis = np.zeros(3)
+    t_in = inside_v @ axis
+    lo, hi = float(t_in.min()), float(t_in.max())
+    n = int(min(MAX_DIRECTIONS, max(1, np.ceil((hi - lo) / DIRECTION_STEP) + 1)))
+    if n == 1:
+        return c0[None, :], np.ones((len(v), 1))
+    ts = np.linspace(lo, hi, n)
+    dirs = c0[None, :] + ts[:, None] * axis[None, :]
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    f = np.clip((v @ axis - lo) / (hi - lo) * (n - 1), 0.0, n - 1 - 1e-9)
+    i = np.floor(f).astype(np.int64)
+    t = f - i
+    wts = np.zeros((len(v), n))
+    wts[np.arange(len(v)), i] = 1.0 - t
+    wts[np.arange(len(v)), i + 1] = t
+    return dirs, wts
+
+
+def first_flight(q, inside, axes, source_dirs, v, g_walk: float, g_last: float, sigma_t,
+                 should_cancel: Optional[Callable[[], bool]] = None) -> Optional[FirstFlight]:
+    """The exact first flight of one light on one medium, or None where the walk alone serves
+    (every channel's escape fraction at or below ESCAPE_LOW, no power) or when cancelled.
+
+    ``q`` (X,Y,Z,3): the first-scattering source on the pyramid's lattice (W/m^3, the walk's,
+    of the delta-scaled medium); ``inside`` (X,Y,Z) bool: the lattice points in the medium;
+    ``axes`` (3,3): world metres per lattice step (columns); ``source_dirs`` (N,3): the
+    light's propagation direction at every lattice point; ``v`` (N,3): the direction from
+    every lattice point to the camera; ``g_walk`` the delta-scaled medium's g* (the first
+    scattering's), ``g_last`` the medium's own g (the last scattering's, towards the camera);
+    ``sigma_t`` (3,) the delta-scaled medium's mean extinction where it has density (1/m).
+
+    d is the sources' power-weighted mean direction and the first scattering's anisotropy
+    g* |mean|, which keeps the mean of the flights' directions where the light arrives from
+    several (round a point light: isotropic)."""
+    if not ENABLED:
+        return None
+    shape = q.shape[:3]
+    power = q.sum(axis=-1).reshape(-1)
+    total = float(power.sum())
+    sigma_t = np.broadcast_to(np.asarray(sigma_t, np.float64), (3,))
+    if not total > 0.0 or not np.any(inside) or not np.all(sigma_t > 0.0):
+        return None
+    mean = (source_dirs * power[:, None]).sum(axis=0) / total
+    norm = float(np.linalg.norm(mean))
+    d = mean / norm if norm > 1e-12 else np.array([0.0, 0.0, 1.0])
+    g1 = float(g_walk) * min(norm, 1.0)
+    weight = blend_weight(escape_fraction(q, inside, axes, d, g1, sigma_t))
+    if not np.any(weight > 0.0):
+        return None
+    if int(np.prod(_fft_shape(shape))) > MAX_FFT_POINTS:
+        return None
+    dirs, wts = camera_directions(v, v[inside.reshape(-1)])
+    out = np.zeros(tuple(shape) + (3,))
+    # a channel whose source is another's times a constant, with the same sigma_t (a grey
+    # medium under a light of any colour), is that channel's flight times the constant
+    sums = q.sum(axis=(0, 1, 2))
+    same = {}
+    for ch in (c for c in range(3) if weight[c] > 0.0 and sums[c] > 0.0):
+        for r in same:
+            if sigma_t[r] == sigma_t[ch] and sums[r] > 0.0 and np.allclose(
+                    q[..., ch] * sums[r], q[..., r] * sums[ch], rtol=1e-6, atol=0.0):
+                same[r].append(ch)
+                break
+        else:
+            same[ch] = [ch]
+    fq = {r: spectrum(q[..., r], shape) for r in same}
+    for j, w in enumerate(dirs):
+        fk = {}
+        for r, chans in same.items():
+            if should_cancel and should_cancel():
+                return None
+            s = float(sigma_t[r])
+            if s not in fk:
+                fk[s] = spectrum(flight_kernel(axes, shape, d, g1, s, w, g_last), shape)
+            f = convolve(fq[r], fk[s], shape) * wts[:, j].reshape(shape)
+            for ch in chans:
+                out[..., ch] += f * (sums[ch] / sums[r])
+    return FirstFlight(np.ascontiguousarray(np.maximum(out, 0.0), np.float32), weight)

@@ -1,0 +1,182 @@
+"""The exact first flight (firstflight.py): its kernel's integrals, the convolution's
+orientation, the escape fraction and blend, the walk's table without the first flight, and
+how the march's flattened level takes it."""
+import numpy as np
+import pytest
+
+from mpp_render import firstflight as ff
+from mpp_render.kernels_np import level_paths, level_table, table_lookup
+from mpp_render.phase import delta_fraction, delta_g, hg
+
+
+def rotation(a, b, c):
+    ca, sa, cb, sb, cc, sc = np.cos(a), np.sin(a), np.cos(b), np.sin(b), np.cos(c), np.sin(c)
+    rx = np.array([[1, 0, 0], [0, ca, -sa], [0, sa, ca]])
+    ry = np.array([[cb, 0, sb], [0, 1, 0], [-sb, 0, cb]])
+    rz = np.array([[cc, -sc, 0], [sc, cc, 0], [0, 0, 1]])
+    return rz @ ry @ rx
+
+
+@pytest.mark.parametrize("axes", [np.eye(3) * 0.1,
+                                  rotation(0.3, -0.7, 1.1) @ np.diag([0.1, 0.12, 0.08])])
+def test_the_bare_kernel_integrates_to_the_mean_free_path(axes):
+    sigma = 2.0   # 1/m: the lattice spans 8 mean free paths either side, e^-8 beyond
+    k = ff.flight_kernel(axes, (41, 41, 41), np.array([0.0, 0.6, 0.8]), 0.5, sigma)
+    assert np.all(np.isfinite(k)) and np.all(k >= 0.0)
+    assert k.sum() * sigma == pytest.approx(1.0, abs=0.03)
+
+
+def test_the_camera_kernel_integrates_to_hg_of_the_product():
+    sigma, g1, g2 = 2.0, 0.45, 0.6
+    d = np.array([1.0, 0.0, 0.0])
+    for cos in (0.8, 0.0, -0.7):
+        w = np.array([cos, np.sqrt(1 - cos * cos), 0.0])
+        k = ff.flight_kernel(np.eye(3) * 0.1, (41, 41, 41), d, g1, sigma, w, g2)
+        assert k.sum() * sigma == pytest.approx(float(hg(cos, g1 * g2)), rel=0.05)
+
+
+def test_the_convolution_reads_the_flight_from_source_to_point():
+    """F1(x) = sum_y Q(y) K(x - y): the FFT result equals the direct sum at a few points,
+    with no wrap-around (a source in one corner lights the far corner by the kernel's far
+    offset)."""
+    rng = np.random.default_rng(3)
+    shape = (9, 7, 6)
+    axes = rotation(0.2, 0.1, -0.4) @ np.diag([0.2, 0.25, 0.15])
+    d, w = np.array([0.0, 0.0, 1.0]), np.array([0.6, 0.0, 0.8])
+    k = ff.flight_kernel(axes, shape, d, 0.6, 1.3, w, 0.8)
+    q = rng.random(shape)
+    out = ff.convolve(ff.spectrum(q, shape), ff.spectrum(k, shape), shape)
+    for x in [(0, 0, 0), (8, 6, 5), (4, 3, 2), (8, 0, 5)]:
+        direct = sum(q[y] * k[tuple(np.array(x) - np.array(y) + np.array(shape) - 1)]
+                     for y in np.ndindex(shape))
+        assert out[x] == pytest.approx(direct, rel=1e-9)
+    corner = np.zeros(shape)
+    corner[0, 0, 0] = 1.0
+    far = ff.convolve(ff.spectrum(corner, shape), ff.spectrum(k, shape), shape)
+    assert far[8, 6, 5] == pytest.approx(k[16, 12, 10], rel=1e-9)
+
+
+def beam_box(n=(24, 12, 12), h=0.1):
+    """A box lattice with a beam along +x through its middle, scattering evenly from two
+    lattice steps inside the box's faces: (q, inside, axes, dirs)."""
+    q = np.zeros(n + (3,))
+    q[2:n[0] - 2, n[1] // 2, n[2] // 2, :] = 1.0
+    inside = np.ones(n, bool)
+    dirs = np.tile([1.0, 0.0, 0.0], (int(np.prod(n)), 1))
+    return q, inside, np.eye(3) * h, dirs
+
+
+def test_the_escape_fraction_falls_with_the_optical_size():
+    fractions = []
+    for sigma in (0.05, 0.5, 2.0, 8.0, 50.0):
+        q, inside, axes, dirs = beam_box()
+        e = ff.escape_fraction(q, inside, axes, np.array([1.0, 0, 0]), 0.4, np.full(3, sigma))
+        assert np.all((e >= 0.0) & (e <= 1.0)) and np.ptp(e) < 1e-12
+        fractions.append(e[0])
+    assert fractions[0] > 0.85 and fractions[-1] < 0.05
+    assert np.all(np.diff(fractions) < 0.0)
+
+
+def test_the_blend_weight_ramps_between_the_thresholds():
+    e = np.array([0.0, ff.ESCAPE_LOW, 0.5 * (ff.ESCAPE_LOW + ff.ESCAPE_HIGH), ff.ESCAPE_HIGH, 1.0])
+    assert ff.blend_weight(e).tolist() == pytest.approx([0.0, 0.0, 0.5, 1.0, 1.0])
+
+
+def test_a_thin_box_takes_the_exact_flight_and_a_dense_one_the_walk():
+    n = (24, 12, 12)
+    v = np.tile([0.0, -1.0, 0.0], (int(np.prod(n)), 1))   # the camera far along -y
+    q, inside, axes, dirs = beam_box(n)
+    thin = ff.first_flight(q, inside, axes, dirs, v, 0.45, 0.85, np.full(3, 0.05))
+    assert thin is not None and thin.weight.tolist() == [1.0, 1.0, 1.0]
+    f = thin.field
+    assert f.shape == n + (3,) and f.dtype == np.float32 and np.all(np.isfinite(f))
+    # light that left the beam reaches the whole box, most of it near the beam
+    assert np.all(f[..., 0] > 0.0)
+    assert f[12, 6, 6, 0] > 5.0 * f[12, 0, 0, 0]
+    q, inside, axes, dirs = beam_box(n)
+    assert ff.first_flight(q, inside, axes, dirs, v, 0.45, 0.85, np.full(3, 50.0)) is None
+    # nothing to fly: no power, or a medium that does not scatter
+    assert ff.first_flight(np.zeros(n + (3,)), inside, axes, dirs, v, 0.4, 0.8,
+                           np.full(3, 0.05)) is None
+    assert ff.first_flight(q, inside, axes, dirs, v, 0.4, 0.8, np.zeros(3)) is None
+
+
+def test_channels_of_one_source_shape_fly_once():
+    """A grey medium under a coloured light: channels whose sources are proportional share
+    one convolution, and give what separate ones give."""
+    n = (16, 10, 10)
+    v = np.tile([0.0, -0.6, 0.8], (int(np.prod(n)), 1))
+    q, inside, axes, dirs = beam_box(n)
+    q *= np.array([1.0, 0.5, 0.2])
+    shared = ff.first_flight(q, inside, axes, dirs, v, 0.45, 0.85, np.full(3, 0.05))
+    apart = q.copy()
+    apart[8, 5, 5, 1] *= 1.001   # no longer proportional: three convolutions
+    alone = ff.first_flight(apart, inside, axes, dirs, v, 0.45, 0.85, np.full(3, 0.05))
+    assert np.allclose(shared.field[..., 1], 0.5 * shared.field[..., 0], rtol=1e-5)
+    assert np.allclose(shared.field, alone.field, rtol=2e-3, atol=1e-6 * shared.field.max())
+
+
+def test_the_camera_directions_interpolate_across_the_view():
+    rng = np.random.default_rng(0)
+    v = rng.normal(size=(500, 3)) * [0.3, 0.05, 0.0] + [0.0, 0.0, -1.0]
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    dirs, wts = ff.camera_directions(v, v)
+    assert 2 <= len(dirs) <= ff.MAX_DIRECTIONS
+    assert np.allclose(wts.sum(axis=1), 1.0) and np.all(wts >= 0.0)
+    # the interpolated direction is close to each point's own (within the step)
+    mix = wts @ dirs
+    mix /= np.linalg.norm(mix, axis=1, keepdims=True)
+    off = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", mix, v), -1, 1)))
+    assert np.percentile(off, 90) < 8.0
+    one, w1 = ff.camera_directions(v[:1], v[:1])
+    assert len(one) == 1 and np.allclose(w1, 1.0)
+
+
+@pytest.mark.parametrize("g", [0.0, 0.5, 0.85])
+def test_the_walk_after_the_first_flight_is_the_walk_less_the_straight_paths(g):
+    """Per level, weight(all) - weight(after_first) = int e^-(sigma_a + sigma_s*) l dl over the
+    level's paths: the paths that have not scattered again; their mean cosine drops."""
+    ss, sa, h, n = np.array([4.0, 2.0, 0.5]), np.array([0.3, 0.1, 0.05]), 0.05, 10
+    full = level_table(g, ss, sa, h, n)
+    after = level_table(g, ss, sa, h, n, after_first=True)
+    rho = np.array([1.0])
+    a, b = table_lookup(full, rho)[:, 0], table_lookup(after, rho)[:, 0]
+    keep = 1.0 - delta_fraction(g)
+    for c in range(3):
+        l_tr = 1.0 / (ss[c] * max(1.0 - g, 1e-6))
+        st = sa[c] + ss[c] * keep
+        for k, (lo, hi, _) in enumerate(level_paths(h, n, np.array(l_tr), delta_g(g))):
+            straight = (np.exp(-st * lo) - np.exp(-st * hi)) / st
+            assert a[k, c] - b[k, c] == pytest.approx(float(straight), rel=1e-6, abs=1e-12)
+    assert np.all(b[:, :3] >= 0.0) and np.all(b[:, :3] <= a[:, :3])
+    if g > 0:
+        assert np.all(b[:, 3:] <= a[:, 3:] + 1e-12) and np.all(b[:, 3:] >= 0.0)
+
+
+def test_the_flattened_level_takes_the_first_flight_by_its_weight():
+    """One light whose walk is zero: the flattened level is the exact flight times its weight;
+    a weight of 0 leaves what the walk gives."""
+    from mpp_render import march
+    from mpp_render.media import prepare
+    from mpp_render.precompute import MultipleField
+    from mpp_render.scene import Camera, Light, Medium
+    n = 8
+    i2w = np.eye(4)
+    i2w[:3, :3] *= 0.1
+    pm = prepare(Medium("box", np.ones((n, n, n), np.float32), i2w, np.full(3, 1.0),
+                        np.full(3, 0.1), 0.5, source="MESH"))
+    c2w = np.array([[1.0, 0, 0, 0.3], [0, 0, -1, -4.0], [0, 1, 0, 0.4], [0, 0, 0, 1]])
+    cam = Camera("PERSP", c2w, 8, 8, (-0.3, 0.3, -0.3, 0.3), 0.1, 100.0)
+    light = Light("SUN", "sun", np.full(3, 2.0), direction=np.array([0.0, 0.0, -1.0]))
+    shape = (6, 6, 6)
+    levels = [np.zeros(shape + (3,), np.float32), np.zeros((3, 3, 3, 3), np.float32)]
+    field = np.random.default_rng(1).random(shape + (3,)).astype(np.float32)
+    table = level_table(0.5, pm.sigma_s, pm.sigma_a, 0.1, 2)
+    after = level_table(0.5, pm.sigma_s, pm.sigma_a, 0.1, 2, after_first=True)
+    mf = MultipleField(2, 0.2, levels, ff.FirstFlight(field, np.array([1.0, 0.5, 0.0])))
+    out = march.flatten_levels(pm, [mf], [light], table, cam, after)
+    assert np.allclose(out, field * np.array([1.0, 0.5, 0.0], np.float32))
+    levels[0][:] = 1.0
+    mf0 = MultipleField(2, 0.2, levels, ff.FirstFlight(field, np.zeros(3)))
+    walk = march.flatten_levels(pm, [MultipleField(2, 0.2, levels)], [light], table, cam)
+    assert np.array_equal(march.flatten_levels(pm, [mf0], [light], table, cam, after), walk)
