@@ -180,3 +180,23 @@ def test_the_flattened_level_takes_the_first_flight_by_its_weight():
     mf0 = MultipleField(2, 0.2, levels, ff.FirstFlight(field, np.zeros(3)))
     walk = march.flatten_levels(pm, [MultipleField(2, 0.2, levels)], [light], table, cam)
     assert np.array_equal(march.flatten_levels(pm, [mf0], [light], table, cam, after), walk)
+
+
+@pytest.mark.parametrize("g_walk,g_last", [(-0.9, -0.99), (0.0, 0.0), (0.497, 0.99), (0.3, -0.5)])
+@pytest.mark.parametrize("sigma", [1e-6, 0.05, 1e4])
+def test_stiff_flights_stay_finite(g_walk, g_last, sigma):
+    """Anisotropy near +-1, a nearly transparent and an opaque medium (optical depth 1e3 per
+    lattice step), the light from all sides (its mean direction 0): finite, non-negative."""
+    n = (12, 8, 8)
+    q, inside, axes, dirs = beam_box(n)
+    dirs = np.random.default_rng(2).normal(size=dirs.shape)
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    dirs[: len(dirs) // 2] = -dirs[len(dirs) - len(dirs) // 2:][: len(dirs) // 2]
+    v = np.tile([0.0, -1.0, 0.0], (int(np.prod(n)), 1))
+    out = ff.first_flight(q, inside, axes, dirs, v, g_walk, g_last, np.full(3, sigma))
+    if sigma >= 1e4:
+        assert out is None   # every flight ends in its own cell: the walk alone
+    else:
+        assert out is not None and out.weight.tolist() == [1.0, 1.0, 1.0]
+        assert np.all(np.isfinite(out.field)) and np.all(out.field >= 0.0)
+        assert out.field.max() > 0.0
