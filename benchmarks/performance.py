@@ -312,7 +312,7 @@ BOUNDS = {
         "box), so the per-sample cost above bounds it; per-tile numpy work is ~5 % since the "
         "tiles grew to 64 px."),
     "speedup": (
-        "Our error on slab_forward (0.072-0.074) and fog_beam (0.45-0.46) is the multiple "
+        "Our error on slab_forward (0.072-0.074) and fog_beam (0.21-0.31) is the multiple "
         "scattering model's bias, not noise: more samples do not lower it, and Cycles does not "
         "reach it within 64 spp on either (the speedups are lower bounds, 64-spp seconds over "
         "ours).  30x would need our whole render in ~80 ms (slab_forward) or ~60 ms "

@@ -188,7 +188,7 @@ def escape_fraction(q, inside, axes, d, g1: float, sigma_t) -> np.ndarray:
     first flights (Q convolved with the bare kernel).  ``q`` (X,Y,Z,3) W/m^3, ``inside``
     (X,Y,Z) bool, ``sigma_t`` (3,) 1/m.  Computed on a lattice of at most
     ESCAPE_RESOLUTION points along its longest axis (blocks of the source summed): it is one
-    number per channel.  Channels without power give 0."""
+    number per channel.  Channels without power or extinction give 0."""
     c = max(1, int(np.ceil(max(q.shape[:3]) / ESCAPE_RESOLUTION)))
     qc = _block_sum(q, c) / float(c ** 3)               # mean power density per block
     occ = _block_sum(inside.astype(np.float64), c) / float(c ** 3)
@@ -197,7 +197,7 @@ def escape_fraction(q, inside, axes, d, g1: float, sigma_t) -> np.ndarray:
     total = qc.sum(axis=(0, 1, 2))
     kernels = {}
     for ch in range(3):
-        if not total[ch] > 0.0:
+        if not (total[ch] > 0.0 and sigma_t[ch] > 0.0):
             continue
         s = float(sigma_t[ch])
         if s not in kernels:
@@ -266,13 +266,14 @@ def first_flight(q, inside, axes, source_dirs, v, g_walk: float, g_last: float, 
     power = q.sum(axis=-1).reshape(-1)
     total = float(power.sum())
     sigma_t = np.broadcast_to(np.asarray(sigma_t, np.float64), (3,))
-    if not total > 0.0 or not np.any(inside) or not np.all(sigma_t > 0.0):
+    if not total > 0.0 or not np.any(inside) or not np.any(sigma_t > 0.0):
         return None
     mean = (source_dirs * power[:, None]).sum(axis=0) / total
     norm = float(np.linalg.norm(mean))
     d = mean / norm if norm > 1e-12 else np.array([0.0, 0.0, 1.0])
     g1 = float(g_walk) * min(norm, 1.0)
     weight = blend_weight(escape_fraction(q, inside, axes, d, g1, sigma_t))
+    weight[~(sigma_t > 0.0)] = 0.0
     if not np.any(weight > 0.0):
         return None
     if int(np.prod(_fft_shape(shape))) > MAX_FFT_POINTS:

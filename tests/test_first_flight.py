@@ -99,6 +99,10 @@ def test_a_thin_box_takes_the_exact_flight_and_a_dense_one_the_walk():
     assert ff.first_flight(np.zeros(n + (3,)), inside, axes, dirs, v, 0.4, 0.8,
                            np.full(3, 0.05)) is None
     assert ff.first_flight(q, inside, axes, dirs, v, 0.4, 0.8, np.zeros(3)) is None
+    # a channel that does not scatter nor absorb flies nowhere; the others still do
+    q[..., 2] = 0.0
+    part = ff.first_flight(q, inside, axes, dirs, v, 0.4, 0.8, np.array([0.05, 0.05, 0.0]))
+    assert part.weight.tolist() == [1.0, 1.0, 0.0] and not np.any(part.field[..., 2])
 
 
 def test_channels_of_one_source_shape_fly_once():
