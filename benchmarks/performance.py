@@ -38,7 +38,7 @@ os.environ["MPP_CACHE_MB"] = "0"
 sys.path.insert(0, REPO)
 SCENES = os.path.join(os.path.dirname(REPO), "shared", "scenes")
 
-from mpp_render import kernels, march, precompute, render as render_mod  # noqa: E402
+from mpp_render import firstflight, kernels, march, precompute, render as render_mod  # noqa: E402
 from mpp_render.camera import camera_plane  # noqa: E402
 from mpp_render.render import render  # noqa: E402
 from mpp_render.scene import Camera, Light, Medium, SceneDescription, Settings, World  # noqa: E402
@@ -110,6 +110,19 @@ def mesh_scene(n=96, w=160, h=120, spp=1):
                             settings=Settings(samples=spp, multiple=True))
 
 
+def fog_box_scene(n=96, w=160, h=120, spp=1):
+    """A thin mesh volume: a 4 x 4 x 2 m box of fog (sigma_s 0.95 /m, sigma_a 0.05 /m, g 0.85)
+    under a sun, multiple scattering on: its first flights mostly leave it
+    (firstflight.py)."""
+    i2w = np.eye(4)
+    i2w[:3, :3] = np.diag([4.0 / n, 4.0 / n, 4.0 / n])
+    i2w[:3, 3] = [-2.0, -2.0, -1.0]
+    box = Medium("fog box", np.ones((n, n, n // 2), np.float32), i2w, np.full(3, 0.95),
+                 np.full(3, 0.05), 0.85, source="MESH")
+    return SceneDescription(camera(w, h), [sun()], [box], world=World(np.zeros(3)),
+                            settings=Settings(samples=spp, multiple=True))
+
+
 class Switch:
     """Set module attributes for the duration of a ``with`` block."""
 
@@ -120,7 +133,8 @@ class Switch:
         self.old = {}
         for key, val in self.kw.items():
             mod, attr = key.split("__")
-            m = {"march": march, "precompute": precompute, "render": render_mod}[mod]
+            m = {"march": march, "precompute": precompute, "render": render_mod,
+                 "firstflight": firstflight}[mod]
             self.old[(m, attr)] = getattr(m, attr)
             setattr(m, attr, val)
 
@@ -221,6 +235,14 @@ def skip_tables(quick):
         f"(march.FLATTEN; {m}^3 ball, a sun and a point light, {w}x{h}, 1 spp, multiple on)",
         lambda: mesh_scene(n=m, w=w, h=h), {"march__FLATTEN": False}, {"march__FLATTEN": True},
         "march")
+    add(f"precompute: the exact first flight (firstflight.ENABLED; a {m}^2 x {m // 2} "
+        "voxel 4 x 4 x 2 m fog box under a sun, its weight 1; ratio < 1: the cost)",
+        lambda: fog_box_scene(n=m), {"firstflight__ENABLED": False},
+        {"firstflight__ENABLED": True}, "precompute")
+    add(f"precompute: the first flight's escape fraction alone where the walk serves "
+        f"({m}^3 ball, a sun and a point light: weight 0, no flight computed)",
+        lambda: mesh_scene(n=m), {"firstflight__ENABLED": False},
+        {"firstflight__ENABLED": True}, "precompute")
     add(f"tiles of 64 px instead of 32 at 1 spp ({m}^3, 960x540, multiple off)",
         lambda: scene(n=m, w=960, h=540, multiple=False), {"render__TILE": 32},
         {"render__TILE": 64}, "march")

@@ -12,9 +12,10 @@ the first flight is instead the convolution
     F1(x) = int Q(y) p1(d . r^) e^(-sigma_t* |r|) / |r|^2  p(r^ . w) d^3y ,   r = x - y
 
 (W/(m^2 sr) per unit sigma_s at x: the march multiplies by the local sigma_s), with p1 the
-walk's HG(g*) about the light's direction d at the sources, sigma_t* the delta-scaled
-medium's extinction (1/m; the forward peak's scatterings keep the light on its course), p the
-medium's own HG(g) and w the direction to the camera.  It is evaluated by FFT on the lattice,
+medium's own HG(g) outside its forward peak (``first_phase``: the light scattered into the
+peak is the beam channels', precompute.peak_light) about the light's direction d at the
+sources, sigma_t* the delta-scaled medium's extinction (1/m; the forward peak's scatterings
+keep the light on its course), p the medium's own HG(g) and w the direction to the camera.  It is evaluated by FFT on the lattice,
 one kernel per colour channel and camera direction (a few directions spread over what the
 camera sees of the medium, interpolated between); the walk then carries only the paths with
 at least one more scattering (``kernels_np.level_table(..., after_first=True)``).  See
@@ -33,12 +34,13 @@ lattice step; any affine grid), directions are unit world vectors of propagation
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Callable, Optional
 
 import numpy as np
 
-from .phase import hg
+from .phase import hg, outside_peak
 
 ENABLED = True      # a switch for tests and benchmarks: False leaves the walk alone
 ESCAPE_LOW = 0.3    # escape fraction at or below which the walk alone is used
@@ -47,7 +49,8 @@ ESCAPE_RESOLUTION = 32   # lattice points along the longest axis for the escape 
 MAX_DIRECTIONS = 9       # camera directions convolved at most
 DIRECTION_STEP = np.radians(6.0)   # angle between neighbouring camera directions
 MAX_FFT_POINTS = 1 << 24   # larger lattices keep the walk alone (memory: ~0.2 GB per transform)
-NEAR_DIRECTIONS = 4096   # directions integrating the 27 cells round a flight's start
+NEAR_RADIUS = 6          # cells within this many lattice steps of a flight's start ...
+NEAR_DIRECTIONS = 16384  # ... are integrated along this many rays (``near_cells``)
 
 
 @dataclass
@@ -60,6 +63,15 @@ class FirstFlight:
     weight: np.ndarray
 
 
+def first_phase(cos_theta, g: float, spread: float):
+    """The direction of a first flight out of the beam (1/sr): HG(g) without its forward
+    peak (phase.outside_peak: the peak's light is the beam channels'), for light arriving
+    along one direction; ``spread`` in [0, 1] (the length of the mean of the light's
+    directions at the sources) mixes it with the isotropic 1 / (4 pi), which keeps the mean
+    of the flights' directions where light arrives from several."""
+    return spread * outside_peak(cos_theta, g) + (1.0 - spread) / (4.0 * np.pi)
+
+
 def sphere_directions(n: int) -> np.ndarray:
     """``n`` unit vectors spread evenly over the sphere (a Fibonacci lattice), (n,3)."""
     i = np.arange(n) + 0.5
@@ -69,47 +81,65 @@ def sphere_directions(n: int) -> np.ndarray:
     return np.stack([s * np.cos(phi), s * np.sin(phi), z], axis=1)
 
 
-def near_cells(axes, d, g1: float, sigma_t: float, w=None, g2: float = 0.0,
-               n_dirs: int = NEAR_DIRECTIONS) -> np.ndarray:
-    """The kernel's integral over each of the 27 cells round the origin (3,3,3), exactly
-    along every ray from the origin -- the cell's share of int e^(-sigma_t r) dr = the
-    difference of e^(-sigma_t r) where the ray enters and leaves it, over sigma_t -- and by
-    ``n_dirs`` evenly spread directions over the sphere: the steep 1/r^2 and e^(-sigma_t r)
-    of a dense medium's first flights, which a few points per cell would miss."""
+@functools.lru_cache(maxsize=4)   # ~10 MB each at the defaults
+def _near_segments(axes_bytes: bytes, sigma_t: float, n_dirs: int, radius: int):
+    """The rays of ``near_cells`` cut into their pieces in each cell: (directions (n,3),
+    per piece its ray, its cell's flat index in the (2 radius + 1)^3 block, and
+    int e^(-sigma_t r) dr over it (m))."""
+    axes = np.frombuffer(axes_bytes, np.float64).reshape(3, 3)
     omega = sphere_directions(n_dirs)
-    ang = hg(omega @ np.asarray(d, np.float64), g1) * (4.0 * np.pi / n_dirs)
-    if w is not None:
-        ang = ang * hg(omega @ np.asarray(w, np.float64), g2)
-    step = omega @ np.linalg.inv(np.asarray(axes, np.float64)).T   # index units per metre
-    with np.errstate(divide="ignore"):
-        planes = np.concatenate([np.abs(0.5 / step), np.abs(1.5 / step)], axis=1)
-    exit_r = np.min(np.abs(1.5 / np.where(step != 0.0, step, 1e-300)), axis=1)
-    out = np.zeros((3, 3, 3))
-    rs = np.sort(np.where(np.isfinite(planes), planes, np.inf), axis=1)
-    rs = np.concatenate([np.zeros((len(omega), 1)), rs], axis=1)
+    step = omega @ np.linalg.inv(axes).T   # index units per metre along each ray
+    safe = np.where(step != 0.0, np.abs(step), 1e-300)
+    bounds = np.arange(radius + 1) + 0.5
+    planes = (bounds[None, None, :] / safe[:, :, None]).reshape(n_dirs, -1)
+    exit_r = np.min((radius + 0.5) / safe, axis=1)
+    rs = np.concatenate([np.zeros((n_dirs, 1)), np.sort(planes, axis=1)], axis=1)
+    size = 2 * radius + 1
+    rays, cells, masses = [], [], []
     for j in range(rs.shape[1] - 1):
         a, b = rs[:, j], np.minimum(rs[:, j + 1], exit_r)
-        ok = b > a
-        if not np.any(ok):
-            continue
+        ok = np.flatnonzero(b > a)
+        if not ok.size:
+            break
         mid = 0.5 * (a[ok] + b[ok])
-        cell = np.rint(step[ok] * mid[:, None]).astype(np.int64) + 1
-        inside = np.all((cell >= 0) & (cell <= 2), axis=1)
-        mass = ang[ok] * (np.exp(-sigma_t * a[ok]) - np.exp(-sigma_t * b[ok])) / sigma_t
-        np.add.at(out, tuple(cell[inside].T), mass[inside])
-    return out
+        cell = np.rint(step[ok] * mid[:, None]).astype(np.int64) + radius
+        keep = np.all((cell >= 0) & (cell < size), axis=1)
+        rays.append(ok[keep].astype(np.int32))
+        cells.append(np.ravel_multi_index(tuple(cell[keep].T), (size,) * 3).astype(np.int32))
+        masses.append((np.exp(-sigma_t * a[ok][keep]) - np.exp(-sigma_t * b[ok][keep])) / sigma_t)
+    return omega, np.concatenate(rays), np.concatenate(cells), np.concatenate(masses)
 
 
-def flight_kernel(axes, half, d, g1: float, sigma_t: float, w=None, g2: float = 0.0,
+def near_cells(axes, d, first, sigma_t: float, w=None, g2: float = 0.0,
+               n_dirs: int = NEAR_DIRECTIONS, radius: int = NEAR_RADIUS) -> np.ndarray:
+    """The kernel's integral over each cell within ``radius`` lattice steps of the origin
+    ((2 radius + 1)^3), exactly along every ray from the origin -- the cell's share of
+    int e^(-sigma_t r) dr = the difference of e^(-sigma_t r) where the ray enters and leaves
+    it, over sigma_t -- and by ``n_dirs`` evenly spread directions over the sphere: the steep
+    1/r^2 and e^(-sigma_t r) of a dense medium's first flights, and the edge of the forward
+    peak's cone (first_phase), which a few points per cell would miss (for the kernel's sum
+    that was 5-10 % next to the cone's edge with 27 cells; within 1 % with radius 6)."""
+    axes = np.ascontiguousarray(axes, np.float64)
+    omega, rays, cells, mass = _near_segments(axes.tobytes(), float(sigma_t), int(n_dirs),
+                                              int(radius))
+    ang = first_phase(omega @ np.asarray(d, np.float64), *first) * (4.0 * np.pi / n_dirs)
+    if w is not None:
+        ang = ang * hg(omega @ np.asarray(w, np.float64), g2)
+    size = 2 * radius + 1
+    return np.bincount(cells, weights=ang[rays] * mass, minlength=size ** 3).reshape((size,) * 3)
+
+
+def flight_kernel(axes, half, d, first, sigma_t: float, w=None, g2: float = 0.0,
                   n_dirs: int = NEAR_DIRECTIONS) -> np.ndarray:
     """The first-flight kernel on the lattice offsets -(n-1)..(n-1) per axis (``half`` = n,
     3 ints): each cell's integral of p1(d . r^) e^(-sigma_t |r|) / |r|^2 [p2(r^ . w)] over
     its volume (m for the bare kernel: int of 1/m^2 over m^3; times 1/sr with ``w``).
     ``axes`` (3,3): world vector (m) of one lattice step along each index axis (columns);
-    p1 = HG(g1), p2 = HG(g2) towards unit ``w`` (omitted when None).  The 27 cells round the
-    origin, where 1/r^2 is steep, are integrated along rays (``near_cells``); the others take
-    their centre's value.  Over all space the bare kernel integrates to 1 / sigma_t, and with
-    ``w`` to HG(d . w; g1 g2) / sigma_t (HG composed with HG)."""
+    p1 = first_phase(., *first) (``first`` = (g, spread)), p2 = HG(g2) towards unit ``w``
+    (omitted when None).  The cells within NEAR_RADIUS steps of the origin, where 1/r^2 is
+    steep, are integrated along rays (``near_cells``); the others take their centre's value.  Over all space the
+    bare kernel integrates to 1 / sigma_t, and with ``w`` to (p1 composed with p2)(d . w) /
+    sigma_t."""
     axes = np.asarray(axes, np.float64)
     d = np.asarray(d, np.float64)
     vol = abs(float(np.linalg.det(axes)))
@@ -122,17 +152,18 @@ def flight_kernel(axes, half, d, g1: float, sigma_t: float, w=None, g2: float = 
             rr = np.sqrt(np.einsum("...i,...i->...", r, r))
             safe = np.maximum(rr, 1e-300)
             u = r / safe[..., None]
-            plane = hg(u @ d, g1) * np.exp(-sigma_t * rr) / (safe * safe) * vol
+            plane = first_phase(u @ d, *first) * np.exp(-sigma_t * rr) / (safe * safe) * vol
             if w is not None:
                 plane = plane * hg(u @ np.asarray(w, np.float64), g2)
         k[i] = plane
-    near = near_cells(axes, d, g1, sigma_t, w, g2, n_dirs)
+    near = near_cells(axes, d, first, sigma_t, w, g2, n_dirs, NEAR_RADIUS)
+    r = NEAR_RADIUS
     c = [n - 1 for n in half]
-    lo = [max(0, ci - 1) for ci in c]
-    hi = [min(k.shape[i], c[i] + 2) for i in range(3)]
-    k[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]] = near[lo[0] - c[0] + 1:hi[0] - c[0] + 1,
-                                                    lo[1] - c[1] + 1:hi[1] - c[1] + 1,
-                                                    lo[2] - c[2] + 1:hi[2] - c[2] + 1]
+    lo = [max(0, ci - r) for ci in c]
+    hi = [min(k.shape[i], c[i] + r + 1) for i in range(3)]
+    k[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]] = near[lo[0] - c[0] + r:hi[0] - c[0] + r,
+                                                    lo[1] - c[1] + r:hi[1] - c[1] + r,
+                                                    lo[2] - c[2] + r:hi[2] - c[2] + r]
     return k
 
 
@@ -182,7 +213,7 @@ def _block_sum(a, c):
     return p.reshape(s[0] // c, c, s[1] // c, c, s[2] // c, c, *s[3:]).sum(axis=(1, 3, 5))
 
 
-def escape_fraction(q, inside, axes, d, g1: float, sigma_t) -> np.ndarray:
+def escape_fraction(q, inside, axes, d, first, sigma_t) -> np.ndarray:
     """Per colour channel, the fraction (3,) of the first flights' power that leaves the
     medium before its next event: 1 - sigma_t int_inside phi / int Q, phi the fluence of the
     first flights (Q convolved with the bare kernel).  ``q`` (X,Y,Z,3) W/m^3, ``inside``
@@ -201,7 +232,7 @@ def escape_fraction(q, inside, axes, d, g1: float, sigma_t) -> np.ndarray:
             continue
         s = float(sigma_t[ch])
         if s not in kernels:
-            kernels[s] = spectrum(flight_kernel(axes * c, shape, d, g1, s), shape)
+            kernels[s] = spectrum(flight_kernel(axes * c, shape, d, first, s), shape)
         phi = convolve(spectrum(qc[..., ch], shape), kernels[s], shape)
         collided = s * float(np.sum(np.maximum(phi, 0.0) * occ))
         out[ch] = min(1.0, max(0.0, 1.0 - collided / float(total[ch])))
@@ -244,7 +275,7 @@ def camera_directions(v, inside_v):
     return dirs, wts
 
 
-def first_flight(q, inside, axes, source_dirs, v, g_walk: float, g_last: float, sigma_t,
+def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t,
                  should_cancel: Optional[Callable[[], bool]] = None) -> Optional[FirstFlight]:
     """The exact first flight of one light on one medium, or None where the walk alone serves
     (every channel's escape fraction at or below ESCAPE_LOW, no power) or when cancelled.
@@ -253,13 +284,14 @@ def first_flight(q, inside, axes, source_dirs, v, g_walk: float, g_last: float, 
     of the delta-scaled medium); ``inside`` (X,Y,Z) bool: the lattice points in the medium;
     ``axes`` (3,3): world metres per lattice step (columns); ``source_dirs`` (N,3): the
     light's propagation direction at every lattice point; ``v`` (N,3): the direction from
-    every lattice point to the camera; ``g_walk`` the delta-scaled medium's g* (the first
-    scattering's), ``g_last`` the medium's own g (the last scattering's, towards the camera);
-    ``sigma_t`` (3,) the delta-scaled medium's mean extinction where it has density (1/m).
+    every lattice point to the camera; ``g`` the medium's own HG anisotropy (the first
+    scattering's outside its forward peak, ``first_phase``, and the last one's towards the
+    camera); ``sigma_t`` (3,) the delta-scaled medium's mean extinction where it has density
+    (1/m).
 
-    d is the sources' power-weighted mean direction and the first scattering's anisotropy
-    g* |mean|, which keeps the mean of the flights' directions where the light arrives from
-    several (round a point light: isotropic)."""
+    d is the sources' power-weighted mean direction, and the length of that mean spreads the
+    first scattering's directions (``first_phase``): round a point light inside the medium
+    they are isotropic."""
     if not ENABLED:
         return None
     shape = q.shape[:3]
@@ -271,8 +303,8 @@ def first_flight(q, inside, axes, source_dirs, v, g_walk: float, g_last: float, 
     mean = (source_dirs * power[:, None]).sum(axis=0) / total
     norm = float(np.linalg.norm(mean))
     d = mean / norm if norm > 1e-12 else np.array([0.0, 0.0, 1.0])
-    g1 = float(g_walk) * min(norm, 1.0)
-    weight = blend_weight(escape_fraction(q, inside, axes, d, g1, sigma_t))
+    first = (float(g), min(norm, 1.0))
+    weight = blend_weight(escape_fraction(q, inside, axes, d, first, sigma_t))
     weight[~(sigma_t > 0.0)] = 0.0
     if not np.any(weight > 0.0):
         return None
@@ -300,7 +332,7 @@ def first_flight(q, inside, axes, source_dirs, v, g_walk: float, g_last: float, 
                 return None
             s = float(sigma_t[r])
             if s not in fk:
-                fk[s] = spectrum(flight_kernel(axes, shape, d, g1, s, w, g_last), shape)
+                fk[s] = spectrum(flight_kernel(axes, shape, d, first, s, w, float(g)), shape)
             f = convolve(fq[r], fk[s], shape) * wts[:, j].reshape(shape)
             for ch in chans:
                 out[..., ch] += f * (sums[ch] / sums[r])

@@ -93,6 +93,31 @@ def _peak_msa(g: float) -> float:
     return m2 / max(m0, 1e-300)
 
 
+def peak_cone_cos(g: float) -> float:
+    """The cosine of the forward cone that holds the fraction f = delta_fraction(g) of HG(g)'s
+    scattering (its forward peak): from HG's closed-form distribution of cos,
+    P(cos > c) = (1 - g^2) / (2 g) (1 / (1 - g) - 1 / sqrt(1 + g^2 - 2 g c)).  About
+    cos(26 deg) for g = 0.85; 1 (no cone) for g <= 0."""
+    g = clamp_g(g)
+    f = delta_fraction(g)
+    if f <= 0.0:
+        return 1.0
+    a = 1.0 / (1.0 - g) - 2.0 * g * f / (1.0 - g * g)
+    return float(np.clip((1.0 + g * g - 1.0 / (a * a)) / (2.0 * g), -1.0, 1.0))
+
+
+def outside_peak(cos_theta, g: float):
+    """HG(g) without its forward peak, renormalised (1/sr): HG(cos; g) / (1 - f) outside the
+    cone of ``peak_cone_cos(g)``, 0 inside -- the directions of a scattering out of the peak
+    (delta_fraction), where the delta-Eddington split puts HG(g*) instead.  HG(g) itself for
+    g <= 0."""
+    f = delta_fraction(g)
+    p = hg(cos_theta, g)
+    if f <= 0.0:
+        return p
+    return np.where(np.asarray(cos_theta) < peak_cone_cos(g), p / (1.0 - f), 0.0)
+
+
 def peak_msa(g: float) -> float:
     """The mean squared polar angle (rad^2) of the forward peak that delta_fraction splits
     off HG(g): of the directions within the forward cone that holds the fraction f of HG's

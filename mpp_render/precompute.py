@@ -668,7 +668,7 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
         # flight exact where the first flights mostly leave the medium (firstflight.py)
         first = first_flight(base.reshape(tuple(shape) + (3,)), (rho > 0).reshape(shape),
                              stride * pm.i2w[:3, :3], light_direction(light, pts),
-                             towards_camera(camera, pts), g,
+                             towards_camera(camera, pts),
                              g if g_last is None else float(g_last),
                              np.asarray(pm.sigma_t, np.float64) * mean_rho, should_cancel)
         if should_cancel and should_cancel():
