@@ -1,4 +1,4 @@
-"""The first flight of multiple scattering, evaluated exactly on the light pyramid's lattice.
+"""The first flights of multiple scattering, evaluated exactly on the light pyramid's lattice.
 
 Every multiply scattered path starts at a first scattering out of the beam (the source Q of
 ``precompute.lattice_source``, W/m^3) and flies straight to its next event.  The walk of the
@@ -15,11 +15,15 @@ the first flight is instead the convolution
 medium's own HG(g) outside its forward peak (``first_phase``: the light scattered into the
 peak is the beam channels', precompute.peak_light) about the light's direction d at the
 sources, sigma_t* the delta-scaled medium's extinction (1/m; the forward peak's scatterings
-keep the light on its course), p the medium's own HG(g) and w the direction to the camera.  It is evaluated by FFT on the lattice,
-one kernel per colour channel and camera direction (a few directions spread over what the
-camera sees of the medium, interpolated between); the walk then carries only the paths with
-at least one more scattering (``kernels_np.level_table(..., after_first=True)``).  See
-docs/method.md, "The first flight, exact".
+keep the light on its course), p the medium's own HG(g) and w the direction to the camera.
+The second flight is the same convolution of the second-scattering source sigma_s* phi1
+(phi1 the first flights' fluence, Q convolved with the kernel without its camera factor)
+with p1 composed with itself as its direction (``peak_free_twice``).  They are evaluated by
+FFT on the lattice, one kernel per colour channel, flight and camera direction (a few
+directions spread over what the camera sees of the medium, interpolated between); the walk
+then carries only the paths with at least two more scatterings
+(``kernels_np.level_table(..., exact_flights=EXACT_FLIGHTS)``).  See docs/method.md, "The
+first flight, exact".
 
 Where the first flights mostly stay in the medium the walk's calibration (its escape through
 the surface) holds and the exact flight changes little or does worse (a dense, forward slab);
@@ -43,6 +47,7 @@ import numpy as np
 from .phase import hg, outside_peak
 
 ENABLED = True      # a switch for tests and benchmarks: False leaves the walk alone
+EXACT_FLIGHTS = 2   # flights out of the beam computed exactly (march: kernels_np.level_table)
 ESCAPE_LOW = 0.3    # escape fraction at or below which the walk alone is used
 ESCAPE_HIGH = 0.5   # escape fraction at or above which the exact first flight alone is used
 ESCAPE_RESOLUTION = 32   # lattice points along the longest axis for the escape fraction
@@ -55,21 +60,62 @@ NEAR_DIRECTIONS = 16384  # ... are integrated along this many rays (``near_cells
 
 @dataclass
 class FirstFlight:
-    """The exact first flight of one light on one medium: ``field`` (X,Y,Z,3) float32 on the
+    """The exact first flights of one light on one medium: ``field`` (X,Y,Z,3) float32 on the
     light pyramid's finest lattice (W/(m^2 sr) per unit sigma_s, RGB), and per channel the
-    ``weight`` (3,) in [0, 1] with which it replaces the walk's first flight."""
+    ``weight`` (3,) in [0, 1] with which they replace the walk's."""
 
     field: np.ndarray
     weight: np.ndarray
 
 
-def first_phase(cos_theta, g: float, spread: float):
-    """The direction of a first flight out of the beam (1/sr): HG(g) without its forward
-    peak (phase.outside_peak: the peak's light is the beam channels'), for light arriving
-    along one direction; ``spread`` in [0, 1] (the length of the mean of the light's
-    directions at the sources) mixes it with the isotropic 1 / (4 pi), which keeps the mean
-    of the flights' directions where light arrives from several."""
-    return spread * outside_peak(cos_theta, g) + (1.0 - spread) / (4.0 * np.pi)
+def first_phase(cos_theta, g: float, spread: float, order: int = 1):
+    """The direction of a flight out of the beam (1/sr), about the light's direction: for
+    the first flight (``order`` 1) HG(g) without its forward peak (phase.outside_peak: the
+    peak's light is the beam channels'), for the second (``order`` 2) that composed with
+    itself (``peak_free_twice``: the second scattering out of the peak turns the first
+    flight's direction again), for light arriving along one direction.  ``spread`` in [0, 1]
+    (the length of the mean of the light's directions at the sources) mixes it with the
+    isotropic 1 / (4 pi), which keeps the mean of the flights' directions where light
+    arrives from several."""
+    p = outside_peak(cos_theta, g) if order == 1 else peak_free_twice(cos_theta, g)
+    return spread * p + (1.0 - spread) / (4.0 * np.pi)
+
+
+LEGENDRE_TERMS = 400   # terms of the composed phase function's Legendre series
+
+
+@functools.lru_cache(maxsize=16)
+def _twice_table(g: float):
+    """(cos grid, values) of phase.outside_peak(., g) composed with itself, from its Legendre
+    series: the coefficients t_l = 2 pi int p P_l dcos multiply, p o p = sum_l (2l + 1) /
+    (4 pi) t_l^2 P_l."""
+    from .phase import peak_cone_cos
+    x, wx = np.polynomial.legendre.leggauss(4 * LEGENDRE_TERMS)
+    c = peak_cone_cos(g)   # outside_peak is 0 beyond c: integrate over [-1, c] only
+    nodes, wts = 0.5 * (c + 1.0) * x + 0.5 * (c - 1.0), 0.5 * (c + 1.0) * wx
+    p = outside_peak(np.minimum(nodes, np.nextafter(c, -1.0)), g)
+    grid = np.cos(np.linspace(0.0, np.pi, 2049))
+    coef = np.empty(LEGENDRE_TERMS)
+    pl_prev, pl = np.ones_like(nodes), nodes.copy()
+    qg_prev, qg = np.ones_like(grid), grid.copy()
+    out = np.full(grid.shape, 1.0 / (4.0 * np.pi))          # l = 0: t_0 = 1
+    for l in range(1, LEGENDRE_TERMS):
+        coef[l] = 2.0 * np.pi * float(np.sum(wts * p * pl))
+        out += (2 * l + 1) / (4.0 * np.pi) * coef[l] ** 2 * qg
+        pl_prev, pl = pl, ((2 * l + 1) * nodes * pl - l * pl_prev) / (l + 1)
+        qg_prev, qg = qg, ((2 * l + 1) * grid * qg - l * qg_prev) / (l + 1)
+    return grid[::-1].copy(), np.maximum(out[::-1], 0.0)
+
+
+def peak_free_twice(cos_theta, g: float):
+    """phase.outside_peak(., g) composed with itself (1/sr): the direction, about the
+    light's, after two scatterings out of the forward peak (``_twice_table``, interpolated
+    in cos).  HG(g^2) for g <= 0 (HG composed with HG)."""
+    from .phase import delta_fraction
+    if delta_fraction(g) <= 0.0:
+        return hg(cos_theta, g * g)
+    grid, vals = _twice_table(round(float(g), 6))
+    return np.interp(np.asarray(cos_theta, np.float64), grid, vals)
 
 
 def sphere_directions(n: int) -> np.ndarray:
@@ -275,35 +321,42 @@ def camera_directions(v, inside_v):
     return dirs, wts
 
 
-def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t,
+def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=None,
                  should_cancel: Optional[Callable[[], bool]] = None) -> Optional[FirstFlight]:
-    """The exact first flight of one light on one medium, or None where the walk alone serves
-    (every channel's escape fraction at or below ESCAPE_LOW, no power) or when cancelled.
+    """The exact first flights of one light on one medium, or None where the walk alone
+    serves (every channel's escape fraction at or below ESCAPE_LOW, no power) or when
+    cancelled: the first flight out of the beam and, where ``sigma_s`` is given, the second
+    (EXACT_FLIGHTS), from the second-scattering source sigma_s* phi1 (phi1 the first
+    flights' fluence in the medium) with the direction ``first_phase(..., order=2)``.
 
     ``q`` (X,Y,Z,3): the first-scattering source on the pyramid's lattice (W/m^3, the walk's,
     of the delta-scaled medium); ``inside`` (X,Y,Z) bool: the lattice points in the medium;
     ``axes`` (3,3): world metres per lattice step (columns); ``source_dirs`` (N,3): the
     light's propagation direction at every lattice point; ``v`` (N,3): the direction from
-    every lattice point to the camera; ``g`` the medium's own HG anisotropy (the first
-    scattering's outside its forward peak, ``first_phase``, and the last one's towards the
-    camera); ``sigma_t`` (3,) the delta-scaled medium's mean extinction where it has density
-    (1/m).
+    every lattice point to the camera; ``g`` the medium's own HG anisotropy (the scatterings'
+    outside its forward peak, ``first_phase``, and the last one's towards the camera);
+    ``sigma_t``, ``sigma_s`` (3,) the delta-scaled medium's mean extinction and scattering
+    where it has density (1/m).
 
     d is the sources' power-weighted mean direction, and the length of that mean spreads the
-    first scattering's directions (``first_phase``): round a point light inside the medium
-    they are isotropic."""
+    flights' directions (``first_phase``): round a point light inside the medium they are
+    isotropic."""
     if not ENABLED:
         return None
     shape = q.shape[:3]
     power = q.sum(axis=-1).reshape(-1)
     total = float(power.sum())
     sigma_t = np.broadcast_to(np.asarray(sigma_t, np.float64), (3,))
+    second = sigma_s is not None
+    sigma_s = np.zeros(3) if sigma_s is None else \
+        np.broadcast_to(np.asarray(sigma_s, np.float64), (3,))
     if not total > 0.0 or not np.any(inside) or not np.any(sigma_t > 0.0):
         return None
     mean = (source_dirs * power[:, None]).sum(axis=0) / total
     norm = float(np.linalg.norm(mean))
     d = mean / norm if norm > 1e-12 else np.array([0.0, 0.0, 1.0])
-    first = (float(g), min(norm, 1.0))
+    spread = min(norm, 1.0)
+    first = (float(g), spread)
     weight = blend_weight(escape_fraction(q, inside, axes, d, first, sigma_t))
     weight[~(sigma_t > 0.0)] = 0.0
     if not np.any(weight > 0.0):
@@ -312,28 +365,44 @@ def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t,
         return None
     dirs, wts = camera_directions(v, v[inside.reshape(-1)])
     out = np.zeros(tuple(shape) + (3,))
-    # a channel whose source is another's times a constant, with the same sigma_t (a grey
-    # medium under a light of any colour), is that channel's flight times the constant
+    # a channel whose source is another's times a constant, with the same coefficients (a
+    # grey medium under a light of any colour), is that channel's flight times the constant
     sums = q.sum(axis=(0, 1, 2))
     same = {}
     for ch in (c for c in range(3) if weight[c] > 0.0 and sums[c] > 0.0):
         for r in same:
-            if sigma_t[r] == sigma_t[ch] and sums[r] > 0.0 and np.allclose(
+            if sigma_t[r] == sigma_t[ch] and sigma_s[r] == sigma_s[ch] and np.allclose(
                     q[..., ch] * sums[r], q[..., r] * sums[ch], rtol=1e-6, atol=0.0):
                 same[r].append(ch)
                 break
         else:
             same[ch] = [ch]
-    fq = {r: spectrum(q[..., r], shape) for r in same}
+    sources = {}   # per representative channel: the spectra of the first and second sources
+    bare = {}
+    for r in same:
+        if should_cancel and should_cancel():
+            return None
+        fq = spectrum(q[..., r], shape)
+        sources[r] = [(fq, 1)]
+        if second and sigma_s[r] > 0.0:
+            s = float(sigma_t[r])
+            if s not in bare:
+                bare[s] = spectrum(flight_kernel(axes, shape, d, first, s), shape)
+            q2 = np.where(inside, float(sigma_s[r]) * np.maximum(convolve(fq, bare[s], shape), 0.0), 0.0)
+            sources[r].append((spectrum(q2, shape), 2))
     for j, w in enumerate(dirs):
         fk = {}
         for r, chans in same.items():
             if should_cancel and should_cancel():
                 return None
             s = float(sigma_t[r])
-            if s not in fk:
-                fk[s] = spectrum(flight_kernel(axes, shape, d, first, s, w, float(g)), shape)
-            f = convolve(fq[r], fk[s], shape) * wts[:, j].reshape(shape)
+            f = 0.0
+            for fq, order in sources[r]:
+                if (s, order) not in fk:
+                    fk[(s, order)] = spectrum(flight_kernel(axes, shape, d, (float(g), spread, order),
+                                                            s, w, float(g)), shape)
+                f = f + convolve(fq, fk[(s, order)], shape)
+            f = f * wts[:, j].reshape(shape)
             for ch in chans:
                 out[..., ch] += f * (sums[ch] / sums[r])
     return FirstFlight(np.ascontiguousarray(np.maximum(out, 0.0), np.float32), weight)

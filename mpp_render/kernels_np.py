@@ -507,7 +507,7 @@ def level_paths(h, levels, l_tr, g):
     return out
 
 
-def level_table(g, sigma_s, sigma_a, h, levels, after_first=False):
+def level_table(g, sigma_s, sigma_a, h, levels, exact_flights=0):
     """Per pyramid level k, density rho (RHO_TABLE) and colour channel, the path-length
     weight int e^(-sigma_a rho l) dl (m) over the paths the level stands for, and the
     anisotropy g g* e^(-l_k / l_tr) of the last scattering: (levels, len(RHO_TABLE), 6)
@@ -523,33 +523,50 @@ def level_table(g, sigma_s, sigma_a, h, levels, after_first=False):
     g* e^(-u).  Level k (width W_k = h 2^k, level 0 unblurred) stands for the paths whose
     spread w(l) lies within a factor sqrt(2) of W_k.
 
-    ``after_first``: only the paths that have scattered again since their first scattering
-    (the first flight is then firstflight.py's): a path of length l has not with probability
-    P1 = e^(-sigma_s* l), so the weight is int e^(-sigma_a l) (1 - e^(-sigma_s* l)) dl, and
-    the mean cosine of those that have is g* (e^(-u) - P1) / (1 - P1) (the straight ones keep
-    g*)."""
+    ``exact_flights`` (0, 1 or 2): only the paths that have scattered at least that many
+    times since their first scattering (their first flights are then firstflight.py's): a
+    path of length l has scattered n times with the Poisson probability P_n =
+    (sigma_s* l)^n e^(-sigma_s* l) / n!, so the weight is int e^(-sigma_a l) (1 - sum_{n <
+    exact_flights} P_n) dl, and the mean cosine of those paths is
+    g* (e^(-u) - sum P_n g*^n) / (1 - sum P_n) (each scattering multiplies it by g*: the
+    straight paths keep g*, so the paths that turned hold less than the average)."""
     from .phase import delta_fraction, delta_g
     rho = RHO_TABLE
     b1 = max(1.0 - g, 1e-6)
     g_walk = delta_g(g)
     keep = 1.0 - delta_fraction(g)
+    n_exact = int(exact_flights)
+    if n_exact not in (0, 1, 2):
+        raise ValueError("exact_flights must be 0, 1 or 2")
     out = np.zeros((levels, len(rho), 6))
     for c, (s_c, a_c) in enumerate(zip(np.broadcast_to(np.asarray(sigma_s, np.float64), (3,)),
                                        np.broadcast_to(np.asarray(sigma_a, np.float64), (3,)))):
         ss, sa = rho * s_c, rho * a_c
         with np.errstate(divide="ignore"):
             l_tr = np.where(ss > 0, 1.0 / (ss * b1), np.inf)
+        walk_ss = ss * keep
+        st = sa + walk_ss
         for k, (lo, hi, l_k) in enumerate(level_paths(h, levels, l_tr, g_walk)):
             span = hi - lo
-            out[k, :, c] = np.exp(-sa * lo) * span * _phi1(sa * span)
+            weight = np.exp(-sa * lo) * span * _phi1(sa * span)
             mean_cos = np.exp(-l_k / l_tr)
-            if after_first:
-                st = sa + ss * keep
-                out[k, :, c] = np.maximum(
-                    out[k, :, c] - np.exp(-st * lo) * span * _phi1(st * span), 0.0)
-                p1 = np.exp(-ss * keep * l_k)
-                mean_cos = np.where(p1 < 1.0 - 1e-9,
-                                    (mean_cos - p1) / np.maximum(1.0 - p1, 1e-12), mean_cos)
+            if n_exact:
+                # int e^(-sigma_a l) P_0 dl = int e^(-sigma_t* l) dl over [lo, hi]
+                weight = weight - np.exp(-st * lo) * span * _phi1(st * span)
+                p0 = np.exp(-walk_ss * l_k)
+                done, turned = p0, p0
+                if n_exact == 2:
+                    # int e^(-sigma_a l) P_1 dl = sigma_s* [-(sigma_t* l + 1) e^(-sigma_t* l)
+                    # / sigma_t*^2] from lo to hi
+                    st_safe = np.maximum(st, 1e-300)
+                    f = lambda l: -(st * l + 1.0) * np.exp(-st * l) / (st_safe * st_safe)  # noqa: E731
+                    weight = weight - walk_ss * (f(hi) - f(lo))
+                    p1 = walk_ss * l_k * p0
+                    done, turned = p0 + p1, p0 + p1 * g_walk
+                weight = np.maximum(weight, 0.0)
+                mean_cos = np.where(done < 1.0 - 1e-9,
+                                    (mean_cos - turned) / np.maximum(1.0 - done, 1e-12), mean_cos)
+            out[k, :, c] = weight
             out[k, :, 3 + c] = g * g_walk * mean_cos
     return out
 

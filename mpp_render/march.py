@@ -39,7 +39,7 @@ from typing import List, Optional
 
 import numpy as np
 
-from . import kernels
+from . import firstflight, kernels
 from .kernels_np import LIGHT_FIELDS, REFINE_STEPS, RHO_TABLE, T_MIN, hash32
 from .lights import pack_light
 from .media import PreparedMedium
@@ -105,7 +105,8 @@ class MarchContext:
                     after = None
                     if any(m is not None and m.first is not None for m in mfs):
                         after = level_table(pm.g, pm.sigma_s, pm.sigma_a, ref.h,
-                                            len(ref.levels), after_first=True)
+                                            len(ref.levels),
+                                            exact_flights=firstflight.EXACT_FLIGHTS)
                     flat = flatten_levels(pm, mfs, self.lights, table, self.camera, after)
                     per_medium.append([([flat], ref.stride, ref.h)] + [None] * (len(mfs) - 1))
                     tables.append(FLAT_TABLE)
@@ -138,9 +139,9 @@ def flatten_levels(pm: PreparedMedium, mfs, lights: List[Light], table: np.ndarr
     varies over metres, the lattice is centimetres).  An area light's direction is its
     centre's (the march jitters it over the area).
 
-    A light whose MultipleField carries an exact first flight (``first``, firstflight.py)
-    adds, by its weight w per channel, that flight plus the levels read through
-    ``table_after`` (level_table(..., after_first=True): the paths that scattered again),
+    A light whose MultipleField carries exact first flights (``first``, firstflight.py)
+    adds, by their weight w per channel, those flights plus the levels read through
+    ``table_after`` (level_table(..., exact_flights=2): the paths that scattered twice more),
     and 1 - w of the levels through ``table``."""
     from .camera import towards_camera
     from .kernels_np import hg, light_sample, table_lookup, upsample

@@ -378,9 +378,9 @@ class MultipleField:
     apart (spacing ``h`` metres).  Level channels: the RGB power per volume (W/m^3) that the
     light's unscattered beam scatters, Q = sigma_s E exp(-tau) (the start of every multiply
     scattered path), each level moved by its paths' drift (``drift_levels``).  ``first``:
-    None, or for a mesh volume whose first flights mostly leave it the exact first flight
-    (firstflight.FirstFlight on the finest lattice) that replaces the walk's, by its weight
-    (march.flatten_levels)."""
+    None, or for a mesh volume whose first flights mostly leave it the exact first two
+    flights (firstflight.FirstFlight on the finest lattice) that replace the walk's, by their
+    weight (march.flatten_levels)."""
 
     stride: int
     h: float
@@ -670,7 +670,8 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
                              stride * pm.i2w[:3, :3], light_direction(light, pts),
                              towards_camera(camera, pts),
                              g if g_last is None else float(g_last),
-                             np.asarray(pm.sigma_t, np.float64) * mean_rho, should_cancel)
+                             np.asarray(pm.sigma_t, np.float64) * mean_rho, sigma_s,
+                             should_cancel)
         if should_cancel and should_cancel():
             return None
     levels, directions = source_pyramid(base, light, pts, shape, g, max_levels, keep)

@@ -116,6 +116,13 @@ def test_a_thin_box_takes_the_exact_flight_and_a_dense_one_the_walk():
     # light that left the beam reaches the whole box, most of it near the beam
     assert np.all(f[..., 0] > 0.0)
     assert f[12, 6, 6, 0] > 5.0 * f[12, 0, 0, 0]
+    # the second flight: scattered again inside the box (sigma_s* 0.04 of the 0.05 /m), it
+    # adds light, less than sigma_s* / sigma_t* of the first's (most of the first flights
+    # leave this box)
+    both = ff.first_flight(q, inside, axes, dirs, v, 0.85, np.full(3, 0.05), np.full(3, 0.04))
+    added = float(both.field.sum() - f.sum())
+    assert 0.0 < added < 0.8 * float(f.sum())
+    assert np.all(both.field >= f - 1e-6 * f.max())
     q, inside, axes, dirs = beam_box(n)
     assert ff.first_flight(q, inside, axes, dirs, v, 0.85, np.full(3, 50.0)) is None
     # nothing to fly: no power, or a medium that does not scatter
@@ -160,24 +167,56 @@ def test_the_camera_directions_interpolate_across_the_view():
 
 
 @pytest.mark.parametrize("g", [0.0, 0.5, 0.85])
-def test_the_walk_after_the_first_flight_is_the_walk_less_the_straight_paths(g):
-    """Per level, weight(all) - weight(after_first) = int e^-(sigma_a + sigma_s*) l dl over the
-    level's paths: the paths that have not scattered again; their mean cosine drops."""
+def test_the_walk_after_the_exact_flights_is_the_walk_less_their_paths(g):
+    """Per level, weight(all) - weight(exact_flights=1) = int e^-(sigma_a + sigma_s*) l dl over
+    the level's paths (those that have not scattered again), and weight(1) - weight(2) =
+    int sigma_s* l e^-(sigma_a + sigma_s*) l dl (those that scattered once more); the mean
+    cosine drops with each."""
     ss, sa, h, n = np.array([4.0, 2.0, 0.5]), np.array([0.3, 0.1, 0.05]), 0.05, 10
-    full = level_table(g, ss, sa, h, n)
-    after = level_table(g, ss, sa, h, n, after_first=True)
     rho = np.array([1.0])
-    a, b = table_lookup(full, rho)[:, 0], table_lookup(after, rho)[:, 0]
+    tabs = [table_lookup(level_table(g, ss, sa, h, n, exact_flights=e), rho)[:, 0]
+            for e in (0, 1, 2)]
     keep = 1.0 - delta_fraction(g)
     for c in range(3):
         l_tr = 1.0 / (ss[c] * max(1.0 - g, 1e-6))
-        st = sa[c] + ss[c] * keep
+        s1, st = ss[c] * keep, sa[c] + ss[c] * keep
         for k, (lo, hi, _) in enumerate(level_paths(h, n, np.array(l_tr), delta_g(g))):
             straight = (np.exp(-st * lo) - np.exp(-st * hi)) / st
-            assert a[k, c] - b[k, c] == pytest.approx(float(straight), rel=1e-6, abs=1e-12)
-    assert np.all(b[:, :3] >= 0.0) and np.all(b[:, :3] <= a[:, :3])
-    if g > 0:
-        assert np.all(b[:, 3:] <= a[:, 3:] + 1e-12) and np.all(b[:, 3:] >= 0.0)
+            l = np.linspace(lo, hi, 20001)
+            once = np.trapz(s1 * l * np.exp(-st * l), l)
+            assert tabs[0][k, c] - tabs[1][k, c] == pytest.approx(float(straight), rel=1e-6,
+                                                                  abs=1e-12)
+            assert tabs[1][k, c] - tabs[2][k, c] == pytest.approx(float(once), rel=1e-5,
+                                                                  abs=1e-10)
+    for a, b in zip(tabs, tabs[1:]):
+        assert np.all(b[:, :3] >= 0.0) and np.all(b[:, :3] <= a[:, :3] + 1e-15)
+        if g > 0:
+            assert np.all(b[:, 3:] <= a[:, 3:] + 1e-12) and np.all(b[:, 3:] >= 0.0)
+    with pytest.raises(ValueError):
+        level_table(g, ss, sa, h, n, exact_flights=3)
+
+
+@pytest.mark.parametrize("g", [-0.4, 0.3, 0.85])
+def test_the_second_flight_turns_twice_out_of_the_peak(g):
+    """The second flight's direction is outside_peak composed with itself: normalised, its
+    mean cosine the square of one scattering's, equal to a direct integral over the sphere,
+    HG(g^2) where there is no peak."""
+    mu = np.linspace(-1.0, 1.0, 200001)
+    twice = ff.peak_free_twice(mu, g)
+    once = outside_peak(mu, g)
+    assert np.trapz(twice, mu) * 2 * np.pi == pytest.approx(1.0, rel=1e-4)
+    m1 = np.trapz(once * mu, mu) * 2 * np.pi
+    assert np.trapz(twice * mu, mu) * 2 * np.pi == pytest.approx(m1 * m1, rel=2e-3, abs=1e-6)
+    om = ff.sphere_directions(200000)
+    d = np.array([0.0, 0.0, 1.0])
+    for c in (0.95, 0.5, -0.6):
+        w = np.array([np.sqrt(1 - c * c), 0.0, c])
+        direct = np.mean(outside_peak(om @ d, g) * outside_peak(om @ w, g)) * 4 * np.pi
+        assert float(ff.peak_free_twice(c, g)) == pytest.approx(float(direct), rel=0.01)
+    if g <= 0:
+        assert np.allclose(twice[::1000], hg(mu[::1000], g * g))
+    half = ff.first_phase(mu, g, 0.5, order=2)
+    assert np.allclose(half, 0.5 * twice + 0.5 / (4 * np.pi))
 
 
 def test_the_flattened_level_takes_the_first_flight_by_its_weight():
@@ -199,7 +238,7 @@ def test_the_flattened_level_takes_the_first_flight_by_its_weight():
     levels = [np.zeros(shape + (3,), np.float32), np.zeros((3, 3, 3, 3), np.float32)]
     field = np.random.default_rng(1).random(shape + (3,)).astype(np.float32)
     table = level_table(0.5, pm.sigma_s, pm.sigma_a, 0.1, 2)
-    after = level_table(0.5, pm.sigma_s, pm.sigma_a, 0.1, 2, after_first=True)
+    after = level_table(0.5, pm.sigma_s, pm.sigma_a, 0.1, 2, exact_flights=2)
     mf = MultipleField(2, 0.2, levels, ff.FirstFlight(field, np.array([1.0, 0.5, 0.0])))
     out = march.flatten_levels(pm, [mf], [light], table, cam, after)
     assert np.allclose(out, field * np.array([1.0, 0.5, 0.0], np.float32))
@@ -213,14 +252,15 @@ def test_the_flattened_level_takes_the_first_flight_by_its_weight():
 @pytest.mark.parametrize("sigma", [1e-6, 0.05, 1e4])
 def test_stiff_flights_stay_finite(g, sigma):
     """Anisotropy near +-1, a nearly transparent and an opaque medium (optical depth 1e3 per
-    lattice step), the light from all sides (its mean direction 0): finite, non-negative."""
+    lattice step), albedo 1 (both flights), the light from all sides (its mean direction 0):
+    finite, non-negative."""
     n = (12, 8, 8)
     q, inside, axes, dirs = beam_box(n)
     dirs = np.random.default_rng(2).normal(size=dirs.shape)
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     dirs[: len(dirs) // 2] = -dirs[len(dirs) - len(dirs) // 2:][: len(dirs) // 2]
     v = np.tile([0.0, -1.0, 0.0], (int(np.prod(n)), 1))
-    out = ff.first_flight(q, inside, axes, dirs, v, g, np.full(3, sigma))
+    out = ff.first_flight(q, inside, axes, dirs, v, g, np.full(3, sigma), np.full(3, sigma))
     if sigma >= 1e4:
         assert out is None   # every flight ends in its own cell: the walk alone
     else:

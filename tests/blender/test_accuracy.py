@@ -35,9 +35,11 @@ TARGET = {"rel_rmse_4": 0.03, "bias": 0.02}
 # ("The first flight, exact": fog_beam 0.447 -> 0.239, slab_isotropic 0.047 -> 0.037;
 # colored_sphere 0.064 -> 0.065 within its bound, kept), and fog_beam's again when that
 # flight left the forward peak's cone to the beam (0.239 -> 0.226; slab_isotropic
-# 0.037 -> 0.039 within its bound, kept).  The trades are measured and stated there.
-FULL_BOUND = {"cloud_vdb": 0.040, "colored_sphere": 0.070, "fog_beam": 0.260,
-              "slab_forward": 0.086, "slab_isotropic": 0.043, "smoke_plume": 0.038}
+# 0.037 -> 0.039 within its bound, kept), and both again when the second flight became exact
+# too (fog_beam 0.226 -> 0.212, slab_isotropic 0.039 -> 0.031; colored_sphere 0.064 -> 0.061,
+# its bound kept).  The trades are measured and stated there.
+FULL_BOUND = {"cloud_vdb": 0.040, "colored_sphere": 0.070, "fog_beam": 0.243,
+              "slab_forward": 0.086, "slab_isotropic": 0.036, "smoke_plume": 0.038}
 SCENE_NAMES = sorted(FULL_BOUND)
 
 
