@@ -235,11 +235,11 @@ def skip_tables(quick):
         f"(march.FLATTEN; {m}^3 ball, a sun and a point light, {w}x{h}, 1 spp, multiple on)",
         lambda: mesh_scene(n=m, w=w, h=h), {"march__FLATTEN": False}, {"march__FLATTEN": True},
         "march")
-    add(f"precompute: the exact first flight (firstflight.ENABLED; a {m}^2 x {m // 2} "
+    add(f"precompute: the exact first two flights (firstflight.ENABLED; a {m}^2 x {m // 2} "
         "voxel 4 x 4 x 2 m fog box under a sun, its weight 1; ratio < 1: the cost)",
         lambda: fog_box_scene(n=m), {"firstflight__ENABLED": False},
         {"firstflight__ENABLED": True}, "precompute")
-    add(f"precompute: the first flight's escape fraction alone where the walk serves "
+    add(f"precompute: the first flights' escape fraction alone where the walk serves "
         f"({m}^3 ball, a sun and a point light: weight 0, no flight computed)",
         lambda: mesh_scene(n=m), {"firstflight__ENABLED": False},
         {"firstflight__ENABLED": True}, "precompute")
