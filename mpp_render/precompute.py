@@ -42,11 +42,11 @@ import numpy as np
 
 from . import kernels, kernels_np
 from .camera import towards_camera
+from .firstflight import FirstFlight, first_flight
 from .lights import is_dark, towards_light
 from .media import PreparedMedium, density_from, union_interval
 from .phase import sample_hg
 from .scene import Camera, Light, World
-from .firstflight import FirstFlight, first_flight
 from .surfaces import occluded
 from .worldfog import optical_depth as fog_optical_depth
 
@@ -385,7 +385,7 @@ class MultipleField:
     stride: int
     h: float
     levels: list
-    first: Optional["FirstFlight"] = None
+    first: Optional[FirstFlight] = None
 
 
 NEAR_LIGHT_CELLS = 3  # lattice cells around a point or spot light whose source is averaged
