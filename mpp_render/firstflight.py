@@ -39,11 +39,14 @@ lattice step; any affine grid), directions are unit world vectors of propagation
 from __future__ import annotations
 
 import functools
+import os
+import threading
 from dataclasses import dataclass
 from typing import Callable, Optional
 
 import numpy as np
 
+from .parallel import run_chunks
 from .phase import hg, outside_peak
 
 ENABLED = True      # a switch for tests and benchmarks: False leaves the walk alone
@@ -53,6 +56,7 @@ ESCAPE_HIGH = 0.5   # escape fraction at or above which the exact first flight a
 ESCAPE_RESOLUTION = 32   # lattice points along the longest axis for the escape fraction
 MAX_DIRECTIONS = 9       # camera directions convolved at most
 DIRECTION_STEP = np.radians(6.0)   # angle between neighbouring camera directions
+FFT_MEMORY = 1 << 30       # bytes the parallel convolutions may hold at once
 MAX_FFT_POINTS = 1 << 24   # larger lattices keep the walk alone (memory: ~0.2 GB per transform)
 NEAR_RADIUS = 6          # cells within this many lattice steps of a flight's start ...
 NEAR_DIRECTIONS = 16384  # ... are integrated along this many rays (``near_cells``)
@@ -322,7 +326,8 @@ def camera_directions(v, inside_v):
 
 
 def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=None,
-                 should_cancel: Optional[Callable[[], bool]] = None) -> Optional[FirstFlight]:
+                 should_cancel: Optional[Callable[[], bool]] = None,
+                 threads: int = 0) -> Optional[FirstFlight]:
     """The exact first flights of one light on one medium, or None where the walk alone
     serves (every channel's escape fraction at or below ESCAPE_LOW, no power) or when
     cancelled: the first flight out of the beam and, where ``sigma_s`` is given, the second
@@ -336,7 +341,9 @@ def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=Non
     every lattice point to the camera; ``g`` the medium's own HG anisotropy (the scatterings'
     outside its forward peak, ``first_phase``, and the last one's towards the camera);
     ``sigma_t``, ``sigma_s`` (3,) the delta-scaled medium's mean extinction and scattering
-    where it has density (1/m).
+    where it has density (1/m).  The camera directions' convolutions run on ``threads``
+    threads (<= 0: one per core; numpy's FFTs release the GIL), fewer where FFT_MEMORY
+    would not hold them.
 
     d is the sources' power-weighted mean direction, and the length of that mean spreads the
     flights' directions (``first_phase``): round a point light inside the medium they are
@@ -390,19 +397,41 @@ def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=Non
                 bare[s] = spectrum(flight_kernel(axes, shape, d, first, s), shape)
             q2 = np.where(inside, float(sigma_s[r]) * np.maximum(convolve(fq, bare[s], shape), 0.0), 0.0)
             sources[r].append((spectrum(q2, shape), 2))
-    for j, w in enumerate(dirs):
-        fk = {}
-        for r, chans in same.items():
-            if should_cancel and should_cancel():
-                return None
-            s = float(sigma_t[r])
-            f = 0.0
-            for fq, order in sources[r]:
-                if (s, order) not in fk:
-                    fk[(s, order)] = spectrum(flight_kernel(axes, shape, d, (float(g), spread, order),
-                                                            s, w, float(g)), shape)
-                f = f + convolve(fq, fk[(s, order)], shape)
-            f = f * wts[:, j].reshape(shape)
-            for ch in chans:
-                out[..., ch] += f * (sums[ch] / sums[r])
+    turn = threading.Condition()
+    added = [0]   # directions added to ``out`` so far: they are added in order, so that the
+    # sum (and the render) does not depend on which thread finished first
+
+    def directions(a, b):   # one camera direction per chunk, on the pool's threads
+        for j in range(a, b):
+            part = {}
+            try:
+                fk = {}
+                for r in same:
+                    if should_cancel and should_cancel():
+                        return
+                    s = float(sigma_t[r])
+                    f = 0.0
+                    for fq, order in sources[r]:
+                        if (s, order) not in fk:
+                            fk[(s, order)] = spectrum(flight_kernel(
+                                axes, shape, d, (float(g), spread, order), s, dirs[j], float(g)),
+                                shape)
+                        f = f + convolve(fq, fk[(s, order)], shape)
+                    part[r] = f * wts[:, j].reshape(shape)
+            finally:
+                with turn:
+                    turn.wait_for(lambda: added[0] == j)
+                    for r, f in part.items():
+                        for ch in same[r]:
+                            out[..., ch] += f * (sums[ch] / sums[r])
+                    added[0] += 1
+                    turn.notify_all()
+
+    # each thread holds a kernel, its spectrum, a product and a result of the FFT's size
+    per_thread = 4 * 8 * int(np.prod(_fft_shape(shape)))
+    n_threads = threads if threads > 0 else (os.cpu_count() or 1)
+    n_threads = max(1, min(n_threads, FFT_MEMORY // per_thread))
+    if not run_chunks(len(dirs), 1, directions, n_threads, should_cancel) or \
+            (should_cancel and should_cancel()):
+        return None
     return FirstFlight(np.ascontiguousarray(np.maximum(out, 0.0), np.float32), weight)

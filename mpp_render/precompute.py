@@ -33,8 +33,6 @@ every shadow (interpolating the 0 / SHADOW_TAU step of a binary shadow does that
 from __future__ import annotations
 
 import os
-from concurrent.futures import ThreadPoolExecutor
-from concurrent.futures import TimeoutError as FuturesTimeout
 from dataclasses import dataclass, field
 from typing import Callable, List, Optional
 
@@ -45,6 +43,7 @@ from .camera import towards_camera
 from .firstflight import FirstFlight, first_flight
 from .lights import is_dark, towards_light
 from .media import PreparedMedium, density_from, union_interval
+from .parallel import run_chunks
 from .phase import sample_hg
 from .scene import Camera, Light, World
 from .surfaces import occluded
@@ -112,38 +111,6 @@ def _exit_distance(media, points, dirs, limit):
 
 
 SHADOW_TAU = 50.0  # optical depth standing for "blocked by an opaque surface" (T ~ 2e-22)
-
-
-def run_chunks(n, chunk, work, threads=0, should_cancel=None) -> bool:
-    """Call ``work(a, b)`` for consecutive ranges [a, b) of ``range(n)`` on a thread pool
-    (``threads`` <= 0: one per core).  The kernels release the GIL, so chunks run in parallel;
-    each chunk must write only its own slice.  Returns False when ``should_cancel`` stopped it."""
-    starts = list(range(0, n, chunk))
-    threads = threads if threads > 0 else (os.cpu_count() or 1)
-    if threads == 1 or len(starts) <= 1:
-        for a in starts:
-            if should_cancel and should_cancel():
-                return False
-            work(a, min(n, a + chunk))
-        return True
-    with ThreadPoolExecutor(max_workers=threads) as pool:
-        futures = [pool.submit(work, a, min(n, a + chunk)) for a in starts]
-        try:
-            for f in futures:
-                # poll before every wait, not only when one times out: chunks shorter than
-                # the timeout would otherwise never look at Esc
-                while True:
-                    if should_cancel and should_cancel():
-                        return False
-                    try:
-                        f.result(timeout=0.05)
-                        break
-                    except FuturesTimeout:
-                        pass
-        finally:  # cancelled or failed: drop the chunks not started (leaving the pool
-            for g in futures:  # waits only for the running ones)
-                g.cancel()
-    return True
 
 
 def kernel_arrays(media):
@@ -621,7 +588,7 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
                    camera: Camera, max_levels=8, resolution: int = MULTIPLE_RESOLUTION,
                    should_cancel: Optional[Callable[[], bool]] = None,
                    g_last: Optional[float] = None,
-                   beam: Optional[int] = None) -> Optional[MultipleField]:
+                   beam: Optional[int] = None, threads: int = 0) -> Optional[MultipleField]:
     """The light pyramid of ``light`` on medium ``pm`` from its precomputed field ``fld``
     (optical depth at ``channel``), see MultipleField, on a lattice of about ``resolution``
     points along the grid's longest side (never finer than the voxels): the source
@@ -630,7 +597,8 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
     of its paths (``drift_levels``), for the light that ``camera`` sees.  None when
     ``should_cancel`` says so.  ``pm`` is the medium as the walk sees it: precompute hands
     the delta-scaled medium (media.delta_scaled) and the optical depth of its beam, and
-    ``g_last`` the medium's own g, that of the last scattering towards the camera."""
+    ``g_last`` the medium's own g, that of the last scattering towards the camera.
+    ``threads``: for the exact first flights' convolutions (firstflight.py)."""
     from . import boundary
     from .kernels_np import level_paths, walk_displacement
     from .media import density_from
@@ -671,7 +639,7 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
                              towards_camera(camera, pts),
                              g if g_last is None else float(g_last),
                              np.asarray(pm.sigma_t, np.float64) * mean_rho, sigma_s,
-                             should_cancel)
+                             should_cancel, threads)
         if should_cancel and should_cancel():
             return None
     levels, directions = source_pyramid(base, light, pts, shape, g, max_levels, keep)
@@ -1206,7 +1174,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                 # first scatters out of the forward peak (docs/method.md, "The forward peak")
                 ms[li] = multiple_field(delta[mi], f, light, chans[li], camera, beam=beams[li],
                                         resolution=multiple_resolution,
-                                        should_cancel=should_cancel, g_last=float(pm.g))
+                                        should_cancel=should_cancel, g_last=float(pm.g),
+                                        threads=threads)
                 if should_cancel and should_cancel():
                     return None
         ms_all.append(ms)

@@ -267,3 +267,26 @@ def test_stiff_flights_stay_finite(g, sigma):
         assert out is not None and out.weight.tolist() == [1.0, 1.0, 1.0]
         assert np.all(np.isfinite(out.field)) and np.all(out.field >= 0.0)
         assert out.field.max() > 0.0
+
+
+def test_the_flights_are_the_same_on_any_number_of_threads_and_stop_on_esc():
+    """The camera directions' convolutions run on threads and are added in order: the same
+    bits on 1 and 3 threads; Esc (should_cancel) at any point returns None, without a hang."""
+    n = (20, 12, 12)
+    q, inside, axes, dirs = beam_box(n)
+    rng = np.random.default_rng(0)
+    v = rng.normal(size=(int(np.prod(n)), 3)) * [0.4, 0.05, 0.0] + [0.0, -1.0, 0.0]
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    args = (q, inside, axes, dirs, v, 0.85, np.full(3, 0.05), np.full(3, 0.04))
+    one = ff.first_flight(*args, threads=1)
+    three = ff.first_flight(*args, threads=3)
+    assert len(ff.camera_directions(v, v)[0]) > 3
+    assert np.array_equal(one.field, three.field)
+    for k in (1, 2, 4, 8):
+        calls = [0]
+
+        def esc():
+            calls[0] += 1
+            return calls[0] > k
+
+        assert ff.first_flight(*args, should_cancel=esc, threads=3) is None

@@ -1,0 +1,42 @@
+"""Work split over a thread pool, with Esc polled while it runs (no bpy).
+
+The compiled kernels and numpy's FFTs release the GIL, so chunks of them run in parallel on
+threads; ``run_chunks`` is the one place that does it (the precompute's sweeps and marches,
+the first flights' convolutions)."""
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import TimeoutError as FuturesTimeout
+
+
+def run_chunks(n, chunk, work, threads=0, should_cancel=None) -> bool:
+    """Call ``work(a, b)`` for consecutive ranges [a, b) of ``range(n)`` on a thread pool
+    (``threads`` <= 0: one per core).  The kernels release the GIL, so chunks run in parallel;
+    each chunk must write only its own slice.  Returns False when ``should_cancel`` stopped it."""
+    starts = list(range(0, n, chunk))
+    threads = threads if threads > 0 else (os.cpu_count() or 1)
+    if threads == 1 or len(starts) <= 1:
+        for a in starts:
+            if should_cancel and should_cancel():
+                return False
+            work(a, min(n, a + chunk))
+        return True
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        futures = [pool.submit(work, a, min(n, a + chunk)) for a in starts]
+        try:
+            for f in futures:
+                # poll before every wait, not only when one times out: chunks shorter than
+                # the timeout would otherwise never look at Esc
+                while True:
+                    if should_cancel and should_cancel():
+                        return False
+                    try:
+                        f.result(timeout=0.05)
+                        break
+                    except FuturesTimeout:
+                        pass
+        finally:  # cancelled or failed: drop the chunks not started (leaving the pool
+            for g in futures:  # waits only for the running ones)
+                g.cancel()
+    return True
