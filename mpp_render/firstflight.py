@@ -47,7 +47,7 @@ from typing import Callable, Optional
 import numpy as np
 
 from .parallel import run_chunks
-from .phase import hg, outside_peak
+from .phase import delta_fraction, hg, outside_peak, peak_cone_cos
 
 ENABLED = True      # a switch for tests and benchmarks: False leaves the walk alone
 EXACT_FLIGHTS = 2   # flights out of the beam computed exactly (march: kernels_np.level_table)
@@ -93,7 +93,6 @@ def _twice_table(g: float):
     """(cos grid, values) of phase.outside_peak(., g) composed with itself, from its Legendre
     series: the coefficients t_l = 2 pi int p P_l dcos multiply, p o p = sum_l (2l + 1) /
     (4 pi) t_l^2 P_l."""
-    from .phase import peak_cone_cos
     x, wx = np.polynomial.legendre.leggauss(4 * LEGENDRE_TERMS)
     c = peak_cone_cos(g)   # outside_peak is 0 beyond c: integrate over [-1, c] only
     nodes, wts = 0.5 * (c + 1.0) * x + 0.5 * (c - 1.0), 0.5 * (c + 1.0) * wx
@@ -115,7 +114,6 @@ def peak_free_twice(cos_theta, g: float):
     """phase.outside_peak(., g) composed with itself (1/sr): the direction, about the
     light's, after two scatterings out of the forward peak (``_twice_table``, interpolated
     in cos).  HG(g^2) for g <= 0 (HG composed with HG)."""
-    from .phase import delta_fraction
     if delta_fraction(g) <= 0.0:
         return hg(cos_theta, g * g)
     grid, vals = _twice_table(round(float(g), 6))
@@ -187,9 +185,9 @@ def flight_kernel(axes, half, d, first, sigma_t: float, w=None, g2: float = 0.0,
     ``axes`` (3,3): world vector (m) of one lattice step along each index axis (columns);
     p1 = first_phase(., *first) (``first`` = (g, spread)), p2 = HG(g2) towards unit ``w``
     (omitted when None).  The cells within NEAR_RADIUS steps of the origin, where 1/r^2 is
-    steep, are integrated along rays (``near_cells``); the others take their centre's value.  Over all space the
-    bare kernel integrates to 1 / sigma_t, and with ``w`` to (p1 composed with p2)(d . w) /
-    sigma_t."""
+    steep, are integrated along rays (``near_cells``); the others take their centre's value.
+    Over all space the bare kernel integrates to 1 / sigma_t, and with ``w`` to (p1 composed
+    with p2)(d . w) / sigma_t."""
     axes = np.asarray(axes, np.float64)
     d = np.asarray(d, np.float64)
     vol = abs(float(np.linalg.det(axes)))
@@ -354,7 +352,7 @@ def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=Non
     power = q.sum(axis=-1).reshape(-1)
     total = float(power.sum())
     sigma_t = np.broadcast_to(np.asarray(sigma_t, np.float64), (3,))
-    second = sigma_s is not None
+    second = sigma_s is not None and EXACT_FLIGHTS >= 2   # what the walk's table leaves out
     sigma_s = np.zeros(3) if sigma_s is None else \
         np.broadcast_to(np.asarray(sigma_s, np.float64), (3,))
     if not total > 0.0 or not np.any(inside) or not np.any(sigma_t > 0.0):
@@ -395,7 +393,8 @@ def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=Non
             s = float(sigma_t[r])
             if s not in bare:
                 bare[s] = spectrum(flight_kernel(axes, shape, d, first, s), shape)
-            q2 = np.where(inside, float(sigma_s[r]) * np.maximum(convolve(fq, bare[s], shape), 0.0), 0.0)
+            phi1 = np.maximum(convolve(fq, bare[s], shape), 0.0)
+            q2 = np.where(inside, float(sigma_s[r]) * phi1, 0.0)
             sources[r].append((spectrum(q2, shape), 2))
     turn = threading.Condition()
     added = [0]   # directions added to ``out`` so far: they are added in order, so that the

@@ -556,11 +556,11 @@ def level_table(g, sigma_s, sigma_a, h, levels, exact_flights=0):
                 p0 = np.exp(-walk_ss * l_k)
                 done, turned = p0, p0
                 if n_exact == 2:
-                    # int e^(-sigma_a l) P_1 dl = sigma_s* [-(sigma_t* l + 1) e^(-sigma_t* l)
-                    # / sigma_t*^2] from lo to hi
-                    st_safe = np.maximum(st, 1e-300)
-                    f = lambda l: -(st * l + 1.0) * np.exp(-st * l) / (st_safe * st_safe)  # noqa: E731
-                    weight = weight - walk_ss * (f(hi) - f(lo))
+                    # int e^(-sigma_a l) P_1 dl = sigma_s* [(sigma_t* l + 1) e^(-sigma_t* l)
+                    # / sigma_t*^2] from hi to lo
+                    st2 = np.maximum(st * st, 1e-300)
+                    weight = weight - walk_ss * ((st * lo + 1.0) * np.exp(-st * lo)
+                                                 - (st * hi + 1.0) * np.exp(-st * hi)) / st2
                     p1 = walk_ss * l_k * p0
                     done, turned = p0 + p1, p0 + p1 * g_walk
                 weight = np.maximum(weight, 0.0)

@@ -49,7 +49,8 @@ def test_the_first_flight_leaves_the_peak_to_the_beam(g):
     mu = np.linspace(-1.0, 1.0, 2000001)
     c = peak_cone_cos(g)
     cone = mu >= c
-    assert np.trapz(np.where(cone, hg(mu, g), 0.0), mu) * 2 * np.pi == pytest.approx(g * g, rel=1e-3)
+    in_cone = np.trapz(np.where(cone, hg(mu, g), 0.0), mu) * 2 * np.pi
+    assert in_cone == pytest.approx(g * g, rel=1e-3)
     p = outside_peak(mu, g)
     assert np.trapz(p, mu) * 2 * np.pi == pytest.approx(1.0, rel=1e-3)
     assert not np.any(p[cone]) and np.all(p >= 0.0)
