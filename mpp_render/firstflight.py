@@ -54,8 +54,8 @@ EXACT_FLIGHTS = 2   # flights out of the beam computed exactly (march: kernels_n
 ESCAPE_LOW = 0.3    # escape fraction at or below which the walk alone is used
 ESCAPE_HIGH = 0.5   # escape fraction at or above which the exact first flight alone is used
 ESCAPE_RESOLUTION = 32   # lattice points along the longest axis for the escape fraction
-MAX_DIRECTIONS = 9       # camera directions convolved at most
-DIRECTION_STEP = np.radians(6.0)   # angle between neighbouring camera directions
+MAX_DIRECTIONS = 9       # camera directions convolved at most along each axis of the view
+DIRECTION_STEP = np.radians(15.0)  # angle between neighbouring camera directions, at most
 FFT_MEMORY = 1 << 30       # bytes the parallel convolutions may hold at once
 MAX_FFT_POINTS = 1 << 24   # larger lattices keep the walk alone (memory: ~0.2 GB per transform)
 NEAR_RADIUS = 6          # cells within this many lattice steps of a flight's start ...
@@ -64,12 +64,14 @@ NEAR_DIRECTIONS = 16384  # ... are integrated along this many rays (``near_cells
 
 @dataclass
 class FirstFlight:
-    """The exact first flights of one light on one medium: ``field`` (X,Y,Z,3) float32 on the
-    light pyramid's finest lattice (W/(m^2 sr) per unit sigma_s, RGB), and per channel the
-    ``weight`` (3,) in [0, 1] with which they replace the walk's."""
+    """The exact first flights of one light on one medium: ``field`` (X,Y,Z,3) float32 on a
+    lattice ``stride`` voxels apart (W/(m^2 sr) per unit sigma_s, RGB; precompute sets the
+    stride, None: the light pyramid's finest lattice), and per channel the ``weight`` (3,)
+    in [0, 1] with which they replace the walk's."""
 
     field: np.ndarray
     weight: np.ndarray
+    stride: Optional[int] = None
 
 
 def first_phase(cos_theta, g: float, spread: float, order: int = 1):
@@ -177,6 +179,55 @@ def near_cells(axes, d, first, sigma_t: float, w=None, g2: float = 0.0,
     return np.bincount(cells, weights=ang[rays] * mass, minlength=size ** 3).reshape((size,) * 3)
 
 
+class KernelBase:
+    """The parts of flight_kernel that do not depend on the camera direction, for one
+    lattice (``axes``, ``half``), flight direction (``d``, ``first``) and ``sigma_t``:
+    ``bare`` p1(d . r^) e^(-sigma_t |r|) / |r|^2 x cell volume (float64) and the offsets'
+    unit vectors ``u`` (3 float32 arrays): the camera's factor p2(r^ . w) is then one
+    product per direction (``kernel``)."""
+
+    def __init__(self, axes, half, d, first, sigma_t: float, n_dirs: int = NEAR_DIRECTIONS):
+        self.axes = np.asarray(axes, np.float64)
+        self.d = np.asarray(d, np.float64)
+        self.first, self.sigma_t, self.n_dirs = first, float(sigma_t), n_dirs
+        self.half = tuple(int(n) for n in half)
+        vol = abs(float(np.linalg.det(self.axes)))
+        ranges = [np.arange(-(n - 1), n, dtype=np.float64) for n in self.half]
+        shape = tuple(len(r) for r in ranges)
+        self.bare = np.empty(shape)
+        self.u = np.empty((3,) + shape, np.float32)
+        yz = np.stack(np.meshgrid(ranges[1], ranges[2], indexing="ij"), -1) @ self.axes[:, 1:].T
+        for i, a in enumerate(ranges[0]):   # plane by plane: a few arrays of a plane at a time
+            r = yz + a * self.axes[:, 0]
+            with np.errstate(over="ignore", under="ignore", divide="ignore",
+                             invalid="ignore"):
+                rr = np.sqrt(np.einsum("...i,...i->...", r, r))
+                safe = np.maximum(rr, 1e-300)
+                u = r / safe[..., None]
+                self.bare[i] = first_phase(u @ self.d, *first) * np.exp(-self.sigma_t * rr) \
+                    / (safe * safe) * vol
+            self.u[:, i] = np.moveaxis(u, -1, 0)
+
+    def kernel(self, w=None, g2: float = 0.0) -> np.ndarray:
+        """flight_kernel's kernel towards ``w`` (None: the bare kernel)."""
+        if w is None:
+            k = self.bare.copy()
+        else:
+            w = np.asarray(w, np.float64)
+            cos = self.u[0] * w[0] + self.u[1] * w[1] + self.u[2] * w[2]
+            k = self.bare * hg(cos, g2)
+        near = near_cells(self.axes, self.d, self.first, self.sigma_t, w, g2, self.n_dirs,
+                          NEAR_RADIUS)
+        r = NEAR_RADIUS
+        c = [n - 1 for n in self.half]
+        lo = [max(0, ci - r) for ci in c]
+        hi = [min(k.shape[i], c[i] + r + 1) for i in range(3)]
+        k[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]] = near[lo[0] - c[0] + r:hi[0] - c[0] + r,
+                                                        lo[1] - c[1] + r:hi[1] - c[1] + r,
+                                                        lo[2] - c[2] + r:hi[2] - c[2] + r]
+        return k
+
+
 def flight_kernel(axes, half, d, first, sigma_t: float, w=None, g2: float = 0.0,
                   n_dirs: int = NEAR_DIRECTIONS) -> np.ndarray:
     """The first-flight kernel on the lattice offsets -(n-1)..(n-1) per axis (``half`` = n,
@@ -187,32 +238,8 @@ def flight_kernel(axes, half, d, first, sigma_t: float, w=None, g2: float = 0.0,
     (omitted when None).  The cells within NEAR_RADIUS steps of the origin, where 1/r^2 is
     steep, are integrated along rays (``near_cells``); the others take their centre's value.
     Over all space the bare kernel integrates to 1 / sigma_t, and with ``w`` to (p1 composed
-    with p2)(d . w) / sigma_t."""
-    axes = np.asarray(axes, np.float64)
-    d = np.asarray(d, np.float64)
-    vol = abs(float(np.linalg.det(axes)))
-    ranges = [np.arange(-(n - 1), n, dtype=np.float64) for n in half]
-    k = np.empty(tuple(len(r) for r in ranges))
-    yz = np.stack(np.meshgrid(ranges[1], ranges[2], indexing="ij"), -1) @ axes[:, 1:].T
-    for i, a in enumerate(ranges[0]):   # plane by plane: a few arrays of one plane at a time
-        r = yz + a * axes[:, 0]
-        with np.errstate(over="ignore", under="ignore", divide="ignore", invalid="ignore"):
-            rr = np.sqrt(np.einsum("...i,...i->...", r, r))
-            safe = np.maximum(rr, 1e-300)
-            u = r / safe[..., None]
-            plane = first_phase(u @ d, *first) * np.exp(-sigma_t * rr) / (safe * safe) * vol
-            if w is not None:
-                plane = plane * hg(u @ np.asarray(w, np.float64), g2)
-        k[i] = plane
-    near = near_cells(axes, d, first, sigma_t, w, g2, n_dirs, NEAR_RADIUS)
-    r = NEAR_RADIUS
-    c = [n - 1 for n in half]
-    lo = [max(0, ci - r) for ci in c]
-    hi = [min(k.shape[i], c[i] + r + 1) for i in range(3)]
-    k[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]] = near[lo[0] - c[0] + r:hi[0] - c[0] + r,
-                                                    lo[1] - c[1] + r:hi[1] - c[1] + r,
-                                                    lo[2] - c[2] + r:hi[2] - c[2] + r]
-    return k
+    with p2)(d . w) / sigma_t.  (KernelBase builds it for many ``w``.)"""
+    return KernelBase(axes, half, d, first, sigma_t, n_dirs).kernel(w, g2)
 
 
 def _smooth_length(n: int) -> int:
@@ -232,7 +259,7 @@ def _smooth_length(n: int) -> int:
     return best
 
 
-def _fft_shape(shape):
+def fft_shape(shape):
     """The FFT size of a linear convolution of a lattice of ``shape`` with a kernel over
     its offsets -(n-1)..(n-1): at least 2n - 1 per axis (the periodic copies then fall
     outside the part kept)."""
@@ -241,14 +268,20 @@ def _fft_shape(shape):
 
 def spectrum(a, shape):
     """The FFT of a source or kernel on the padded size of ``shape``'s linear convolution."""
-    return np.fft.rfftn(a, s=_fft_shape(shape))
+    return np.fft.rfftn(a, s=fft_shape(shape))
 
 
 def convolve(fq, fk, shape) -> np.ndarray:
     """The linear (not circular) convolution of a source on a lattice of ``shape`` with a
     kernel of flight_kernel(half = shape), from their ``spectrum``s ``fq`` and ``fk``:
     (X,Y,Z) float64 on the source's lattice."""
-    out = np.fft.irfftn(fq * fk, s=_fft_shape(shape))
+    return inverse(fq * fk, shape)
+
+
+def inverse(product, shape) -> np.ndarray:
+    """The part on the source's lattice of the inverse transform of a product of spectra
+    (or a sum of such products): ``convolve`` without its product."""
+    out = np.fft.irfftn(product, s=fft_shape(shape))
     return out[shape[0] - 1:2 * shape[0] - 1, shape[1] - 1:2 * shape[1] - 1,
                shape[2] - 1:2 * shape[2] - 1]
 
@@ -296,30 +329,40 @@ def blend_weight(escape) -> np.ndarray:
 
 def camera_directions(v, inside_v):
     """(directions (n,3), per point weights (N,n)) for the directions to the camera ``v``
-    (N,3, unit, one per lattice point): n directions spread along the principal axis of the
-    spread of ``inside_v`` (the directions from the medium's points) DIRECTION_STEP apart (at
-    most MAX_DIRECTIONS), each point interpolating the two nearest linearly."""
+    (N,3, unit, one per lattice point): a grid of directions about the mean of ``inside_v``
+    (the directions from the medium's points) along the two principal axes of their spread,
+    DIRECTION_STEP apart (at most MAX_DIRECTIONS along each), each point interpolating the
+    four nearest bilinearly.  Both axes matter: the last scattering's HG(g) towards the
+    camera is narrow (half its peak 7 degrees off the peak for g = 0.85), and a medium as
+    high as the view is wide sees the camera from directions 10 degrees apart vertically
+    too (fog_beam: one axis left the light above and below a beam 40 % too bright)."""
     c0 = inside_v.mean(axis=0)
     c0 = c0 / max(float(np.linalg.norm(c0)), 1e-30)
     dev = inside_v - c0
     if len(dev) > 1 and np.any(dev):
-        axis = np.linalg.svd(dev, full_matrices=False)[2][0]
+        axes = np.linalg.svd(dev, full_matrices=False)[2][:2]
     else:
-        axis = np.zeros(3)
-    t_in = inside_v @ axis
-    lo, hi = float(t_in.min()), float(t_in.max())
-    n = int(min(MAX_DIRECTIONS, max(1, np.ceil((hi - lo) / DIRECTION_STEP) + 1)))
-    if n == 1:
-        return c0[None, :], np.ones((len(v), 1))
-    ts = np.linspace(lo, hi, n)
-    dirs = c0[None, :] + ts[:, None] * axis[None, :]
+        axes = np.zeros((2, 3))
+    grids, pos = [], []
+    for axis in axes:
+        t_in = inside_v @ axis
+        lo, hi = float(t_in.min()), float(t_in.max())
+        n = int(min(MAX_DIRECTIONS, max(1, np.ceil((hi - lo) / DIRECTION_STEP) + 1)))
+        grids.append(np.linspace(lo, hi, n) if n > 1 else np.array([0.5 * (lo + hi)]))
+        pos.append(np.clip((v @ axis - lo) / max(hi - lo, 1e-30) * (n - 1), 0.0,
+                           max(n - 1 - 1e-9, 0.0)))
+    n1, n2 = len(grids[0]), len(grids[1])
+    dirs = (c0[None, None, :] + grids[0][:, None, None] * axes[0]
+            + grids[1][None, :, None] * axes[1]).reshape(-1, 3)
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
-    f = np.clip((v @ axis - lo) / (hi - lo) * (n - 1), 0.0, n - 1 - 1e-9)
-    i = np.floor(f).astype(np.int64)
-    t = f - i
-    wts = np.zeros((len(v), n))
-    wts[np.arange(len(v)), i] = 1.0 - t
-    wts[np.arange(len(v)), i + 1] = t
+    wts = np.zeros((len(v), n1 * n2))
+    rows = np.arange(len(v))
+    i1, i2 = np.floor(pos[0]).astype(np.int64), np.floor(pos[1]).astype(np.int64)
+    t1, t2 = pos[0] - i1, pos[1] - i2
+    for a, wa in ((0, 1.0 - t1), (1, t1)):
+        for b, wb in ((0, 1.0 - t2), (1, t2)):
+            col = np.minimum(i1 + a, n1 - 1) * n2 + np.minimum(i2 + b, n2 - 1)
+            np.add.at(wts, (rows, col), wa * wb)
     return dirs, wts
 
 
@@ -366,7 +409,7 @@ def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=Non
     weight[~(sigma_t > 0.0)] = 0.0
     if not np.any(weight > 0.0):
         return None
-    if int(np.prod(_fft_shape(shape))) > MAX_FFT_POINTS:
+    if int(np.prod(fft_shape(shape))) > MAX_FFT_POINTS:
         return None
     dirs, wts = camera_directions(v, v[inside.reshape(-1)])
     out = np.zeros(tuple(shape) + (3,))
@@ -392,13 +435,28 @@ def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=Non
         if second and sigma_s[r] > 0.0:
             s = float(sigma_t[r])
             if s not in bare:
-                bare[s] = spectrum(flight_kernel(axes, shape, d, first, s), shape)
+                bare[s] = spectrum(KernelBase(axes, shape, d, first, s).kernel(), shape)
             phi1 = np.maximum(convolve(fq, bare[s], shape), 0.0)
             q2 = np.where(inside, float(sigma_s[r]) * phi1, 0.0)
             sources[r].append((spectrum(q2, shape), 2))
     turn = threading.Condition()
     added = [0]   # directions added to ``out`` so far: they are added in order, so that the
     # sum (and the render) does not depend on which thread finished first
+
+    # per (sigma_t, order): the kernel's parts that no camera direction changes, built once
+    # where they fit in half of FFT_MEMORY (else per direction, as flight_kernel does)
+    keys = sorted({(float(sigma_t[r]), order) for r in same for _, order in sources[r]})
+    base_bytes = 20 * int(np.prod([2 * n - 1 for n in shape]))
+    bases = {}
+    if len(keys) * base_bytes <= FFT_MEMORY // 2:
+        for key in keys:
+            if should_cancel and should_cancel():
+                return None
+            bases[key] = KernelBase(axes, shape, d, (float(g), spread, key[1]), key[0])
+
+    def base(key):
+        return bases[key] if key in bases else \
+            KernelBase(axes, shape, d, (float(g), spread, key[1]), key[0])
 
     def directions(a, b):   # one camera direction per chunk, on the pool's threads
         for j in range(a, b):
@@ -409,14 +467,13 @@ def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=Non
                     if should_cancel and should_cancel():
                         return
                     s = float(sigma_t[r])
-                    f = 0.0
+                    prod = 0.0   # the flights' spectra summed: one inverse transform
                     for fq, order in sources[r]:
                         if (s, order) not in fk:
-                            fk[(s, order)] = spectrum(flight_kernel(
-                                axes, shape, d, (float(g), spread, order), s, dirs[j], float(g)),
-                                shape)
-                        f = f + convolve(fq, fk[(s, order)], shape)
-                    part[r] = f * wts[:, j].reshape(shape)
+                            fk[(s, order)] = spectrum(base((s, order)).kernel(
+                                dirs[j], float(g)), shape)
+                        prod = prod + fq * fk[(s, order)]
+                    part[r] = inverse(prod, shape) * wts[:, j].reshape(shape)
             finally:
                 with turn:
                     turn.wait_for(lambda: added[0] == j)
@@ -426,10 +483,12 @@ def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=Non
                     added[0] += 1
                     turn.notify_all()
 
-    # each thread holds a kernel, its spectrum, a product and a result of the FFT's size
-    per_thread = 4 * 8 * int(np.prod(_fft_shape(shape)))
+    # each thread holds a kernel, its spectrum, a product and a result of the FFT's size,
+    # beside the kernels' bases (float64 and three float32 per offset)
+    per_thread = 4 * 8 * int(np.prod(fft_shape(shape)))
+    held = sum(b.bare.nbytes + b.u.nbytes for b in bases.values())
     n_threads = threads if threads > 0 else (os.cpu_count() or 1)
-    n_threads = max(1, min(n_threads, FFT_MEMORY // per_thread))
+    n_threads = max(1, min(n_threads, (FFT_MEMORY - held) // per_thread))
     if not run_chunks(len(dirs), 1, directions, n_threads, should_cancel) or \
             (should_cancel and should_cancel()):
         return None

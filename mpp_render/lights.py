@@ -28,6 +28,7 @@ from .kernels_np import (KIND_AREA, KIND_POINT, KIND_SPOT, KIND_SUN, L_AREA, L_A
                          L_BEAM, L_BLEND, L_CHANNEL, L_COND, L_COSHALF, L_DIR, L_INDIRECT, L_INV,
                          L_KIND, L_NORMAL,
                          L_NORMALIZE, L_POS, L_RADIUS, L_ROUND, L_STRENGTH, LIGHT_FIELDS,
+                         SPOT_GATE_MARGIN,
                          light_sample)
 from .scene import Light
 
@@ -173,6 +174,27 @@ def spot_attenuation(light: Light, from_light):
     _, e = incident(unit, pts)
     dist2 = np.einsum("ij,ij->i", pts - unit.position, pts - unit.position)
     return e[:, 0] * np.maximum(dist2, 1e-8)
+
+
+def outside_spot(light: Light, points, reach: float) -> np.ndarray:
+    """(N,) bool: the ``points`` (N,3, m) round which a ball of radius ``reach`` (m) lies
+    wholly outside a SPOT light's cone, with its emitter's radius and the cone measured in
+    the light's local frame as ``incident`` does (its irradiance there is 0); all False for
+    the other kinds and for points within reach + radius of the light."""
+    points = np.asarray(points, np.float64).reshape(-1, 3)
+    if light.kind != "SPOT":
+        return np.zeros(len(points), bool)
+    rec = pack_light(light)
+    v = points - rec[L_POS:L_POS + 3]
+    dist = np.sqrt(np.einsum("ij,ij->i", v, v))
+    near = dist <= reach + max(float(rec[L_RADIUS]), 0.0)
+    safe = np.where(near, 1.0, dist)
+    loc = v @ rec[L_INV:L_INV + 9].reshape(3, 3).T
+    cos = -loc[:, 2] / np.maximum(np.sqrt(np.einsum("ij,ij->i", loc, loc)), 1e-30)
+    theta = np.arccos(np.clip(cos, -1.0, 1.0))
+    ball = np.arcsin(np.clip((reach + max(float(rec[L_RADIUS]), 0.0)) / safe, 0.0, 1.0))
+    spread = SPOT_GATE_MARGIN * min(float(rec[L_COND]), 1e6) * ball
+    return ~near & (theta - spread > np.arccos(np.clip(rec[L_COSHALF], -1.0, 1.0)))
 
 
 def towards_light(light: Light, points):

@@ -108,7 +108,9 @@ class MarchContext:
                                             len(ref.levels),
                                             exact_flights=firstflight.EXACT_FLIGHTS)
                     flat = flatten_levels(pm, mfs, self.lights, table, self.camera, after)
-                    per_medium.append([([flat], ref.stride, ref.h)] + [None] * (len(mfs) - 1))
+                    stride = flat_stride(mfs)
+                    per_medium.append([([flat], stride, ref.h * stride / ref.stride)]
+                                      + [None] * (len(mfs) - 1))
                     tables.append(FLAT_TABLE)
                     continue
                 per_medium.append([None if m is None else (m.levels, m.stride, m.h) for m in mfs])
@@ -128,16 +130,25 @@ FLAT_TABLE = np.concatenate([np.full((1, len(RHO_TABLE), 3), 4.0 * np.pi),
                              np.zeros((1, len(RHO_TABLE), 3))], axis=2)
 
 
+def flat_stride(mfs) -> int:
+    """The stride (voxels) of a medium's flattened level: the finest of its light pyramids'
+    lattice and its exact first flights' (precompute.fine_stride divides the
+    pyramid's stride)."""
+    ref = next(m for m in mfs if m is not None)
+    return min([ref.stride] + [m.first.stride for m in mfs
+                               if m is not None and m.first is not None and m.first.stride])
+
+
 def flatten_levels(pm: PreparedMedium, mfs, lights: List[Light], table: np.ndarray,
                    camera: Camera, table_after: Optional[np.ndarray] = None) -> np.ndarray:
-    """One level (X,Y,Z,3) float32 on the light pyramids' finest lattice: at each point y,
-    sum over lights l and levels k of the level read at y times the level's weight and
-    HG(cos_l(y); g_k) at density 1 (``table``: kernels_np.level_table), cos_l(y) the cosine
-    between the light's propagation at y and the direction from y to the ``camera``: what
-    kernels_np.multiple_source computes at a march sample of a density-1 medium, with the
-    phase factor interpolated between lattice points instead of taken at the sample (it
-    varies over metres, the lattice is centimetres).  An area light's direction is its
-    centre's (the march jitters it over the area).
+    """One level (X,Y,Z,3) float32 on the lattice ``flat_stride(mfs)`` voxels apart: at
+    each point y, sum over lights l and levels k of the level read at y times the level's
+    weight and HG(cos_l(y); g_k) at density 1 (``table``: kernels_np.level_table), cos_l(y)
+    the cosine between the light's propagation at y and the direction from y to the
+    ``camera``: what kernels_np.multiple_source computes at a march sample of a density-1
+    medium, with the phase factor interpolated between lattice points instead of taken at
+    the sample (it varies over metres, the lattice is centimetres).  An area light's
+    direction is its centre's (the march jitters it over the area).
 
     A light whose MultipleField carries exact first flights (``first``, firstflight.py)
     adds, by their weight w per channel, those flights plus the levels read through
@@ -145,10 +156,11 @@ def flatten_levels(pm: PreparedMedium, mfs, lights: List[Light], table: np.ndarr
     and 1 - w of the levels through ``table``."""
     from .camera import towards_camera
     from .kernels_np import hg, light_sample, table_lookup, upsample
-    from .precompute import lattice_points
+    from .precompute import lattice_points, lattice_shape
     ref = next(m for m in mfs if m is not None)
-    shape = ref.levels[0].shape[:3]
-    _, x = lattice_points(pm, shape, ref.stride)
+    stride = flat_stride(mfs)
+    shape = lattice_shape(pm.grid.shape, stride)
+    _, x = lattice_points(pm, shape, stride)
     v = towards_camera(camera, x)
     tab = table_lookup(table, np.ones(1))[:, 0, :]   # (levels, 6) at density 1
     tab_after = None if table_after is None else table_lookup(table_after, np.ones(1))[:, 0, :]
@@ -159,23 +171,21 @@ def flatten_levels(pm: PreparedMedium, mfs, lights: List[Light], table: np.ndarr
         half = np.full(len(x), 0.5)
         wi = light_sample(pack_light(light), x, half, half)[0]
         cos = np.einsum("ij,ij->i", wi, v)   # the kernels' -(wi . d): d = -v
-        ups = [upsample(lev, 2 ** k, shape).reshape(-1, 3)
-               for k, lev in enumerate(msf.levels[:len(tab)])]
-
-        def summed(t):
-            acc = np.zeros((len(x), 3))
-            for k, up in enumerate(ups):
-                acc += up * (t[k, :3] * hg(cos[:, None], t[k, 3:]))
-            return acc.reshape(out.shape)
-
         first = msf.first if tab_after is not None else None
-        if first is None:
-            out += summed(tab)
-            continue
-        w = np.asarray(first.weight, np.float64)
-        if np.any(w < 1.0):
-            out += (1.0 - w) * summed(tab)
-        out += w * (summed(tab_after) + first.field)
+        w = None if first is None else np.asarray(first.weight, np.float64)
+        # per level, read once: through ``table`` by 1 - w, through ``table_after`` by w
+        for k, lev in enumerate(msf.levels[:len(tab)]):
+            up = upsample(lev, 2 ** k * msf.stride // stride, shape).reshape(out.shape)
+            both = [(tab, None if w is None else 1.0 - w)] + \
+                ([] if w is None else [(tab_after, w)])
+            for t, by in both:
+                if by is not None and not np.any(by > 0.0):
+                    continue
+                part = up * (t[k, :3] * hg(cos[:, None], t[k, 3:])).reshape(out.shape)
+                out += part if by is None else by * part
+        if first is not None:
+            fstride = first.stride or msf.stride
+            out += w * upsample(first.field, fstride // stride, shape)
     return np.ascontiguousarray(out, np.float32)
 
 

@@ -40,7 +40,7 @@ import numpy as np
 
 from . import kernels, kernels_np
 from .camera import towards_camera
-from .firstflight import FirstFlight, first_flight
+from .firstflight import FirstFlight, fft_shape, first_flight
 from .lights import is_dark, towards_light
 from .media import PreparedMedium, density_from, union_interval
 from .parallel import run_chunks
@@ -402,12 +402,22 @@ def cell_mean_irradiance(light: Light, pts, cell: np.ndarray, n: int = 2) -> np.
     rule).  A spot's cone narrower than the lattice (fog_beam's is 0.2 m wide where it
     enters, two lattice spacings) read at the points alone is over- or under-counted as the
     lattice falls; a sun's irradiance is the same everywhere and read once, and an area
-    light's is already its emitter's integral (lights.area_incident), read once."""
-    from .lights import irradiance
+    light's is already its emitter's integral (lights.area_incident), read once.  Cells
+    wholly outside a spot's cone (``lights.outside_spot``) are 0 without a read."""
+    from .lights import irradiance, outside_spot
     if light.kind in ("SUN", "AREA"):
         return irradiance(light, pts)
+    pts = np.asarray(pts, np.float64).reshape(-1, 3)
+    cell = np.asarray(cell, np.float64)
+    corner = 0.5 * float(np.linalg.norm(np.abs(cell).sum(axis=1)))   # m, a bound
+    lit = np.flatnonzero(~outside_spot(light, pts, corner))
+    if lit.size < len(pts):
+        out = np.zeros((len(pts), 3))
+        if lit.size:
+            out[lit] = cell_mean_irradiance(light, pts[lit], cell, n)
+        return out
     t = (np.arange(n) + 0.5) / n - 0.5
-    offs = np.stack(np.meshgrid(t, t, t, indexing="ij"), -1).reshape(-1, 3) @ np.asarray(cell).T
+    offs = np.stack(np.meshgrid(t, t, t, indexing="ij"), -1).reshape(-1, 3) @ cell.T
     acc = np.zeros((len(pts), 3))
     for o in offs:
         acc += irradiance(light, pts + o)
@@ -422,7 +432,8 @@ def peak_light(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int, 
     (phase.delta_fraction) and not yet out of it, spread sideways as the peak's angles take
     it (docs/method.md, "The forward peak spreads").  Returns (lattice (X,Y,Z,3) float32,
     stride): on a lattice ``stride`` voxels apart, about ``resolution`` points along the
-    grid's longest side, for ``kernels.upsample_into``; None when ``should_cancel`` says so.
+    grid's longest side (finer where ``fine_stride`` says so), for
+    ``kernels.upsample_into``; None when ``should_cancel`` says so.
 
     Along a line from the light the beam's light beyond the unscattered light is
     B = E (exp(-tau*) - exp(-tau)) (``fld``'s ``beam`` and ``channel`` optical depths at the
@@ -440,7 +451,9 @@ def peak_light(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int, 
     from . import pyramid
     from .media import delta_scaled
     from .phase import delta_fraction, peak_msa
-    stride, shape, h = pyramid_lattice(pm, resolution)
+    stride, _, h = pyramid_lattice(pm, resolution)
+    fine = fine_stride(pm, stride)
+    stride, shape, h = fine, lattice_shape(pm.grid.shape, fine), h * fine / stride
     f = delta_fraction(pm.g)
     per_metre = np.sqrt(peak_msa(pm.g) / 6.0)   # w / s, the first turn's spread per axis
     pad = 0
@@ -601,18 +614,11 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
     ``threads``: for the exact first flights' convolutions (firstflight.py)."""
     from . import boundary
     from .kernels_np import level_paths, walk_displacement
-    from .media import density_from
     stride, shape, h = pyramid_lattice(pm, resolution)
-    idx, pts = lattice_points(pm, shape, stride)
-    rho = density_from(lattice_values(fld[..., 0], idx, stride), pm.threshold)
-    base = lattice_source(pm, fld, light, channel, stride, shape, should_cancel=should_cancel,
-                          beam=beam)
-    if base is None:
+    got = source_lattice(pm, fld, light, channel, stride, beam, should_cancel)
+    if got is None:
         return None
-    if light.kind in ("POINT", "SPOT"):
-        near = near_light_cells(pm, light, stride, shape)
-        if near.size:
-            base[near] = cell_mean_source(pm, fld, light, channel, stride, shape, near, beam)
+    base, rho, pts = got
     inside = rho[rho > 0]
     mean_rho = float(np.mean(inside)) if inside.size else 0.0
     sigma_s = np.asarray(pm.sigma_s, np.float64) * mean_rho
@@ -634,19 +640,68 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
             str(camera.projection).upper() in ("PERSP", "ORTHO"):
         # a mesh volume, whose levels the march sums once (march.flatten_levels): the first
         # flight exact where the first flights mostly leave the medium (firstflight.py)
-        first = first_flight(base.reshape(tuple(shape) + (3,)), (rho > 0).reshape(shape),
-                             stride * pm.i2w[:3, :3], light_direction(light, pts),
-                             towards_camera(camera, pts),
+        fine = fine_stride(pm, stride)
+        got = (base, rho, pts) if fine == stride else \
+            source_lattice(pm, fld, light, channel, fine, beam, should_cancel)
+        if got is None:
+            return None
+        fshape = lattice_shape(pm.grid.shape, fine)
+        first = first_flight(got[0].reshape(tuple(fshape) + (3,)), (got[1] > 0).reshape(fshape),
+                             fine * pm.i2w[:3, :3], light_direction(light, got[2]),
+                             towards_camera(camera, got[2]),
                              g if g_last is None else float(g_last),
                              np.asarray(pm.sigma_t, np.float64) * mean_rho, sigma_s,
                              should_cancel, threads)
         if should_cancel and should_cancel():
             return None
+        if first is not None:
+            first.stride = fine
     levels, directions = source_pyramid(base, light, pts, shape, g, max_levels, keep)
     if should_cancel and should_cancel():
         return None
     drift_levels(levels, pm, light, camera, stride, h, sigma_s, directions, g_last)
     return MultipleField(stride, h, levels, first)
+
+
+def source_lattice(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int,
+                   stride: int, beam: Optional[int] = None,
+                   should_cancel: Optional[Callable[[], bool]] = None):
+    """(source (N,3) W/m^3, density (N,), points (N,3) m) on the lattice ``stride`` voxels
+    apart (C order of ``lattice_shape``): the first-scattering source of ``lattice_source``,
+    averaged over the cells round a point or spot light (``cell_mean_source``), and the
+    medium's density at the lattice points.  None when ``should_cancel`` says so."""
+    shape = lattice_shape(pm.grid.shape, stride)
+    idx, pts = lattice_points(pm, shape, stride)
+    rho = density_from(lattice_values(fld[..., 0], idx, stride), pm.threshold)
+    base = lattice_source(pm, fld, light, channel, stride, shape, should_cancel=should_cancel,
+                          beam=beam)
+    if base is None:
+        return None
+    if light.kind in ("POINT", "SPOT"):
+        near = near_light_cells(pm, light, stride, shape)
+        if near.size:
+            base[near] = cell_mean_source(pm, fld, light, channel, stride, shape, near, beam)
+    return base, rho, pts
+
+
+# What follows a narrow beam -- the forward peak's light (peak_light) and the exact first
+# flights (firstflight.py) -- is computed on a lattice finer than the walk's by this factor
+# where the first flights' FFT on it stays within FINE_POINTS: round a beam a few lattice
+# steps wide their light is as narrow (fog_beam on the walk's 64 points: the beam's axis
+# 14 % too dark, its sides 60 % too bright; docs/method.md).  Larger grids keep the walk's.
+REFINE = 2
+FINE_POINTS = 1 << 22
+
+
+def fine_stride(pm: PreparedMedium, stride: int) -> int:
+    """The stride (voxels) of the lattice for the forward peak's light and the exact first
+    flights, for a walk on ``stride``: the largest divisor of ``stride`` at most
+    stride / REFINE (the walk's lattice points are then among its points,
+    march.flatten_levels), or ``stride`` itself where that is 1 or the finer lattice's FFT
+    would exceed FINE_POINTS."""
+    fine = next((d for d in range(stride // REFINE, 0, -1) if stride % d == 0), stride)
+    n = int(np.prod(fft_shape(lattice_shape(pm.grid.shape, fine))))
+    return fine if n <= FINE_POINTS else stride
 
 
 def source_pyramid(base, light: Light, pts, shape, g: float, max_levels: int, keep=None):
