@@ -110,16 +110,24 @@ def mesh_scene(n=96, w=160, h=120, spp=1):
                             settings=Settings(samples=spp, multiple=True))
 
 
-def fog_box_scene(n=96, w=160, h=120, spp=1):
+def spot():
+    """A narrow spot (8 degrees, 2000 W) 1.5 m beyond the fog box's side, along +x."""
+    m = np.array([[0.0, 0, -1, -3.5], [0, 1, 0, 0], [1, 0, 0, 0], [0, 0, 0, 1]])
+    return Light("SPOT", "spot", np.full(3, 2000.0), position=m[:3, 3].copy(),
+                 direction=np.array([1.0, 0.0, 0.0]), matrix=m, radius=0.1,
+                 spot_size=np.radians(8.0), spot_blend=0.1)
+
+
+def fog_box_scene(n=96, w=160, h=120, spp=1, light=None):
     """A thin mesh volume: a 4 x 4 x 2 m box of fog (sigma_s 0.95 /m, sigma_a 0.05 /m, g 0.85)
-    under a sun, multiple scattering on: its first flights mostly leave it
+    under a sun (or ``light``), multiple scattering on: its first flights mostly leave it
     (firstflight.py)."""
     i2w = np.eye(4)
     i2w[:3, :3] = np.diag([4.0 / n, 4.0 / n, 4.0 / n])
     i2w[:3, 3] = [-2.0, -2.0, -1.0]
     box = Medium("fog box", np.ones((n, n, n // 2), np.float32), i2w, np.full(3, 0.95),
                  np.full(3, 0.05), 0.85, source="MESH")
-    return SceneDescription(camera(w, h), [sun()], [box], world=World(np.zeros(3)),
+    return SceneDescription(camera(w, h), [light or sun()], [box], world=World(np.zeros(3)),
                             settings=Settings(samples=spp, multiple=True))
 
 
@@ -239,6 +247,14 @@ def skip_tables(quick):
         "voxel 4 x 4 x 2 m fog box under a sun, its weight 1; ratio < 1: the cost)",
         lambda: fog_box_scene(n=m), {"firstflight__ENABLED": False},
         {"firstflight__ENABLED": True}, "precompute")
+    add(f"precompute: the first flights and the forward peak's light on a lattice twice as "
+        f"fine (precompute.REFINE 1 -> 2; the same fog box under a narrow spot; ratio < 1: "
+        f"the cost)", lambda: fog_box_scene(n=m, light=spot()), {"precompute__REFINE": 1},
+        {"precompute__REFINE": 2}, "precompute")
+    add(f"precompute: a spot's cone culls the cells it misses (precompute.SPOT_CULL; the same "
+        f"fog box under the narrow spot, lattice twice as fine)",
+        lambda: fog_box_scene(n=m, light=spot()), {"precompute__SPOT_CULL": False},
+        {"precompute__SPOT_CULL": True}, "precompute")
     add(f"precompute: the first flights' escape fraction alone where the walk serves "
         f"({m}^3 ball, a sun and a point light: weight 0, no flight computed)",
         lambda: mesh_scene(n=m), {"firstflight__ENABLED": False},

@@ -396,6 +396,10 @@ def pyramid_lattice(pm: PreparedMedium, resolution: int = MULTIPLE_RESOLUTION):
     return stride, lattice_shape(pm.grid.shape, stride), h
 
 
+SPOT_CULL = True   # cell_mean_irradiance skips the cells a spot's cone misses (a switch for
+# benchmarks/performance.py)
+
+
 def cell_mean_irradiance(light: Light, pts, cell: np.ndarray, n: int = 2) -> np.ndarray:
     """The light's irradiance (W/m^2, (N,3)) averaged over the lattice cells centred on
     ``pts`` (N,3, m) with edges the columns of ``cell`` (3,3, m): n^3 points each (midpoint
@@ -410,7 +414,8 @@ def cell_mean_irradiance(light: Light, pts, cell: np.ndarray, n: int = 2) -> np.
     pts = np.asarray(pts, np.float64).reshape(-1, 3)
     cell = np.asarray(cell, np.float64)
     corner = 0.5 * float(np.linalg.norm(np.abs(cell).sum(axis=1)))   # m, a bound
-    lit = np.flatnonzero(~outside_spot(light, pts, corner))
+    lit = np.flatnonzero(~outside_spot(light, pts, corner)) if SPOT_CULL else \
+        np.arange(len(pts))
     if lit.size < len(pts):
         out = np.zeros((len(pts), 3))
         if lit.size:
