@@ -54,7 +54,7 @@ EXACT_FLIGHTS = 2   # flights out of the beam computed exactly (march: kernels_n
 ESCAPE_LOW = 0.3    # escape fraction at or below which the walk alone is used
 ESCAPE_HIGH = 0.5   # escape fraction at or above which the exact first flight alone is used
 ESCAPE_RESOLUTION = 32   # lattice points along the longest axis for the escape fraction
-MAX_DIRECTIONS = 9       # camera directions convolved at most along each axis of the view
+MAX_DIRECTIONS = 24      # camera directions convolved at most (the step widens to fit)
 DIRECTION_STEP = np.radians(15.0)  # angle between neighbouring camera directions, at most
 FFT_MEMORY = 1 << 30       # bytes the parallel convolutions may hold at once
 MAX_FFT_POINTS = 1 << 24   # larger lattices keep the walk alone (memory: ~0.2 GB per transform)
@@ -331,8 +331,8 @@ def camera_directions(v, inside_v):
     """(directions (n,3), per point weights (N,n)) for the directions to the camera ``v``
     (N,3, unit, one per lattice point): a grid of directions about the mean of ``inside_v``
     (the directions from the medium's points) along the two principal axes of their spread,
-    DIRECTION_STEP apart (at most MAX_DIRECTIONS along each), each point interpolating the
-    four nearest bilinearly.  Both axes matter: the last scattering's HG(g) towards the
+    DIRECTION_STEP apart (a wider step where that would take more than MAX_DIRECTIONS),
+    each point interpolating the four nearest bilinearly.  Both axes matter: the last scattering's HG(g) towards the
     camera is narrow (half its peak 7 degrees off the peak for g = 0.85), and a medium as
     high as the view is wide sees the camera from directions 10 degrees apart vertically
     too (fog_beam: one axis left the light above and below a beam 40 % too bright)."""
@@ -343,11 +343,15 @@ def camera_directions(v, inside_v):
         axes = np.linalg.svd(dev, full_matrices=False)[2][:2]
     else:
         axes = np.zeros((2, 3))
+    spans = [(float(t.min()), float(t.max())) for t in (inside_v @ axes.T).T]
+    step = DIRECTION_STEP
+    while True:
+        ns = [int(max(1, np.ceil((hi - lo) / step) + 1)) for lo, hi in spans]
+        if ns[0] * ns[1] <= MAX_DIRECTIONS:
+            break
+        step *= 1.1
     grids, pos = [], []
-    for axis in axes:
-        t_in = inside_v @ axis
-        lo, hi = float(t_in.min()), float(t_in.max())
-        n = int(min(MAX_DIRECTIONS, max(1, np.ceil((hi - lo) / DIRECTION_STEP) + 1)))
+    for axis, (lo, hi), n in zip(axes, spans, ns):
         grids.append(np.linspace(lo, hi, n) if n > 1 else np.array([0.5 * (lo + hi)]))
         pos.append(np.clip((v @ axis - lo) / max(hi - lo, 1e-30) * (n - 1), 0.0,
                            max(n - 1 - 1e-9, 0.0)))

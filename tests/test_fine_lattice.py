@@ -13,14 +13,20 @@ from mpp_render.precompute import (FINE_POINTS, cell_mean_irradiance, fine_strid
 from mpp_render.scene import Camera, Light, Medium, SceneDescription, Settings, World
 
 
-def grid(shape):
-    return SimpleNamespace(grid=SimpleNamespace(shape=tuple(shape)))
+def grid(shape, sharp=True):
+    return SimpleNamespace(grid=SimpleNamespace(shape=tuple(shape)), sharp=sharp)
 
 
 @pytest.mark.parametrize("stride, fine", [(1, 1), (2, 1), (3, 1), (4, 2), (5, 1), (6, 3),
                                           (8, 4)])
 def test_the_fine_stride_divides_the_walks(stride, fine):
     assert fine_stride(grid((130, 54, 54)), stride) == fine
+
+
+def test_a_medium_of_varying_density_keeps_the_walks_lattice():
+    """A VDB grid or the world's fog: its first flights are the walk's, and the forward
+    peak's light alone on the finer lattice cost smoke_plume three times the precompute."""
+    assert fine_stride(grid((130, 54, 54), sharp=False), 2) == 2
 
 
 def test_a_large_grid_keeps_the_walks_lattice():

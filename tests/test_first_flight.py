@@ -160,7 +160,7 @@ def test_the_camera_directions_interpolate_across_the_view(spread):
     v = rng.normal(size=(2000, 3)) * [spread[0], spread[1], 0.0] + [0.0, 0.0, -1.0]
     v /= np.linalg.norm(v, axis=1, keepdims=True)
     dirs, wts = ff.camera_directions(v, v)
-    assert 2 <= len(dirs) <= ff.MAX_DIRECTIONS ** 2
+    assert 2 <= len(dirs) <= ff.MAX_DIRECTIONS
     assert np.allclose(wts.sum(axis=1), 1.0) and np.all(wts >= 0.0)
     mix = wts @ dirs
     mix /= np.linalg.norm(mix, axis=1, keepdims=True)
@@ -177,6 +177,15 @@ def test_the_camera_directions_interpolate_across_the_view(spread):
         assert np.percentile(off1, 90) > np.percentile(off, 90) + 3.0
     one, w1 = ff.camera_directions(v[:1], v[:1])
     assert len(one) == 1 and np.allclose(w1, 1.0)
+
+
+def test_a_camera_inside_the_medium_convolves_at_most_max_directions():
+    """Directions to the camera from all round it (a camera in the fog): the grid's step
+    widens so that no more than MAX_DIRECTIONS convolutions are made; weights still sum to 1."""
+    v = ff.sphere_directions(3000)
+    dirs, wts = ff.camera_directions(v, v)
+    assert 4 <= len(dirs) <= ff.MAX_DIRECTIONS
+    assert np.allclose(wts.sum(axis=1), 1.0) and np.all(wts >= 0.0)
 
 
 @pytest.mark.parametrize("g", [0.0, 0.5, 0.85])
