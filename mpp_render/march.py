@@ -173,16 +173,19 @@ def flatten_levels(pm: PreparedMedium, mfs, lights: List[Light], table: np.ndarr
         cos = np.einsum("ij,ij->i", wi, v)   # the kernels' -(wi . d): d = -v
         first = msf.first if tab_after is not None else None
         w = None if first is None else np.asarray(first.weight, np.float64)
-        # per level, read once: through ``table`` by 1 - w, through ``table_after`` by w
+        # each level upsampled once, read through ``table`` by 1 - w, ``table_after`` by w
         for k, lev in enumerate(msf.levels[:len(tab)]):
-            up = upsample(lev, 2 ** k * msf.stride // stride, shape).reshape(out.shape)
-            both = [(tab, None if w is None else 1.0 - w)] + \
-                ([] if w is None else [(tab_after, w)])
-            for t, by in both:
-                if by is not None and not np.any(by > 0.0):
-                    continue
-                part = up * (t[k, :3] * hg(cos[:, None], t[k, 3:])).reshape(out.shape)
-                out += part if by is None else by * part
+            up = upsample(lev, 2 ** k * msf.stride // stride, shape).reshape(-1, 3)
+
+            def read(t):
+                return (up * (t[k, :3] * hg(cos[:, None], t[k, 3:]))).reshape(out.shape)
+
+            if w is None:
+                out += read(tab)
+                continue
+            if np.any(w < 1.0):
+                out += (1.0 - w) * read(tab)
+            out += w * read(tab_after)
         if first is not None:
             fstride = first.stride or msf.stride
             out += w * upsample(first.field, fstride // stride, shape)
