@@ -370,6 +370,30 @@ def camera_directions(v, inside_v):
     return dirs, wts
 
 
+def flight_weight(q, inside, axes, source_dirs, g: float, sigma_t):
+    """(weight (3,), d (3,), spread) of the exact flights of the source ``q`` (arguments as
+    ``first_flight``'s): the blend weight per channel (``blend_weight`` of the escape
+    fraction), the sources' power-weighted mean direction d and the length of that mean;
+    None where no channel takes the flights (every weight 0, no power, ENABLED off) -- the
+    walk's coarser lattice then answers for a finer one (precompute.multiple_field)."""
+    if not ENABLED:
+        return None
+    power = q.sum(axis=-1).reshape(-1)
+    total = float(power.sum())
+    sigma_t = np.broadcast_to(np.asarray(sigma_t, np.float64), (3,))
+    if not total > 0.0 or not np.any(inside) or not np.any(sigma_t > 0.0):
+        return None
+    mean = (source_dirs * power[:, None]).sum(axis=0) / total
+    norm = float(np.linalg.norm(mean))
+    d = mean / norm if norm > 1e-12 else np.array([0.0, 0.0, 1.0])
+    spread = min(norm, 1.0)
+    weight = blend_weight(escape_fraction(q, inside, axes, d, (float(g), spread), sigma_t))
+    weight[~(sigma_t > 0.0)] = 0.0
+    if not np.any(weight > 0.0):
+        return None
+    return weight, d, spread
+
+
 def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=None,
                  should_cancel: Optional[Callable[[], bool]] = None,
                  threads: int = 0) -> Optional[FirstFlight]:
@@ -393,26 +417,16 @@ def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=Non
     d is the sources' power-weighted mean direction, and the length of that mean spreads the
     flights' directions (``first_phase``): round a point light inside the medium they are
     isotropic."""
-    if not ENABLED:
+    got = flight_weight(q, inside, axes, source_dirs, g, sigma_t)
+    if got is None:
         return None
+    weight, d, spread = got
     shape = q.shape[:3]
-    power = q.sum(axis=-1).reshape(-1)
-    total = float(power.sum())
     sigma_t = np.broadcast_to(np.asarray(sigma_t, np.float64), (3,))
     second = sigma_s is not None and EXACT_FLIGHTS >= 2   # what the walk's table leaves out
     sigma_s = np.zeros(3) if sigma_s is None else \
         np.broadcast_to(np.asarray(sigma_s, np.float64), (3,))
-    if not total > 0.0 or not np.any(inside) or not np.any(sigma_t > 0.0):
-        return None
-    mean = (source_dirs * power[:, None]).sum(axis=0) / total
-    norm = float(np.linalg.norm(mean))
-    d = mean / norm if norm > 1e-12 else np.array([0.0, 0.0, 1.0])
-    spread = min(norm, 1.0)
     first = (float(g), spread)
-    weight = blend_weight(escape_fraction(q, inside, axes, d, first, sigma_t))
-    weight[~(sigma_t > 0.0)] = 0.0
-    if not np.any(weight > 0.0):
-        return None
     if int(np.prod(fft_shape(shape))) > MAX_FFT_POINTS:
         return None
     dirs, wts = camera_directions(v, v[inside.reshape(-1)])

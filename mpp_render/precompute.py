@@ -40,7 +40,7 @@ import numpy as np
 
 from . import kernels, kernels_np
 from .camera import towards_camera
-from .firstflight import FirstFlight, fft_shape, first_flight
+from .firstflight import FirstFlight, fft_shape, first_flight, flight_weight
 from .lights import is_dark, towards_light
 from .media import PreparedMedium, density_from, union_interval
 from .parallel import run_chunks
@@ -646,6 +646,12 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
         # a mesh volume, whose levels the march sums once (march.flatten_levels): the first
         # flight exact where the first flights mostly leave the medium (firstflight.py)
         fine = fine_stride(pm, stride)
+        sigma_t = np.asarray(pm.sigma_t, np.float64) * mean_rho
+        if fine != stride and flight_weight(
+                base.reshape(tuple(shape) + (3,)), (rho > 0).reshape(shape),
+                stride * pm.i2w[:3, :3], light_direction(light, pts),
+                g if g_last is None else float(g_last), sigma_t) is None:
+            fine = stride   # the walk serves: no finer source for flights never made
         got = (base, rho, pts) if fine == stride else \
             source_lattice(pm, fld, light, channel, fine, beam, should_cancel)
         if got is None:
@@ -654,8 +660,7 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
         first = first_flight(got[0].reshape(tuple(fshape) + (3,)), (got[1] > 0).reshape(fshape),
                              fine * pm.i2w[:3, :3], light_direction(light, got[2]),
                              towards_camera(camera, got[2]),
-                             g if g_last is None else float(g_last),
-                             np.asarray(pm.sigma_t, np.float64) * mean_rho, sigma_s,
+                             g if g_last is None else float(g_last), sigma_t, sigma_s,
                              should_cancel, threads)
         if should_cancel and should_cancel():
             return None

@@ -109,3 +109,33 @@ def test_a_spots_cone_culls_only_dark_cells():
     assert np.array_equal(got, full)
     sun = Light("SUN", "sun", np.full(3, 2.0), direction=np.array([0.0, 0.0, -1.0]))
     assert not outside_spot(sun, pts, reach).any()
+
+
+def test_no_finer_source_where_the_walk_serves(monkeypatch):
+    """A dense small box (its first flights mostly stay in it: weight 0): the first flights are
+    not made, and the finer lattice's source is not computed for them either."""
+    from mpp_render import precompute as pc
+    from mpp_render.media import prepare
+    desc = beam_scene()
+    desc.media[0].sigma_s = np.full(3, 40.0)
+    pm = prepare(desc.media[0])
+    strides = []
+    real = pc.source_lattice
+
+    def counted(*args, **kw):
+        strides.append(args[4])
+        return real(*args, **kw)
+
+    monkeypatch.setattr(pc, "source_lattice", counted)
+    pre = precompute([pm], desc.lights, desc.world, desc.camera, multiple=True,
+                     multiple_resolution=25)
+    msf = pre.multiple[0][0]
+    assert msf.stride == 2 and msf.first is None
+    assert fine_stride(pm, 2) == 1 and strides == [2]
+    # the thin box of the test above does compute it
+    strides.clear()
+    desc = beam_scene()
+    pm = prepare(desc.media[0])
+    precompute([pm], desc.lights, desc.world, desc.camera, multiple=True,
+               multiple_resolution=25)
+    assert strides == [2, 1]
