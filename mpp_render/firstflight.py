@@ -417,18 +417,17 @@ def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=Non
     d is the sources' power-weighted mean direction, and the length of that mean spreads the
     flights' directions (``first_phase``): round a point light inside the medium they are
     isotropic."""
+    shape = q.shape[:3]
+    if int(np.prod(fft_shape(shape))) > MAX_FFT_POINTS:
+        return None
     got = flight_weight(q, inside, axes, source_dirs, g, sigma_t)
     if got is None:
         return None
     weight, d, spread = got
-    shape = q.shape[:3]
     sigma_t = np.broadcast_to(np.asarray(sigma_t, np.float64), (3,))
     second = sigma_s is not None and EXACT_FLIGHTS >= 2   # what the walk's table leaves out
     sigma_s = np.zeros(3) if sigma_s is None else \
         np.broadcast_to(np.asarray(sigma_s, np.float64), (3,))
-    first = (float(g), spread)
-    if int(np.prod(fft_shape(shape))) > MAX_FFT_POINTS:
-        return None
     dirs, wts = camera_directions(v, v[inside.reshape(-1)])
     out = np.zeros(tuple(shape) + (3,))
     # a channel whose source is another's times a constant, with the same coefficients (a
@@ -443,27 +442,10 @@ def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=Non
                 break
         else:
             same[ch] = [ch]
-    sources = {}   # per representative channel: the spectra of the first and second sources
-    bare = {}
-    for r in same:
-        if should_cancel and should_cancel():
-            return None
-        fq = spectrum(q[..., r], shape)
-        sources[r] = [(fq, 1)]
-        if second and sigma_s[r] > 0.0:
-            s = float(sigma_t[r])
-            if s not in bare:
-                bare[s] = spectrum(KernelBase(axes, shape, d, first, s).kernel(), shape)
-            phi1 = np.maximum(convolve(fq, bare[s], shape), 0.0)
-            q2 = np.where(inside, float(sigma_s[r]) * phi1, 0.0)
-            sources[r].append((spectrum(q2, shape), 2))
-    turn = threading.Condition()
-    added = [0]   # directions added to ``out`` so far: they are added in order, so that the
-    # sum (and the render) does not depend on which thread finished first
-
+    orders = {r: [1, 2] if second and sigma_s[r] > 0.0 else [1] for r in same}
     # per (sigma_t, order): the kernel's parts that no camera direction changes, built once
-    # where they fit in half of FFT_MEMORY (else per direction, as flight_kernel does)
-    keys = sorted({(float(sigma_t[r]), order) for r in same for _, order in sources[r]})
+    # where they fit in half of FFT_MEMORY (else per use, as flight_kernel does)
+    keys = sorted({(float(sigma_t[r]), order) for r in same for order in orders[r]})
     base_bytes = 20 * int(np.prod([2 * n - 1 for n in shape]))
     bases = {}
     if len(keys) * base_bytes <= FFT_MEMORY // 2:
@@ -475,6 +457,24 @@ def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=Non
     def base(key):
         return bases[key] if key in bases else \
             KernelBase(axes, shape, d, (float(g), spread, key[1]), key[0])
+
+    sources = {}   # per representative channel: the spectra of the first and second sources
+    bare = {}      # per sigma_t: the first flight's bare kernel's spectrum (for phi1)
+    for r in same:
+        if should_cancel and should_cancel():
+            return None
+        fq = spectrum(q[..., r], shape)
+        sources[r] = [(fq, 1)]
+        if 2 in orders[r]:
+            s = float(sigma_t[r])
+            if s not in bare:
+                bare[s] = spectrum(base((s, 1)).kernel(), shape)
+            phi1 = np.maximum(convolve(fq, bare[s], shape), 0.0)
+            q2 = np.where(inside, float(sigma_s[r]) * phi1, 0.0)
+            sources[r].append((spectrum(q2, shape), 2))
+    turn = threading.Condition()
+    added = [0]   # directions added to ``out`` so far: they are added in order, so that the
+    # sum (and the render) does not depend on which thread finished first
 
     def directions(a, b):   # one camera direction per chunk, on the pool's threads
         for j in range(a, b):
