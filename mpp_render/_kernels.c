@@ -981,13 +981,15 @@ static inline double spot_cos(const double *L, const double v[3]) {
 }
 
 /* Light record `L` at point x: propagation direction d, irradiance e, unit direction to the
- * centre wc and its distance dc (INFINITY for the sun). */
+ * centre wc and its distance dc (INFINITY for the sun), and ds, the distance to the emitting
+ * point(s) sampled (their irradiance-weighted mean; dc for a point without radius). */
 static void light_sample(const double *L, const double x[3], double u1, double u2,
-                         double d[3], double e[3], double wc[3], double *dc) {
+                         double d[3], double e[3], double wc[3], double *dc, double *ds) {
     int kind = (int)L[L_KIND];
     if (kind == KIND_SUN) {
         for (int a = 0; a < 3; a++) { d[a] = L[L_DIR + a]; e[a] = L[L_STRENGTH + a]; wc[a] = -d[a]; }
         *dc = INFINITY;
+        *ds = INFINITY;
         return;
     }
     const double *c = L + L_POS;
@@ -1020,7 +1022,11 @@ static void light_sample(const double *L, const double x[3], double u1, double u
             double th_in = bl > 0.0 ? acos(cin < 1.0 ? cin : 1.0) : th_out;
             if (th - spread > th_out || th + spread < th_in) n_pts = 1;
         }
-        double rmin = radius > 1e-4 ? radius : 1e-4, esum = 0.0, dsum[3] = {0, 0, 0};
+        double rmin = 1e-4, esum = 0.0, dsum[3] = {0, 0, 0}, lsum = 0.0;
+        /* 1 - cos theta_max of the disc's cone, without cancellation for r << d */
+        double hyp = sqrt(dcc * dcc + radius * radius);
+        double omc_max = radius > 0.0 ? radius * radius / (hyp * (hyp + dcc)) : 0.0;
+        double e_disc = radius > 0.0 ? 2.0 * omc_max / (radius * radius) : 0.0;
         for (int i = 0; i < n_pts; i++) {
             if (i > 0) {
                 double ua = u1 + (double)i / (double)SPOT_DISC_POINTS, ub = (double)i * SPOT_DISC_PHI;
@@ -1029,15 +1035,27 @@ static void light_sample(const double *L, const double x[3], double u1, double u
                 if (ub >= 1.0) ub -= 1.0;
                 disc_map(ua, ub, 1, &pa, &pb);
             }
-            double src[3];
-            for (int a = 0; a < 3; a++) src[a] = c[a] + radius * (t1[a] * pa + t2[a] * pb);
-            double v[3] = {x[0] - src[0], x[1] - src[1], x[2] - src[2]};
-            double dist = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-            double id = 1.0 / (dist > 1e-30 ? dist : 1e-30), di[3];
-            for (int a = 0; a < 3; a++) di[a] = v[a] * id;
+            double di[3], den, dist;  /* the irradiance per unit intensity is att / den */
+            if (radius > 0.0) {
+                /* Cycles' soft-falloff lamp: a disc of radius r facing x with radiance
+                 * I / (pi r^2); the disc subtends the cone of half-angle atan(r / d) about wc,
+                 * irradiance I / (pi r^2) * 2 pi (1 - cos theta_max), exact also inside r.
+                 * The disc point (pa, pb) maps to a direction uniform in that solid angle. */
+                double s = pa * pa + pb * pb, omc = s * omc_max;
+                double cos_t = 1.0 - omc, sin_t = sqrt(omc * (2.0 - omc) > 0.0 ? omc * (2.0 - omc) : 0.0);
+                double rs = s > 0.0 ? sin_t / sqrt(s) : 0.0;
+                for (int a = 0; a < 3; a++) di[a] = -(wc[a] * cos_t + (t1[a] * pa + t2[a] * pb) * rs);
+                den = 1.0 / e_disc;
+                dist = dcc / (cos_t > 1e-12 ? cos_t : 1e-12);  /* to the disc along di */
+            } else {
+                double v[3] = {x[0] - c[0], x[1] - c[1], x[2] - c[2]};
+                dist = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+                double id = 1.0 / (dist > 1e-30 ? dist : 1e-30);
+                for (int a = 0; a < 3; a++) di[a] = v[a] * id;
+                den = dist * dist > rmin * rmin ? dist * dist : rmin * rmin;
+            }
             if (i == 0)
                 for (int a = 0; a < 3; a++) d[a] = di[a];
-            double r2 = dist * dist > rmin * rmin ? dist * dist : rmin * rmin;
             double att = 1.0;
             if (kind == KIND_SPOT) {
                 double cos_t = spot_cos(L, di);
@@ -1049,9 +1067,11 @@ static void light_sample(const double *L, const double x[3], double u1, double u
                     att = q * q * (3.0 - 2.0 * q);
                 }
             }
-            esum += att / r2;
-            for (int a = 0; a < 3; a++) dsum[a] += att / r2 * di[a];
+            esum += att / den;
+            lsum += att / den * dist;
+            for (int a = 0; a < 3; a++) dsum[a] += att / den * di[a];
         }
+        *ds = (radius > 0.0 && esum > 0.0) ? lsum / esum : dcc;
         /* the direction: the irradiance-weighted mean over the points, so that the phase
          * function sees the light from the part of the disc that lights x */
         double dn = sqrt(dsum[0] * dsum[0] + dsum[1] * dsum[1] + dsum[2] * dsum[2]);
@@ -1067,12 +1087,22 @@ static void light_sample(const double *L, const double x[3], double u1, double u
     double dist2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
     if (!(dist2 > 1e-8)) dist2 = 1e-8;
     double dist = sqrt(dist2);
+    *ds = dist;
     for (int a = 0; a < 3; a++) d[a] = v[a] / dist;
     double cos_l = d[0] * L[L_NORMAL] + d[1] * L[L_NORMAL + 1] + d[2] * L[L_NORMAL + 2];
     if (cos_l < 0.0) cos_l = 0.0;
     double area = L[L_AREA];
     double norm = (L[L_NORMALIZE] > 0 && area > 0) ? area : 1.0;
     for (int a = 0; a < 3; a++) e[a] = L[L_STRENGTH + a] / M_PI / norm * (cos_l * area / dist2);
+}
+
+/* The optical depth to an emitting point at distance ds, from the field's depth to the light's
+ * centre at distance dc: the centre's path's mean extinction times the emitting point's path
+ * length, ds / dc (exact in a homogeneous medium).  Near the centre the field's trilinear
+ * depth stands for at least half a voxel's path, so dc is taken as at least that. */
+static inline double path_stretch(double ds, double dc, double voxel) {
+    double lo = 0.5 * voxel;
+    return ds / (dc > lo ? dc : lo);
 }
 
 static inline double hg_phase(double c, double g) {
@@ -1162,13 +1192,13 @@ static void multiple_source_c(const MS *ms, const Grid *lv, int m, int nl, const
  * Twin of kernels_np.light_varies. */
 static int light_varies(const double *LR, Py_ssize_t nl, const int *chan, const double o[3],
                         const double d[3], double s_a, double s_b, double g) {
-    double xa[3], xb[3], wi[3], e[3], wc[3], dc;
+    double xa[3], xb[3], wi[3], e[3], wc[3], dc, ds;
     for (int q = 0; q < 3; q++) { xa[q] = o[q] + d[q] * s_a; xb[q] = o[q] + d[q] * s_b; }
     for (Py_ssize_t l = 0; l < nl; l++) {
         if (chan[l] < 0 || (int)LR[l * LIGHT_FIELDS + L_KIND] == KIND_SUN) continue;
-        light_sample(LR + l * LIGHT_FIELDS, xa, 0.5, 0.5, wi, e, wc, &dc);
+        light_sample(LR + l * LIGHT_FIELDS, xa, 0.5, 0.5, wi, e, wc, &dc, &ds);
         double ea = (e[0] + e[1] + e[2]) * hg_phase(-(wi[0] * d[0] + wi[1] * d[1] + wi[2] * d[2]), g);
-        light_sample(LR + l * LIGHT_FIELDS, xb, 0.5, 0.5, wi, e, wc, &dc);
+        light_sample(LR + l * LIGHT_FIELDS, xb, 0.5, 0.5, wi, e, wc, &dc, &ds);
         double eb = (e[0] + e[1] + e[2]) * hg_phase(-(wi[0] * d[0] + wi[1] * d[1] + wi[2] * d[2]), g);
         double hi = ea > eb ? ea : eb, lo = ea > eb ? eb : ea;
         if (hi > 0.0 && !(lo >= (1.0 - LIGHT_VARIATION) * hi)) return 1;
@@ -1488,11 +1518,11 @@ static PyObject *march(PyObject *self, PyObject *args) {
                 double t = seg + uniform01(key, k, DIM_JITTER) * H;
                 double ts = t < seg + hl ? t : seg + hl, x[3];
                 for (int q = 0; q < 3; q++) x[q] = o[q] + d[q] * ts;
-                double wi[MAX_LIGHTS][3], e[MAX_LIGHTS][3], wc[MAX_LIGHTS][3], dc[MAX_LIGHTS];
+                double wi[MAX_LIGHTS][3], e[MAX_LIGHTS][3], wc[MAX_LIGHTS][3], dc[MAX_LIGHTS], ds[MAX_LIGHTS];
                 for (Py_ssize_t l = 0; l < nl; l++) {
                     double u1 = 0.5, u2 = 0.5;
                     if (jitter[l]) { u1 = uniform01(key, k, 2 * l); u2 = uniform01(key, k, 2 * l + 1); }
-                    light_sample(LR + l * LIGHT_FIELDS, x, u1, u2, wi[l], e[l], wc[l], &dc[l]);
+                    light_sample(LR + l * LIGHT_FIELDS, x, u1, u2, wi[l], e[l], wc[l], &dc[l], &ds[l]);
                 }
                 double sig_t[3] = {0, 0, 0}, src[3] = {0, 0, 0}, src_ms[3] = {0, 0, 0}, src_em[3] = {0, 0, 0};
                 for (int m = 0; m < ng; m++) {
@@ -1518,6 +1548,8 @@ static PyObject *march(PyObject *self, PyObject *args) {
                         if (c < 0) continue;
                         double tau[3] = {v[c], v[c + 1], v[c + 2]};
                         if (edge) refined_tau(g, ng, m, c, x, wc[l], dc[l], 0.5 * voxel[m], tau);
+                        if (ds[l] != dc[l])  /* light from an emitter point off the centre */
+                            for (int a = 0; a < 3; a++) tau[a] *= path_stretch(ds[l], dc[l], voxel[m]);
                         int cb = use_ms ? beam[l] : -1;
                         double cs = -(wi[l][0] * d[0] + wi[l][1] * d[1] + wi[l][2] * d[2]);
                         double p = hg_phase(cs, gg[m]);

@@ -331,7 +331,7 @@ def light_sample(rec, x, u1, u2):
     n = len(x)
     if kind == KIND_SUN:
         d = np.broadcast_to(rec[L_DIR:L_DIR + 3], (n, 3)).copy()
-        return d, np.broadcast_to(s, (n, 3)).copy(), -d, np.full(n, np.inf)
+        return d, np.broadcast_to(s, (n, 3)).copy(), -d, np.full(n, np.inf), np.full(n, np.inf)
     centre = rec[L_POS:L_POS + 3]
     vc = centre - x
     dc = np.sqrt(np.einsum("ij,ij->i", vc, vc))
@@ -354,8 +354,13 @@ def light_sample(rec, x, u1, u2):
             th_in = np.arccos(min(ch + (1.0 - ch) * bl, 1.0)) if bl > 0.0 else th_out
             many = ~(inside & ((th - spread > th_out) | (th + spread < th_in)))
         esum = np.zeros(n)
+        lsum = np.zeros(n)
         dsum = np.zeros((n, 3))
         d = None
+        # 1 - cos(theta_max) of the cone the facing disc subtends, without cancellation
+        hyp = np.sqrt(dc * dc + radius * radius)
+        omc_max = radius * radius / (hyp * (hyp + dc)) if radius > 0.0 else np.zeros(n)
+        e_disc = 2.0 * omc_max / (radius * radius) if radius > 0.0 else np.zeros(n)
         for i in range(n_pts):
             if i > 0:
                 if not many.any():
@@ -367,13 +372,24 @@ def light_sample(rec, x, u1, u2):
                 ub = np.where(ub >= 1.0, ub - 1.0, ub)
                 a, b = _disc(2.0 * ua - 1.0, 2.0 * ub - 1.0, True)
             a, b = np.broadcast_to(a, (n,)), np.broadcast_to(b, (n,))
-            src = centre + radius * (t1 * a[:, None] + t2 * b[:, None])
-            v = x - src
-            dist = np.sqrt(np.einsum("ij,ij->i", v, v))
-            di = v / np.maximum(dist, 1e-30)[:, None]
+            if radius > 0.0:
+                # Cycles' soft-falloff lamp (C twin): a disc facing x of radiance I/(pi r^2);
+                # the disc point (a, b) maps to a direction uniform in the disc's solid angle
+                s2 = a * a + b * b
+                omc = s2 * omc_max
+                cos_t = 1.0 - omc
+                sin_t = np.sqrt(np.maximum(omc * (2.0 - omc), 0.0))
+                rs = np.where(s2 > 0.0, sin_t / np.sqrt(np.where(s2 > 0.0, s2, 1.0)), 0.0)
+                di = -(wc * cos_t[:, None] + (t1 * a[:, None] + t2 * b[:, None]) * rs[:, None])
+                r2 = 1.0 / e_disc
+                dist = dc / np.maximum(cos_t, 1e-12)  # to the disc along di
+            else:
+                v = x - centre
+                dist = np.sqrt(np.einsum("ij,ij->i", v, v))
+                di = v / np.maximum(dist, 1e-30)[:, None]
+                r2 = np.maximum(dist * dist, 1e-4 ** 2)
             if i == 0:
                 d = di
-            r2 = np.maximum(dist * dist, max(radius, 1e-4) ** 2)
             att = 1.0
             if kind == KIND_SPOT:
                 cos_t = _spot_cos(rec, di)
@@ -386,16 +402,20 @@ def light_sample(rec, x, u1, u2):
             w = np.broadcast_to(att / r2, (n,))
             if i == 0:
                 e1 = w.copy()
+                ds1 = np.broadcast_to(dist, (n,)).copy()
             else:
                 w = np.where(many, w, 0.0)
             esum = esum + w
+            lsum = lsum + w * dist
             dsum = dsum + w[:, None] * di
+        ds = np.where(esum > 0.0, lsum / np.where(esum > 0.0, esum, 1.0), dc) if radius > 0.0 else dc
         if n_pts > 1:  # the irradiance-weighted mean direction, as the phase function sees it
             dn = np.sqrt(np.einsum("ij,ij->i", dsum, dsum))
             d = np.where((many & (dn > 0.0))[:, None], dsum / np.where(dn > 0.0, dn, 1.0)[:, None], d)
+            ds = np.where(many, ds, np.where(e1 > 0.0, ds1, dc)) if radius > 0.0 else dc
             esum = np.where(many, esum / n_pts, e1)
         e = s[None, :] / (4.0 * np.pi) * esum[:, None]
-        return d, e, wc, dc
+        return d, e, wc, dc, ds
     # AREA
     src = centre + rec[L_AX:L_AX + 3] * a[:, None] + rec[L_AY:L_AY + 3] * b[:, None]
     v = x - src
@@ -404,13 +424,21 @@ def light_sample(rec, x, u1, u2):
     cos_l = np.maximum(d @ rec[L_NORMAL:L_NORMAL + 3], 0.0)
     area = rec[L_AREA]
     radiance = s / np.pi / (area if (rec[L_NORMALIZE] > 0 and area > 0) else 1.0)
-    return d, radiance[None, :] * (cos_l * area / dist2)[:, None], wc, dc
+    return d, radiance[None, :] * (cos_l * area / dist2)[:, None], wc, dc, np.sqrt(dist2)
 
 
 def _fetch(field, w2i, x, c0, nc):
     idx = x @ w2i[:, :3].T + w2i[:, 3]
     v = trilinear(field, idx) if field.ndim == 4 else trilinear(field, idx)[:, None]
     return v[:, c0:c0 + nc]
+
+
+def path_stretch(ds, dc, voxel):
+    """(N,) factor from the field's optical depth to the light's centre (distance ``dc``, m) to
+    that to the emitting point sampled (``ds``): the centre path's mean extinction times the
+    point's path length, ds / dc (exact in a homogeneous medium); dc at least half a voxel,
+    the path the field's trilinear depth stands for next to the centre (C twin)."""
+    return ds / np.maximum(dc, 0.5 * voxel)
 
 
 def _refined_tau(fields, w2is, thrs, sig_ts, mi, c, x, w, dist, delta):
@@ -801,13 +829,17 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
                     c = int(rec[L_CHANNEL])
                     if c < 0:
                         continue
-                    wi, e, wc, dc = emit[li]
+                    wi, e, wc, dc, ds = emit[li]
                     raw = v[:, c:c + 3]
                     tau = raw
                     if edge.size:
                         tau = tau.copy()
                         tau[edge] = _refined_tau(fields, w2is, thresholds, sigma_ts, mi, c, x[edge],
                                                  wc[edge], dc[edge], 0.5 * voxels[mi])
+                    off = ds != dc  # light from an emitter point off the centre
+                    if off.any():
+                        tau = tau.copy() if tau is raw else tau
+                        tau[off] = tau[off] * path_stretch(ds[off], dc[off], voxels[mi])[:, None]
                     cos = -np.einsum("ij,ij->i", wi, d)
                     pe = hg(cos, gs[mi])[:, None] * e
                     if rec[L_INDIRECT] > 0.5:

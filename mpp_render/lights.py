@@ -6,12 +6,17 @@ it brings on a plane facing it, *before* attenuation by the media.  Single scatt
 point is then sigma_s * p(cos) * E * T_light.
 
 * POINT / SPOT: radiant intensity I = P / (4 pi) W/sr (Cycles' point and spot convention), so
-  E = I / d^2.  A light with a radius is a sphere: the emission point is jittered over the
-  disc of that radius facing the shading point, which softens the spot cone as Cycles' sphere
-  lights do; inside the sphere d is held at the radius.  A spot with a radius averages its
-  cone over 8 points of that disc (a lattice shifted by the jitter: the same mean as one
-  point, far less noise in the penumbra) and reports the irradiance-weighted direction;
-  where the cone is the same over the whole disc one point does.
+  E = I / d^2.  A light with a radius r is Cycles' default "soft falloff" lamp
+  (kernel/light/point.h, the branch ``is_sphere = !use_soft_falloff`` takes by default): a
+  disc of radius r facing the shading point with radiance I / (pi r^2).  It subtends the cone
+  of half-angle atan(r / d) about the centre, so E = I / (pi r^2) * 2 pi (1 - cos theta_max)
+  = 2 I (1 - d / sqrt(d^2 + r^2)) / r^2 (I / d^2 far away, 2 I / r^2 at the centre) whatever
+  point of the disc is sampled; the jitter picks the direction uniformly in that solid
+  angle (the phase function and a spot's cone see it), and the distance to the disc along it,
+  d / cos(theta), scales the optical depth to the centre (``path_stretch``): the disc's
+  light crosses more medium than the centre's path.  A spot with a radius averages its
+  cone over 8 such directions (a lattice shifted by the jitter: the same mean as one
+  direction, far less noise in the penumbra) and reports the irradiance-weighted direction.
 * SPOT cone: smoothstep((cos(theta) - cos(size/2)) / ((1 - cos(size/2)) * blend)), theta
   measured in the light's local frame (non-uniform scale included); no normalisation by the
   cone's solid angle.
@@ -19,6 +24,7 @@ point is then sigma_s * p(cos) * E * T_light.
 * AREA: one point per call is picked on the emitter from ``u``; the estimate is
   L_e cos(theta_l) A / d^2 with L_e = P / (pi A) (``normalize``) or P / pi; only the front
   (local -Z) side emits.  Averaging calls with stratified ``u`` converges to the integral.
+  The optical depth to the centre is scaled to the sampled point's distance, as for a disc.
 """
 from __future__ import annotations
 
@@ -93,7 +99,7 @@ def incident(light: Light, points, u=None):
         if light.kind == "AREA":
             return area_incident(light, points)
         u = np.full((len(points), 2), 0.5)
-    d, e, _, _ = light_sample(pack_light(light), points, u[:, 0], u[:, 1])
+    d, e = light_sample(pack_light(light), points, u[:, 0], u[:, 1])[:2]
     return d, e
 
 

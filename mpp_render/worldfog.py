@@ -238,7 +238,7 @@ def tail(fog: Medium, lights: List[Light], origins, dirs, s0, s1, nodes: int = T
         dd = np.repeat(d[live], nodes, axis=0)
         inc = np.zeros((len(x), 3))
         for rec in recs:
-            wi, e, wc, dc = light_sample(rec, x, np.full(len(x), 0.5), np.full(len(x), 0.5))
+            wi, e, wc, dc = light_sample(rec, x, np.full(len(x), 0.5), np.full(len(x), 0.5))[:4]
             cos = -np.einsum("ij,ij->i", wi, dd)
             inc += hg(cos, float(fog.g))[:, None] * e * np.exp(-optical_depth(st, dc))
         att = np.exp(-st[None, None, :] * s[..., None])      # (M, K, 3) fog from s0 to the node

@@ -37,7 +37,7 @@ def test_area_irradiance_is_the_emitters_integral(shape):
     d, e = incident(light, pts)
     u = rng.random((400_000, 2))
     for p, dp, ep in zip(pts, d, e):
-        dm, em, _, _ = light_sample(pack_light(light), np.repeat(p[None], len(u), 0), u[:, 0], u[:, 1])
+        dm, em = light_sample(pack_light(light), np.repeat(p[None], len(u), 0), u[:, 0], u[:, 1])[:2]
         if (p - light.matrix[:3, 3]) @ normal <= 0.0:
             assert np.all(ep == 0.0) and np.all(em == 0.0)
             continue

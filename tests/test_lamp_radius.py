@@ -1,0 +1,76 @@
+"""A point or spot light with a radius is Cycles' soft-falloff lamp: a disc of radius r facing
+the shading point, of radiance I / (pi r^2) (lights.py).  Its irradiance has a closed form,
+the sampled directions fill the disc's cone uniformly in solid angle, and the distance to
+the disc the march scales the optical depth by is the disc's solid-angle-weighted mean."""
+import math
+
+import numpy as np
+import pytest
+
+from mpp_render import kernels_np
+from mpp_render.lights import pack_light
+from mpp_render.scene import Light
+
+
+def lamp(radius, strength=100.0):
+    m = np.eye(4)
+    return Light("POINT", "p", np.full(3, strength), position=np.zeros(3), matrix=m, radius=radius)
+
+
+def disc_integral(d0, r, f, n=4000):
+    """Integral over the disc of radius r facing a point at distance d0 of f(t) cos / t^2 dA
+    (midpoint rule in the disc's radius), t the distance to the disc point."""
+    rho = (np.arange(n) + 0.5) / n * r
+    t = np.sqrt(d0 * d0 + rho * rho)
+    return float(np.sum(f(t) * d0 / t ** 3 * 2 * np.pi * rho) * (r / n))
+
+
+@pytest.mark.parametrize("d0", [0.02, 0.1, 0.25, 0.5, 2.0])
+def test_irradiance_is_the_disc_integral(d0):
+    r, P = 0.3, 100.0
+    rec = pack_light(lamp(r, P))
+    u = np.random.default_rng(1).random((64, 2))
+    x = np.tile([0.0, 0.0, d0], (len(u), 1))
+    d, e, wc, dc, ds = kernels_np.light_sample(rec, x, u[:, 0], u[:, 1])
+    I = P / (4 * np.pi)
+    closed = 2 * I * (1 - d0 / math.hypot(d0, r)) / r ** 2
+    assert np.allclose(e, closed, rtol=1e-12)                    # every sample: the whole disc
+    assert closed == pytest.approx(I / (np.pi * r * r) * disc_integral(d0, r, lambda t: 1.0), rel=1e-5)
+    if d0 > 5 * r:
+        assert closed == pytest.approx(I / d0 ** 2, rel=0.05)     # far away: a point
+
+
+def test_directions_fill_the_cone_and_distance_is_the_disc_mean():
+    r, d0 = 0.3, 0.2
+    rec = pack_light(lamp(r))
+    k = 128  # a stratified grid over (u1, u2)
+    g = (np.stack(np.meshgrid(np.arange(k), np.arange(k), indexing="ij"), -1).reshape(-1, 2) + 0.5) / k
+    x = np.tile([0.0, 0.0, d0], (len(g), 1))
+    d, e, wc, dc, ds = kernels_np.light_sample(rec, x, g[:, 0], g[:, 1])
+    cos = -np.einsum("ij,ij->i", d, wc)         # propagation direction against the way to the centre
+    cos_max = d0 / math.hypot(d0, r)
+    assert cos.min() >= cos_max - 1e-12 and cos.max() <= 1.0 + 1e-12
+    # uniform in solid angle: cos is uniform on [cos_max, 1]
+    assert np.mean(cos) == pytest.approx(0.5 * (1 + cos_max), rel=2e-3)
+    assert np.allclose(ds, d0 / cos)
+    # the mean distance over the disc's solid angle
+    want = disc_integral(d0, r, lambda t: t) / disc_integral(d0, r, lambda t: 1.0)
+    assert np.mean(ds) == pytest.approx(want, rel=2e-3)
+
+
+def test_radius_zero_stays_a_point():
+    rec = pack_light(lamp(0.0, 4 * np.pi))
+    x = np.array([[0.0, 0.0, 2.0], [1.0, 0.0, 0.0]])
+    d, e, wc, dc, ds = kernels_np.light_sample(rec, x, np.full(2, 0.3), np.full(2, 0.7))
+    assert np.allclose(e[:, 0], 1.0 / np.array([4.0, 1.0]))
+    assert np.array_equal(ds, dc)               # no stretch of the optical depth
+
+
+def test_path_stretch_is_exact_in_a_homogeneous_medium():
+    sigma, voxel = 3.0, 0.01
+    dc = np.array([0.05, 0.2, 1.0])
+    ds = np.array([0.3, 0.25, 1.01])
+    tau_centre = sigma * dc
+    assert np.allclose(tau_centre * kernels_np.path_stretch(ds, dc, voxel), sigma * ds)
+    # next to the centre the field's depth stands for half a voxel's path
+    assert kernels_np.path_stretch(np.array([0.1]), np.array([0.001]), voxel)[0] == pytest.approx(0.1 / 0.005)
