@@ -11,7 +11,8 @@ with E_l the light's irradiance (W/m^2) on a plane facing it, theta_l the angle 
 normal (turned towards the viewer) and the direction w_l to the light, T_media the
 transmittance through the media, V the surface visibility, and for the sky one
 cosine-distributed direction per point whose visibility and transmittance stand for the
-whole sky.  There is no glass, transmission or surface-to-surface light.
+whole sky; along that direction a surface it hits adds its own light, reflected the same way
+(one bounce by default: ``shade``'s ``bounces``).  There is no glass or transmission.
 
 f is Cycles' Principled BSDF (Blender 4.x/5.0, ``intern/cycles/kernel/svm/closure.h``), built
 top-down as Cycles layers its closures, each layer taking the weight w it leaves below:
@@ -229,7 +230,7 @@ def facing_normals(ss: SurfaceSet, tri, d):
 
 
 def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, rng,
-          media_radiance=None):
+          media_radiance=None, bounces: int = 1):
     """Outgoing radiance (N,3) W/(m^2 sr) of surface points ``p`` hit by rays ``d``.
 
     ``media_optical_depth(points, dirs, t_max)`` -> (N,3) optical depth through the media
@@ -240,7 +241,13 @@ def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, r
     the caller): the light the smoke and fog around a surface throw onto it (single and
     multiple scattering and emission; the sky and the lights seen through the volumes are
     the terms above).  With the cosine-weighted direction the estimate of its reflection is
-    the layers' directional albedo x that radiance, unbiased over samples per pixel."""
+    the layers' directional albedo x that radiance, unbiased over samples per pixel.
+
+    ``bounces``: surface-to-surface bounces gathered along that same direction.  Where it
+    hits a surface, that point's own light (``shade`` of it with ``bounces - 1``, without the
+    volumes' light, ``media_radiance``) seen through the media is reflected the same way: a lit
+    ground brightens the pillars that stand on it, as Cycles' diffuse bounces do (they count
+    no volume bounce, so they are in its single-scattering images)."""
     from .lights import incident, is_dark, towards_light
     from .phase import orthonormal_basis
 
@@ -266,15 +273,23 @@ def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, r
         tau = media_optical_depth(po[lit], to_l[lit], dist)
         out[lit] += bsdf.eval(to_l[lit], lit) * e[lit] * np.exp(-tau)
     wc = np.asarray(world_color, np.float64)
-    if np.any(wc > 0) or media_radiance is not None:
+    if np.any(wc > 0) or media_radiance is not None or bounces > 0:
         u = rng.random((n_pts, 2))
         r = np.sqrt(u[:, 0])
         phi = 2 * np.pi * u[:, 1]
         t1, t2 = orthonormal_basis(nrm)
         w = (t1 * (r * np.cos(phi))[:, None] + t2 * (r * np.sin(phi))[:, None]
              + nrm * np.sqrt(np.maximum(0.0, 1 - r * r))[:, None])
-        t_hit, _ = intersect(ss, po, w, np.full(n_pts, np.inf))
+        t_hit, tri_hit = intersect(ss, po, w, np.full(n_pts, np.inf))
         albedo = bsdf.albedo()
+        if bounces > 0:
+            hit = np.flatnonzero(tri_hit >= 0)
+            if hit.size:
+                ph = po[hit] + w[hit] * t_hit[hit, None]
+                seen = shade(ss, tri_hit[hit], ph, w[hit], lights, world_color,
+                             media_optical_depth, rng, None, bounces - 1)
+                tau = media_optical_depth(po[hit], w[hit], t_hit[hit])
+                out[hit] += albedo[hit] * seen * np.exp(-tau)
         if np.any(wc > 0):
             vis = ~np.isfinite(t_hit)
             tau = media_optical_depth(po, w, np.full(n_pts, np.inf))
