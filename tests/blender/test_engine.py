@@ -83,6 +83,31 @@ def test_render_writes_every_pass_to_blenders_multilayer_exr(empty_scene, tmp_pa
     assert last.translate_s >= 0 and last.write_s >= 0
 
 
+def test_render_depsgraph_returns_the_engines_frame(empty_scene, monkeypatch):
+    """The plain function the engine calls, called directly on the scene's depsgraph, returns
+    the same frame as a render through Blender (the engine only copies it into the result)."""
+    small_scene(empty_scene)
+    via_engine = frame.render_mpp()
+    rec = frame.render_depsgraph(bpy.context.evaluated_depsgraph_get(), W, H)
+    assert rec.view_layer == via_engine.view_layer == "ViewLayer"
+    assert rec.frame == via_engine.frame and rec.write_s == 0.0 and rec.translate_s >= 0
+    assert set(rec.output.passes) == set(via_engine.output.passes)
+    for name, arr in via_engine.output.passes.items():
+        np.testing.assert_array_equal(rec.output.passes[name], arr, err_msg=name)
+    from mpp_render.blender import translate
+
+    def unreadable(*args, **kwargs):
+        raise ValueError("unreadable scene")
+
+    monkeypatch.setattr(translate, "scene_from_depsgraph", unreadable)
+    with pytest.raises(frame.TranslationError, match="unreadable scene"):
+        frame.render_depsgraph(bpy.context.evaluated_depsgraph_get(), W, H)
+    with frame.collect() as frames:  # through Blender: an error report, no frame handed back
+        with pytest.raises(RuntimeError, match="cannot translate the scene: unreadable scene"):
+            bpy.ops.render.render()
+    assert frames == []
+
+
 def test_passes_are_compositor_outputs(empty_scene, tmp_path):
     sc = small_scene(empty_scene)
     ng = bpy.data.node_groups.new("Comp", "CompositorNodeTree")
