@@ -8,7 +8,7 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 from mpp_render import exr
-from mpp_render.blender import engine, frame, properties
+from mpp_render.blender import batch, engine, frame, properties
 from mpp_render.passes import PASSES
 from mpp_render.scene import Settings
 
@@ -81,6 +81,37 @@ def test_render_writes_every_pass_to_blenders_multilayer_exr(empty_scene, tmp_pa
     assert T[H // 2, W // 2].max() < 0.5 and T[0, 0].min() > 0.99
     assert got["Volume Single"][H // 2, W // 2].sum() > 0
     assert last.translate_s >= 0 and last.write_s >= 0
+
+
+def exr_layout(path):
+    """(part name, channel names, pixel type, compression, alpha and z channel) per part."""
+    import OpenImageIO as oiio
+
+    inp = oiio.ImageInput.open(str(path))
+    parts = []
+    i = 0
+    while inp.seek_subimage(i, 0):
+        sp = inp.spec()
+        parts.append((sp.getattribute("name"), tuple(sp.channelnames), str(sp.format),
+                      sp.getattribute("compression"), sp.tile_width, sp.alpha_channel,
+                      sp.z_channel))
+        i += 1
+    inp.close()
+    return parts
+
+
+def test_the_command_lines_exr_has_blenders_layout(empty_scene, tmp_path):
+    """exr.write_passes (what ``render`` writes) and Blender's own multilayer writer give the
+    same parts, channels, pixel type and compression (Blender adds only header metadata)."""
+    sc = small_scene(empty_scene)
+    batch.set_multilayer_exr(sc)
+    sc.render.filepath = str(tmp_path / "blender.exr")
+    sc.render.use_file_extension = False
+    last = frame.render_mpp(write_still=True)
+    exr.write_passes(str(tmp_path / "ours.exr"), last.output.passes, layer=last.view_layer)
+    theirs = exr_layout(tmp_path / "blender.exr")
+    assert len(theirs) == len(PASSES)
+    assert exr_layout(tmp_path / "ours.exr") == theirs
 
 
 def test_render_depsgraph_returns_the_engines_frame(empty_scene, monkeypatch):
