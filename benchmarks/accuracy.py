@@ -27,7 +27,8 @@ REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 # settings or repeats would hide the precompute's seconds.
 os.environ["MPP_CACHE_MB"] = "0"
 sys.path.insert(0, REPO)
-SCENES = os.path.join(os.path.dirname(REPO), "shared", "scenes")
+# the public scene suite: $MPP_SCENES, else shared/scenes beside the checkout
+SCENES = os.environ.get("MPP_SCENES") or os.path.join(os.path.dirname(REPO), "shared", "scenes")
 
 
 def tone(a, scale):
@@ -53,7 +54,8 @@ def panel(ours, ref):
 def render_scene(name, samples, tmp):
     import bpy
 
-    from mpp_render import cli, metrics
+    from mpp_render import metrics
+    from mpp_render.blender import batch
     from mpp_render.exr import read_passes
 
     scene_dir = os.path.join(SCENES, name)
@@ -65,8 +67,8 @@ def render_scene(name, samples, tmp):
         bpy.ops.wm.open_mainfile(filepath=os.path.join(scene_dir, "scene.blend"))
         sc = bpy.context.scene
         spp = metrics.SINGLE_SCATTERING_SAMPLES.get(name, samples) if single else samples
-        cli.set_mpp(sc, spp, multiple=not single)
-        rec = cli.render_current(sc, os.path.join(tmp, f"{name}_{int(single)}.exr"))
+        batch.set_mpp(sc, spp, multiple=not single)
+        rec = batch.render_current(sc, os.path.join(tmp, f"{name}_{int(single)}.exr"))
         passes = rec["_passes"]
         m = metrics.compare(passes["Combined"], ss_runs if single else ms_runs)
         key = "single" if single else "full"
@@ -138,8 +140,8 @@ def main(argv=None):
     args = ap.parse_args(argv)
     from mpp_render.metrics import scene_names
     names = scene_names(SCENES, args.scenes)
-    from mpp_render import cli
-    cli._bpy()
+    from mpp_render.blender import batch
+    batch.register()
     os.makedirs(os.path.join(args.out, "images"), exist_ok=True)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:

@@ -28,7 +28,8 @@ REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 # settings or repeats would hide the precompute's seconds.
 os.environ["MPP_CACHE_MB"] = "0"
 sys.path.insert(0, REPO)
-SCENES = os.path.join(os.path.dirname(REPO), "shared", "scenes")
+# the public scene suite: $MPP_SCENES, else shared/scenes beside the checkout
+SCENES = os.environ.get("MPP_SCENES") or os.path.join(os.path.dirname(REPO), "shared", "scenes")
 
 # our quality settings: (label, samples per pixel, voxel resolution of mesh volumes)
 QUALITIES = [("draft", 1, 64), ("medium", 4, 96), ("final", 16, 128)]
@@ -55,7 +56,8 @@ def speedup(ours_s, ours_err, cycles):
 def measure_scene(name, cycles_spp, single, tmp):
     import bpy
 
-    from mpp_render import cli, metrics
+    from mpp_render import metrics
+    from mpp_render.blender import batch
     from mpp_render.exr import read_passes
 
     scene_dir = os.path.join(SCENES, name)
@@ -65,9 +67,9 @@ def measure_scene(name, cycles_spp, single, tmp):
     for label, spp, vox in QUALITIES:
         bpy.ops.wm.open_mainfile(filepath=os.path.join(scene_dir, "scene.blend"))
         sc = bpy.context.scene
-        cli.set_mpp(sc, spp, multiple=not single)
+        batch.set_mpp(sc, spp, multiple=not single)
         sc.mpp.voxel_resolution = vox
-        rec = cli.render_current(sc, os.path.join(tmp, f"{name}_{label}.exr"))
+        rec = batch.render_current(sc, os.path.join(tmp, f"{name}_{label}.exr"))
         m = metrics.compare(rec["_passes"]["Combined"], refs)
         rows["ours"].append({"quality": label, "spp": spp, "voxels": vox, "seconds": rec["render"],
                              "translate": rec["translate"], "precompute": rec["precompute"],
@@ -77,8 +79,8 @@ def measure_scene(name, cycles_spp, single, tmp):
     for spp in cycles_spp:
         bpy.ops.wm.open_mainfile(filepath=os.path.join(scene_dir, "scene.blend"))
         sc = bpy.context.scene
-        cli.set_cycles_reference(sc, spp, multiple=not single, seed=1000 + spp)
-        rec = cli.render_current(sc, os.path.join(tmp, f"{name}_cycles{spp}.exr"))
+        batch.set_cycles_reference(sc, spp, multiple=not single, seed=1000 + spp)
+        rec = batch.render_current(sc, os.path.join(tmp, f"{name}_cycles{spp}.exr"))
         m = metrics.compare(rec["_passes"]["Combined"], refs)
         rows["cycles"].append({"spp": spp, "seconds": rec["render"], "rel_rmse_4": m["rel_rmse_4"],
                                "bias": m["bias"]})
@@ -149,8 +151,8 @@ def main(argv=None):
     args = ap.parse_args(argv)
     from mpp_render.metrics import scene_names
     names = scene_names(SCENES, args.scenes)
-    from mpp_render import cli
-    cli._bpy()
+    from mpp_render.blender import batch
+    batch.register()
     results = []
     with tempfile.TemporaryDirectory() as tmp:
         for name in names:

@@ -45,7 +45,8 @@ if REPO not in sys.path:
 
 import bpy  # noqa: E402
 
-from mpp_render import cli, metrics  # noqa: E402
+from mpp_render import metrics  # noqa: E402
+from mpp_render.blender import batch  # noqa: E402
 from mpp_render.blender import demo  # noqa: E402
 
 WIDTH, HEIGHT = 320, 180  # one panel, pixels
@@ -310,22 +311,22 @@ def build_light(directory, width=WIDTH // 2, height=HEIGHT // 2, kind="point"):
 
 def render_ours(sc, tmp, tag, samples, multiple=True):
     """Our render of ``sc``: (passes, render seconds, warnings)."""
-    cli.set_mpp(sc, samples, multiple=multiple, seed=0)
-    rec = cli.render_current(sc, os.path.join(tmp, f"{tag}_mpp.exr"))
+    batch.set_mpp(sc, samples, multiple=multiple, seed=0)
+    rec = batch.render_current(sc, os.path.join(tmp, f"{tag}_mpp.exr"))
     return rec["_passes"], rec["render"], rec["warnings"]
 
 
 def render_cycles(sc, tmp, tag, samples, multiple=True, seeds=(1, 2)):
-    """Cycles at the reference settings (cli.set_cycles_reference) with the Volume Direct /
+    """Cycles at the reference settings (batch.set_cycles_reference) with the Volume Direct /
     Indirect passes on, ``samples`` spp split over one run per seed: (the runs' passes, render
     seconds of all runs together)."""
     runs, total = [], 0.0
     for seed in seeds:
-        cli.set_cycles_reference(sc, max(1, samples // len(seeds)), multiple=multiple, seed=seed)
+        batch.set_cycles_reference(sc, max(1, samples // len(seeds)), multiple=multiple, seed=seed)
         vl = bpy.context.view_layer
         vl.cycles.use_pass_volume_direct = True
         vl.cycles.use_pass_volume_indirect = True
-        rec = cli.render_current(sc, os.path.join(tmp, f"{tag}_cycles_s{seed}.exr"))
+        rec = batch.render_current(sc, os.path.join(tmp, f"{tag}_cycles_s{seed}.exr"))
         runs.append(rec["_passes"])
         total += rec["render"]
     return runs, total
@@ -594,7 +595,7 @@ def main(argv=None):
     ap.add_argument("--out", default=os.path.join(REPO, "docs"))
     args = ap.parse_args(argv)
     names = args.only.split(",") if args.only else list(FEATURES)
-    cli._bpy()
+    batch.register()
     os.makedirs(os.path.join(args.out, "images"), exist_ok=True)
     json_path = os.path.join(args.out, "gallery.json")
     records = {}

@@ -24,14 +24,16 @@ REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 # settings or repeats would hide the precompute's seconds.
 os.environ["MPP_CACHE_MB"] = "0"
 sys.path.insert(0, REPO)
-SCENES = os.path.join(os.path.dirname(REPO), "shared", "scenes")
+# the public scene suite: $MPP_SCENES, else shared/scenes beside the checkout
+SCENES = os.environ.get("MPP_SCENES") or os.path.join(os.path.dirname(REPO), "shared", "scenes")
 DEFAULT = 64
 
 
 def measure(name, samples, resolutions, tmp):
     import bpy
 
-    from mpp_render import cli, metrics
+    from mpp_render import metrics
+    from mpp_render.blender import batch
     from mpp_render.exr import read_passes
 
     scene_dir = os.path.join(SCENES, name)
@@ -40,9 +42,9 @@ def measure(name, samples, resolutions, tmp):
     for res in resolutions:
         bpy.ops.wm.open_mainfile(filepath=os.path.join(scene_dir, "scene.blend"))
         sc = bpy.context.scene
-        cli.set_mpp(sc, samples, multiple=True)
+        batch.set_mpp(sc, samples, multiple=True)
         sc.mpp.multiple_resolution = int(res)
-        rec = cli.render_current(sc, os.path.join(tmp, f"{name}_{res}.exr"))
+        rec = batch.render_current(sc, os.path.join(tmp, f"{name}_{res}.exr"))
         m = metrics.compare(rec["_passes"]["Combined"], runs)
         rows.append({"scene": name, "resolution": int(res), "rel_rmse_4": m["rel_rmse_4"],
                      "bias": m["bias"], "multiple_mean": float(rec["_passes"]["Volume Multiple"].mean()),
@@ -87,8 +89,8 @@ def main(argv=None):
     from mpp_render.metrics import scene_names
     names = scene_names(SCENES, args.scenes)
     resolutions = [int(x) for x in args.resolutions.split(",")]
-    from mpp_render import cli
-    cli._bpy()
+    from mpp_render.blender import batch
+    batch.register()
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for name in names:

@@ -36,7 +36,8 @@ REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 # settings or repeats would hide the precompute's seconds.
 os.environ["MPP_CACHE_MB"] = "0"
 sys.path.insert(0, REPO)
-SCENES = os.path.join(os.path.dirname(REPO), "shared", "scenes")
+# the public scene suite: $MPP_SCENES, else shared/scenes beside the checkout
+SCENES = os.environ.get("MPP_SCENES") or os.path.join(os.path.dirname(REPO), "shared", "scenes")
 
 from mpp_render import firstflight, kernels, march, precompute, render as render_mod  # noqa: E402
 from mpp_render.camera import camera_plane  # noqa: E402
@@ -281,26 +282,24 @@ def public_scenes(names):
     """Every public scene through the engine at its own settings (multiple scattering on), and
     cloud_vdb at 1920x1080; None when bpy is missing."""
     try:
-        from mpp_render import cli
-        bpy = cli._bpy()
+        from mpp_render.blender import batch
+        bpy = batch.register()
     except Exception as e:  # pragma: no cover - machine without bpy
         print(f"public scenes skipped: {e}", flush=True)
         return None
-    from mpp_render.blender import engine
+    from mpp_render.blender import frame
     rows = []
 
     def one(name, label, configure):
         bpy.ops.wm.open_mainfile(filepath=os.path.join(SCENES, name, "scene.blend"))
         sc = bpy.context.scene
         configure(sc)
-        engine.LAST_RENDER = None
         tracemalloc.start()
         t = time.perf_counter()
-        bpy.ops.render.render()
+        last = frame.render_mpp()
         wall = time.perf_counter() - t
         peak = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
-        last = engine.LAST_RENDER
         out = last.output
         threads = out.stats.get("threads", 1)
         samples = out.stats.get("march_samples", 0.0)
@@ -316,11 +315,11 @@ def public_scenes(names):
 
     for name in names:
         one(name, "own settings, multiple on",
-            lambda sc: cli.set_mpp(sc, None, multiple=True, seed=0))
+            lambda sc: batch.set_mpp(sc, None, multiple=True, seed=0))
     for multiple, spps in ((False, (1, 4)), (True, (1,))):
         for spp in spps:
             def hd(sc, spp=spp, multiple=multiple):
-                cli.set_mpp(sc, spp, multiple=multiple, seed=0)
+                batch.set_mpp(sc, spp, multiple=multiple, seed=0)
                 sc.render.resolution_x, sc.render.resolution_y = 1920, 1080
                 sc.render.resolution_percentage = 100
             one("cloud_vdb", f"1920x1080, {spp} spp, multiple {'on' if multiple else 'off'}", hd)

@@ -24,6 +24,16 @@ opening the file excluded); ``render`` is the render call alone.  For Cycles the
 times are null.  With ``--frames`` the line is ``{"frames": [one record per frame, with
 "frame"], "seconds_per_frame": s, "total": s, "warnings": [...], "cancelled": bool}``.
 Blender's own log lines may come before the JSON line.
+
+Bad input (a missing or unreadable file, a bad ``--frames`` spec, an output that cannot be
+written, a scene folder without references) is answered with one line on stderr saying what
+is wrong and what to do, and exit status 2; any other error also prints one line (exit 1)
+unless ``--debug`` is given, which shows the traceback instead.  A failed or cancelled render
+exits 1 after the JSON line.
+
+This module holds the argument parsing, the checks of the input and the dispatch; Blender's
+module is not loaded here.  The Blender work is done by ``mpp_render.blender.batch``,
+imported by the command that needs it.
 """
 from __future__ import annotations
 
@@ -32,127 +42,24 @@ import json
 import os
 import re
 import sys
-import time
 
-import numpy as np
-
-
-def _bpy():
-    """Import bpy and register the engine and its settings (idempotent)."""
-    import bpy
-
-    from .blender import engine, properties
-
-    properties.register()
-    engine.register()
-    return bpy
+BLEND_MAGICS = (b"BLENDER", b"\x1f\x8b", b"\x28\xb5\x2f\xfd")  # plain, gzip, zstd
 
 
-def set_cycles_reference(scene, samples=None, multiple=True, seed=0):
-    """Cycles settings of the reference images (metrics.md; blender-notes section 4)."""
-    scene.render.engine = 'CYCLES'
-    c = scene.cycles
-    c.device = 'CPU'
-    if samples:
-        c.samples = int(samples)
-    c.seed = int(seed)
-    c.use_animated_seed = False
-    c.use_adaptive_sampling = False
-    c.use_denoising = False
-    c.max_bounces = 1024
-    c.volume_bounces = 1024 if multiple else 0
-    c.transparent_max_bounces = 1024
-    c.sample_clamp_direct = 0.0
-    c.sample_clamp_indirect = 0.0
-    c.pixel_filter_type = 'BOX'
-    c.filter_width = 1.0
+class CliError(Exception):
+    """Bad input: ``message`` (what is wrong and what to do) is printed as one line and the
+    command exits with ``code`` (2: a usage error)."""
+
+    def __init__(self, message: str, code: int = 2):
+        super().__init__(message)
+        self.code = code
 
 
-def set_mpp(scene, samples=None, multiple=True, seed=None):
-    """Select the MPP engine; override its samples / multiple scattering / seed."""
-    scene.render.engine = 'MPP_RENDER'
-    if samples:
-        scene.mpp.samples = int(samples)
-    scene.mpp.multiple = bool(multiple)
-    if seed is not None:
-        scene.mpp.seed = int(seed)
+class Parser(argparse.ArgumentParser):
+    """argparse with its errors on one line (the usage is one ``--help`` away)."""
 
-
-def set_multilayer_exr(scene):
-    """Blender's own writer to a 32-bit ZIP multilayer EXR (media_type must come first)."""
-    ims = scene.render.image_settings
-    ims.media_type = 'MULTI_LAYER_IMAGE'
-    ims.file_format = 'OPEN_EXR_MULTILAYER'
-    ims.color_depth = '32'
-    ims.exr_codec = 'ZIP'
-
-
-def png_path(exr_path: str) -> str:
-    return os.path.splitext(exr_path)[0] + ".png"
-
-
-def image_stats(passes: dict) -> dict:
-    """A few numbers that describe an image when there is no reference to compare with."""
-    comb = passes["Combined"][:, :, :3]
-    out = {
-        "finite": bool(np.all(np.isfinite(comb))),
-        "mean_rgb": [round(float(v), 6) for v in comb.reshape(-1, 3).mean(axis=0)],
-        "max": float(np.max(comb)),
-    }
-    if "Transmittance" in passes:
-        out["mean_transmittance"] = round(float(passes["Transmittance"].mean()), 6)
-    return out
-
-
-def render_current(scene, out_exr: str) -> dict:
-    """Render ``scene``'s current frame (active view layer) with its engine, write
-    ``out_exr`` (multilayer) and the PNG preview; return the timings record."""
-    import bpy
-
-    from . import exr
-    from .blender import engine
-
-    layer = bpy.context.view_layer.name
-    out_exr = os.path.abspath(out_exr)
-    os.makedirs(os.path.dirname(out_exr), exist_ok=True)
-    engine.LAST_RENDER = None
-    t0 = time.perf_counter()
-    bpy.ops.render.render(layer=layer)
-    render_s = time.perf_counter() - t0
-
-    t1 = time.perf_counter()
-    if scene.render.engine == 'MPP_RENDER':
-        last = engine.LAST_RENDER
-        if last is None:
-            raise RuntimeError("the MPP engine produced no image (see the reports above)")
-        passes = last.output.passes
-        exr.write_passes(out_exr, passes, layer=last.view_layer)
-        exr.write_preview_png(png_path(out_exr), passes["Combined"])
-        rec = {"translate": last.translate_s,
-               "precompute": last.output.timings.get("precompute"),
-               "march": last.output.timings.get("march"),
-               "reused": last.output.stats.get("reused", [])}
-        extra_write = last.write_s
-        warnings = list(last.output.warnings)
-        cancelled = last.output.cancelled
-    else:
-        set_multilayer_exr(scene)
-        bpy.data.images["Render Result"].save_render(filepath=out_exr, scene=scene)
-        passes = exr.read_passes(out_exr, layer=layer)
-        exr.write_preview_png(png_path(out_exr), passes["Combined"])
-        rec = {"translate": None, "precompute": None, "march": None}
-        extra_write = 0.0
-        warnings = []
-        cancelled = False
-    write_s = time.perf_counter() - t1
-    rec.update({"write": extra_write + write_s, "total": render_s + write_s,
-                "warnings": warnings, "render": render_s, "engine": scene.render.engine,
-                "cancelled": cancelled,
-                "resolution": [scene.render.resolution_x * scene.render.resolution_percentage // 100,
-                               scene.render.resolution_y * scene.render.resolution_percentage // 100],
-                "exr": out_exr})
-    rec["_passes"] = passes
-    return rec
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 def parse_frames(text: str) -> range:
@@ -178,89 +85,127 @@ def frame_path(output: str, frame: int) -> str:
     return f"{stem}_{frame:04d}{ext or '.exr'}"
 
 
-def _configure(scene, args) -> None:
-    if args.resolution_percentage:
-        scene.render.resolution_percentage = args.resolution_percentage
-    if args.engine == "cycles":
-        set_cycles_reference(scene, args.samples, not args.no_multiple, args.seed or 0)
-    else:
-        set_mpp(scene, args.samples, not args.no_multiple, args.seed)
+# --- checks of the input, before Blender starts ------------------------------------------
 
+def check_blend(path: str) -> str:
+    """``path`` if it is a readable .blend file (plain or compressed); CliError otherwise."""
+    if not os.path.exists(path):
+        raise CliError(f"{path}: no such file; give the path of a .blend file")
+    if os.path.isdir(path):
+        raise CliError(f"{path} is a folder; give the path of a .blend file in it")
+    try:
+        with open(path, "rb") as f:
+            head = f.read(8)
+    except OSError as e:
+        raise CliError(f"cannot read {path}: {e.strerror}; check its permissions") from e
+    if not head.startswith(BLEND_MAGICS):
+        raise CliError(f"{path} is not a .blend file; give a file saved by Blender")
+    return path
+
+
+def check_output(path: str, option: str = "-o") -> None:
+    """Create the folder of the output file ``path``; CliError when it cannot be written."""
+    full = os.path.abspath(path)
+    if os.path.isdir(full):
+        raise CliError(f"{option} {path} is a folder; give a file name (e.g. {os.path.join(path, 'out.exr')})")
+    folder = os.path.dirname(full)
+    try:
+        os.makedirs(folder, exist_ok=True)
+    except OSError as e:
+        raise CliError(f"cannot create the folder of {option} {path}: {e.strerror}; "
+                       f"choose another {option}") from e
+    if not os.access(folder, os.W_OK):
+        raise CliError(f"cannot write {option} {path}: {folder} is not writable; "
+                       f"choose another {option}")
+
+
+def _open_scene(path: str):
+    from .blender import batch
+
+    try:
+        return batch.open_blend(path)
+    except batch.BatchError as e:
+        raise CliError(str(e)) from e
+
+
+# --- the commands ------------------------------------------------------------------------
 
 def cmd_render(args) -> dict:
-    frames = parse_frames(args.frames) if args.frames else None
+    try:
+        frames = parse_frames(args.frames) if args.frames else None
+    except ValueError as e:
+        raise CliError(f"{e}; e.g. --frames 1:24 or --frames 1:24:2") from e
     if frames is not None and args.frame is not None:
-        raise SystemExit("use either --frame or --frames")
-    bpy = _bpy()
-    bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.file))
-    scene = bpy.context.scene
-    if frames is not None:
-        return render_frames(scene, args, frames)
-    if args.frame is not None:
+        raise CliError("use either --frame or --frames, not both")
+    if args.resolution_percentage is not None and args.resolution_percentage < 1:
+        raise CliError(f"--resolution-percentage {args.resolution_percentage}: give a percentage >= 1")
+    check_blend(args.file)
+    outputs = [frame_path(args.output, f) for f in frames] if frames is not None else [args.output]
+    for out in dict.fromkeys(outputs):
+        check_output(out)
+    scene = _open_scene(args.file)
+    from .blender import batch
+
+    if frames is None and args.frame is not None:
         scene.frame_set(args.frame)
-    _configure(scene, args)
-    rec = render_current(scene, args.output)
-    rec.pop("_passes")
-    return rec
-
-
-def render_frames(scene, args, frames) -> dict:
-    """Render ``frames`` one after the other into ``frame_path(args.output, f)``; stops at a
-    cancelled frame."""
-    _configure(scene, args)
-    records, warnings = [], []
-    t0 = time.perf_counter()
-    for f in frames:
-        scene.frame_set(f)
-        rec = render_current(scene, frame_path(args.output, f))
-        rec.pop("_passes")
-        rec["frame"] = f
-        records.append(rec)
-        warnings.extend(w for w in rec["warnings"] if w not in warnings)
-        if rec["cancelled"]:
-            break
-    total = time.perf_counter() - t0
-    return {"frames": records, "seconds_per_frame": total / max(1, len(records)),
-            "total": total, "warnings": warnings,
-            "cancelled": any(r["cancelled"] for r in records)}
+    batch.configure(scene, args.engine, args.samples, not args.no_multiple, args.seed,
+                    args.resolution_percentage)
+    if frames is not None:
+        return batch.render_frames(scene, list(zip(frames, outputs)))
+    return batch.public(batch.render_current(scene, args.output))
 
 
 def cmd_demo(args) -> dict:
     """Build the demo cloud, render it with MPP, then with Cycles at the reference settings
-    (``cycles_samples`` spp, 0 to skip) and score ours against it (one Cycles run: the
-    metrics of metrics.md without the noise correction, so the error includes Cycles' noise)."""
-    _bpy()
-    from .blender.demo import build_demo_scene
-    from .metrics import compare
-
+    (``cycles_samples`` spp, 0 to skip) and score ours against it (``batch.demo``)."""
     stem = args.output[:-4] if args.output.endswith(".exr") else args.output
-    scene = build_demo_scene(os.path.dirname(os.path.abspath(stem)))
-    set_mpp(scene, args.samples, not args.no_multiple)
-    rec = render_current(scene, stem + ".exr")
-    ours = rec.pop("_passes")
-    rec["image"] = image_stats(ours)
-    spp = int(getattr(args, "cycles_samples", 32) or 0)
-    if spp > 0:
-        set_cycles_reference(scene, spp, not args.no_multiple, seed=1)
-        ref = render_current(scene, stem + "_cycles.exr")
-        m = compare(ours["Combined"], [ref.pop("_passes")["Combined"]])
-        rec["cycles"] = {"samples": spp, "seconds": ref["render"], "exr": ref["exr"],
-                         "rel_rmse": m["rel_rmse"], "rel_rmse_4": m["rel_rmse_4"], "bias": m["bias"]}
-        set_mpp(scene, args.samples, not args.no_multiple)
-    return rec
+    check_output(stem + ".exr")
+    from .blender import batch
+
+    return batch.demo(stem, args.samples, not args.no_multiple,
+                      int(getattr(args, "cycles_samples", 32) or 0))
 
 
 def cmd_compare(args) -> dict:
-    from .metrics import compare_files
+    from .exr import read_passes
+    from .metrics import compare_files, reference_paths
 
-    return compare_files(args.candidate, args.scene_dir, single=args.single)
+    what = "ss_s*.exr" if args.single else "ref_s*.exr"
+    if not os.path.isfile(args.candidate):
+        raise CliError(f"{args.candidate}: no such file; give the EXR written by 'render'")
+    if not os.path.isdir(args.scene_dir):
+        raise CliError(f"{args.scene_dir}: no such folder; give a scene folder holding {what}")
+    if not reference_paths(args.scene_dir, args.single):
+        hint = "" if args.single else " (or --single for ss_s*.exr)"
+        raise CliError(f"no {what} in {args.scene_dir}; give a scene folder of the suite{hint}")
+    try:
+        has = read_passes(args.candidate, names=("Combined",))
+    except (OSError, RuntimeError) as e:
+        raise CliError(f"{args.candidate} is not an EXR file that can be read; give the "
+                       "multilayer EXR written by 'render'") from e
+    if "Combined" not in has:
+        raise CliError(f"{args.candidate} has no Combined pass; give the multilayer EXR "
+                       "written by 'render'")
+    try:
+        return compare_files(args.candidate, args.scene_dir, single=args.single)
+    except ValueError as e:  # the resolutions do not match
+        raise CliError(f"{e}; render at the references' resolution or 1/f of it") from e
+
+
+DEBUG_HELP = "show the traceback of an error (for bug reports)"
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="python -m mpp_render", description=__doc__.split("\n")[0])
+    ap = Parser(prog="python -m mpp_render", description=__doc__.split("\n")[0])
+    ap.add_argument("--debug", action="store_true", help=DEBUG_HELP)
     sub = ap.add_subparsers(dest="command", required=True)
 
-    r = sub.add_parser("render", help="render one frame of a .blend file")
+    def command(name, **kw):
+        p = sub.add_parser(name, **kw)
+        p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=DEBUG_HELP)
+        return p
+
+    r = command("render", help="render one frame of a .blend file")
     r.add_argument("file", help="the .blend file")
     r.add_argument("-o", "--output", required=True, help="multilayer EXR to write (PNG beside it)")
     r.add_argument("--frame", type=int, help="frame to render (default: the file's current)")
@@ -274,13 +219,13 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--resolution-percentage", type=int, help="1..100, scales the file's resolution")
     r.set_defaults(func=cmd_render)
 
-    c = sub.add_parser("compare", help="score an EXR against a scene's Cycles references")
+    c = command("compare", help="score an EXR against a scene's Cycles references")
     c.add_argument("candidate", help="EXR with a Combined pass")
     c.add_argument("scene_dir", help="folder holding ref_s*.exr / ss_s*.exr")
     c.add_argument("--single", action="store_true", help="score against ss_s*.exr")
     c.set_defaults(func=cmd_compare)
 
-    d = sub.add_parser("demo", help="render the built-in demo cloud")
+    d = command("demo", help="render the built-in demo cloud")
     d.add_argument("-o", "--output", default=os.path.join("out", "demo"),
                    help="output stem: writes STEM.exr and STEM.png (default out/demo)")
     d.add_argument("--samples", type=int, help="samples per pixel (default 16)")
@@ -289,16 +234,37 @@ def build_parser() -> argparse.ArgumentParser:
 
     from .package import cmd_package  # stdlib only: cheap to import here
 
-    k = sub.add_parser("package", help="build the installable extension zip (kernels as a wheel)")
+    k = command("package", help="build the installable extension zip (kernels as a wheel)")
     k.add_argument("--output-dir", default="dist", help="folder for the zip (default dist)")
     k.add_argument("--source-dir", help="extension source (default: this checkout's root)")
     k.set_defaults(func=cmd_package)
     return ap
 
 
+def one_line(text: str) -> str:
+    """``text`` with its line breaks and runs of blanks folded into single spaces."""
+    return " ".join(str(text).split())
+
+
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    rec = args.func(args)
+    debug = bool(getattr(args, "debug", False))
+    try:
+        rec = args.func(args)
+    except CliError as e:
+        if debug:
+            raise
+        print(f"mpp_render: error: {one_line(e)}", file=sys.stderr, flush=True)
+        return e.code
+    except KeyboardInterrupt:
+        print("mpp_render: interrupted", file=sys.stderr, flush=True)
+        return 130
+    except Exception as e:  # a bug or a failure of the machine: one line unless --debug
+        if debug:
+            raise
+        print(f"mpp_render: {args.command} failed: {type(e).__name__}: {one_line(e)} "
+              "(run again with --debug for the traceback)", file=sys.stderr, flush=True)
+        return 1
     sys.stdout.flush()
     print(json.dumps(rec), flush=True)
     if rec.get("failed") or rec.get("cancelled"):

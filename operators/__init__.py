@@ -20,11 +20,11 @@ import bpy
 import numpy as np
 
 if __package__ and "." in __package__:  # installed: a subpackage of the extension
-    from ..mpp_render import cache, cli, metrics
-    from ..mpp_render.blender import engine
+    from ..mpp_render import cache, metrics
+    from ..mpp_render.blender import batch
 else:  # a checkout: ``operators`` and ``mpp_render`` are both top-level
-    from mpp_render import cache, cli, metrics
-    from mpp_render.blender import engine
+    from mpp_render import cache, metrics
+    from mpp_render.blender import batch
 
 ENGINE = "MPP_RENDER"
 DIFF_IMAGE = "MPP Difference"
@@ -119,15 +119,23 @@ def _finite_or_none(value):
 
 def compare_with_cycles(scene, samples: int = DEFAULT_CYCLES_SAMPLES, seed: int = 0) -> dict:
     """Render ``scene``'s current frame (the context's scene, active view layer) with MPP and
-    then with Cycles at ``samples`` spp and the reference settings (``cli.set_cycles_reference``,
+    then with Cycles at ``samples`` spp and the reference settings (``batch.set_cycles_reference``,
     volume bounces following MPP's *Multiple Scattering*), and score MPP's Combined pass
     against the Cycles render with ``metrics.compare`` (that single run is the reference, so
     the numbers include Cycles' own noise; ``floor`` is None).
 
     Stores the difference map in ``bpy.data.images["MPP Difference"]`` and the returned record
     as JSON in ``scene["mpp_last_compare"]``.  The scene's engine, Cycles settings and output
-    image settings are restored afterwards, and ``engine.LAST_RENDER`` holds MPP's frame.
-    Stops after MPP's render when that render was cancelled (``cancelled`` True, no metrics)."""
+    image settings are restored afterwards.  Stops after MPP's render when that render was
+    cancelled (``cancelled`` True, no metrics).  Returns the record; ``compare_renders`` does
+    the same and also hands back both renders' records (with their passes)."""
+    return compare_renders(scene, samples, seed)[0]
+
+
+def compare_renders(scene, samples: int = DEFAULT_CYCLES_SAMPLES, seed: int = 0):
+    """``compare_with_cycles``'s work: returns ``(record, ours, ref)`` where ``ours`` and
+    ``ref`` are ``batch.render_current``'s records of the MPP and the Cycles render (``ref``
+    None when MPP's was cancelled); ``ours["_frame"]`` is MPP's ``frame.FrameRecord``."""
     if scene != bpy.context.scene:
         raise ValueError("compare_with_cycles renders the context's scene only")
     if not hasattr(scene, "cycles"):
@@ -136,22 +144,18 @@ def compare_with_cycles(scene, samples: int = DEFAULT_CYCLES_SAMPLES, seed: int 
     saved_engine = scene.render.engine
     saved_cycles = snapshot(scene.cycles)
     saved_image = snapshot(scene.render.image_settings, IMAGE_SETTING_KEYS)
-    ours_last = None
     ref = None
     with tempfile.TemporaryDirectory(prefix="mpp_compare_") as tmp:
         try:
             scene.render.engine = ENGINE
-            ours = cli.render_current(scene, os.path.join(tmp, "mpp.exr"))
-            ours_last = engine.LAST_RENDER
+            ours = batch.render_current(scene, os.path.join(tmp, "mpp.exr"))
             if not ours["cancelled"]:
-                cli.set_cycles_reference(scene, samples, multiple=scene.mpp.multiple, seed=seed)
-                ref = cli.render_current(scene, os.path.join(tmp, "cycles.exr"))
+                batch.set_cycles_reference(scene, samples, multiple=scene.mpp.multiple, seed=seed)
+                ref = batch.render_current(scene, os.path.join(tmp, "cycles.exr"))
         finally:
             scene.render.engine = saved_engine
             restore(scene.cycles, saved_cycles)
             restore(scene.render.image_settings, saved_image)
-            if ours_last is not None:
-                engine.LAST_RENDER = ours_last
 
     rec = {
         "frame": scene.frame_current,
@@ -178,7 +182,7 @@ def compare_with_cycles(scene, samples: int = DEFAULT_CYCLES_SAMPLES, seed: int 
         rec["difference_image"] = DIFF_IMAGE
     rec = {k: _finite_or_none(v) for k, v in rec.items()}
     scene[COMPARE_PROP] = json.dumps(rec)
-    return rec
+    return rec, ours, ref
 
 
 def compare_summary(rec: dict) -> str:
@@ -213,7 +217,7 @@ def last_compare(scene):
 
 def _renderer_package() -> str:
     """The renderer's package name: ``mpp_render`` in a checkout, longer when installed."""
-    return engine.__name__.rsplit(".blender.engine", 1)[0]
+    return batch.__name__.rsplit(".blender.batch", 1)[0]
 
 
 def cached_functions():
@@ -232,16 +236,12 @@ def cached_functions():
 
 
 def clear_caches() -> dict:
-    """Drop what the engine keeps between renders: ``engine.LAST_RENDER`` (the last frame's
-    passes, kept for the command line), the renderer's store of reusable work
+    """Drop what the renderer keeps between renders: its store of reusable work
     (``mpp_render.cache``: precompute fields, light pyramids, voxelised meshes, grids read
-    from files) and its module-level function caches.  Returns ``{"last_render_mb",
-    "cache_mb", "functions", "entries"}``: the MB (2^20 bytes) of arrays the last render and
+    from files) and its module-level function caches.  The engine keeps no frame (each frame's
+    record goes back to whoever asked for it), and Blender's own Render Result is left to
+    Blender.  Returns ``{"cache_mb", "functions", "entries"}``: the MB (2^20 bytes) of arrays
     the store held, the function caches cleared and the entries they held."""
-    released = 0
-    if engine.LAST_RENDER is not None:
-        released = cache.nbytes(engine.LAST_RENDER.output)
-        engine.LAST_RENDER = None
     stored = cache.clear()
     functions = entries = 0
     for fn in cached_functions():
@@ -249,14 +249,12 @@ def clear_caches() -> dict:
         fn.cache_clear()
         functions += 1
     gc.collect()
-    return {"last_render_mb": released / MB, "cache_mb": stored / MB, "functions": functions,
-            "entries": entries}
+    return {"cache_mb": stored / MB, "functions": functions, "entries": entries}
 
 
 def clear_summary(rec: dict) -> str:
-    return (f"MPP: released {rec['last_render_mb']:.1f} MB (last render), "
-            f"{rec.get('cache_mb', 0.0):.1f} MB (reusable precompute and grids) and cleared "
-            f"{rec['functions']} function cache(s) ({rec['entries']} entries)")
+    return (f"MPP: released {rec.get('cache_mb', 0.0):.1f} MB (reusable precompute and grids) "
+            f"and cleared {rec['functions']} function cache(s) ({rec['entries']} entries)")
 
 
 # --- operators, panel and menu entry -----------------------------------------------------
@@ -299,8 +297,8 @@ class MPP_OT_compare_with_cycles(bpy.types.Operator):
 
 
 class MPP_OT_clear_cache(bpy.types.Operator):
-    """Free what MPP keeps between renders (the last frame's passes, the precompute and
-    grids kept for the next frame, cached tables)"""
+    """Free what MPP keeps between renders (the precompute and grids kept for the next
+    frame, cached tables)"""
 
     bl_idname = "mpp.clear_cache"
     bl_label = "Clear MPP Caches"

@@ -1,13 +1,13 @@
-"""The MPP ``RenderEngine``: a thin adapter from Blender's render loop to ``mpp_render.render``.
+"""The MPP ``RenderEngine``: a thin adapter from Blender's render loop to ``frame.render_depsgraph``.
 
 One frame of one view layer flows one way::
 
-    depsgraph --translate.scene_from_depsgraph--> SceneDescription
-              --mpp_render.render.render-------> RenderOutput (passes, row 0 at the top)
-              --write_result-------------------> Blender render result (row 0 at the bottom)
+    depsgraph --frame.render_depsgraph (translate + mpp_render.render.render)--> FrameRecord
+              --write_result--> Blender render result (row 0 at the bottom)
 
-The engine class only forwards to the plain functions below.  ``LAST_RENDER`` keeps the last
-frame's ``RenderOutput`` with the translation and write times, for the command line.
+The engine class only forwards to the plain functions below and hands each frame's record to
+whoever collects it (``frame.collect``: the command line, the operators, the tests); the
+engine keeps nothing between renders.
 
 Animations (``blender -b file.blend -E MPP_RENDER -a``, ``render.render(animation=True)``):
 Blender calls ``render`` once per frame and view layer and writes each frame's file.  What
@@ -23,33 +23,16 @@ from __future__ import annotations
 
 import os
 import time
-from dataclasses import dataclass
 from typing import Callable, Optional
 
 import bpy
 import numpy as np
 
 from ..passes import enabled_passes
-from .properties import settings_from_scene
+from . import frame
+from .frame import NO_MEDIA_MESSAGE, FrameRecord, TranslationError  # noqa: F401 (re-exported)
 
 TEST_BREAK_ENV = "MPP_TEST_BREAK_AFTER_S"
-NO_MEDIA_MESSAGE = "MPP: no volumes in the scene; rendering the background and surfaces only"
-
-
-@dataclass
-class LastRender:
-    """The last frame rendered by the engine.  ``output``: the core's ``RenderOutput``;
-    ``translate_s``: seconds from depsgraph to scene description; ``write_s``: seconds to
-    copy the passes into Blender's render result; ``view_layer``: the layer's name."""
-
-    output: object
-    translate_s: float
-    write_s: float
-    view_layer: str
-    frame: int = 0
-
-
-LAST_RENDER: Optional[LastRender] = None
 
 
 def cancel_check(test_break: Callable[[], bool], start: float) -> Callable[[], bool]:
@@ -103,39 +86,29 @@ def progress_reporter(engine) -> Callable[[float, str], None]:
     return progress
 
 
-def render_frame(engine, depsgraph) -> Optional[LastRender]:
+def render_frame(engine, depsgraph) -> Optional[FrameRecord]:
     """Render one frame of ``depsgraph``'s view layer into ``engine``'s result, reporting
-    every warning.  Returns (and stores in ``LAST_RENDER``) the frame's record; None when the
-    scene could not be translated (an error is reported)."""
-    global LAST_RENDER
-    from ..render import render
-    from .translate import scene_from_depsgraph
-
+    every warning.  Returns the frame's record; None when the scene could not be translated
+    (an error is reported)."""
     start = time.perf_counter()
     should_cancel = cancel_check(engine.test_break, start)
     scene = depsgraph.scene_eval
     width, height = int(engine.resolution_x), int(engine.resolution_y)
-    layer_name = depsgraph.view_layer.name
-
-    engine.update_stats("MPP", "Translating scene")
     try:
-        desc = scene_from_depsgraph(depsgraph, settings_from_scene(scene),
-                                    camera_override=engine.camera_override,
-                                    width=width, height=height)
-    except Exception as e:  # a scene we cannot read at all: say why instead of a black frame
+        rec = frame.render_depsgraph(depsgraph, width, height,
+                                     camera_override=engine.camera_override,
+                                     progress=progress_reporter(engine),
+                                     should_cancel=should_cancel)
+    except TranslationError as e:  # say why instead of a black frame
         engine.report({'ERROR'}, f"MPP: cannot translate the scene: {e}")
         return None
-    translate_s = time.perf_counter() - start
-    if not desc.media and desc.world.volume is None:
-        desc.warnings.append(NO_MEDIA_MESSAGE)
-
-    out = render(desc, progress=progress_reporter(engine), should_cancel=should_cancel)
+    out = rec.output
     for msg in out.warnings:
         engine.report({'WARNING'}, msg)
 
     t_write = time.perf_counter()
-    write_result(engine, out.passes, layer_name, width, height)
-    write_s = time.perf_counter() - t_write
+    write_result(engine, out.passes, rec.view_layer, width, height)
+    rec.write_s = time.perf_counter() - t_write
     if out.cancelled:
         engine.report({'INFO'}, "MPP: render cancelled; the passes hold the finished tiles")
     reused = out.stats.get("reused")
@@ -143,8 +116,7 @@ def render_frame(engine, depsgraph) -> Optional[LastRender]:
         engine.update_stats("MPP", f"Frame {scene.frame_current}: reused the precompute of "
                             + " and ".join(reused))
     engine.update_progress(1.0)
-    LAST_RENDER = LastRender(out, translate_s, write_s, layer_name, int(scene.frame_current))
-    return LAST_RENDER
+    return rec
 
 
 class MPPRenderEngine(bpy.types.RenderEngine):
@@ -158,7 +130,7 @@ class MPPRenderEngine(bpy.types.RenderEngine):
     bl_use_shading_nodes_custom = False
 
     def render(self, depsgraph):
-        render_frame(self, depsgraph)
+        frame.deliver(render_frame(self, depsgraph))
 
     def update_render_passes(self, scene=None, renderlayer=None):
         register_passes(self, scene, renderlayer)

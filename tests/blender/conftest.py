@@ -10,19 +10,10 @@ REPO = pathlib.Path(__file__).resolve().parents[2]
 
 
 def find_scenes():
-    """The public scene suite: $MPP_SCENES, else ``shared/scenes`` beside the checkout (or
-    beside one of its parents)."""
+    """The public scene suite: $MPP_SCENES, else ``shared/scenes`` beside the checkout (in
+    the repository's parent folder)."""
     if os.environ.get("MPP_SCENES"):
         return pathlib.Path(os.environ["MPP_SCENES"]).resolve()
-    for parent in REPO.parents:
-        cand = parent / "shared" / "scenes"
-        if cand.is_dir():
-            return cand.resolve()
-    # this workplace keeps the suite at /work/shared/scenes (beside the main checkout); a
-    # clone made elsewhere still finds it there
-    workplace = pathlib.Path("/work/shared/scenes")
-    if workplace.is_dir():
-        return workplace
     return (REPO.parent / "shared" / "scenes").resolve()
 
 

@@ -12,8 +12,8 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from mpp_render import cli, metrics  # noqa: E402
-from mpp_render.blender import engine  # noqa: E402
+from mpp_render import metrics  # noqa: E402
+from mpp_render.blender import batch, frame  # noqa: E402
 from mpp_render.exr import read_passes  # noqa: E402
 
 SAMPLES_SINGLE = 16  # the scenes' single scattering is cheap: converge ours well below 0.03
@@ -47,14 +47,12 @@ SCENE_NAMES = sorted(FULL_BOUND)
 
 
 def render_scene(scenes_dir, name, multiple):
-    cli._bpy()
+    batch.register()
     bpy.ops.wm.open_mainfile(filepath=str(scenes_dir / name / "scene.blend"))
     sc = bpy.context.scene
     spp = SAMPLES_FULL if multiple else metrics.SINGLE_SCATTERING_SAMPLES.get(name, SAMPLES_SINGLE)
-    cli.set_mpp(sc, spp, multiple=multiple, seed=0)
-    engine.LAST_RENDER = None
-    bpy.ops.render.render()
-    out = engine.LAST_RENDER.output
+    batch.set_mpp(sc, spp, multiple=multiple, seed=0)
+    out = frame.render_mpp().output
     assert not out.warnings, out.warnings
     return out.passes
 

@@ -14,7 +14,7 @@ bpy = pytest.importorskip("bpy")
 
 from mpp_render import cache, exr  # noqa: E402
 from mpp_render import precompute as pre_mod  # noqa: E402
-from mpp_render.blender import engine  # noqa: E402
+from mpp_render.blender import engine, frame  # noqa: E402
 from parts import add_camera, add_cube, add_light, mpp_output, volume_material  # noqa: E402
 
 from conftest import REPO  # noqa: E402
@@ -95,8 +95,7 @@ def test_animation_renders_every_frame_and_reuses_what_did_not_change(empty_scen
     # frame 2 rendered alone and cold equals frame 2 of the animation
     cache.clear()
     empty_scene.frame_set(2)
-    bpy.ops.render.render()
-    cold = engine.LAST_RENDER.output
+    cold = frame.render_mpp().output
     assert cold.stats["reused"] == []
     anim = exr.read_passes(str(tmp_path / "f_0002.exr"))
     for name in ("Combined", "Volume Single", "Volume Multiple", "Transmittance"):
@@ -127,8 +126,7 @@ def test_clear_caches_empties_the_store(empty_scene, tmp_path, warm):
     assert rec["cache_mb"] == pytest.approx(held) and rec["cache_mb"] > 0
     assert len(cache.CACHE) == 0
     assert "reusable precompute" in operators.clear_summary(rec)
-    bpy.ops.render.render()
-    assert engine.LAST_RENDER.output.stats["reused"] == []
+    assert frame.render_mpp().output.stats["reused"] == []
 
 
 def test_cli_frames_writes_one_exr_per_frame(empty_scene, tmp_path):

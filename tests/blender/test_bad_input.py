@@ -14,7 +14,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from mpp_render.blender import engine, properties  # noqa: E402
+from mpp_render.blender import engine, frame, properties  # noqa: E402
 from mpp_render.blender.translate.vdb import openvdb_module  # noqa: E402
 from parts import (add_camera, add_cube, add_light, link, mpp_output,  # noqa: E402
                    volume_material)
@@ -64,8 +64,9 @@ def good_vdb(tmp_path, name="good.vdb"):
 def render():
     """Render the frame; the engine's record of it.  The render must finish (not cancelled)
     with finite, non-negative passes of the right size."""
-    bpy.ops.render.render()
-    last = engine.LAST_RENDER
+    with frame.collect() as frames:
+        bpy.ops.render.render()
+    last = frames[-1] if frames else None
     assert last is not None and not last.output.cancelled
     for name, p in last.output.passes.items():
         assert p.shape[:2] == (H, W), name
@@ -149,7 +150,7 @@ def test_randomly_damaged_vdbs_never_crash(tmp_path):
         import numpy as np
         import bpy
         import test_bad_input as t
-        from mpp_render.blender import engine, properties
+        from mpp_render.blender import engine, frame, properties
         properties.register(); engine.register()
         bpy.ops.wm.read_factory_settings(use_empty=True)
         sc = bpy.context.scene
@@ -164,8 +165,7 @@ def test_randomly_damaged_vdbs_never_crash(tmp_path):
             path = {str(tmp_path)!r} + f"/damaged{{i}}.vdb"
             open(path, "wb").write(bytes(b))
             t.add_volume(f"Damaged{{i}}", path, location=(1.5, 0.2 * i, 0.0))
-        bpy.ops.render.render()
-        out = engine.LAST_RENDER.output
+        out = frame.render_mpp().output
         print("RESULT", len(out.warnings), all(np.all(np.isfinite(p)) for p in out.passes.values()))
         for w in out.warnings:
             print("WARNING", w)

@@ -7,8 +7,8 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from mpp_render import blackbody, cli, exr  # noqa: E402
-from mpp_render.blender import engine  # noqa: E402
+from mpp_render import blackbody, exr  # noqa: E402
+from mpp_render.blender import batch, frame  # noqa: E402
 from mpp_render.blender.translate import scene_from_depsgraph  # noqa: E402
 from mpp_render.blender.translate.vdb import openvdb_module  # noqa: E402
 from mpp_render.scene import Settings  # noqa: E402
@@ -35,23 +35,21 @@ def volume_material(kind="ShaderNodeVolumePrincipled", **inputs):
 
 
 def render_cycles(sc, tmp_path, spp=16):
-    cli.set_cycles_reference(sc, spp, multiple=False)
+    batch.set_cycles_reference(sc, spp, multiple=False)
     sc.render.threads_mode = 'FIXED'
     sc.render.threads = 2
     path = str(tmp_path / "cycles.exr")
-    cli.set_multilayer_exr(sc)
+    batch.set_multilayer_exr(sc)
     bpy.ops.render.render()
     bpy.data.images["Render Result"].save_render(filepath=path, scene=sc)
     return exr.read_passes(path, layer=bpy.context.view_layer.name)["Combined"][..., :3]
 
 
 def render_mpp(sc, spp=4):
-    cli._bpy()
-    cli.set_mpp(sc, spp, multiple=False)
+    batch.register()
+    batch.set_mpp(sc, spp, multiple=False)
     sc.mpp.voxel_resolution = 32
-    engine.LAST_RENDER = None
-    bpy.ops.render.render()
-    return engine.LAST_RENDER.output
+    return frame.render_mpp().output
 
 
 def centre(img):

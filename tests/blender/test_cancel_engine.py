@@ -8,7 +8,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from mpp_render.blender import engine  # noqa: E402
+from mpp_render.blender import engine, frame  # noqa: E402
 from parts import add_camera, add_cube, add_light, mpp_output, volume_material  # noqa: E402
 
 LATENCY_S = 0.5
@@ -46,9 +46,8 @@ def render_with_esc(monkeypatch, after):
     monkeypatch.setattr(engine, "cancel_check", cancel_check)
     monkeypatch.setattr(engine, "write_result", write_result)
     monkeypatch.setenv(engine.TEST_BREAK_ENV, str(after))
-    bpy.ops.render.render()
+    last = frame.render_mpp()
     monkeypatch.delenv(engine.TEST_BREAK_ENV)
-    last = engine.LAST_RENDER
     assert last.output.cancelled
     assert last.translate_s < after  # Esc came after the translation
     return last, returns[0] - (starts[0] + after)
@@ -69,8 +68,7 @@ def test_esc_during_the_precompute(empty_scene, monkeypatch):
     last, latency = render_with_esc(monkeypatch, 0.5)
     assert "march" not in last.output.timings  # stopped in the precompute
     assert latency < LATENCY_S, f"{latency:.3f} s from Esc to return"
-    bpy.ops.render.render()  # no Esc this time
-    check_complete(engine.LAST_RENDER, (36, 48))
+    check_complete(frame.render_mpp(), (36, 48))  # no Esc this time
     assert sc.mpp.voxel_resolution == 96
 
 

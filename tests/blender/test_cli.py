@@ -44,3 +44,20 @@ def test_cli_render_and_compare(scenes_dir, tmp_path):
     assert not m["failed"] and m["ref_downsample"] == 4
     for key in ("rel_rmse", "floor", "bias", "rel_rmse_4", "floor_4"):
         assert isinstance(m[key], float) and math.isfinite(m[key]), key
+
+
+def test_cli_render_a_damaged_blend(scenes_dir, tmp_path):
+    """A file with a .blend header that Blender cannot read: one line on stderr, exit 2 (the
+    cases caught before Blender starts are in tests/test_cli_errors.py)."""
+    damaged = tmp_path / "damaged.blend"
+    damaged.write_bytes((scenes_dir / "slab_forward" / "scene.blend").read_bytes()[:2000])
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
+    p = subprocess.run([sys.executable, "-m", "mpp_render", "render", str(damaged), "-o",
+                        str(tmp_path / "x.exr")], cwd=str(REPO), env=env, capture_output=True,
+                       text=True, timeout=120)
+    lines = p.stderr.strip().splitlines()
+    assert p.returncode == 2 and len(lines) == 1, p.stderr[-2000:]
+    assert "Blender cannot open" in lines[0] and str(damaged) in lines[0]
+    assert "Traceback" not in p.stderr + p.stdout
+    assert not (tmp_path / "x.exr").exists()

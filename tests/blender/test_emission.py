@@ -4,13 +4,12 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from mpp_render import cli  # noqa: E402
-from mpp_render.blender import engine  # noqa: E402
+from mpp_render.blender import batch, frame  # noqa: E402
 
 
 def test_principled_volume_emission_renders(empty_scene):
     sc = empty_scene
-    cli._bpy()
+    batch.register()
     bpy.ops.mesh.primitive_cube_add(size=2.0)
     cube = bpy.context.active_object
     mat = bpy.data.materials.new("glow")
@@ -30,10 +29,8 @@ def test_principled_volume_emission_renders(empty_scene):
     cam.rotation_euler = (np.pi / 2, 0, 0)
     sc.camera = cam
     sc.render.resolution_x, sc.render.resolution_y = 24, 16
-    cli.set_mpp(sc, 1, multiple=True)
-    engine.LAST_RENDER = None
-    bpy.ops.render.render()
-    p = engine.LAST_RENDER.output.passes
+    batch.set_mpp(sc, 1, multiple=True)
+    p = frame.render_mpp().output.passes
     e = p["Emission"][8, 12]
     # through 2 m of sigma_t 1: 2 * (1, .5, .25) * (1 - e^-2)
     assert np.allclose(e, 2.0 * np.array([1.0, 0.5, 0.25]) * (1 - np.exp(-2.0)), rtol=0.03)

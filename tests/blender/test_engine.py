@@ -8,7 +8,7 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 from mpp_render import exr
-from mpp_render.blender import engine, properties
+from mpp_render.blender import batch, engine, frame, properties
 from mpp_render.passes import PASSES
 from mpp_render.scene import Settings
 
@@ -66,13 +66,13 @@ def test_render_writes_every_pass_to_blenders_multilayer_exr(empty_scene, tmp_pa
     ims.exr_codec = 'ZIP'
     sc.render.filepath = str(tmp_path / "frame.exr")
     sc.render.use_file_extension = False
-    bpy.ops.render.render(write_still=True)
+    last = frame.render_mpp(write_still=True)
 
     parts = exr_parts(tmp_path / "frame.exr")
     for p in PASSES:
         assert f"ViewLayer.{p.name}" in parts
     got = exr.read_passes(str(tmp_path / "frame.exr"), layer="ViewLayer")
-    ours = engine.LAST_RENDER.output.passes
+    ours = last.output.passes
     for p in PASSES:
         assert got[p.name].shape == (H, W, p.channels)
         # Same rows as the core's output (row 0 at the top): the engine's flip is right.
@@ -80,7 +80,63 @@ def test_render_writes_every_pass_to_blenders_multilayer_exr(empty_scene, tmp_pa
     T = got["Transmittance"]
     assert T[H // 2, W // 2].max() < 0.5 and T[0, 0].min() > 0.99
     assert got["Volume Single"][H // 2, W // 2].sum() > 0
-    assert engine.LAST_RENDER.translate_s >= 0 and engine.LAST_RENDER.write_s >= 0
+    assert last.translate_s >= 0 and last.write_s >= 0
+
+
+def exr_layout(path):
+    """(part name, channel names, pixel type, compression, alpha and z channel) per part."""
+    import OpenImageIO as oiio
+
+    inp = oiio.ImageInput.open(str(path))
+    parts = []
+    i = 0
+    while inp.seek_subimage(i, 0):
+        sp = inp.spec()
+        parts.append((sp.getattribute("name"), tuple(sp.channelnames), str(sp.format),
+                      sp.getattribute("compression"), sp.tile_width, sp.alpha_channel,
+                      sp.z_channel))
+        i += 1
+    inp.close()
+    return parts
+
+
+def test_the_command_lines_exr_has_blenders_layout(empty_scene, tmp_path):
+    """exr.write_passes (what ``render`` writes) and Blender's own multilayer writer give the
+    same parts, channels, pixel type and compression (Blender adds only header metadata)."""
+    sc = small_scene(empty_scene)
+    batch.set_multilayer_exr(sc)
+    sc.render.filepath = str(tmp_path / "blender.exr")
+    sc.render.use_file_extension = False
+    last = frame.render_mpp(write_still=True)
+    exr.write_passes(str(tmp_path / "ours.exr"), last.output.passes, layer=last.view_layer)
+    theirs = exr_layout(tmp_path / "blender.exr")
+    assert len(theirs) == len(PASSES)
+    assert exr_layout(tmp_path / "ours.exr") == theirs
+
+
+def test_render_depsgraph_returns_the_engines_frame(empty_scene, monkeypatch):
+    """The plain function the engine calls, called directly on the scene's depsgraph, returns
+    the same frame as a render through Blender (the engine only copies it into the result)."""
+    small_scene(empty_scene)
+    via_engine = frame.render_mpp()
+    rec = frame.render_depsgraph(bpy.context.evaluated_depsgraph_get(), W, H)
+    assert rec.view_layer == via_engine.view_layer == "ViewLayer"
+    assert rec.frame == via_engine.frame and rec.write_s == 0.0 and rec.translate_s >= 0
+    assert set(rec.output.passes) == set(via_engine.output.passes)
+    for name, arr in via_engine.output.passes.items():
+        np.testing.assert_array_equal(rec.output.passes[name], arr, err_msg=name)
+    from mpp_render.blender import translate
+
+    def unreadable(*args, **kwargs):
+        raise ValueError("unreadable scene")
+
+    monkeypatch.setattr(translate, "scene_from_depsgraph", unreadable)
+    with pytest.raises(frame.TranslationError, match="unreadable scene"):
+        frame.render_depsgraph(bpy.context.evaluated_depsgraph_get(), W, H)
+    with frame.collect() as frames:  # through Blender: an error report, no frame handed back
+        with pytest.raises(RuntimeError, match="cannot translate the scene: unreadable scene"):
+            bpy.ops.render.render()
+    assert frames == []
 
 
 def test_passes_are_compositor_outputs(empty_scene, tmp_path):
@@ -118,8 +174,7 @@ def test_unsupported_node_is_reported_and_the_rest_renders(empty_scene, capfd):
     nt = bpy.data.materials["Vol1"].node_tree
     noise = nt.nodes.new("ShaderNodeTexNoise")
     nt.links.new(noise.outputs["Fac"], nt.nodes["Principled Volume"].inputs["Density"])
-    bpy.ops.render.render()
-    last = engine.LAST_RENDER
+    last = frame.render_mpp()
     msgs = [w for w in last.output.warnings if "Noise Texture" in w]
     assert msgs, f"no warning about the unsupported node in {last.output.warnings}"
     printed = capfd.readouterr()
@@ -134,8 +189,7 @@ def test_empty_scene_renders_the_background_with_a_report(empty_scene):
     bg = sc.world.node_tree.nodes["Background"]
     bg.inputs["Color"].default_value = (0.2, 0.3, 0.4, 1.0)
     bg.inputs["Strength"].default_value = 1.0
-    bpy.ops.render.render()
-    last = engine.LAST_RENDER
+    last = frame.render_mpp()
     assert engine.NO_MEDIA_MESSAGE in last.output.warnings
     comb = last.output.passes["Combined"]
     np.testing.assert_allclose(comb, np.broadcast_to([0.2, 0.3, 0.4, 1.0], comb.shape), atol=1e-6)
@@ -147,9 +201,9 @@ def test_esc_stops_the_render_quickly(empty_scene, monkeypatch):
     sc.mpp.samples = 256  # tens of seconds uninterrupted
     monkeypatch.setenv(engine.TEST_BREAK_ENV, "0.2")
     t = time.perf_counter()
-    bpy.ops.render.render()
+    last = frame.render_mpp()
     wall = time.perf_counter() - t
-    assert engine.LAST_RENDER.output.cancelled
+    assert last.output.cancelled
     assert wall < 3.0, f"Esc took {wall:.2f} s to stop the render"
 
 

@@ -453,7 +453,7 @@ def test_a_slow_reader_is_stopped_and_reported(tmp_path):
 
 
 RENDER_SCENE = """
-    from mpp_render.blender import engine, properties
+    from mpp_render.blender import engine, frame, properties
     properties.register(); engine.register()
     sc = bpy.context.scene
     sc.world = bpy.data.worlds.new("World")
@@ -483,8 +483,7 @@ def test_render_shows_the_smoke_where_the_grid_puts_it(tmp_path):
     open(CACHE + "/data/fluid_data_0002.vdb", "wb").write(b"not a vdb file at all" * 10)
     for f in (1, 2):
         sc.frame_set(f)
-        bpy.ops.render.render()
-        out = engine.LAST_RENDER.output
+        out = frame.render_mpp().output
         T = out.passes["Transmittance"].mean(axis=2)
         print("RESULT", json.dumps({"tag": f"f{f}", "T_cols": T.mean(axis=0).tolist(),
                                     "T_rows": T.mean(axis=1).tolist(),
@@ -521,8 +520,7 @@ FIRE_SCENE = RENDER_SCENE.replace("t.volume_material(density=40.0)", "MATERIAL")
     FLAME = t.FLAME_PEAK * t.plume(t.RES, t.FLAME_CELL, 2.0)
 
     def passes():
-        bpy.ops.render.render()
-        out = engine.LAST_RENDER.output
+        out = frame.render_mpp().output
         return {k: out.passes[k][..., :3].tolist() for k in ("Combined", "Volume Single",
                                                             "Emission")}
 """

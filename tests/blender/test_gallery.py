@@ -9,8 +9,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from mpp_render import cli  # noqa: E402
-from mpp_render.blender import engine  # noqa: E402
+from mpp_render.blender import batch, frame  # noqa: E402
 
 GALLERY = pathlib.Path(__file__).resolve().parents[2] / "benchmarks" / "gallery.py"
 
@@ -26,14 +25,12 @@ def test_fire_scene_renders_every_pass(tmp_path):
     """The fire (a .vdb with density and temperature grids under a sun): every pass finite,
     the radiance passes lit somewhere, the fire in view (Transmittance below 1, Depth hits)."""
     g = load_gallery()
-    cli._bpy()
+    batch.register()
     sc = g.build_fire(str(tmp_path), 32, 24)
     assert (tmp_path / "gallery_fire.vdb").exists()
-    cli.set_mpp(sc, 1, multiple=True, seed=0)
+    batch.set_mpp(sc, 1, multiple=True, seed=0)
     sc.mpp.voxel_resolution = 32
-    engine.LAST_RENDER = None
-    bpy.ops.render.render()
-    out = engine.LAST_RENDER.output
+    out = frame.render_mpp().output
     assert not out.cancelled and not out.warnings, out.warnings
     p = out.passes
     assert set(p) >= {"Combined", "Volume Single", "Volume Multiple", "Emission",

@@ -9,7 +9,7 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 import operators  # the repository root's ``operators`` package
-from mpp_render.blender import engine
+from mpp_render.blender import frame
 from parts import add_camera, add_cube, add_light, mpp_output, volume_material
 
 W, H = 32, 24
@@ -39,7 +39,8 @@ def test_compare_with_cycles_stores_metrics_and_difference_image(empty_scene, ca
     ims.file_format = 'PNG'
     ims.color_depth = '16'
 
-    assert bpy.ops.mpp.compare_with_cycles(samples=4) == {'FINISHED'}
+    with frame.collect() as frames:
+        assert bpy.ops.mpp.compare_with_cycles(samples=4) == {'FINISHED'}
 
     rec = json.loads(sc[operators.COMPARE_PROP])
     assert rec["cycles_samples"] == 4 and rec["resolution"] == [W, H]
@@ -58,7 +59,7 @@ def test_compare_with_cycles_stores_metrics_and_difference_image(empty_scene, ca
     assert sc.cycles.samples == 7 and sc.cycles.volume_bounces == 3
     assert sc.cycles.use_denoising and sc.cycles.pixel_filter_type == 'BLACKMAN_HARRIS'
     assert ims.file_format == 'PNG' and ims.color_depth == '16'
-    assert engine.LAST_RENDER is not None  # MPP's frame, for the command line
+    assert len(frames) == 1  # MPP's frame, handed back by the engine
     printed = capfd.readouterr()
     assert "MPP vs Cycles 4 spp: rel_rmse" in printed.out + printed.err  # self.report
 
@@ -90,18 +91,26 @@ def test_difference_map_signs_and_scale():
     assert scale0 == pytest.approx(1.0)
 
 
-def test_clear_cache_releases_the_last_render(empty_scene):
+def test_clear_cache_clears_and_nothing_keeps_the_last_render(empty_scene):
+    import gc
+    import weakref
+
     from mpp_render import mpp
 
     sc = tiny_scene(empty_scene)
     sc.render.engine = "MPP_RENDER"
-    bpy.ops.render.render()
-    assert engine.LAST_RENDER is not None
-    expect_mb = sum(a.nbytes for a in engine.LAST_RENDER.output.passes.values()) / (1 << 20)
+    last = frame.render_mpp()
+    assert last is not None
+    expect_mb = sum(a.nbytes for a in last.output.passes.values()) / (1 << 20)
+    assert expect_mb > 0
+    # The frame's record went back to the caller: the engine keeps no reference to it.
+    held = weakref.ref(last.output)
+    del last
+    gc.collect()
+    assert held() is None
     mpp.mean_sq_angle(0.3)  # fill a function cache
     rec = operators.clear_caches()
-    assert engine.LAST_RENDER is None
-    assert rec["last_render_mb"] >= expect_mb > 0
+    assert "last_render_mb" not in rec and rec["cache_mb"] >= 0
     assert rec["functions"] >= 1 and rec["entries"] >= 1
     assert mpp._mean_sq_angle_cached.cache_info().currsize == 0
     assert "MB" in operators.clear_summary(rec)

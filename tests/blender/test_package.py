@@ -59,10 +59,12 @@ sc.render.resolution_x, sc.render.resolution_y, sc.render.resolution_percentage 
 sc.render.engine = "MPP_RENDER"
 sc.mpp.samples = 1
 sc.mpp.voxel_resolution = 8
-bpy.ops.render.render()
+frame = sys.modules[pkg + ".mpp_render.blender.frame"]
+with frame.collect() as frames:
+    bpy.ops.render.render()
 
 kernels = sys.modules[pkg + ".mpp_render.kernels"]
-last = sys.modules[pkg + ".mpp_render.blender.engine"].LAST_RENDER
+last = frames[-1] if frames else None
 out["backend"] = kernels.backend()
 out["kernels_module"] = kernels._c.__name__ if kernels._c is not None else None
 out["kernels_file"] = getattr(kernels._c, "__file__", None)
@@ -72,7 +74,7 @@ out["min_transmittance"] = float(last.output.passes["Transmittance"].min()) if l
 assert bpy.ops.mpp.compare_with_cycles(samples=1) == {'FINISHED'}
 out["compare_rel_rmse"] = json.loads(sc["mpp_last_compare"])["rel_rmse"]
 assert bpy.ops.mpp.clear_cache() == {'FINISHED'}
-out["cleared"] = sys.modules[pkg + ".mpp_render.blender.engine"].LAST_RENDER is None
+out["cleared"] = len(sys.modules[pkg + ".mpp_render.cache"].CACHE) == 0
 
 bpy.ops.extensions.package_uninstall(repo_index=repo_index, pkg_id="mpp_render")
 out["ext_dir_after"] = os.path.isdir(out["ext_dir"])

@@ -8,7 +8,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from mpp_render import cli  # noqa: E402
+from mpp_render.blender import batch  # noqa: E402
 from mpp_render.blender.translate import scene_from_depsgraph  # noqa: E402
 from mpp_render.scene import Settings  # noqa: E402
 
@@ -76,13 +76,13 @@ def build_scene(sc):
 
 
 def test_planes_render_as_in_cycles(empty_scene, tmp_path):
-    cli._bpy()
+    batch.register()
     sc = empty_scene
     build_scene(sc)
-    cli.set_cycles_reference(sc, CYCLES_SPP, multiple=False, seed=1)
-    ref = cli.render_current(sc, str(tmp_path / "cycles.exr"))["_passes"]["Combined"][..., :3]
-    cli.set_mpp(sc, OUR_SPP, multiple=False, seed=0)
-    rec = cli.render_current(sc, str(tmp_path / "mpp.exr"))
+    batch.set_cycles_reference(sc, CYCLES_SPP, multiple=False, seed=1)
+    ref = batch.render_current(sc, str(tmp_path / "cycles.exr"))["_passes"]["Combined"][..., :3]
+    batch.set_mpp(sc, OUR_SPP, multiple=False, seed=0)
+    rec = batch.render_current(sc, str(tmp_path / "mpp.exr"))
     assert all("no volumes" in w for w in rec["warnings"]), rec["warnings"]
     ours = rec["_passes"]["Combined"][..., :3]
     assert np.all(np.isfinite(ours))

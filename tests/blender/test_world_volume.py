@@ -5,8 +5,8 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from mpp_render import cli, exr  # noqa: E402
-from mpp_render.blender import engine  # noqa: E402
+from mpp_render import exr  # noqa: E402
+from mpp_render.blender import batch, frame  # noqa: E402
 from mpp_render.blender.translate import scene_from_depsgraph  # noqa: E402
 from mpp_render.metrics import compare  # noqa: E402
 from mpp_render.scene import Settings  # noqa: E402
@@ -43,23 +43,21 @@ def surface_material(name, node="ShaderNodeBsdfDiffuse", **inputs):
 
 
 def render_cycles(sc, tmp_path, spp, seed):
-    cli.set_cycles_reference(sc, spp, multiple=False, seed=seed)
+    batch.set_cycles_reference(sc, spp, multiple=False, seed=seed)
     sc.render.threads_mode = 'FIXED'
     sc.render.threads = 2
     path = str(tmp_path / f"cycles_{seed}.exr")
-    cli.set_multilayer_exr(sc)
+    batch.set_multilayer_exr(sc)
     bpy.ops.render.render()
     bpy.data.images["Render Result"].save_render(filepath=path, scene=sc)
     return exr.read_passes(path, layer=bpy.context.view_layer.name)["Combined"][..., :3]
 
 
 def render_mpp(sc, spp, voxels, seed=0):
-    cli._bpy()
-    cli.set_mpp(sc, spp, multiple=False, seed=seed)
+    batch.register()
+    batch.set_mpp(sc, spp, multiple=False, seed=seed)
     sc.mpp.voxel_resolution = voxels
-    engine.LAST_RENDER = None
-    bpy.ops.render.render()
-    out = engine.LAST_RENDER.output
+    out = frame.render_mpp().output
     assert not out.cancelled
     return out
 
@@ -147,11 +145,12 @@ def test_suns_are_dark_and_emission_fills_the_fog(empty_scene, tmp_path):
     desc = scene_from_depsgraph(bpy.context.evaluated_depsgraph_get(), Settings())
     assert desc.world.volume.sigma_a == pytest.approx([0.05] * 3)
     ref = render_cycles(sc, tmp_path, 16, 1)
-    ours = render_mpp(sc, 4, 32).passes
+    ours_out = render_mpp(sc, 4, 32)
+    ours = ours_out.passes
     expect = np.array([1.0, 0.5, 0.25]) / 0.05
     np.testing.assert_allclose(ref[8, 12], expect, rtol=0.01)
     np.testing.assert_allclose(ours["Combined"][8, 12, :3], expect, rtol=0.01)
     np.testing.assert_allclose(ours["Emission"][8, 12], expect, rtol=0.01)
     assert np.all(ours["Volume Single"] == 0)   # the sun does not reach through the fog
     assert any("a sun lights nothing through the world volume" in w
-               for w in engine.LAST_RENDER.output.warnings)
+               for w in ours_out.warnings)
