@@ -38,7 +38,8 @@ os.environ["MPP_CACHE_MB"] = "0"
 sys.path.insert(0, REPO)
 SCENES = os.path.join(os.path.dirname(REPO), "shared", "scenes")
 
-from mpp_render import firstflight, kernels, march, precompute, render as render_mod  # noqa: E402
+from mpp_render import firstflight, kernels, march, render as render_mod  # noqa: E402
+from mpp_render.precompute import lightdepth, source  # noqa: E402
 from mpp_render.camera import camera_plane  # noqa: E402
 from mpp_render.render import render  # noqa: E402
 from mpp_render.scene import Camera, Light, Medium, SceneDescription, Settings, World  # noqa: E402
@@ -141,8 +142,8 @@ class Switch:
         self.old = {}
         for key, val in self.kw.items():
             mod, attr = key.split("__")
-            m = {"march": march, "precompute": precompute, "render": render_mod,
-                 "firstflight": firstflight}[mod]
+            m = {"march": march, "render": render_mod, "firstflight": firstflight,
+                 "precompute": lightdepth if hasattr(lightdepth, attr) else source}[mod]
             self.old[(m, attr)] = getattr(m, attr)
             setattr(m, attr, val)
 
@@ -227,7 +228,7 @@ def skip_tables(quick):
         {"precompute__SWEEP": False}, {"precompute__SWEEP": True}, "precompute")
     add(f"world light: brick walk in optical_depth ({n}^3, sun + sky, multiple on)",
         lambda: scene(n=n, multiple=True), {"precompute__SKIP_MIN_VOXELS": 1 << 62},
-        {"precompute__SKIP_MIN_VOXELS": precompute.SKIP_MIN_VOXELS}, "precompute")
+        {"precompute__SKIP_MIN_VOXELS": lightdepth.SKIP_MIN_VOXELS}, "precompute")
     m = 64 if quick else 96
     w, h = (320, 240) if quick else (640, 480)
     add(f"march: skip empty super-steps ({m}^3, {w}x{h}, 1 spp, multiple off)",

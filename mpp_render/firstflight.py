@@ -1,7 +1,7 @@
 """The first flights of multiple scattering, evaluated exactly on the light pyramid's lattice.
 
 Every multiply scattered path starts at a first scattering out of the beam (the source Q of
-``precompute.lattice_source``, W/m^3) and flies straight to its next event.  The walk of the
+``precompute.source.restricted_source``, W/m^3) and flies straight to its next event.  The walk of the
 light pyramid spreads that first flight, like every later one, as an isotropic Gaussian about
 its mean displacement; where the first flights are long -- a medium thinner than its mean
 free path, such as fog round a spot light's beam -- that puts their light in the wrong place:
@@ -13,7 +13,7 @@ the first flight is instead the convolution
 
 (W/(m^2 sr) per unit sigma_s at x: the march multiplies by the local sigma_s), with p1 the
 medium's own HG(g) outside its forward peak (``first_phase``: the light scattered into the
-peak is the beam channels', precompute.peak_light) about the light's direction d at the
+peak is the beam channels', precompute.source.peak_light) about the light's direction d at the
 sources, sigma_t* the delta-scaled medium's extinction (1/m; the forward peak's scatterings
 keep the light on its course), p the medium's own HG(g) and w the direction to the camera.
 The second flight is the same convolution of the second-scattering source sigma_s* phi1
@@ -375,7 +375,7 @@ def flight_weight(q, inside, axes, source_dirs, g: float, sigma_t):
     ``first_flight``'s): the blend weight per channel (``blend_weight`` of the escape
     fraction), the sources' power-weighted mean direction d and the length of that mean;
     None where no channel takes the flights (every weight 0, no power, ENABLED off) -- the
-    walk's coarser lattice then answers for a finer one (precompute.multiple_field)."""
+    walk's coarser lattice then answers for a finer one (precompute.lightpyramid.multiple_field)."""
     if not ENABLED:
         return None
     power = q.sum(axis=-1).reshape(-1)

@@ -14,11 +14,11 @@ homogeneous media and stable at any optical depth.
 In-scattered radiance at x, per medium m with density rho_m(x):
   S = sum_m rho_m sigma_s,m [ sum_lights p_m(w_l . -d) E_l(x) exp(-tau_l,m(x)) + A_m(x) ]
 with E_l the light's irradiance (lights.py), tau the precomputed optical depth to the light
-and A the precomputed world light (precompute.py).  Rays stop when T < ``T_MIN``.
+and A the precomputed world light (mpp_render/precompute/).  Rays stop when T < ``T_MIN``.
 
 Emission (the Emission pass) is a medium's constant ``emission`` wherever its density is > 0
 plus, for a medium with an emission grid, the grid's value read from the field's emission
-channels (precompute.FieldLayout.emission_channels) wherever it is non-zero (the march's
+channels (precompute/layout.py) wherever it is non-zero (the march's
 brick bounds, PreparedMedium.march_bricks, keep those super-steps whole).
 
 Mesh volumes have a sharp surface (media.density_from).  There the optical depth to a light
@@ -44,7 +44,7 @@ from .kernels_np import LIGHT_FIELDS, REFINE_STEPS, RHO_TABLE, T_MIN, hash32
 from .lights import pack_light
 from .media import PreparedMedium
 from .passes import DEPTH_MISS, DEPTH_OPACITY
-from .precompute import FieldLayout
+from .precompute.layout import FieldLayout
 from .scene import Camera, Light
 
 __all__ = ["MarchContext", "march_rays", "pack_lights", "ray_keys", "REFINE_STEPS", "T_MIN"]
@@ -132,7 +132,7 @@ FLAT_TABLE = np.concatenate([np.full((1, len(RHO_TABLE), 3), 4.0 * np.pi),
 
 def flat_stride(mfs) -> int:
     """The stride (voxels) of a medium's flattened level: the finest of its light pyramids'
-    lattice and its exact first flights' (precompute.fine_stride divides the
+    lattice and its exact first flights' (precompute.source.fine_stride divides the
     pyramid's stride)."""
     ref = next(m for m in mfs if m is not None)
     return min([ref.stride] + [m.first.stride for m in mfs
@@ -156,7 +156,7 @@ def flatten_levels(pm: PreparedMedium, mfs, lights: List[Light], table: np.ndarr
     and 1 - w of the levels through ``table``."""
     from .camera import towards_camera
     from .kernels_np import hg, light_sample, table_lookup, upsample
-    from .precompute import lattice_points, lattice_shape
+    from .precompute.lattice import lattice_points, lattice_shape
     ref = next(m for m in mfs if m is not None)
     stride = flat_stride(mfs)
     shape = lattice_shape(pm.grid.shape, stride)

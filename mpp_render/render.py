@@ -25,7 +25,7 @@ from .camera import primary_rays
 from .march import MarchContext, march_rays, ray_keys
 from .media import prepare, union_interval
 from .passes import DEPTH_MISS, enabled_passes
-from .precompute import kernel_arrays, split_fog
+from .precompute.lightdepth import kernel_arrays, split_fog
 from .scene import SceneDescription
 from .surfaces import intersect, prepare_surfaces, shade
 
