@@ -241,12 +241,12 @@ def camera_key(camera) -> tuple:
 def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, surfaces=None,
                       threads: int = 0, multiple: bool = False, multiple_resolution=None,
                       should_cancel: Optional[Callable[[], bool]] = None,
-                      progress=None, cache: Optional[Cache] = None):
+                      progress=None, cache: Optional[Cache] = None, tuning=None):
     """``precompute.precompute`` reusing earlier results kept in ``cache`` (default ``CACHE``).
 
     One entry (kind 'precompute') per *light key* -- the media, lights, surfaces, multiple
-    scattering and its resolution (and then the camera position), thread count and whether
-    the world is lit -- holds the fields and pyramids
+    scattering and its resolution (and then the camera position), thread count, the tuning
+    (scene.Tuning) and whether the world is lit -- holds the fields and pyramids
     and the *world key* they were computed for (world colour, camera position, ambient
     directions, seed).  Then:
 
@@ -265,16 +265,17 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
     from . import precompute as pre_mod
     from .precompute.lattice import MULTIPLE_RESOLUTION
     from .precompute.layout import light_channels
-    from .scene import World
+    from .scene import Tuning, World
 
     cache = CACHE if cache is None else cache
+    tuning = Tuning() if tuning is None else tuning
     if multiple_resolution is None:
         multiple_resolution = MULTIPLE_RESOLUTION
     has_world = bool(np.any(np.asarray(world.color, np.float64) > 0))
     # the thread count does not change the numbers; it is keyed anyway so that a render with
     # other threads still runs (and checks) the precompute
     common = (media_key(media), surfaces_key(surfaces), bool(multiple),
-              int(multiple_resolution) if multiple else 0, int(threads))
+              int(multiple_resolution) if multiple else 0, int(threads), tuning)
     # the light pyramids are moved towards what the camera sees (precompute.lightpyramid.drift_levels)
     light_key = digest("lights", common, list(lights), has_world,
                        camera_key(camera) if multiple else None)
@@ -282,7 +283,7 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
                        int(n_dirs), int(seed)) if has_world else None
     kw = dict(n_dirs=n_dirs, seed=seed, should_cancel=should_cancel, progress=progress,
               surfaces=surfaces, threads=threads, multiple=multiple,
-              multiple_resolution=multiple_resolution)
+              multiple_resolution=multiple_resolution, tuning=tuning)
 
     def result(pre, reused):
         return pre_mod.Precomputed(pre.fields, pre.layout, pre.multiple, pre.seconds,

@@ -22,7 +22,7 @@ with p1 composed with itself as its direction (``peak_free_twice``).  They are e
 FFT on the lattice, one kernel per colour channel, flight and camera direction (a few
 directions spread over what the camera sees of the medium, interpolated between); the walk
 then carries only the paths with at least two more scatterings
-(``kernels_np.level_table(..., exact_flights=EXACT_FLIGHTS)``).  See docs/method.md, "The
+(``kernels_np.level_table(..., exact_flights=2)``; scene.Tuning.exact_flights).  See docs/method.md, "The
 first flight, exact".
 
 Where the first flights mostly stay in the medium the walk's calibration (its escape through
@@ -49,8 +49,6 @@ import numpy as np
 from .parallel import run_chunks
 from .phase import delta_fraction, hg, outside_peak, peak_cone_cos
 
-ENABLED = True      # a switch for tests and benchmarks: False leaves the walk alone
-EXACT_FLIGHTS = 2   # flights out of the beam computed exactly (march: kernels_np.level_table)
 ESCAPE_LOW = 0.3    # escape fraction at or below which the walk alone is used
 ESCAPE_HIGH = 0.5   # escape fraction at or above which the exact first flight alone is used
 ESCAPE_RESOLUTION = 32   # lattice points along the longest axis for the escape fraction
@@ -374,10 +372,8 @@ def flight_weight(q, inside, axes, source_dirs, g: float, sigma_t):
     """(weight (3,), d (3,), spread) of the exact flights of the source ``q`` (arguments as
     ``first_flight``'s): the blend weight per channel (``blend_weight`` of the escape
     fraction), the sources' power-weighted mean direction d and the length of that mean;
-    None where no channel takes the flights (every weight 0, no power, ENABLED off) -- the
+    None where no channel takes the flights (every weight 0, no power) -- the
     walk's coarser lattice then answers for a finer one (precompute.lightpyramid.multiple_field)."""
-    if not ENABLED:
-        return None
     power = q.sum(axis=-1).reshape(-1)
     total = float(power.sum())
     sigma_t = np.broadcast_to(np.asarray(sigma_t, np.float64), (3,))
@@ -396,11 +392,11 @@ def flight_weight(q, inside, axes, source_dirs, g: float, sigma_t):
 
 def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=None,
                  should_cancel: Optional[Callable[[], bool]] = None,
-                 threads: int = 0) -> Optional[FirstFlight]:
+                 threads: int = 0, exact_flights: int = 2) -> Optional[FirstFlight]:
     """The exact first flights of one light on one medium, or None where the walk alone
     serves (every channel's escape fraction at or below ESCAPE_LOW, no power) or when
     cancelled: the first flight out of the beam and, where ``sigma_s`` is given, the second
-    (EXACT_FLIGHTS), from the second-scattering source sigma_s* phi1 (phi1 the first
+    (``exact_flights`` 2; scene.Tuning.exact_flights), from the second-scattering source sigma_s* phi1 (phi1 the first
     flights' fluence in the medium) with the direction ``first_phase(..., order=2)``.
 
     ``q`` (X,Y,Z,3): the first-scattering source on the pyramid's lattice (W/m^3, the walk's,
@@ -425,7 +421,7 @@ def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=Non
         return None
     weight, d, spread = got
     sigma_t = np.broadcast_to(np.asarray(sigma_t, np.float64), (3,))
-    second = sigma_s is not None and EXACT_FLIGHTS >= 2   # what the walk's table leaves out
+    second = sigma_s is not None and exact_flights >= 2   # what the walk's table leaves out
     sigma_s = np.zeros(3) if sigma_s is None else \
         np.broadcast_to(np.asarray(sigma_s, np.float64), (3,))
     dirs, wts = camera_directions(v, v[inside.reshape(-1)])

@@ -29,14 +29,14 @@ from .precompute.lightdepth import kernel_arrays, split_fog
 from .scene import SceneDescription
 from .surfaces import intersect, prepare_surfaces, shade
 
-TILE = 64            # largest tile side (pixels)
 GATHER_SEED = 0x5BD1E995  # offsets the seed of the rays that gather volume light onto surfaces
 TILE_RAYS = 4096     # rays per tile at most: Esc and progress are served between tiles
 
 
-def tile_size(samples: int) -> int:
-    """Tile side (pixels) so that a tile holds at most TILE_RAYS rays (4 to TILE)."""
-    return int(np.clip(int(math.sqrt(TILE_RAYS / max(1, samples))), 4, TILE))
+def tile_size(samples: int, largest: int = 64) -> int:
+    """Tile side (pixels) so that a tile holds at most TILE_RAYS rays (4 to ``largest``,
+    Tuning.tile)."""
+    return int(np.clip(int(math.sqrt(TILE_RAYS / max(1, samples))), 4, largest))
 
 
 @dataclass
@@ -134,7 +134,8 @@ def render(desc: SceneDescription,
                                       should_cancel=cancel, progress=progress,
                                       surfaces=None if surf.empty else surf, threads=st.threads,
                                       multiple=st.multiple,
-                                      multiple_resolution=st.multiple_resolution)
+                                      multiple_resolution=st.multiple_resolution,
+                                      tuning=st.tuning)
         if pre is None:
             return RenderOutput(out, {"precompute": time.perf_counter() - t_pre}, warnings, True)
     timings["precompute"] = time.perf_counter() - t_pre
@@ -142,7 +143,7 @@ def render(desc: SceneDescription,
     bg = np.asarray(world.color, np.float64)
     ctx = MarchContext(media, pre.fields if pre else [], pre.layout if pre else None,
                        media_lights, step, pre.multiple if st.multiple else None,
-                       cam) if media else None
+                       cam, st.tuning) if media else None
     od = kernels.get("optical_depth")
     step_light = step
 
@@ -170,7 +171,7 @@ def render(desc: SceneDescription,
         return radiance if ctx is not None else None
 
     spp = max(1, int(st.samples))
-    ts = tile_size(spp)
+    ts = tile_size(spp, st.tuning.tile)
     tiles = [(x0, y0) for y0 in range(0, H, ts) for x0 in range(0, W, ts)]
 
     def do_tile(index):

@@ -22,7 +22,7 @@ from .. import kernels, kernels_np
 from ..lights import towards_light
 from ..media import PreparedMedium, union_interval
 from ..parallel import run_chunks
-from ..scene import Light
+from ..scene import Light, Tuning
 from ..surfaces import occluded
 from ..worldfog import optical_depth as fog_optical_depth
 from .lattice import dilate, grid_points, to_world
@@ -55,21 +55,19 @@ def _media_arrays_for(media, coefficient):
     raise ValueError(coefficient)
 
 
-SKIP_MIN_VOXELS = 1 << 20  # grids from which optical_depth walks the bricks (measured:
-# below it a grid sits in the cache, a step is as cheap as a brick crossing and walking the
-# bricks costs more than it saves; above it 1.7-2.9x faster on the public scenes' grids)
-
-
-def media_bricks(media):
+def media_bricks(media, tuning: Tuning = Tuning()):
     """The media's brick bounds (media.brick_bounds) for optical_depth to add empty and
-    constant stretches in one go, or None for small grids (SKIP_MIN_VOXELS); the result is
-    the same either way."""
-    if not media or max(m.grid.size for m in media) < SKIP_MIN_VOXELS:
+    constant stretches in one go, or None for small grids (below ``tuning.skip_min_voxels``
+    voxels: such a grid sits in the cache, a step is as cheap as a brick crossing and walking
+    the bricks costs more than it saves; above it 1.7-2.9x faster on the public scenes'
+    grids); the result is the same either way."""
+    if not media or max(m.grid.size for m in media) < tuning.skip_min_voxels:
         return None
     return [m.bricks for m in media]
 
 
-def density_lengths(media: List[PreparedMedium], points, dirs, t_max, step):
+def density_lengths(media: List[PreparedMedium], points, dirs, t_max, step,
+                    tuning: Tuning = Tuning()):
     """(N, M) metres of density along rays p + s dir, s in [0, t_max] cut where they leave
     the media's boxes, per medium: the integral of density_from(grid) (kernels.optical_depth
     with each medium's coefficient a unit vector, three media per call).  Any RGB optical
@@ -84,7 +82,7 @@ def density_lengths(media: List[PreparedMedium], points, dirs, t_max, step):
         grp = media[g0:g0 + 3]
         units = [np.eye(3)[k] for k in range(len(grp))]
         v = od(points, dirs, t_max, [m.grid for m in grp], [m.w2i for m in grp], units,
-               [m.threshold for m in grp], float(step), 0.5, bricks=media_bricks(grp),
+               [m.threshold for m in grp], float(step), 0.5, bricks=media_bricks(grp, tuning),
                clip=M <= 3)
         out[:, g0:g0 + len(grp)] = v[:, :len(grp)]
     return out
@@ -98,7 +96,7 @@ def split_fog(media: List[PreparedMedium]):
 
 def light_optical_depth(media: List[PreparedMedium], light: Light, points, step,
                         chunk=1 << 14, should_cancel=None, surfaces=None, threads=0,
-                        coefficient="sigma_t", fog_sigma_t=None):
+                        coefficient="sigma_t", fog_sigma_t=None, tuning: Tuning = Tuning()):
     """RGB optical depth (N,3) from world ``points`` to ``light`` (its centre) through media;
     ``SHADOW_TAU`` is added where an opaque surface (``surfaces``, a SurfaceSet) blocks the
     way, so surfaces cast volumetric shadows, and with ``fog_sigma_t`` (RGB 1/m) the world
@@ -108,7 +106,7 @@ def light_optical_depth(media: List[PreparedMedium], light: Light, points, step,
     od = kernels.get("optical_depth")
     arrays = _media_arrays_for(media, coefficient) if media else None
     # the bricks bound density_from(grid), which 'length' does not integrate
-    bricks = None if coefficient == "length" else media_bricks(media)
+    bricks = None if coefficient == "length" else media_bricks(media, tuning)
     if coefficient != "sigma_t":
         surfaces = None
         fog_sigma_t = None
@@ -317,14 +315,12 @@ def near_sharp_surfaces(pm: PreparedMedium, media: List[PreparedMedium]):
     return np.flatnonzero(out)
 
 
-SWEEP = True  # lights by the sweep (False: one exact march per needed voxel, the old way;
-# a switch for benchmarks/performance.py)
 SWEEP_CELLS = 16  # column cells per sweep chunk (at least): chunks run in parallel, Esc between
 
 
 def sweep_light(media: List[PreparedMedium], pm: PreparedMedium, light: Light, field: np.ndarray,
                 channel: int, step: float, surfaces=None, threads=0, should_cancel=None,
-                needed=None, fog_sigma_t=None, sharp=None):
+                needed=None, fog_sigma_t=None, sharp=None, tuning: Tuning = Tuning()):
     """Fill ``field[..., channel:channel+3]`` with the RGB optical depth from every voxel of
     ``pm``'s grid to ``light`` through all media, with ``kernels.light_sweep``: the light's
     rays are followed slab by slab across the grid, so the cost is that of a few passes over
@@ -340,7 +336,7 @@ def sweep_light(media: List[PreparedMedium], pm: PreparedMedium, light: Light, f
     depend on the media's grids only, not on the light).  Returns True when done, False
     when cancelled, None when the light cannot be swept (the caller then marches every
     voxel)."""
-    plan = sweep_pyramids(pm, light) if SWEEP else None
+    plan = sweep_pyramids(pm, light)
     if plan is None:
         return None
     pyramids, L = plan
@@ -354,7 +350,7 @@ def sweep_light(media: List[PreparedMedium], pm: PreparedMedium, light: Light, f
         idx = kernels_np.column_index(pyr.axis, pyr.coef, float(pyr.i_first), pq[..., 0], pq[..., 1])
         start = to_world(pm, idx.reshape(-1, 3))
         init = light_optical_depth(media, light, start, step, should_cancel=should_cancel,
-                                   threads=threads)
+                                   threads=threads, tuning=tuning)
         if init is None:
             return False
         n_sub = _sub_steps(pm, pyr, step)
@@ -377,7 +373,7 @@ def sweep_light(media: List[PreparedMedium], pm: PreparedMedium, light: Light, f
         # stepped off the surface) march exactly.
         flat = near_sharp_surfaces(pm, media) if sharp is None else sharp
         tau = light_optical_depth(media, light, grid_points(pm, flat), step,
-                                  should_cancel=should_cancel, threads=threads)
+                                  should_cancel=should_cancel, threads=threads, tuning=tuning)
         if tau is None:
             return False
         field.reshape(-1, field.shape[-1])[flat, channel:channel + 3] = tau

@@ -17,7 +17,7 @@ from ..camera import towards_camera
 from ..firstflight import FirstFlight, first_flight, flight_weight
 from ..kernels_np import level_paths, walk_displacement
 from ..media import PreparedMedium
-from ..scene import Camera, Light
+from ..scene import Camera, Light, Tuning
 from . import boundary
 from .lattice import MULTIPLE_RESOLUTION, lattice_points, lattice_shape, walk_lattice
 from .source import fine_stride, light_direction, source_and_density
@@ -32,19 +32,31 @@ class MultipleField:
     scattered path), each level moved by its paths' drift (``drift_levels``).  ``first``:
     None, or for a mesh volume whose first flights mostly leave it the exact first two
     flights (firstflight.FirstFlight on the finest lattice) that replace the walk's, by their
-    weight (march.flatten_levels)."""
+    weight (march.flatten_levels).  ``flat``: the march sums the levels once (``flattens``)."""
 
     stride: int
     h: float
     levels: list
     first: Optional[FirstFlight] = None
+    flat: bool = False
+
+
+def flattens(pm: PreparedMedium, camera: Optional[Camera], tuning: Tuning = Tuning()) -> bool:
+    """Whether the march sums ``pm``'s light pyramids over levels and lights once
+    (march.flatten_levels, with ``tuning.flatten``): a mesh volume (one density wherever it
+    has any) seen by a perspective or orthographic camera, the direction from a sample to
+    the camera then that of the camera ray through it.  Only such a medium gets the exact
+    first flights, which join the flattened level."""
+    return bool(tuning.flatten) and pm.threshold >= 0.0 and camera is not None and \
+        str(camera.projection).upper() in ("PERSP", "ORTHO")
 
 
 def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int,
                    camera: Camera, max_levels=8, resolution: int = MULTIPLE_RESOLUTION,
                    should_cancel: Optional[Callable[[], bool]] = None,
                    g_last: Optional[float] = None,
-                   beam: Optional[int] = None, threads: int = 0) -> Optional[MultipleField]:
+                   beam: Optional[int] = None, threads: int = 0,
+                   tuning: Tuning = Tuning()) -> Optional[MultipleField]:
     """The light pyramid of ``light`` on medium ``pm`` from its precomputed field ``fld``
     (optical depth at ``channel``), see MultipleField, on a lattice of about ``resolution``
     points along the grid's longest side (never finer than the voxels): the source
@@ -54,7 +66,9 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
     ``should_cancel`` says so.  ``pm`` is the medium as the walk sees it: precompute hands
     the delta-scaled medium (media.delta_scaled) and the optical depth of its beam, and
     ``g_last`` the medium's own g, that of the last scattering towards the camera.
-    ``threads``: for the exact first flights' convolutions (firstflight.py)."""
+    ``threads``: for the exact first flights' convolutions (firstflight.py).  ``tuning``:
+    whether the levels are flattened (``flattens``) and the exact first flights made, and
+    on what lattice (scene.Tuning)."""
     stride, shape, h = walk_lattice(pm, resolution)
     got = source_and_density(pm, fld, light, channel, stride, beam, should_cancel)
     if got is None:
@@ -77,11 +91,11 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
     if should_cancel and should_cancel():
         return None
     first = None
-    if pm.threshold >= 0.0 and camera is not None and \
-            str(camera.projection).upper() in ("PERSP", "ORTHO"):
+    flat = flattens(pm, camera, tuning)
+    if flat and tuning.first_flights:
         # a mesh volume, whose levels the march sums once (march.flatten_levels): the first
         # flight exact where the first flights mostly leave the medium (firstflight.py)
-        fine = fine_stride(pm, stride)
+        fine = fine_stride(pm, stride, tuning)
         sigma_t = np.asarray(pm.sigma_t, np.float64) * mean_rho
         if fine != stride and flight_weight(
                 base.reshape(tuple(shape) + (3,)), (rho > 0).reshape(shape),
@@ -97,7 +111,7 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
                              fine * pm.i2w[:3, :3], light_direction(light, got[2]),
                              towards_camera(camera, got[2]),
                              g if g_last is None else float(g_last), sigma_t, sigma_s,
-                             should_cancel, threads)
+                             should_cancel, threads, tuning.exact_flights)
         if should_cancel and should_cancel():
             return None
         if first is not None:
@@ -106,7 +120,7 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
     if should_cancel and should_cancel():
         return None
     drift_levels(levels, pm, light, camera, stride, h, sigma_s, directions, g_last)
-    return MultipleField(stride, h, levels, first)
+    return MultipleField(stride, h, levels, first, flat)
 
 
 def source_pyramid(base, light: Light, pts, shape, g: float, max_levels: int, keep=None):

@@ -10,7 +10,7 @@ import numpy as np
 
 from .. import kernels
 from ..media import PreparedMedium, delta_scaled, density_from
-from ..scene import Camera, Light, World
+from ..scene import Camera, Light, Tuning, World
 from .lattice import MULTIPLE_RESOLUTION, grid_points, needed_flat
 from .layout import FieldLayout, field_layout
 from .lightdepth import (SHADOW_TAU, light_optical_depth, near_sharp_surfaces, soft_visibility,
@@ -37,10 +37,12 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                should_cancel: Optional[Callable[[], bool]] = None,
                progress: Optional[Callable[[float, str], None]] = None,
                surfaces=None, threads: int = 0, multiple: bool = False,
-               multiple_resolution: int = MULTIPLE_RESOLUTION) -> Optional[Precomputed]:
+               multiple_resolution: int = MULTIPLE_RESOLUTION,
+               tuning: Tuning = Tuning()) -> Optional[Precomputed]:
     """Field arrays for every medium, and with ``multiple`` the light pyramids; None when
     cancelled.  ``surfaces`` (a SurfaceSet or None) shadow the lights and the sky.  Media
-    that cannot scatter (sigma_s = 0) get no multiple-scattering data."""
+    that cannot scatter (sigma_s = 0) get no multiple-scattering data.  ``tuning``: the
+    method's knobs (scene.Tuning, with the Settings)."""
     t_start = time.perf_counter()
     delta = [delta_scaled(pm) for pm in media]
     layout = field_layout(media, lights, world.color, multiple, delta)
@@ -92,7 +94,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                     swept = sweep_light(through, own, light, f, ch, step, surfaces=surfaces,
                                         threads=threads, should_cancel=should_cancel,
                                         needed=None if pts is None else (flat, pts),
-                                        fog_sigma_t=through_fog, sharp=sharp)
+                                        fog_sigma_t=through_fog, sharp=sharp, tuning=tuning)
                 if swept is False:
                     return None
                 if swept is None:  # the fog, or not sweepable: march from every needed voxel
@@ -100,7 +102,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                     tau = light_optical_depth(through, light, pts, step,
                                               should_cancel=should_cancel,
                                               surfaces=None if pm is fog else surfaces,
-                                              threads=threads, fog_sigma_t=through_fog)
+                                              threads=threads, fog_sigma_t=through_fog,
+                                              tuning=tuning)
                     if tau is None:
                         return None
                     if pm is fog and shadowed:
@@ -114,7 +117,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                 # the beam channels: from the beam's optical depth to the forward peak's own
                 # light, spread sideways (W/m^2)
                 peak = peak_light(pm, f, light, chans[li], beams[li], mean_ss, flat, step,
-                                  multiple_resolution, should_cancel, fog=pm is fog)
+                                  multiple_resolution, should_cancel, fog=pm is fog,
+                                  tuning=tuning)
                 if peak is None:
                     return None
                 kernels.get("upsample_into")(f, beams[li], peak[0], peak[1], flat)
@@ -124,7 +128,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
             got = fill_world_light(f, (layout.ambient_channel, layout.ambient_multiple_channel),
                                    solid, pm, world, camera, flat, n_dirs, 2.0 * step,
                                    seed=seed + mi, should_cancel=should_cancel,
-                                   surfaces=surfaces, threads=threads)
+                                   surfaces=surfaces, threads=threads, tuning=tuning)
             if got is None:
                 return None
             n_ambient += got
@@ -140,7 +144,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                 ms[li] = multiple_field(delta[mi], f, light, chans[li], camera, beam=beams[li],
                                         resolution=multiple_resolution,
                                         should_cancel=should_cancel, g_last=float(pm.g),
-                                        threads=threads)
+                                        threads=threads, tuning=tuning)
                 if should_cancel and should_cancel():
                     return None
         ms_all.append(ms)

@@ -15,7 +15,7 @@ from ..firstflight import fft_shape
 from ..lights import incident, irradiance, outside_spot, towards_light
 from ..media import PreparedMedium, delta_scaled, density_from
 from ..phase import delta_fraction, peak_msa
-from ..scene import Light
+from ..scene import Light, Tuning
 from ..worldfog import optical_depth as fog_optical_depth
 from .lattice import (MULTIPLE_RESOLUTION, dilate, lattice_index, lattice_points, lattice_shape,
                       lattice_values, to_world, walk_lattice)
@@ -50,29 +50,27 @@ def first_scattering(pm: PreparedMedium, rho, e, tau, peak=None) -> np.ndarray:
     return (np.asarray(rho)[:, None] * pm.sigma_s[None, :]) * light
 
 
-SPOT_CULL = True   # cell_mean_irradiance skips the cells a spot's cone misses (a switch for
-# benchmarks/performance.py)
-
-
-def cell_mean_irradiance(light: Light, pts, cell: np.ndarray, n: int = 2) -> np.ndarray:
+def cell_mean_irradiance(light: Light, pts, cell: np.ndarray, n: int = 2,
+                         cull: bool = True) -> np.ndarray:
     """The light's irradiance (W/m^2, (N,3)) averaged over the lattice cells centred on
     ``pts`` (N,3, m) with edges the columns of ``cell`` (3,3, m): n^3 points each (midpoint
     rule).  A spot's cone narrower than the lattice (fog_beam's is 0.2 m wide where it
     enters, two lattice spacings) read at the points alone is over- or under-counted as the
     lattice falls; a sun's irradiance is the same everywhere and read once, and an area
     light's is already its emitter's integral (lights.area_incident), read once.  Cells
-    wholly outside a spot's cone (``lights.outside_spot``) are 0 without a read."""
+    wholly outside a spot's cone (``lights.outside_spot``) are 0 without a read (``cull``;
+    the same result, faster: Tuning.spot_cull)."""
     if light.kind in ("SUN", "AREA"):
         return irradiance(light, pts)
     pts = np.asarray(pts, np.float64).reshape(-1, 3)
     cell = np.asarray(cell, np.float64)
     corner = 0.5 * float(np.linalg.norm(np.abs(cell).sum(axis=1)))   # m, a bound
-    lit = np.flatnonzero(~outside_spot(light, pts, corner)) if SPOT_CULL else \
+    lit = np.flatnonzero(~outside_spot(light, pts, corner)) if cull else \
         np.arange(len(pts))
     if lit.size < len(pts):
         out = np.zeros((len(pts), 3))
         if lit.size:
-            out[lit] = cell_mean_irradiance(light, pts[lit], cell, n)
+            out[lit] = cell_mean_irradiance(light, pts[lit], cell, n, cull)
         return out
     t = (np.arange(n) + 0.5) / n - 0.5
     offs = np.stack(np.meshgrid(t, t, t, indexing="ij"), -1).reshape(-1, 3) @ cell.T
@@ -85,7 +83,8 @@ def cell_mean_irradiance(light: Light, pts, cell: np.ndarray, n: int = 2) -> np.
 def peak_light(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int, beam: int,
                mean_sigma_s: float, flat, step: float,
                resolution: int = MULTIPLE_RESOLUTION,
-               should_cancel: Optional[Callable[[], bool]] = None, fog: bool = False):
+               should_cancel: Optional[Callable[[], bool]] = None, fog: bool = False,
+               tuning: Tuning = Tuning()):
     """The light of the forward peak, W/m^2: what has scattered into the peak
     (phase.delta_fraction) and not yet out of it, spread sideways as the peak's angles take
     it (docs/method.md, "The forward peak spreads").  Returns (lattice (X,Y,Z,3) float32,
@@ -107,7 +106,7 @@ def peak_light(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int, 
     blurred by that width, read from a pyramid of Gaussians: beside a narrow beam the peak's
     light lights the medium, and beside a medium's sides it has left through them."""
     stride, _, h = walk_lattice(pm, resolution)
-    fine = fine_stride(pm, stride)
+    fine = fine_stride(pm, stride, tuning)
     stride, shape, h = fine, lattice_shape(pm.grid.shape, fine), h * fine / stride
     f = delta_fraction(pm.g)
     per_metre = np.sqrt(peak_msa(pm.g) / 6.0)   # w / s, the first turn's spread per axis
@@ -138,13 +137,14 @@ def peak_light(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int, 
         near = dilate(near)
     near = np.flatnonzero(near)
     e = np.zeros((len(idx), 3))
-    e[near] = cell_mean_irradiance(light, pts[near], stride * pm.i2w[:3, :3])
+    e[near] = cell_mean_irradiance(light, pts[near], stride * pm.i2w[:3, :3],
+                                   cull=tuning.spot_cull)
     rest = np.flatnonzero(~known & np.any(e > 0.0, axis=1))  # no light, no peak: no depth
     if rest.size and f > 0.0:
         for out, through in ((tau, pm), (tau_b, delta_scaled(pm))):
             got = fog_optical_depth(through.sigma_t, towards_light(light, pts[rest])[1]) if fog \
                 else light_optical_depth([through], light, pts[rest], step,
-                                         should_cancel=should_cancel)
+                                         should_cancel=should_cancel, tuning=tuning)
             if got is None:
                 return None
             out[rest] = got
@@ -271,25 +271,24 @@ def source_and_density(pm: PreparedMedium, fld: np.ndarray, light: Light, channe
 
 # What follows a narrow beam in a mesh volume -- the forward peak's light (peak_light) and
 # the exact first flights (firstflight.py) -- is computed on a lattice finer than the walk's
-# by this factor where the first flights' FFT on it stays within FINE_POINTS: round a beam a
+# by Tuning.refine where the first flights' FFT on it stays within FINE_POINTS: round a beam a
 # few lattice steps wide their light is as narrow (fog_beam on the walk's 64 points: the
 # beam's axis 14 % too dark, its sides 60 % too bright; docs/method.md).  Larger grids, and
 # the media of varying density (VDB grids, the world's fog), whose first flights are the
 # walk's, keep the walk's lattice (the forward peak's light alone on the finer lattice took
 # smoke_plume's precompute from 1.8 s to 5.2 s for the same error).
-REFINE = 2
 FINE_POINTS = 1 << 22
 
 
-def fine_stride(pm: PreparedMedium, stride: int) -> int:
+def fine_stride(pm: PreparedMedium, stride: int, tuning: Tuning = Tuning()) -> int:
     """The stride (voxels) of the lattice for the forward peak's light and the exact first
     flights, for a walk on ``stride``: the largest divisor of ``stride`` at most
-    stride / REFINE (the walk's lattice points are then among its points,
+    stride / ``tuning.refine`` (the walk's lattice points are then among its points,
     march.flatten_levels), or ``stride`` itself where that is 1, the medium is not a mesh
     volume (``pm.sharp``) or the finer lattice's FFT would exceed FINE_POINTS."""
     if not pm.sharp:
         return stride
-    fine = next((d for d in range(stride // REFINE, 0, -1) if stride % d == 0), stride)
+    fine = next((d for d in range(stride // tuning.refine, 0, -1) if stride % d == 0), stride)
     n = int(np.prod(fft_shape(lattice_shape(pm.grid.shape, fine))))
     return fine if n <= FINE_POINTS else stride
 

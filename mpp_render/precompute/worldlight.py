@@ -17,7 +17,7 @@ from ..camera import towards_camera
 from ..media import PreparedMedium
 from ..parallel import run_chunks
 from ..phase import sample_hg
-from ..scene import Camera, World
+from ..scene import Camera, Tuning, World
 from ..surfaces import occluded
 from .lattice import coarse_lattice
 from .lightdepth import SHADOW_TAU, density_lengths
@@ -54,7 +54,7 @@ def _block_uniforms(seed, a, b):
 
 def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, camera: Camera,
                 points, n_dirs, step, seed=0, chunk=None, should_cancel=None, surfaces=None,
-                threads=0, multiple=False):
+                threads=0, multiple=False, tuning: Tuning = Tuning()):
     """A(x) (N,3): world radiance scattered towards the camera per unit sigma_s, attenuated;
     with ``multiple`` also A_ms(x) (N,3), the same for the sky light that has scattered on
     its way in (the collided part exp(-tau_a) (1 - exp(-tau_s)), see docs/method.md), and the
@@ -87,8 +87,8 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
         w_in = sample_hg(u1, u2, pm.g, axis)  # propagation directions of the arriving light
         d = -w_in  # march towards where the light comes from
         pp = np.repeat(p, n_dirs, axis=0)
-        lengths = density_lengths(media, pp, d, np.full(len(pp), np.inf), step) if media \
-            else np.zeros((len(pp), 0))
+        lengths = density_lengths(media, pp, d, np.full(len(pp), np.inf), step, tuning) \
+            if media else np.zeros((len(pp), 0))
         tau = lengths @ sig_t
         if surfaces is not None and not surfaces.empty:
             tau += SHADOW_TAU * occluded(surfaces, pp, d, np.full(len(pp), np.inf))[:, None]
@@ -105,7 +105,7 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
 
 def fill_world_light(f: np.ndarray, channels, media: List[PreparedMedium], pm: PreparedMedium,
                      world: World, camera: Camera, flat, n_dirs, step, seed=0,
-                     should_cancel=None, surfaces=None, threads=0):
+                     should_cancel=None, surfaces=None, threads=0, tuning: Tuning = Tuning()):
     """Write the world light (``world_light`` through ``media``, on ``coarse_lattice``,
     interpolated trilinearly to the needed voxels ``flat``) into ``pm``'s field ``f`` at
     ``channels`` = (A's first channel, A_ms's or None).  Returns the number of lattice points,
@@ -115,7 +115,7 @@ def fill_world_light(f: np.ndarray, channels, media: List[PreparedMedium], pm: P
     cshape, cflat, cpts = coarse_lattice(pm, stride)
     a = world_light(media, pm, world, camera, cpts, n_dirs, step, seed=seed,
                     should_cancel=should_cancel, surfaces=surfaces, threads=threads,
-                    multiple=amb_ms is not None)
+                    multiple=amb_ms is not None, tuning=tuning)
     if a is None:
         return None
     up = kernels.get("upsample_into")
