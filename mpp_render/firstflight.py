@@ -39,14 +39,13 @@ lattice step; any affine grid), directions are unit world vectors of propagation
 from __future__ import annotations
 
 import functools
-import os
 import threading
 from dataclasses import dataclass
 from typing import Callable, Optional
 
 import numpy as np
 
-from .parallel import run_chunks
+from .parallel import run_chunks, worker_count
 from .phase import delta_fraction, hg, outside_peak, peak_cone_cos
 
 ESCAPE_LOW = 0.3    # escape fraction at or below which the walk alone is used
@@ -501,7 +500,7 @@ def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=Non
     # beside the kernels' bases (float64 and three float32 per offset)
     per_thread = 4 * 8 * int(np.prod(fft_shape(shape)))
     held = sum(b.bare.nbytes + b.u.nbytes for b in bases.values())
-    n_threads = threads if threads > 0 else (os.cpu_count() or 1)
+    n_threads = worker_count(threads)
     n_threads = max(1, min(n_threads, (FFT_MEMORY - held) // per_thread))
     if not run_chunks(len(dirs), 1, directions, n_threads, should_cancel) or \
             (should_cancel and should_cancel()):

@@ -2,7 +2,8 @@
 
 The compiled kernels and numpy's FFTs release the GIL, so chunks of them run in parallel on
 threads; ``run_chunks`` is the one place that does it (the precompute's sweeps and marches,
-the first flights' convolutions)."""
+the first flights' convolutions), and ``worker_count`` the one place that sizes a pool (the
+render's tiles too)."""
 from __future__ import annotations
 
 import os
@@ -10,12 +11,17 @@ from concurrent.futures import ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FuturesTimeout
 
 
+def worker_count(threads: int = 0) -> int:
+    """Threads for a pool: ``threads``, or one per core where it is <= 0."""
+    return threads if threads > 0 else (os.cpu_count() or 1)
+
+
 def run_chunks(n, chunk, work, threads=0, should_cancel=None) -> bool:
     """Call ``work(a, b)`` for consecutive ranges [a, b) of ``range(n)`` on a thread pool
     (``threads`` <= 0: one per core).  The kernels release the GIL, so chunks run in parallel;
     each chunk must write only its own slice.  Returns False when ``should_cancel`` stopped it."""
     starts = list(range(0, n, chunk))
-    threads = threads if threads > 0 else (os.cpu_count() or 1)
+    threads = worker_count(threads)
     if threads == 1 or len(starts) <= 1:
         for a in starts:
             if should_cancel and should_cancel():

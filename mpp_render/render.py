@@ -12,9 +12,8 @@ background and suns are dark in the fog's colour channels.
 from __future__ import annotations
 
 import math
-import os
 import time
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
 from typing import Callable, Dict, List, Optional
 
@@ -24,6 +23,7 @@ from . import cache, kernels, worldfog
 from .camera import primary_rays
 from .march import MarchContext, march_rays, ray_keys
 from .media import prepare, union_interval
+from .parallel import worker_count
 from .passes import DEPTH_MISS, enabled_passes
 from .precompute.lightdepth import kernel_arrays, split_fog
 from .scene import SceneDescription
@@ -99,23 +99,7 @@ def render(desc: SceneDescription,
 
     surf = prepare_surfaces(desc.surfaces)
     fog = worldfog.active(desc.world)
-    world, lights = desc.world, desc.lights
-    fog_pm = None
-    if fog is not None:
-        world = worldfog.effective_world(desc.world, fog)
-        lights = worldfog.effective_lights(desc.lights, fog)
-        for before, after in zip(desc.lights, lights):
-            if before.kind == "SUN" and np.any(np.asarray(before.strength) > 0) \
-                    and not np.any(np.asarray(after.strength) > 0):
-                warnings.append(f"light '{before.name}': a sun lights nothing through the world "
-                                "volume, which is endless (as in Cycles)")
-        box = worldfog.bounded_medium(desc, fog, media, st.voxel_resolution)
-        fog_pm = prepare(box.medium, warnings)
-        media.append(fog_pm)
-        if worldfog.infinite_emission(fog):
-            warnings.append("world volume: it emits in a colour without extinction, which "
-                            "is infinitely bright in Cycles; that emission beyond "
-                            f"{box.depth:.3g} m is left out")
+    world, lights, fog_pm = with_world_fog(desc, fog, media, warnings)
     t_pre = time.perf_counter()
     pre = None
     step = auto_step(desc, media)
@@ -237,21 +221,56 @@ def render(desc: SceneDescription,
         return index, (x0, y0, tw, th), res, float(r["steps"].sum())
 
     t_march = time.perf_counter()
-    threads = st.threads if st.threads > 0 else (os.cpu_count() or 1)
+    threads = worker_count(st.threads)
+    march_samples, cancelled = march_tiles(do_tile, len(tiles), threads, cancel, progress, out)
+    timings["march"] = time.perf_counter() - t_march
+    stats = {"backend": kernels.backend(), "step": step, "tiles": len(tiles), "passes": passes_on,
+             "march_samples": march_samples, "threads": threads}
+    if pre is not None:
+        stats.update(pre.stats)
+    return RenderOutput(out, timings, warnings, cancelled, stats)
+
+
+def with_world_fog(desc: SceneDescription, fog, media: list, warnings: List[str]):
+    """(world, lights, the fog's PreparedMedium or None) as the media see them under the
+    world's fog ``fog`` (worldfog.active; None: the scene's own): the fog's bounded medium
+    is appended to ``media``, what it changes said in ``warnings``."""
+    if fog is None:
+        return desc.world, desc.lights, None
+    world = worldfog.effective_world(desc.world, fog)
+    lights = worldfog.effective_lights(desc.lights, fog)
+    for before, after in zip(desc.lights, lights):
+        if before.kind == "SUN" and np.any(np.asarray(before.strength) > 0) \
+                and not np.any(np.asarray(after.strength) > 0):
+            warnings.append(f"light '{before.name}': a sun lights nothing through the world "
+                            "volume, which is endless (as in Cycles)")
+    box = worldfog.bounded_medium(desc, fog, media, desc.settings.voxel_resolution)
+    fog_pm = prepare(box.medium, warnings)
+    media.append(fog_pm)
+    if worldfog.infinite_emission(fog):
+        warnings.append("world volume: it emits in a colour without extinction, which "
+                        "is infinitely bright in Cycles; that emission beyond "
+                        f"{box.depth:.3g} m is left out")
+    return world, lights, fog_pm
+
+
+def march_tiles(do_tile, n_tiles: int, threads: int, cancel, progress, out) -> tuple:
+    """Run ``do_tile(index)`` for every tile on a pool of ``threads`` threads, at most two
+    per thread queued, writing each result into the passes ``out`` as it comes; Esc
+    (``cancel()``) is polled and ``progress`` told between tiles.  Returns (march samples,
+    whether cancelled)."""
     done = 0
     march_samples = 0.0
     cancelled = False
     with ThreadPoolExecutor(max_workers=threads) as pool:
         pending = set()
-        it = iter(range(len(tiles)))
+        it = iter(range(n_tiles))
         for _ in range(threads * 2):
             i = next(it, None)
             if i is not None:
                 pending.add(pool.submit(do_tile, i))
         while pending:
-            fut = next(iter(pending))
             # wait for whichever finishes first
-            from concurrent.futures import FIRST_COMPLETED, wait
             fin, pending = wait(pending, return_when=FIRST_COMPLETED)
             for f in fin:
                 index, (x0, y0, tw, th), res, n_steps = f.result()
@@ -270,10 +289,5 @@ def render(desc: SceneDescription,
                 if i is not None:
                     pending.add(pool.submit(do_tile, i))
             if progress:
-                progress(done / len(tiles), f"Tiles {done}/{len(tiles)}")
-    timings["march"] = time.perf_counter() - t_march
-    stats = {"backend": kernels.backend(), "step": step, "tiles": len(tiles), "passes": passes_on,
-             "march_samples": march_samples, "threads": threads}
-    if pre is not None:
-        stats.update(pre.stats)
-    return RenderOutput(out, timings, warnings, cancelled, stats)
+                progress(done / n_tiles, f"Tiles {done}/{n_tiles}")
+    return march_samples, cancelled

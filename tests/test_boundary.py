@@ -1,11 +1,11 @@
-"""Light leaving through a medium's surface (mpp_render/precompute/boundary.py) and the light pyramid's
+"""Light leaving through a medium's surface (precompute/boundary.py) and the light pyramid's
 source on its lattice (precompute.source.restricted_source): docs/method.md, "Escape through the
 surface"."""
 import numpy as np
 
 from mpp_render import pyramid
 from mpp_render.precompute import boundary, lattice, source
-from mpp_render.media import prepare
+from mpp_render.media import PreparedMedium, prepare
 from mpp_render.scene import Light, Medium
 
 
@@ -34,12 +34,16 @@ def test_extrapolation_length():
 
 
 class _Medium:
-    """What boundary.survival reads of a prepared medium: the index <-> world maps."""
+    """What boundary.survival reads of a prepared medium: the index <-> world maps (its
+    methods PreparedMedium's)."""
 
     def __init__(self, spacing=0.1):
         self.i2w = np.eye(4)
         self.i2w[:3, :3] *= spacing
         self.w2i = np.linalg.inv(self.i2w)[:3, :]
+
+    to_world = PreparedMedium.to_world
+    to_index = PreparedMedium.to_index
 
 
 def test_survival_ramps_from_the_surface_to_the_extrapolated_boundary():

@@ -7,7 +7,7 @@ import pytest
 from mpp_render import pyramid
 from mpp_render.precompute import lattice, lightpyramid, source
 from mpp_render.kernels_np import level_paths, walk_displacement
-from mpp_render.media import trilinear
+from mpp_render.media import PreparedMedium, trilinear
 from mpp_render.phase import sample_hg
 from mpp_render.scene import Camera, Light
 
@@ -77,7 +77,8 @@ def blob_pyramid(n=33):
 
 
 class _Medium:
-    """What drift_levels reads of a prepared medium: g and the index <-> world maps."""
+    """What drift_levels reads of a prepared medium: g and the index <-> world maps (its
+    methods PreparedMedium's)."""
 
     def __init__(self, g, spacing=0.1):
         self.g = g
@@ -85,6 +86,9 @@ class _Medium:
         self.i2w[:3, :3] *= spacing
         self.i2w[:3, 3] = -16 * spacing
         self.w2i = np.linalg.inv(self.i2w)[:3, :]
+
+    to_world = PreparedMedium.to_world
+    to_index = PreparedMedium.to_index
 
 
 def centroid(level, k, med, c=0):

@@ -1,7 +1,6 @@
 """Lattices on a medium's padded grid: the voxels the precompute fills (``needed_flat``),
 the lattices ``stride`` voxels apart of the light pyramid (``walk_lattice``) and of the world
-light (``coarse_lattice``), and index coordinates to world positions (``to_world``, the one
-place that arithmetic is written).
+light (``coarse_lattice``); index coordinates to world positions: PreparedMedium.to_world.
 
 Index coordinates count padded-grid voxels from the grid's origin; a lattice ``stride``
 voxels apart has its point ``idx`` at index ``idx * stride``; lattices are in C order (the
@@ -17,13 +16,6 @@ from ..media import PreparedMedium
 MULTIPLE_RESOLUTION = 64  # lattice points along the longest side for the light pyramid
 
 
-def to_world(pm: PreparedMedium, ijk) -> np.ndarray:
-    """World positions (N,3, m) of index coordinates ``ijk`` (N,3) of ``pm``'s padded grid
-    (whole numbers at the voxel points; a lattice ``stride`` voxels apart passes
-    ``idx * stride``)."""
-    return ijk @ pm.i2w[:3, :3].T + pm.i2w[:3, 3]
-
-
 def needed_flat(pm: PreparedMedium):
     """Flat indices of the padded grid points whose trilinear neighbourhood holds non-zero
     density: every point of a cell with a non-zero corner (the 3x3x3 dilation of the
@@ -34,7 +26,7 @@ def needed_flat(pm: PreparedMedium):
 def grid_points(pm: PreparedMedium, flat):
     """World positions (N,3) of the padded grid points with flat indices ``flat``."""
     ijk = np.stack(np.unravel_index(flat, pm.grid.shape), axis=1).astype(np.float64)
-    return to_world(pm, ijk)
+    return pm.to_world(ijk)
 
 
 def needed_points(pm: PreparedMedium):
@@ -62,7 +54,7 @@ def lattice_points(pm: PreparedMedium, shape, spacing: int):
     points lie ``spacing`` padded-grid voxels apart from the grid's origin (a pyramid level k:
     stride 2^k), in C order."""
     idx = lattice_index(shape)
-    return idx, to_world(pm, idx * float(spacing))
+    return idx, pm.to_world(idx * float(spacing))
 
 
 def lattice_values(grid: np.ndarray, idx: np.ndarray, stride: int) -> np.ndarray:
@@ -107,4 +99,4 @@ def coarse_lattice(pm: PreparedMedium, stride: int):
     sub[:picked.shape[0], :picked.shape[1], :picked.shape[2]] = picked
     flat = np.flatnonzero(sub)
     ijk = np.stack(np.unravel_index(flat, shape), axis=1).astype(np.float64) * stride
-    return shape, flat, to_world(pm, ijk)
+    return shape, flat, pm.to_world(ijk)

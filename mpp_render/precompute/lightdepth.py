@@ -12,7 +12,6 @@ every shadow (interpolating the 0 / SHADOW_TAU step of a binary shadow does that
 """
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from typing import List
 
@@ -21,11 +20,11 @@ import numpy as np
 from .. import kernels, kernels_np
 from ..lights import towards_light
 from ..media import PreparedMedium, union_interval
-from ..parallel import run_chunks
+from ..parallel import run_chunks, worker_count
 from ..scene import Light, Tuning
 from ..surfaces import occluded
 from ..worldfog import optical_depth as fog_optical_depth
-from .lattice import dilate, grid_points, to_world
+from .lattice import dilate, grid_points
 
 
 def _exit_distance(media, points, dirs, limit):
@@ -90,7 +89,7 @@ def density_lengths(media: List[PreparedMedium], points, dirs, t_max, step,
 
 def split_fog(media: List[PreparedMedium]):
     """(the media other than the world's fog, the fog's PreparedMedium or None)."""
-    fog = next((pm for pm in media if pm.medium.source == "WORLD"), None)
+    fog = next((pm for pm in media if pm.kind == "fog"), None)
     return [pm for pm in media if pm is not fog], fog
 
 
@@ -304,9 +303,9 @@ def near_sharp_surfaces(pm: PreparedMedium, media: List[PreparedMedium]):
     if others:
         ijk = np.stack(np.meshgrid(*[np.arange(n, dtype=np.float64) for n in pm.grid.shape],
                                    indexing="ij"), -1).reshape(-1, 3)
-        world = to_world(pm, ijk)
+        world = pm.to_world(ijk)
         for m in others:
-            idx = world @ m.w2i[:, :3].T + m.w2i[:, 3]
+            idx = m.to_index(world)
             near = np.flatnonzero(np.all((idx > -1.0) & (idx < np.array(m.grid.shape)), axis=1))
             inside = np.zeros(len(world), bool)   # beyond m's grid m has no density
             inside[near] = kernels.get("trilinear")(m.grid, idx[near]) >= m.threshold
@@ -343,12 +342,12 @@ def sweep_light(media: List[PreparedMedium], pm: PreparedMedium, light: Light, f
     sweep = kernels.get("light_sweep")
     grids, w2is, sigmas, thrs = kernel_arrays(media)
     a2w = pm.i2w[:3, :]
-    n_threads = threads if threads > 0 else (os.cpu_count() or 1)
+    n_threads = worker_count(threads)
     jobs = []
     for pyr in pyramids:
         pq = np.stack(np.meshgrid(np.arange(pyr.n_p), np.arange(pyr.n_q), indexing="ij"), -1)
         idx = kernels_np.column_index(pyr.axis, pyr.coef, float(pyr.i_first), pq[..., 0], pq[..., 1])
-        start = to_world(pm, idx.reshape(-1, 3))
+        start = pm.to_world(idx.reshape(-1, 3))
         init = light_optical_depth(media, light, start, step, should_cancel=should_cancel,
                                    threads=threads, tuning=tuning)
         if init is None:

@@ -18,7 +18,7 @@ from ..phase import delta_fraction, peak_msa
 from ..scene import Light, Tuning
 from ..worldfog import optical_depth as fog_optical_depth
 from .lattice import (MULTIPLE_RESOLUTION, dilate, lattice_index, lattice_points, lattice_shape,
-                      lattice_values, to_world, walk_lattice)
+                      lattice_values, walk_lattice)
 from .lightdepth import light_optical_depth
 
 
@@ -29,7 +29,7 @@ NEAR_LIGHT_CELLS = 3  # lattice cells around a point or spot light whose source 
 def near_light_cells(pm: PreparedMedium, light: Light, stride: int, shape) -> np.ndarray:
     """Flat indices of the pyramid lattice cells within ``NEAR_LIGHT_CELLS`` cells of a point
     or spot light inside (or next to) the medium's grid."""
-    c = (np.asarray(light.position, np.float64) @ pm.w2i[:, :3].T + pm.w2i[:, 3]) / stride
+    c = pm.to_index(np.asarray(light.position, np.float64)) / stride
     lo = np.maximum(np.floor(c - NEAR_LIGHT_CELLS).astype(int), 0)
     hi = np.minimum(np.ceil(c + NEAR_LIGHT_CELLS).astype(int), np.array(shape) - 1)
     if np.any(hi < lo):
@@ -119,7 +119,7 @@ def peak_light(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int, 
         pad = int(min(np.ceil(reach / h), PEAK_PAD))
     ext = tuple(n + 2 * pad for n in shape)
     idx = lattice_index(ext) - pad
-    pts = to_world(pm, idx * float(stride))
+    pts = pm.to_world(idx * float(stride))
     ijk = idx.astype(np.int64) * stride
     inside = np.all((ijk >= 0) & (ijk < np.array(pm.grid.shape)), axis=1)
     gflat = np.ravel_multi_index(tuple(np.where(inside[:, None], ijk, 0).T), pm.grid.shape)
@@ -178,7 +178,7 @@ def cell_mean_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel:
     ijk = (ci[:, None, :] * stride + offs[None]).reshape(-1, 3)
     ok = np.all((ijk >= 0) & (ijk < np.array(pm.grid.shape)), axis=1)
     flat = np.ravel_multi_index(tuple(np.where(ok[:, None], ijk, 0).T), pm.grid.shape)
-    pts = to_world(pm, ijk.astype(np.float64))
+    pts = pm.to_world(ijk.astype(np.float64))
     v = fld.reshape(-1, fld.shape[-1])[flat]
     rho = np.where(ok, density_from(v[:, 0], pm.threshold), 0.0)
     _, e = incident(light, pts)
@@ -235,7 +235,7 @@ def restricted_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel
         live = rho > 0.0
         q = np.zeros((len(v), 3))
         if np.any(live):
-            pts = to_world(pm, ijk[live].astype(np.float64))
+            pts = pm.to_world(ijk[live].astype(np.float64))
             e = irradiance(light, pts)
             q[live] = first_scattering(pm, rho[live], e, v[live, channel:channel + 3],
                                        None if beam is None else v[live, beam:beam + 3])
