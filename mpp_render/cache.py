@@ -260,8 +260,8 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
 
     The result equals a cold ``precompute`` call's: in it the light channels, the pyramids and
     the world channels are computed independently.  ``stats["reused"]`` lists the parts
-    taken from the cache ('lights', 'world').  A cancelled precompute changes nothing and
-    returns None.  Callers must not modify the returned arrays."""
+    taken from the cache ('lights', 'world').  A cancelled precompute changes nothing (it
+    raises parallel.Cancelled).  Callers must not modify the returned arrays."""
     from . import precompute as pre_mod
     from .precompute.lattice import MULTIPLE_RESOLUTION
     from .precompute.layout import light_channels
@@ -295,8 +295,6 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
         if entry["world"] == world_key:
             return result(pre, ["lights", "world"] if has_world else ["lights"])
         part = pre_mod.precompute(media, [], world, camera, **kw)  # the camera moved
-        if part is None:
-            return None
         first = pre.layout.world_first
         for f, w in zip(pre.fields, part.fields):
             f[..., first:] = w[..., 1:]
@@ -310,8 +308,6 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
     if donor is not None and donor["world"] == world_key and \
             donor["pre"].layout.light_channels == light_channels(lights):
         part = pre_mod.precompute(media, lights, World(), camera, **kw)  # a light changed
-        if part is None:
-            return None
         old = donor["pre"]
         first = old.layout.world_first
         fields = []
@@ -326,8 +322,6 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
         _keep(cache, light_key, world_key, pre)
         return result(pre, ["world"])
     pre = pre_mod.precompute(media, lights, world, camera, **kw)
-    if pre is None:
-        return None
     _keep(cache, light_key, world_key, pre)
     return result(pre, [])
 

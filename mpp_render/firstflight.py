@@ -45,7 +45,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from .parallel import run_chunks, worker_count
+from .parallel import check, run_chunks, worker_count
 from .phase import delta_fraction, hg, outside_peak, peak_cone_cos
 
 ESCAPE_LOW = 0.3    # escape fraction at or below which the walk alone is used
@@ -393,10 +393,11 @@ def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=Non
                  should_cancel: Optional[Callable[[], bool]] = None,
                  threads: int = 0, exact_flights: int = 2) -> Optional[FirstFlight]:
     """The exact first flights of one light on one medium, or None where the walk alone
-    serves (every channel's escape fraction at or below ESCAPE_LOW, no power) or when
-    cancelled: the first flight out of the beam and, where ``sigma_s`` is given, the second
-    (``exact_flights`` 2; scene.Tuning.exact_flights), from the second-scattering source sigma_s* phi1 (phi1 the first
-    flights' fluence in the medium) with the direction ``first_phase(..., order=2)``.
+    serves (every channel's escape fraction at or below ESCAPE_LOW, no power); raises
+    parallel.Cancelled on Esc.  The first flight out of the beam and, where ``sigma_s`` is
+    given, the second (``exact_flights`` 2; scene.Tuning.exact_flights), from the
+    second-scattering source sigma_s* phi1 (phi1 the first flights' fluence in the medium)
+    with the direction ``first_phase(..., order=2)``.
 
     ``q`` (X,Y,Z,3): the first-scattering source on the pyramid's lattice (W/m^3, the walk's,
     of the delta-scaled medium); ``inside`` (X,Y,Z) bool: the lattice points in the medium;
@@ -445,8 +446,7 @@ def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=Non
     bases = {}
     if len(keys) * base_bytes <= FFT_MEMORY // 2:
         for key in keys:
-            if should_cancel and should_cancel():
-                return None
+            check(should_cancel)
             bases[key] = KernelBase(axes, shape, d, (float(g), spread, key[1]), key[0])
 
     def base(key):
@@ -456,8 +456,7 @@ def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=Non
     sources = {}   # per representative channel: the spectra of the first and second sources
     bare = {}      # per sigma_t: the first flight's bare kernel's spectrum (for phi1)
     for r in same:
-        if should_cancel and should_cancel():
-            return None
+        check(should_cancel)
         fq = spectrum(q[..., r], shape)
         sources[r] = [(fq, 1)]
         if 2 in orders[r]:
@@ -502,7 +501,6 @@ def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=Non
     held = sum(b.bare.nbytes + b.u.nbytes for b in bases.values())
     n_threads = worker_count(threads)
     n_threads = max(1, min(n_threads, (FFT_MEMORY - held) // per_thread))
-    if not run_chunks(len(dirs), 1, directions, n_threads, should_cancel) or \
-            (should_cancel and should_cancel()):
-        return None
+    run_chunks(len(dirs), 1, directions, n_threads, should_cancel)
+    check(should_cancel)   # a direction that saw Esc left its part out
     return FirstFlight(np.ascontiguousarray(np.maximum(out, 0.0), np.float32), weight)

@@ -23,7 +23,7 @@ from . import cache, kernels, worldfog
 from .camera import primary_rays
 from .march import MarchContext, march_rays, ray_keys
 from .media import prepare, union_interval
-from .parallel import worker_count
+from .parallel import Cancelled, worker_count
 from .passes import DEPTH_MISS, enabled_passes
 from .precompute.lightdepth import kernel_arrays, split_fog
 from .scene import SceneDescription
@@ -113,14 +113,15 @@ def render(desc: SceneDescription,
     if media:
         # the light and world-light parts are reused from earlier renders when their inputs
         # did not change (cache.py)
-        pre = cache.precompute_cached(media, media_lights, world, cam,
-                                      n_dirs=st.ambient_directions, seed=st.seed,
-                                      should_cancel=cancel, progress=progress,
-                                      surfaces=None if surf.empty else surf, threads=st.threads,
-                                      multiple=st.multiple,
-                                      multiple_resolution=st.multiple_resolution,
-                                      tuning=st.tuning)
-        if pre is None:
+        try:
+            pre = cache.precompute_cached(media, media_lights, world, cam,
+                                          n_dirs=st.ambient_directions, seed=st.seed,
+                                          should_cancel=cancel, progress=progress,
+                                          surfaces=None if surf.empty else surf,
+                                          threads=st.threads, multiple=st.multiple,
+                                          multiple_resolution=st.multiple_resolution,
+                                          tuning=st.tuning)
+        except Cancelled:
             return RenderOutput(out, {"precompute": time.perf_counter() - t_pre}, warnings, True)
     timings["precompute"] = time.perf_counter() - t_pre
 

@@ -226,7 +226,7 @@ def test_lights_that_cannot_be_swept_fall_back_to_the_exact_march():
     pm = prepare(smooth_cloud(n=10))
     far = Light("POINT", "far", np.full(3, 1e30), position=np.array([1e12, 0.0, 0.0]))
     f = np.zeros(pm.grid.shape + (4,), np.float32)
-    assert P.sweep_light([pm], pm, far, f, 1, pm.voxel_size) is None
+    assert P.sweep_light([pm], pm, far, f, 1, pm.voxel_size) is False
     cam = Camera("ORTHO", np.eye(4), 4, 4, (-1, 1, -1, 1))
     pre = precompute([pm], [far], World(np.zeros(3)), cam)
     flat, pts = lattice.needed_points(pm)

@@ -101,7 +101,7 @@ def light_optical_depth(media: List[PreparedMedium], light: Light, points, step,
     way, so surfaces cast volumetric shadows, and with ``fog_sigma_t`` (RGB 1/m) the world
     fog's sigma_t x distance (worldfog.optical_depth).  ``media`` must not hold the fog.
     ``coefficient`` (see _media_arrays_for) picks what is integrated; shadows and fog are
-    added to 'sigma_t' only.  None when cancelled."""
+    added to 'sigma_t' only.  Raises parallel.Cancelled on Esc."""
     od = kernels.get("optical_depth")
     arrays = _media_arrays_for(media, coefficient) if media else None
     # the bricks bound density_from(grid), which 'length' does not integrate
@@ -124,8 +124,7 @@ def light_optical_depth(media: List[PreparedMedium], light: Light, points, step,
             tau += SHADOW_TAU * occluded(surfaces, p, d, limit)[:, None]
         out[a:b] = tau
 
-    if not run_chunks(len(points), chunk, work, threads, should_cancel):
-        return None
+    run_chunks(len(points), chunk, work, threads, should_cancel)
     return out
 
 
@@ -141,7 +140,8 @@ def soft_visibility(surfaces, light: Light, pm: PreparedMedium, flat, points, ch
     quarter voxel off, a box filter one voxel wide.  Surfaces within ``SELF_VOXELS`` voxels
     of a point do not shadow it: the voxels just behind a lit floor or wall (which camera
     rays never reach) then do not darken the lit fog in front of it through the
-    interpolation; a shadow starts that far behind its caster instead.  None when cancelled."""
+    interpolation; a shadow starts that far behind its caster instead.  Raises
+    parallel.Cancelled on Esc."""
     vis = np.ones(len(points))
     if surfaces is None or surfaces.empty or not len(points):
         return vis
@@ -154,8 +154,7 @@ def soft_visibility(surfaces, light: Light, pm: PreparedMedium, flat, points, ch
     def work(a, b):
         vis[a:b] = binary(points[a:b])
 
-    if not run_chunks(len(points), chunk, work, threads, should_cancel):
-        return None
+    run_chunks(len(points), chunk, work, threads, should_cancel)
     grid = np.ones(pm.grid.shape, bool)
     grid.reshape(-1)[flat] = vis > 0.5
     edge = np.zeros_like(grid)
@@ -172,8 +171,7 @@ def soft_visibility(surfaces, light: Light, pm: PreparedMedium, flat, points, ch
             def work_o(a, b):
                 part[a:b] = binary(points[todo[a:b]] + o)
 
-            if not run_chunks(todo.size, chunk, work_o, threads, should_cancel):
-                return None
+            run_chunks(todo.size, chunk, work_o, threads, should_cancel)
             acc += part
         vis[todo] = acc / len(off)
     return vis
@@ -333,11 +331,11 @@ def sweep_light(media: List[PreparedMedium], pm: PreparedMedium, light: Light, f
     depth with ``fog_sigma_t`` (RGB 1/m; ``media`` must not hold the fog).  ``sharp``: the
     flat indices ``near_sharp_surfaces(pm, media)`` gives, where the caller has them (they
     depend on the media's grids only, not on the light).  Returns True when done, False
-    when cancelled, None when the light cannot be swept (the caller then marches every
-    voxel)."""
+    when the light cannot be swept (the caller then marches every voxel); raises
+    parallel.Cancelled on Esc."""
     plan = sweep_pyramids(pm, light)
     if plan is None:
-        return None
+        return False
     pyramids, L = plan
     sweep = kernels.get("light_sweep")
     grids, w2is, sigmas, thrs = kernel_arrays(media)
@@ -350,8 +348,6 @@ def sweep_light(media: List[PreparedMedium], pm: PreparedMedium, light: Light, f
         start = pm.to_world(idx.reshape(-1, 3))
         init = light_optical_depth(media, light, start, step, should_cancel=should_cancel,
                                    threads=threads, tuning=tuning)
-        if init is None:
-            return False
         n_sub = _sub_steps(pm, pyr, step)
         cells = pyr.n_p - 1
         per = max(SWEEP_CELLS, -(-cells // (4 * n_threads)))
@@ -363,8 +359,7 @@ def sweep_light(media: List[PreparedMedium], pm: PreparedMedium, light: Light, f
             sweep(field, channel, a2w, pyr.axis, pyr.sign, pyr.i_first, pyr.i_last, pyr.coef, L,
                   pyr.cone, init, p_lo, p_hi, n_sub, grids, w2is, sigmas, thrs)
 
-    if not run_chunks(len(jobs), 1, work, threads, should_cancel):
-        return False
+    run_chunks(len(jobs), 1, work, threads, should_cancel)
     if pm.sharp or any(m.sharp for m in media):
         # The optical depth bends sharply at a mesh volume's surface, which the columns'
         # interpolation would smear over a voxel; the voxels there (for the medium's own
@@ -373,8 +368,6 @@ def sweep_light(media: List[PreparedMedium], pm: PreparedMedium, light: Light, f
         flat = near_sharp_surfaces(pm, media) if sharp is None else sharp
         tau = light_optical_depth(media, light, grid_points(pm, flat), step,
                                   should_cancel=should_cancel, threads=threads, tuning=tuning)
-        if tau is None:
-            return False
         field.reshape(-1, field.shape[-1])[flat, channel:channel + 3] = tau
     shadowed = surfaces is not None and not surfaces.empty
     if shadowed or fog_sigma_t is not None:
@@ -393,5 +386,5 @@ def sweep_light(media: List[PreparedMedium], pm: PreparedMedium, light: Light, f
                 add += SHADOW_TAU * occluded(surfaces, pts[a:b], d, limit)[:, None]
             view[flat[a:b], channel:channel + 3] += add.astype(np.float32)
 
-        return run_chunks(len(flat), 1 << 14, per_voxel, threads, should_cancel)
+        run_chunks(len(flat), 1 << 14, per_voxel, threads, should_cancel)
     return True

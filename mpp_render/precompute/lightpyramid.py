@@ -17,6 +17,7 @@ from ..camera import towards_camera
 from ..firstflight import FirstFlight, first_flight, flight_weight
 from ..kernels_np import level_paths, walk_displacement
 from ..media import PreparedMedium
+from ..parallel import check
 from ..scene import Camera, Light, Tuning
 from . import boundary
 from .lattice import MULTIPLE_RESOLUTION, lattice_points, lattice_shape, walk_lattice
@@ -56,23 +57,22 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
                    should_cancel: Optional[Callable[[], bool]] = None,
                    g_last: Optional[float] = None,
                    beam: Optional[int] = None, threads: int = 0,
-                   tuning: Tuning = Tuning()) -> Optional[MultipleField]:
+                   tuning: Tuning = Tuning()) -> MultipleField:
     """The light pyramid of ``light`` on medium ``pm`` from its precomputed field ``fld``
     (optical depth at ``channel``), see MultipleField, on a lattice of about ``resolution``
     points along the grid's longest side (never finer than the voxels): the source
     (``restricted_source``) spread level by level, each level losing what leaves through the
     medium's surface (boundary.py) and then moved along the light by the mean displacement
-    of its paths (``drift_levels``), for the light that ``camera`` sees.  None when
-    ``should_cancel`` says so.  ``pm`` is the medium as the walk sees it: precompute hands
-    the delta-scaled medium (media.delta_scaled) and the optical depth of its beam, and
-    ``g_last`` the medium's own g, that of the last scattering towards the camera.
+    of its paths (``drift_levels``), for the light that ``camera`` sees.  Raises
+    parallel.Cancelled when ``should_cancel`` says so.  ``pm`` is the medium as the walk
+    sees it: precompute hands the delta-scaled medium (media.delta_scaled) and the optical
+    depth of its beam, and ``g_last`` the medium's own g, that of the last scattering
+    towards the camera.
     ``threads``: for the exact first flights' convolutions (firstflight.py).  ``tuning``:
     whether the levels are flattened (``flattens``) and the exact first flights made, and
     on what lattice (scene.Tuning)."""
     stride, shape, h = walk_lattice(pm, resolution)
     got = source_and_density(pm, fld, light, channel, stride, beam, should_cancel)
-    if got is None:
-        return None
     base, rho, pts = got
     inside = rho[rho > 0]
     mean_rho = float(np.mean(inside)) if inside.size else 0.0
@@ -88,8 +88,7 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
                   for _, _, l_k in level_paths(h, max_levels, l_tr, g)]
         keep = boundary.survival(pm, (rho > 0).reshape(shape), stride, h, z_b, drifts,
                                  lambda x: light_direction(light, x))
-    if should_cancel and should_cancel():
-        return None
+    check(should_cancel)
     first = None
     flat = flattens(pm, camera, tuning)
     if flat and tuning.first_flights:
@@ -104,21 +103,17 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
             fine = stride   # the walk serves: no finer source for flights never made
         got = (base, rho, pts) if fine == stride else \
             source_and_density(pm, fld, light, channel, fine, beam, should_cancel)
-        if got is None:
-            return None
         fshape = lattice_shape(pm.grid.shape, fine)
         first = first_flight(got[0].reshape(tuple(fshape) + (3,)), (got[1] > 0).reshape(fshape),
                              fine * pm.i2w[:3, :3], light_direction(light, got[2]),
                              towards_camera(camera, got[2]),
                              g if g_last is None else float(g_last), sigma_t, sigma_s,
                              should_cancel, threads, tuning.exact_flights)
-        if should_cancel and should_cancel():
-            return None
+        check(should_cancel)
         if first is not None:
             first.stride = fine
     levels, directions = source_pyramid(base, light, pts, shape, g, max_levels, keep)
-    if should_cancel and should_cancel():
-        return None
+    check(should_cancel)
     drift_levels(levels, pm, light, camera, stride, h, sigma_s, directions, g_last)
     return MultipleField(stride, h, levels, first, flat)
 

@@ -10,6 +10,7 @@ import numpy as np
 
 from .. import kernels
 from ..media import PreparedMedium, delta_scaled, density_from
+from ..parallel import check
 from ..scene import Camera, Light, Tuning, World
 from .lattice import MULTIPLE_RESOLUTION, grid_points, needed_flat
 from .layout import FieldLayout, field_layout
@@ -38,10 +39,11 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                progress: Optional[Callable[[float, str], None]] = None,
                surfaces=None, threads: int = 0, multiple: bool = False,
                multiple_resolution: int = MULTIPLE_RESOLUTION,
-               tuning: Tuning = Tuning()) -> Optional[Precomputed]:
-    """Field arrays for every medium, and with ``multiple`` the light pyramids; None when
-    cancelled.  ``surfaces`` (a SurfaceSet or None) shadow the lights and the sky.  Media
-    that cannot scatter (sigma_s = 0) get no multiple-scattering data.  ``tuning``: the
+               tuning: Tuning = Tuning()) -> Precomputed:
+    """Field arrays for every medium, and with ``multiple`` the light pyramids; raises
+    parallel.Cancelled when ``should_cancel`` says so.  ``surfaces`` (a SurfaceSet or None)
+    shadow the lights and the sky.  Media that cannot scatter (sigma_s = 0) get no
+    multiple-scattering data.  ``tuning``: the
     method's knobs (scene.Tuning, with the Settings)."""
     t_start = time.perf_counter()
     delta = [delta_scaled(pm) for pm in media]
@@ -86,7 +88,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                                   (beams[li], solid_delta, delta[mi], fog_delta)):
                 if ch is None:
                     continue
-                swept = None
+                swept = False
                 if pm is not fog:
                     if sharp is None and (own.sharp or any(m.sharp for m in through)):
                         # the same voxels for every light and for the delta-scaled media
@@ -95,22 +97,16 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                         threads=threads, should_cancel=should_cancel,
                                         needed=None if pts is None else (flat, pts),
                                         fog_sigma_t=through_fog, sharp=sharp, tuning=tuning)
-                if swept is False:
-                    return None
-                if swept is None:  # the fog, or not sweepable: march from every needed voxel
+                if not swept:  # the fog, or not sweepable: march from every needed voxel
                     pts = grid_points(pm, flat) if pts is None else pts
                     tau = light_optical_depth(through, light, pts, step,
                                               should_cancel=should_cancel,
                                               surfaces=None if pm is fog else surfaces,
                                               threads=threads, fog_sigma_t=through_fog,
                                               tuning=tuning)
-                    if tau is None:
-                        return None
                     if pm is fog and shadowed:
                         vis = soft_visibility(surfaces, light, pm, flat, pts, threads=threads,
                                               should_cancel=should_cancel)
-                        if vis is None:
-                            return None
                         tau = tau - np.log(np.maximum(vis, np.exp(-SHADOW_TAU)))[:, None]
                     view[flat, ch:ch + 3] = tau
             if beams[li] is not None:
@@ -119,8 +115,6 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                 peak = peak_light(pm, f, light, chans[li], beams[li], mean_ss, flat, step,
                                   multiple_resolution, should_cancel, fog=pm is fog,
                                   tuning=tuning)
-                if peak is None:
-                    return None
                 kernels.get("upsample_into")(f, beams[li], peak[0], peak[1], flat)
         if layout.ambient_channel is not None:
             if progress:
@@ -129,8 +123,6 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                    solid, pm, world, camera, flat, n_dirs, 2.0 * step,
                                    seed=seed + mi, should_cancel=should_cancel,
                                    surfaces=surfaces, threads=threads, tuning=tuning)
-            if got is None:
-                return None
             n_ambient += got
         ms = [None] * len(lights)
         if multiple and np.any(pm.sigma_s > 0):
@@ -145,8 +137,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                         resolution=multiple_resolution,
                                         should_cancel=should_cancel, g_last=float(pm.g),
                                         threads=threads, tuning=tuning)
-                if should_cancel and should_cancel():
-                    return None
+                check(should_cancel)
         ms_all.append(ms)
         fields.append(f)
     return Precomputed(fields, layout, ms_all, time.perf_counter() - t_start,

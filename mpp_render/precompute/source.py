@@ -14,6 +14,7 @@ from .. import pyramid
 from ..firstflight import fft_shape
 from ..lights import incident, irradiance, outside_spot, towards_light
 from ..media import PreparedMedium, delta_scaled, density_from
+from ..parallel import check
 from ..phase import delta_fraction, peak_msa
 from ..scene import Light, Tuning
 from ..worldfog import optical_depth as fog_optical_depth
@@ -90,7 +91,7 @@ def peak_light(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int, 
     it (docs/method.md, "The forward peak spreads").  Returns (lattice (X,Y,Z,3) float32,
     stride): on a lattice ``stride`` voxels apart, about ``resolution`` points along the
     grid's longest side (finer where ``fine_stride`` says so), for
-    ``kernels.upsample_into``; None when ``should_cancel`` says so.
+    ``kernels.upsample_into``; raises parallel.Cancelled when ``should_cancel`` says so.
 
     Along a line from the light the beam's light beyond the unscattered light is
     B = E (exp(-tau*) - exp(-tau)) (``fld``'s ``beam`` and ``channel`` optical depths at the
@@ -145,11 +146,8 @@ def peak_light(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int, 
             got = fog_optical_depth(through.sigma_t, towards_light(light, pts[rest])[1]) if fog \
                 else light_optical_depth([through], light, pts[rest], step,
                                          should_cancel=should_cancel, tuning=tuning)
-            if got is None:
-                return None
             out[rest] = got
-    if should_cancel and should_cancel():
-        return None
+    check(should_cancel)
     b = e * np.maximum(np.exp(-tau_b) - np.exp(-tau), 0.0)
     if f > 0.0 and mean_sigma_s > 0.0:
         with np.errstate(invalid="ignore"):
@@ -157,8 +155,7 @@ def peak_light(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int, 
         s = np.nan_to_num(np.maximum(n, 0.0), nan=0.0, posinf=1e30) / (f * mean_sigma_s)
         width = per_metre * s
         levels = pyramid.build(b.astype(np.float32).reshape(ext + (3,)), 10)
-        if should_cancel and should_cancel():
-            return None
+        check(should_cancel)
         core = np.all((idx >= 0) & (idx < np.array(shape)), axis=1)
         b = pyramid.lookup(levels, idx[core] + pad, width[core], h)
     return np.ascontiguousarray(b.reshape(shape + (3,)), np.float32), stride
@@ -212,21 +209,20 @@ def _tent_restrict(a: np.ndarray, axis: int, stride: int, n_out: int) -> np.ndar
 def restricted_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int,
                    stride: int, shape, chunk: int = 16,
                    should_cancel: Optional[Callable[[], bool]] = None,
-                   beam: Optional[int] = None) -> Optional[np.ndarray]:
+                   beam: Optional[int] = None) -> np.ndarray:
     """The first-scattering source Q = sigma_s E exp(-tau) (W/m^3, (N,3) in the C order of
     the lattice ``shape`` ``stride`` voxels apart) from every voxel of the field ``fld``
     (optical depth at ``channel``), each voxel's power shared among the lattice points
     around it (``_tent_restrict`` along each axis): the lattice holds the voxels' power, where
     reading Q at the lattice points alone missed (or doubled) the thin layer a light lights
     inside a dense medium's face as the lattice fell against it (docs/ms_resolution.md).
-    Stride 1 reads the voxels themselves.  Made ``chunk`` voxel planes at a time; None when
-    ``should_cancel`` says so between them."""
+    Stride 1 reads the voxels themselves.  Made ``chunk`` voxel planes at a time; raises
+    parallel.Cancelled when ``should_cancel`` says so between them."""
     nx = pm.grid.shape[0]
     rows = np.zeros((nx, shape[1], shape[2], 3))
     flat_fld = fld.reshape(nx, -1, fld.shape[-1])
     for a in range(0, nx, chunk):
-        if should_cancel and should_cancel():
-            return None
+        check(should_cancel)
         b = min(a + chunk, nx)
         ijk = np.stack(np.meshgrid(np.arange(a, b), np.arange(pm.grid.shape[1]),
                                    np.arange(pm.grid.shape[2]), indexing="ij"), -1).reshape(-1, 3)
@@ -254,14 +250,12 @@ def source_and_density(pm: PreparedMedium, fld: np.ndarray, light: Light, channe
     """(source (N,3) W/m^3, density (N,), points (N,3) m) on the lattice ``stride`` voxels
     apart (C order of ``lattice_shape``): the first-scattering source of ``restricted_source``,
     averaged over the cells round a point or spot light (``cell_mean_source``), and the
-    medium's density at the lattice points.  None when ``should_cancel`` says so."""
+    medium's density at the lattice points.  Raises parallel.Cancelled on Esc."""
     shape = lattice_shape(pm.grid.shape, stride)
     idx, pts = lattice_points(pm, shape, stride)
     rho = density_from(lattice_values(fld[..., 0], idx, stride), pm.threshold)
     base = restricted_source(pm, fld, light, channel, stride, shape, should_cancel=should_cancel,
                           beam=beam)
-    if base is None:
-        return None
     if light.kind in ("POINT", "SPOT"):
         near = near_light_cells(pm, light, stride, shape)
         if near.size:

@@ -61,7 +61,7 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
     pair is returned.  Points draw their jitter from streams seeded by (seed, block of
     ``WORLD_RNG_BLOCK`` points), so the result depends on neither the thread count nor the
     chunk size (by default ``world_chunk(n_dirs)``, short enough to serve Esc quickly).
-    None when cancelled."""
+    Raises parallel.Cancelled on Esc."""
     colour = np.asarray(world.color, np.float64)
     n = len(points)
     if n == 0 or not np.any(colour > 0):
@@ -98,8 +98,7 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
             collided = np.exp(-(tau - tau_s)) * -np.expm1(-tau_s)
             out_ms[a:b] = collided.reshape(m, n_dirs, 3).mean(axis=1) * colour
 
-    if not run_chunks(n, chunk, work, threads, should_cancel):
-        return None
+    run_chunks(n, chunk, work, threads, should_cancel)
     return (out, out_ms) if multiple else out
 
 
@@ -108,16 +107,14 @@ def fill_world_light(f: np.ndarray, channels, media: List[PreparedMedium], pm: P
                      should_cancel=None, surfaces=None, threads=0, tuning: Tuning = Tuning()):
     """Write the world light (``world_light`` through ``media``, on ``coarse_lattice``,
     interpolated trilinearly to the needed voxels ``flat``) into ``pm``'s field ``f`` at
-    ``channels`` = (A's first channel, A_ms's or None).  Returns the number of lattice points,
-    or None when cancelled."""
+    ``channels`` = (A's first channel, A_ms's or None).  Returns the number of lattice
+    points."""
     amb, amb_ms = channels
     stride = max(1, int(round(max(pm.grid.shape) / AMBIENT_RESOLUTION)))
     cshape, cflat, cpts = coarse_lattice(pm, stride)
     a = world_light(media, pm, world, camera, cpts, n_dirs, step, seed=seed,
                     should_cancel=should_cancel, surfaces=surfaces, threads=threads,
                     multiple=amb_ms is not None, tuning=tuning)
-    if a is None:
-        return None
     up = kernels.get("upsample_into")
     for ch, vals in zip((amb, amb_ms), a if amb_ms is not None else (a,)):
         coarse = np.zeros((int(np.prod(cshape)), 3), np.float32)
