@@ -9,7 +9,7 @@ Measures, in one run on this machine (wall seconds of the render call unless sta
    on); march samples per second per core (1 thread and all cores); seconds against image
    size (160x120..1920x1080) and number of lights.
 2. What each skip saves, the old way and the new side by side (each pair run alternately,
-   best of ``REPEATS``): the light sweep against one exact march per voxel; the brick walk of
+   best of ``REPEATS``, the two ways variants of the Settings' ``Tuning``): the brick walk of
    the world light's optical depth; skipping empty super-steps and longer steps in thin
    media in the march; larger tiles; dark lights, multiple scattering off, a medium that
    cannot scatter.
@@ -23,6 +23,7 @@ Writes ``OUT/performance.md``, ``OUT/performance.json`` and ``OUT/performance.pn
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import sys
@@ -39,10 +40,11 @@ sys.path.insert(0, REPO)
 # the public scene suite: $MPP_SCENES, else shared/scenes beside the checkout
 SCENES = os.environ.get("MPP_SCENES") or os.path.join(os.path.dirname(REPO), "shared", "scenes")
 
-from mpp_render import firstflight, kernels, march, precompute, render as render_mod  # noqa: E402
+from mpp_render import kernels  # noqa: E402
 from mpp_render.camera import camera_plane  # noqa: E402
 from mpp_render.render import render  # noqa: E402
-from mpp_render.scene import Camera, Light, Medium, SceneDescription, Settings, World  # noqa: E402
+from mpp_render.scene import (Camera, Light, Medium, SceneDescription, Settings, Tuning,  # noqa: E402
+                               World)
 
 REPEATS = 2
 
@@ -132,34 +134,21 @@ def fog_box_scene(n=96, w=160, h=120, spp=1, light=None):
                             settings=Settings(samples=spp, multiple=True))
 
 
-class Switch:
-    """Set module attributes for the duration of a ``with`` block."""
-
-    def __init__(self, **kw):
-        self.kw = kw
-
-    def __enter__(self):
-        self.old = {}
-        for key, val in self.kw.items():
-            mod, attr = key.split("__")
-            m = {"march": march, "precompute": precompute, "render": render_mod,
-                 "firstflight": firstflight}[mod]
-            self.old[(m, attr)] = getattr(m, attr)
-            setattr(m, attr, val)
-
-    def __exit__(self, *exc):
-        for (m, attr), val in self.old.items():
-            setattr(m, attr, val)
+def tuned(desc, **knobs):
+    """``desc`` with its Settings' Tuning changed by ``knobs`` (scene.Tuning's fields)."""
+    desc.settings = dataclasses.replace(desc.settings,
+                                        tuning=dataclasses.replace(desc.settings.tuning, **knobs))
+    return desc
 
 
 def side_by_side(make, old, new, stage):
     """Best seconds of ``stage`` ('precompute', 'march' or 'total') for the old and the new
-    way, run alternately; returns (old s, new s, old samples, new samples)."""
+    way (``old``, ``new``: Tuning fields for ``tuned``), run alternately; returns (old s,
+    new s, old samples, new samples)."""
     best = {"old": (np.inf, 0.0), "new": (np.inf, 0.0)}
     for _ in range(REPEATS):
-        for label, switches in (("old", old), ("new", new)):
-            with Switch(**switches):
-                s, out = run(make())
+        for label, knobs in (("old", old), ("new", new)):
+            s, out = run(tuned(make(), **knobs))
             v = s if stage == "total" else out.timings[stage]
             if v < best[label][0]:
                 best[label] = (v, out.stats.get("march_samples", 0.0))
@@ -220,49 +209,43 @@ def skip_tables(quick):
                      "old_samples": so, "new_samples": sn})
         print(json.dumps(rows[-1]), flush=True)
 
-    add(f"light sweep vs one exact march per voxel ({n}^3, one sun, no sky)",
-        lambda: scene(n=n, multiple=False, sky=False), {"precompute__SWEEP": False},
-        {"precompute__SWEEP": True}, "precompute")
-    add(f"light sweep vs exact march ({n}^3, a point light, no sky)",
-        lambda: scene(n=n, multiple=False, sky=False, lights=[point()]),
-        {"precompute__SWEEP": False}, {"precompute__SWEEP": True}, "precompute")
     add(f"world light: brick walk in optical_depth ({n}^3, sun + sky, multiple on)",
-        lambda: scene(n=n, multiple=True), {"precompute__SKIP_MIN_VOXELS": 1 << 62},
-        {"precompute__SKIP_MIN_VOXELS": precompute.SKIP_MIN_VOXELS}, "precompute")
+        lambda: scene(n=n, multiple=True), {"skip_min_voxels": 1 << 62},
+        {"skip_min_voxels": Tuning.skip_min_voxels}, "precompute")
     m = 64 if quick else 96
     w, h = (320, 240) if quick else (640, 480)
     add(f"march: skip empty super-steps ({m}^3, {w}x{h}, 1 spp, multiple off)",
-        lambda: scene(n=m, w=w, h=h, multiple=False), {"march__SKIP_EMPTY": False},
-        {"march__SKIP_EMPTY": True, "march__ADAPT_TAU": 0.0}, "march")
-    add(f"march: longer steps in thin media, ADAPT_TAU {march.ADAPT_TAU} ({m}^3, {w}x{h}, 1 spp, "
+        lambda: scene(n=m, w=w, h=h, multiple=False), {"skip_empty": False},
+        {"skip_empty": True, "adapt_tau": 0.0}, "march")
+    add(f"march: longer steps in thin media, adapt_tau {Tuning.adapt_tau} ({m}^3, {w}x{h}, 1 spp, "
         "multiple off)", lambda: scene(n=m, w=w, h=h, multiple=False),
-        {"march__ADAPT_TAU": 0.0}, {"march__ADAPT_TAU": march.ADAPT_TAU}, "march")
+        {"adapt_tau": 0.0}, {"adapt_tau": Tuning.adapt_tau}, "march")
     add(f"march: both, multiple on ({m}^3, {w}x{h}, 1 spp)",
-        lambda: scene(n=m, w=w, h=h, multiple=True), {"march__SKIP_EMPTY": False},
-        {"march__SKIP_EMPTY": True}, "march")
+        lambda: scene(n=m, w=w, h=h, multiple=True), {"skip_empty": False},
+        {"skip_empty": True}, "march")
     add(f"march: a mesh volume's light pyramids summed over levels and lights once "
-        f"(march.FLATTEN; {m}^3 ball, a sun and a point light, {w}x{h}, 1 spp, multiple on)",
-        lambda: mesh_scene(n=m, w=w, h=h), {"march__FLATTEN": False}, {"march__FLATTEN": True},
+        f"(Tuning.flatten; {m}^3 ball, a sun and a point light, {w}x{h}, 1 spp, multiple on)",
+        lambda: mesh_scene(n=m, w=w, h=h), {"flatten": False}, {"flatten": True},
         "march")
-    add(f"precompute: the exact first two flights (firstflight.ENABLED; a {m}^2 x {m // 2} "
+    add(f"precompute: the exact first two flights (Tuning.first_flights; a {m}^2 x {m // 2} "
         "voxel 4 x 4 x 2 m fog box under a sun, its weight 1; ratio < 1: the cost)",
-        lambda: fog_box_scene(n=m), {"firstflight__ENABLED": False},
-        {"firstflight__ENABLED": True}, "precompute")
+        lambda: fog_box_scene(n=m), {"first_flights": False},
+        {"first_flights": True}, "precompute")
     add(f"precompute: the first flights and the forward peak's light on a lattice twice as "
-        f"fine (precompute.REFINE 1 -> 2; the same fog box under a narrow spot; ratio < 1: "
-        f"the cost)", lambda: fog_box_scene(n=m, light=spot()), {"precompute__REFINE": 1},
-        {"precompute__REFINE": 2}, "precompute")
-    add(f"precompute: a spot's cone culls the cells it misses (precompute.SPOT_CULL; the same "
+        f"fine (Tuning.refine 1 -> 2; the same fog box under a narrow spot; ratio < 1: "
+        f"the cost)", lambda: fog_box_scene(n=m, light=spot()), {"refine": 1},
+        {"refine": 2}, "precompute")
+    add(f"precompute: a spot's cone culls the cells it misses (Tuning.spot_cull; the same "
         f"fog box under the narrow spot, lattice twice as fine)",
-        lambda: fog_box_scene(n=m, light=spot()), {"precompute__SPOT_CULL": False},
-        {"precompute__SPOT_CULL": True}, "precompute")
+        lambda: fog_box_scene(n=m, light=spot()), {"spot_cull": False},
+        {"spot_cull": True}, "precompute")
     add(f"precompute: the first flights' escape fraction alone where the walk serves "
         f"({m}^3 ball, a sun and a point light: weight 0, no flight computed)",
-        lambda: mesh_scene(n=m), {"firstflight__ENABLED": False},
-        {"firstflight__ENABLED": True}, "precompute")
+        lambda: mesh_scene(n=m), {"first_flights": False},
+        {"first_flights": True}, "precompute")
     add(f"tiles of 64 px instead of 32 at 1 spp ({m}^3, 960x540, multiple off)",
-        lambda: scene(n=m, w=960, h=540, multiple=False), {"render__TILE": 32},
-        {"render__TILE": 64}, "march")
+        lambda: scene(n=m, w=960, h=540, multiple=False), {"tile": 32},
+        {"tile": 64}, "march")
     base = lambda **kw: scene(n=64, **kw)  # noqa: E731
     others = {}
     for label, make in (("one sun", lambda: base()),

@@ -88,7 +88,7 @@ def media_corners(media: List[PreparedMedium]) -> np.ndarray:
 def surface_irradiance(media: List[PreparedMedium], lights: List[Light], pts, normal, step):
     """Irradiance (N,3, W/m^2) the ``lights`` bring onto the plane points ``pts`` (N,3) of
     unit ``normal``, through the media (optical depth marched with ``step`` m)."""
-    from .precompute import light_optical_depth
+    from .precompute.lightdepth import light_optical_depth
     e = np.zeros((len(pts), 3))
     for light in lights:
         if is_dark(light):

@@ -10,7 +10,7 @@ first) and hit/miss counters:
   surfaces' geometry, multiple scattering on/off and, with it on, the camera position that
   ``precompute.drift_levels`` reads -- with the key of the world-light part
   they hold: the world colour, the ambient directions, the seed and the camera *position*
-  (the direction for an orthographic camera), which ``precompute.world_light`` reads.
+  (the direction for an orthographic camera), which ``precompute.worldlight.world_light`` reads.
   Turning a perspective camera keeps everything; moving it recomputes the world light only
   (and the light pyramids, with multiple scattering on); changing a light keeps the world
   light (``precompute_cached``).
@@ -230,7 +230,7 @@ def surfaces_key(surfaces) -> str:
 
 
 def camera_key(camera) -> tuple:
-    """What ``precompute.world_light`` reads of the camera: the position of a perspective
+    """What ``precompute.worldlight.world_light`` reads of the camera: the position of a perspective
     camera, the view axis of an orthographic one."""
     c2w = np.asarray(camera.cam_to_world, np.float64)
     if camera.projection == "ORTHO":
@@ -238,35 +238,15 @@ def camera_key(camera) -> tuple:
     return (str(camera.projection), c2w[:3, 3].copy())
 
 
-def _world_channels(layout):
-    """The first world-light channel of a field layout (they run to the end), or None."""
-    return layout.ambient_channel
-
-
-def _light_channels(lights) -> list:
-    """The light channel offsets ``precompute.precompute`` gives ``lights`` (None for a dark
-    light), to tell whether two light sets share a field layout."""
-    from .lights import is_dark
-
-    out, c = [], 1
-    for light in lights:
-        if is_dark(light):
-            out.append(None)
-        else:
-            out.append(c)
-            c += 3
-    return out
-
-
 def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, surfaces=None,
                       threads: int = 0, multiple: bool = False, multiple_resolution=None,
                       should_cancel: Optional[Callable[[], bool]] = None,
-                      progress=None, cache: Optional[Cache] = None):
+                      progress=None, cache: Optional[Cache] = None, tuning=None):
     """``precompute.precompute`` reusing earlier results kept in ``cache`` (default ``CACHE``).
 
     One entry (kind 'precompute') per *light key* -- the media, lights, surfaces, multiple
-    scattering and its resolution (and then the camera position), thread count and whether
-    the world is lit -- holds the fields and pyramids
+    scattering and its resolution (and then the camera position), thread count, the tuning
+    (scene.Tuning) and whether the world is lit -- holds the fields and pyramids
     and the *world key* they were computed for (world colour, camera position, ambient
     directions, seed).  Then:
 
@@ -280,27 +260,30 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
 
     The result equals a cold ``precompute`` call's: in it the light channels, the pyramids and
     the world channels are computed independently.  ``stats["reused"]`` lists the parts
-    taken from the cache ('lights', 'world').  A cancelled precompute changes nothing and
-    returns None.  Callers must not modify the returned arrays."""
+    taken from the cache ('lights', 'world').  A cancelled precompute changes nothing (it
+    raises parallel.Cancelled).  Callers must not modify the returned arrays."""
     from . import precompute as pre_mod
-    from .scene import World
+    from .precompute.lattice import MULTIPLE_RESOLUTION
+    from .precompute.layout import light_channels
+    from .scene import Tuning, World
 
     cache = CACHE if cache is None else cache
+    tuning = Tuning() if tuning is None else tuning
     if multiple_resolution is None:
-        multiple_resolution = pre_mod.MULTIPLE_RESOLUTION
+        multiple_resolution = MULTIPLE_RESOLUTION
     has_world = bool(np.any(np.asarray(world.color, np.float64) > 0))
     # the thread count does not change the numbers; it is keyed anyway so that a render with
     # other threads still runs (and checks) the precompute
     common = (media_key(media), surfaces_key(surfaces), bool(multiple),
-              int(multiple_resolution) if multiple else 0, int(threads))
-    # the light pyramids are moved towards what the camera sees (precompute.drift_levels)
+              int(multiple_resolution) if multiple else 0, int(threads), tuning)
+    # the light pyramids are moved towards what the camera sees (precompute.lightpyramid.drift_levels)
     light_key = digest("lights", common, list(lights), has_world,
                        camera_key(camera) if multiple else None)
     world_key = digest("world", common, np.asarray(world.color, np.float64), camera_key(camera),
                        int(n_dirs), int(seed)) if has_world else None
     kw = dict(n_dirs=n_dirs, seed=seed, should_cancel=should_cancel, progress=progress,
               surfaces=surfaces, threads=threads, multiple=multiple,
-              multiple_resolution=multiple_resolution)
+              multiple_resolution=multiple_resolution, tuning=tuning)
 
     def result(pre, reused):
         return pre_mod.Precomputed(pre.fields, pre.layout, pre.multiple, pre.seconds,
@@ -312,9 +295,7 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
         if entry["world"] == world_key:
             return result(pre, ["lights", "world"] if has_world else ["lights"])
         part = pre_mod.precompute(media, [], world, camera, **kw)  # the camera moved
-        if part is None:
-            return None
-        first = _world_channels(pre.layout)
+        first = pre.layout.world_first
         for f, w in zip(pre.fields, part.fields):
             f[..., first:] = w[..., 1:]
         entry["world"] = world_key
@@ -325,12 +306,10 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
         donor_key = cache.get("world_index", world_key)
         donor = cache.get("precompute", donor_key) if donor_key is not None else None
     if donor is not None and donor["world"] == world_key and \
-            donor["pre"].layout.light_channels == _light_channels(lights):
+            donor["pre"].layout.light_channels == light_channels(lights):
         part = pre_mod.precompute(media, lights, World(), camera, **kw)  # a light changed
-        if part is None:
-            return None
         old = donor["pre"]
-        first = _world_channels(old.layout)
+        first = old.layout.world_first
         fields = []
         for fl, fo in zip(part.fields, old.fields):
             f = np.empty(fo.shape, np.float32)
@@ -343,8 +322,6 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
         _keep(cache, light_key, world_key, pre)
         return result(pre, ["world"])
     pre = pre_mod.precompute(media, lights, world, camera, **kw)
-    if pre is None:
-        return None
     _keep(cache, light_key, world_key, pre)
     return result(pre, [])
 

@@ -1,7 +1,7 @@
 """The first flights of multiple scattering, evaluated exactly on the light pyramid's lattice.
 
 Every multiply scattered path starts at a first scattering out of the beam (the source Q of
-``precompute.lattice_source``, W/m^3) and flies straight to its next event.  The walk of the
+``precompute.source.restricted_source``, W/m^3) and flies straight to its next event.  The walk of the
 light pyramid spreads that first flight, like every later one, as an isotropic Gaussian about
 its mean displacement; where the first flights are long -- a medium thinner than its mean
 free path, such as fog round a spot light's beam -- that puts their light in the wrong place:
@@ -13,7 +13,7 @@ the first flight is instead the convolution
 
 (W/(m^2 sr) per unit sigma_s at x: the march multiplies by the local sigma_s), with p1 the
 medium's own HG(g) outside its forward peak (``first_phase``: the light scattered into the
-peak is the beam channels', precompute.peak_light) about the light's direction d at the
+peak is the beam channels', precompute.source.peak_light) about the light's direction d at the
 sources, sigma_t* the delta-scaled medium's extinction (1/m; the forward peak's scatterings
 keep the light on its course), p the medium's own HG(g) and w the direction to the camera.
 The second flight is the same convolution of the second-scattering source sigma_s* phi1
@@ -22,7 +22,7 @@ with p1 composed with itself as its direction (``peak_free_twice``).  They are e
 FFT on the lattice, one kernel per colour channel, flight and camera direction (a few
 directions spread over what the camera sees of the medium, interpolated between); the walk
 then carries only the paths with at least two more scatterings
-(``kernels_np.level_table(..., exact_flights=EXACT_FLIGHTS)``).  See docs/method.md, "The
+(``kernels_np.level_table(..., exact_flights=2)``; scene.Tuning.exact_flights).  See docs/method.md, "The
 first flight, exact".
 
 Where the first flights mostly stay in the medium the walk's calibration (its escape through
@@ -39,18 +39,15 @@ lattice step; any affine grid), directions are unit world vectors of propagation
 from __future__ import annotations
 
 import functools
-import os
 import threading
 from dataclasses import dataclass
 from typing import Callable, Optional
 
 import numpy as np
 
-from .parallel import run_chunks
+from .parallel import check, run_chunks, worker_count
 from .phase import delta_fraction, hg, outside_peak, peak_cone_cos
 
-ENABLED = True      # a switch for tests and benchmarks: False leaves the walk alone
-EXACT_FLIGHTS = 2   # flights out of the beam computed exactly (march: kernels_np.level_table)
 ESCAPE_LOW = 0.3    # escape fraction at or below which the walk alone is used
 ESCAPE_HIGH = 0.5   # escape fraction at or above which the exact first flight alone is used
 ESCAPE_RESOLUTION = 32   # lattice points along the longest axis for the escape fraction
@@ -374,10 +371,8 @@ def flight_weight(q, inside, axes, source_dirs, g: float, sigma_t):
     """(weight (3,), d (3,), spread) of the exact flights of the source ``q`` (arguments as
     ``first_flight``'s): the blend weight per channel (``blend_weight`` of the escape
     fraction), the sources' power-weighted mean direction d and the length of that mean;
-    None where no channel takes the flights (every weight 0, no power, ENABLED off) -- the
-    walk's coarser lattice then answers for a finer one (precompute.multiple_field)."""
-    if not ENABLED:
-        return None
+    None where no channel takes the flights (every weight 0, no power) -- the
+    walk's coarser lattice then answers for a finer one (precompute.lightpyramid.multiple_field)."""
     power = q.sum(axis=-1).reshape(-1)
     total = float(power.sum())
     sigma_t = np.broadcast_to(np.asarray(sigma_t, np.float64), (3,))
@@ -396,12 +391,13 @@ def flight_weight(q, inside, axes, source_dirs, g: float, sigma_t):
 
 def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=None,
                  should_cancel: Optional[Callable[[], bool]] = None,
-                 threads: int = 0) -> Optional[FirstFlight]:
+                 threads: int = 0, exact_flights: int = 2) -> Optional[FirstFlight]:
     """The exact first flights of one light on one medium, or None where the walk alone
-    serves (every channel's escape fraction at or below ESCAPE_LOW, no power) or when
-    cancelled: the first flight out of the beam and, where ``sigma_s`` is given, the second
-    (EXACT_FLIGHTS), from the second-scattering source sigma_s* phi1 (phi1 the first
-    flights' fluence in the medium) with the direction ``first_phase(..., order=2)``.
+    serves (every channel's escape fraction at or below ESCAPE_LOW, no power); raises
+    parallel.Cancelled on Esc.  The first flight out of the beam and, where ``sigma_s`` is
+    given, the second (``exact_flights`` 2; scene.Tuning.exact_flights), from the
+    second-scattering source sigma_s* phi1 (phi1 the first flights' fluence in the medium)
+    with the direction ``first_phase(..., order=2)``.
 
     ``q`` (X,Y,Z,3): the first-scattering source on the pyramid's lattice (W/m^3, the walk's,
     of the delta-scaled medium); ``inside`` (X,Y,Z) bool: the lattice points in the medium;
@@ -425,7 +421,7 @@ def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=Non
         return None
     weight, d, spread = got
     sigma_t = np.broadcast_to(np.asarray(sigma_t, np.float64), (3,))
-    second = sigma_s is not None and EXACT_FLIGHTS >= 2   # what the walk's table leaves out
+    second = sigma_s is not None and exact_flights >= 2   # what the walk's table leaves out
     sigma_s = np.zeros(3) if sigma_s is None else \
         np.broadcast_to(np.asarray(sigma_s, np.float64), (3,))
     dirs, wts = camera_directions(v, v[inside.reshape(-1)])
@@ -450,8 +446,7 @@ def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=Non
     bases = {}
     if len(keys) * base_bytes <= FFT_MEMORY // 2:
         for key in keys:
-            if should_cancel and should_cancel():
-                return None
+            check(should_cancel)
             bases[key] = KernelBase(axes, shape, d, (float(g), spread, key[1]), key[0])
 
     def base(key):
@@ -461,8 +456,7 @@ def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=Non
     sources = {}   # per representative channel: the spectra of the first and second sources
     bare = {}      # per sigma_t: the first flight's bare kernel's spectrum (for phi1)
     for r in same:
-        if should_cancel and should_cancel():
-            return None
+        check(should_cancel)
         fq = spectrum(q[..., r], shape)
         sources[r] = [(fq, 1)]
         if 2 in orders[r]:
@@ -505,9 +499,8 @@ def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=Non
     # beside the kernels' bases (float64 and three float32 per offset)
     per_thread = 4 * 8 * int(np.prod(fft_shape(shape)))
     held = sum(b.bare.nbytes + b.u.nbytes for b in bases.values())
-    n_threads = threads if threads > 0 else (os.cpu_count() or 1)
+    n_threads = worker_count(threads)
     n_threads = max(1, min(n_threads, (FFT_MEMORY - held) // per_thread))
-    if not run_chunks(len(dirs), 1, directions, n_threads, should_cancel) or \
-            (should_cancel and should_cancel()):
-        return None
+    run_chunks(len(dirs), 1, directions, n_threads, should_cancel)
+    check(should_cancel)   # a direction that saw Esc left its part out
     return FirstFlight(np.ascontiguousarray(np.maximum(out, 0.0), np.float32), weight)

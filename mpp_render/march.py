@@ -5,7 +5,7 @@ to the camera's clip range and the first opaque surface) into segments of length
 every medium's field at one jittered point per segment.  Segments come in super-steps of
 ``SUPER`` (kernels_np.march): with the media's brick bounds (media.brick_bounds) a super-step
 where every medium is empty is skipped (it would add nothing), and one where the medium is
-thin (majorant optical depth per step within ``ADAPT_TAU``) is cut into fewer, longer
+thin (majorant optical depth per step within ``Tuning.adapt_tau``) is cut into fewer, longer
 segments, one jittered read each.  Within a segment extinction sigma_t
 and in-scattered radiance S are taken as constant, so the segment adds
 T * S * (1 - exp(-sigma_t h)) / sigma_t and multiplies T by exp(-sigma_t h): exact for
@@ -14,11 +14,11 @@ homogeneous media and stable at any optical depth.
 In-scattered radiance at x, per medium m with density rho_m(x):
   S = sum_m rho_m sigma_s,m [ sum_lights p_m(w_l . -d) E_l(x) exp(-tau_l,m(x)) + A_m(x) ]
 with E_l the light's irradiance (lights.py), tau the precomputed optical depth to the light
-and A the precomputed world light (precompute.py).  Rays stop when T < ``T_MIN``.
+and A the precomputed world light (mpp_render/precompute/).  Rays stop when T < ``T_MIN``.
 
 Emission (the Emission pass) is a medium's constant ``emission`` wherever its density is > 0
 plus, for a medium with an emission grid, the grid's value read from the field's emission
-channels (precompute.FieldLayout.emission_channels) wherever it is non-zero (the march's
+channels (precompute/layout.py) wherever it is non-zero (the march's
 brick bounds, PreparedMedium.march_bricks, keep those super-steps whole).
 
 Mesh volumes have a sharp surface (media.density_from).  There the optical depth to a light
@@ -34,30 +34,29 @@ hash of (ray key, step, dimension), so both twins draw the same ones.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import List, Optional
 
 import numpy as np
 
-from . import firstflight, kernels
+from . import kernels
 from .kernels_np import LIGHT_FIELDS, REFINE_STEPS, RHO_TABLE, T_MIN, hash32
 from .lights import pack_light
 from .media import PreparedMedium
 from .passes import DEPTH_MISS, DEPTH_OPACITY
-from .precompute import FieldLayout
-from .scene import Camera, Light
+from .precompute.layout import FieldLayout
+from .scene import Camera, Light, Tuning
 
 __all__ = ["MarchContext", "march_rays", "pack_lights", "ray_keys", "REFINE_STEPS", "T_MIN"]
 
-# Longer steps where the medium is thin: the march cuts each super-step of SUPER steps into
-# as few (at least one) as keep the density majorant's optical depth per step within this
-# (kernels_np.march; never at a mesh volume's surface, where a lighting feature changes, or
-# with area / sphere lights, whose jitter the steps average).  Measured on the public scenes at
-# 16 spp: cloud_vdb 0.72 of the samples at the same error against Cycles (0.0066); larger
-# values (0.2, 0.4) biased slab_isotropic when its surfaces were still adapted.
-ADAPT_TAU = 0.1
-SKIP_EMPTY = True  # hand the kernel the media's brick bounds (empty super-steps skipped); a
-# switch for benchmarks/performance.py, which measures what the skipping saves
+# Longer steps where the medium is thin (Tuning.adapt_tau): the march cuts each super-step of
+# SUPER steps into as few (at least one) as keep the density majorant's optical depth per step
+# within it (kernels_np.march; never at a mesh volume's surface, where a lighting feature
+# changes, or with area / sphere lights, whose jitter the steps average).  Measured on the
+# public scenes at 16 spp with 0.1: cloud_vdb 0.72 of the samples at the same error against
+# Cycles (0.0066); larger values (0.2, 0.4) biased slab_isotropic when its surfaces were still
+# adapted.  With Tuning.skip_empty the kernel gets the media's brick bounds (empty super-steps
+# skipped).
 
 def pack_lights(lights: List[Light], layout: FieldLayout) -> np.ndarray:
     """(L, LIGHT_FIELDS) float64 records of the lights for the march kernel."""
@@ -87,6 +86,7 @@ class MarchContext:
     step: float
     multiple_fields: Optional[list] = None
     camera: Optional[Camera] = None
+    tuning: Tuning = field(default_factory=Tuning)
 
     def __post_init__(self):
         self.packed = pack_lights(self.lights, self.layout)
@@ -99,14 +99,13 @@ class MarchContext:
                 ref = next((m for m in mfs if m is not None), None)
                 table = np.zeros((1, len(RHO_TABLE), 6)) if ref is None else \
                     level_table(pm.g, pm.sigma_s, pm.sigma_a, ref.h, len(ref.levels))
-                if FLATTEN and ref is not None and pm.threshold >= 0.0 and \
-                        self.camera is not None and \
-                        str(self.camera.projection).upper() in ("PERSP", "ORTHO"):
+                # flattened as the precompute decided (MultipleField.flat)
+                if ref is not None and ref.flat and self.camera is not None:
                     after = None
                     if any(m is not None and m.first is not None for m in mfs):
                         after = level_table(pm.g, pm.sigma_s, pm.sigma_a, ref.h,
                                             len(ref.levels),
-                                            exact_flights=firstflight.EXACT_FLIGHTS)
+                                            exact_flights=self.tuning.exact_flights)
                     flat = flatten_levels(pm, mfs, self.lights, table, self.camera, after)
                     stride = flat_stride(mfs)
                     per_medium.append([([flat], stride, ref.h * stride / ref.stride)]
@@ -123,16 +122,15 @@ class MarchContext:
 # the direction from a sample to the camera is that of the camera ray through it: its light
 # pyramids are summed over levels and lights once, with those weights and the phase
 # function towards the camera at each lattice point, into one level (``flatten_levels``)
-# that the march reads through this table (weight 4 pi, anisotropy 0: the factor 1).
-# ``FLATTEN`` is a switch for benchmarks/performance.py.
-FLATTEN = True
+# that the march reads through this table (weight 4 pi, anisotropy 0: the factor 1), where
+# Tuning.flatten says so (precompute.lightpyramid.flattens).
 FLAT_TABLE = np.concatenate([np.full((1, len(RHO_TABLE), 3), 4.0 * np.pi),
                              np.zeros((1, len(RHO_TABLE), 3))], axis=2)
 
 
 def flat_stride(mfs) -> int:
     """The stride (voxels) of a medium's flattened level: the finest of its light pyramids'
-    lattice and its exact first flights' (precompute.fine_stride divides the
+    lattice and its exact first flights' (precompute.source.fine_stride divides the
     pyramid's stride)."""
     ref = next(m for m in mfs if m is not None)
     return min([ref.stride] + [m.first.stride for m in mfs
@@ -156,7 +154,7 @@ def flatten_levels(pm: PreparedMedium, mfs, lights: List[Light], table: np.ndarr
     and 1 - w of the levels through ``table``."""
     from .camera import towards_camera
     from .kernels_np import hg, light_sample, table_lookup, upsample
-    from .precompute import lattice_points, lattice_shape
+    from .precompute.lattice import lattice_points, lattice_shape
     ref = next(m for m in mfs if m is not None)
     stride = flat_stride(mfs)
     shape = lattice_shape(pm.grid.shape, stride)
@@ -206,7 +204,8 @@ def march_rays(ctx: MarchContext, origins, dirs, t0, t1, axial, keys):
         [m.voxel_size for m in ctx.media], ctx.packed, -1 if amb is None else amb,
         ctx.step, DEPTH_OPACITY, DEPTH_MISS, ctx.multiple,
         em if any(np.any(e > 0) for e in em) else None,
-        [m.march_bricks for m in ctx.media] if SKIP_EMPTY else None, adapt_tau=ADAPT_TAU,
+        [m.march_bricks for m in ctx.media] if ctx.tuning.skip_empty else None,
+        adapt_tau=ctx.tuning.adapt_tau,
         emission_channels=ec)
     return {"single": single, "T": T, "depth": depth, "multiple": multi, "steps": steps,
             "emission": emitted}

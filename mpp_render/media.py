@@ -39,8 +39,27 @@ class PreparedMedium:
     emission_grid: Optional[np.ndarray] = None
 
     @property
+    def kind(self) -> str:
+        """'fog': the world's volume, homogeneous and endless (worldfog.py; its grid a box
+        round what the camera sees); 'mesh': a mesh volume, of one density wherever it has
+        any, with a sharp surface (``threshold`` >= 0, density_from); 'grid': a density grid
+        (VDB, fluid), interpolated."""
+        if self.medium.source == "WORLD":
+            return "fog"
+        return "mesh" if self.threshold >= 0.0 else "grid"
+
+    @property
     def sharp(self) -> bool:
+        """Whether the medium has a sharp surface (a mesh volume's threshold)."""
         return self.threshold >= 0.0
+
+    def to_world(self, ijk) -> np.ndarray:
+        """World positions (N,3, m) of padded index coordinates ``ijk`` (N,3)."""
+        return ijk @ self.i2w[:3, :3].T + self.i2w[:3, 3]
+
+    def to_index(self, points) -> np.ndarray:
+        """Padded index coordinates (N,3) of world points (N,3, m)."""
+        return points @ self.w2i[:, :3].T + self.w2i[:, 3]
 
     @property
     def bricks(self) -> np.ndarray:
@@ -208,7 +227,7 @@ def density_from(value, threshold: float):
 
 def to_index(pm: PreparedMedium, points):
     """World points (N,3) -> padded index coordinates (N,3)."""
-    return points @ pm.w2i[:, :3].T + pm.w2i[:, 3]
+    return pm.to_index(points)
 
 
 def trilinear(grid, idx):

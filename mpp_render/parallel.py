@@ -2,7 +2,8 @@
 
 The compiled kernels and numpy's FFTs release the GIL, so chunks of them run in parallel on
 threads; ``run_chunks`` is the one place that does it (the precompute's sweeps and marches,
-the first flights' convolutions)."""
+the first flights' convolutions), and ``worker_count`` the one place that sizes a pool (the
+render's tiles too)."""
 from __future__ import annotations
 
 import os
@@ -10,18 +11,34 @@ from concurrent.futures import ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FuturesTimeout
 
 
-def run_chunks(n, chunk, work, threads=0, should_cancel=None) -> bool:
+class Cancelled(Exception):
+    """Esc: ``should_cancel()`` turned true.  Raised where it is polled (``check``,
+    ``run_chunks``) and caught by the render, which then returns what it has."""
+
+
+def check(should_cancel) -> None:
+    """Raise Cancelled when ``should_cancel`` (None: never) says so."""
+    if should_cancel is not None and should_cancel():
+        raise Cancelled
+
+
+def worker_count(threads: int = 0) -> int:
+    """Threads for a pool: ``threads``, or one per core where it is <= 0."""
+    return threads if threads > 0 else (os.cpu_count() or 1)
+
+
+def run_chunks(n, chunk, work, threads=0, should_cancel=None) -> None:
     """Call ``work(a, b)`` for consecutive ranges [a, b) of ``range(n)`` on a thread pool
     (``threads`` <= 0: one per core).  The kernels release the GIL, so chunks run in parallel;
-    each chunk must write only its own slice.  Returns False when ``should_cancel`` stopped it."""
+    each chunk must write only its own slice.  Raises Cancelled when ``should_cancel`` stops
+    it (the chunks not started are dropped)."""
     starts = list(range(0, n, chunk))
-    threads = threads if threads > 0 else (os.cpu_count() or 1)
+    threads = worker_count(threads)
     if threads == 1 or len(starts) <= 1:
         for a in starts:
-            if should_cancel and should_cancel():
-                return False
+            check(should_cancel)
             work(a, min(n, a + chunk))
-        return True
+        return
     with ThreadPoolExecutor(max_workers=threads) as pool:
         futures = [pool.submit(work, a, min(n, a + chunk)) for a in starts]
         try:
@@ -29,8 +46,7 @@ def run_chunks(n, chunk, work, threads=0, should_cancel=None) -> bool:
                 # poll before every wait, not only when one times out: chunks shorter than
                 # the timeout would otherwise never look at Esc
                 while True:
-                    if should_cancel and should_cancel():
-                        return False
+                    check(should_cancel)
                     try:
                         f.result(timeout=0.05)
                         break
@@ -39,4 +55,3 @@ def run_chunks(n, chunk, work, threads=0, should_cancel=None) -> bool:
         finally:  # cancelled or failed: drop the chunks not started (leaving the pool
             for g in futures:  # waits only for the running ones)
                 g.cancel()
-    return True

@@ -12,9 +12,8 @@ background and suns are dark in the fog's colour channels.
 from __future__ import annotations
 
 import math
-import os
 import time
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
 from typing import Callable, Dict, List, Optional
 
@@ -24,19 +23,20 @@ from . import cache, kernels, worldfog
 from .camera import primary_rays
 from .march import MarchContext, march_rays, ray_keys
 from .media import prepare, union_interval
+from .parallel import Cancelled, worker_count
 from .passes import DEPTH_MISS, enabled_passes
-from .precompute import kernel_arrays, split_fog
+from .precompute.lightdepth import kernel_arrays, split_fog
 from .scene import SceneDescription
 from .surfaces import intersect, prepare_surfaces, shade
 
-TILE = 64            # largest tile side (pixels)
 GATHER_SEED = 0x5BD1E995  # offsets the seed of the rays that gather volume light onto surfaces
 TILE_RAYS = 4096     # rays per tile at most: Esc and progress are served between tiles
 
 
-def tile_size(samples: int) -> int:
-    """Tile side (pixels) so that a tile holds at most TILE_RAYS rays (4 to TILE)."""
-    return int(np.clip(int(math.sqrt(TILE_RAYS / max(1, samples))), 4, TILE))
+def tile_size(samples: int, largest: int = 64) -> int:
+    """Tile side (pixels) so that a tile holds at most TILE_RAYS rays (4 to ``largest``,
+    Tuning.tile)."""
+    return int(np.clip(int(math.sqrt(TILE_RAYS / max(1, samples))), 4, largest))
 
 
 @dataclass
@@ -99,23 +99,7 @@ def render(desc: SceneDescription,
 
     surf = prepare_surfaces(desc.surfaces)
     fog = worldfog.active(desc.world)
-    world, lights = desc.world, desc.lights
-    fog_pm = None
-    if fog is not None:
-        world = worldfog.effective_world(desc.world, fog)
-        lights = worldfog.effective_lights(desc.lights, fog)
-        for before, after in zip(desc.lights, lights):
-            if before.kind == "SUN" and np.any(np.asarray(before.strength) > 0) \
-                    and not np.any(np.asarray(after.strength) > 0):
-                warnings.append(f"light '{before.name}': a sun lights nothing through the world "
-                                "volume, which is endless (as in Cycles)")
-        box = worldfog.bounded_medium(desc, fog, media, st.voxel_resolution)
-        fog_pm = prepare(box.medium, warnings)
-        media.append(fog_pm)
-        if worldfog.infinite_emission(fog):
-            warnings.append("world volume: it emits in a colour without extinction, which "
-                            "is infinitely bright in Cycles; that emission beyond "
-                            f"{box.depth:.3g} m is left out")
+    world, lights, fog_pm = with_world_fog(desc, fog, media, warnings)
     t_pre = time.perf_counter()
     pre = None
     step = auto_step(desc, media)
@@ -129,20 +113,22 @@ def render(desc: SceneDescription,
     if media:
         # the light and world-light parts are reused from earlier renders when their inputs
         # did not change (cache.py)
-        pre = cache.precompute_cached(media, media_lights, world, cam,
-                                      n_dirs=st.ambient_directions, seed=st.seed,
-                                      should_cancel=cancel, progress=progress,
-                                      surfaces=None if surf.empty else surf, threads=st.threads,
-                                      multiple=st.multiple,
-                                      multiple_resolution=st.multiple_resolution)
-        if pre is None:
+        try:
+            pre = cache.precompute_cached(media, media_lights, world, cam,
+                                          n_dirs=st.ambient_directions, seed=st.seed,
+                                          should_cancel=cancel, progress=progress,
+                                          surfaces=None if surf.empty else surf,
+                                          threads=st.threads, multiple=st.multiple,
+                                          multiple_resolution=st.multiple_resolution,
+                                          tuning=st.tuning)
+        except Cancelled:
             return RenderOutput(out, {"precompute": time.perf_counter() - t_pre}, warnings, True)
     timings["precompute"] = time.perf_counter() - t_pre
 
     bg = np.asarray(world.color, np.float64)
     ctx = MarchContext(media, pre.fields if pre else [], pre.layout if pre else None,
                        media_lights, step, pre.multiple if st.multiple else None,
-                       cam) if media else None
+                       cam, st.tuning) if media else None
     od = kernels.get("optical_depth")
     step_light = step
 
@@ -170,7 +156,7 @@ def render(desc: SceneDescription,
         return radiance if ctx is not None else None
 
     spp = max(1, int(st.samples))
-    ts = tile_size(spp)
+    ts = tile_size(spp, st.tuning.tile)
     tiles = [(x0, y0) for y0 in range(0, H, ts) for x0 in range(0, W, ts)]
 
     def do_tile(index):
@@ -236,21 +222,56 @@ def render(desc: SceneDescription,
         return index, (x0, y0, tw, th), res, float(r["steps"].sum())
 
     t_march = time.perf_counter()
-    threads = st.threads if st.threads > 0 else (os.cpu_count() or 1)
+    threads = worker_count(st.threads)
+    march_samples, cancelled = march_tiles(do_tile, len(tiles), threads, cancel, progress, out)
+    timings["march"] = time.perf_counter() - t_march
+    stats = {"backend": kernels.backend(), "step": step, "tiles": len(tiles), "passes": passes_on,
+             "march_samples": march_samples, "threads": threads}
+    if pre is not None:
+        stats.update(pre.stats)
+    return RenderOutput(out, timings, warnings, cancelled, stats)
+
+
+def with_world_fog(desc: SceneDescription, fog, media: list, warnings: List[str]):
+    """(world, lights, the fog's PreparedMedium or None) as the media see them under the
+    world's fog ``fog`` (worldfog.active; None: the scene's own): the fog's bounded medium
+    is appended to ``media``, what it changes said in ``warnings``."""
+    if fog is None:
+        return desc.world, desc.lights, None
+    world = worldfog.effective_world(desc.world, fog)
+    lights = worldfog.effective_lights(desc.lights, fog)
+    for before, after in zip(desc.lights, lights):
+        if before.kind == "SUN" and np.any(np.asarray(before.strength) > 0) \
+                and not np.any(np.asarray(after.strength) > 0):
+            warnings.append(f"light '{before.name}': a sun lights nothing through the world "
+                            "volume, which is endless (as in Cycles)")
+    box = worldfog.bounded_medium(desc, fog, media, desc.settings.voxel_resolution)
+    fog_pm = prepare(box.medium, warnings)
+    media.append(fog_pm)
+    if worldfog.infinite_emission(fog):
+        warnings.append("world volume: it emits in a colour without extinction, which "
+                        "is infinitely bright in Cycles; that emission beyond "
+                        f"{box.depth:.3g} m is left out")
+    return world, lights, fog_pm
+
+
+def march_tiles(do_tile, n_tiles: int, threads: int, cancel, progress, out) -> tuple:
+    """Run ``do_tile(index)`` for every tile on a pool of ``threads`` threads, at most two
+    per thread queued, writing each result into the passes ``out`` as it comes; Esc
+    (``cancel()``) is polled and ``progress`` told between tiles.  Returns (march samples,
+    whether cancelled)."""
     done = 0
     march_samples = 0.0
     cancelled = False
     with ThreadPoolExecutor(max_workers=threads) as pool:
         pending = set()
-        it = iter(range(len(tiles)))
+        it = iter(range(n_tiles))
         for _ in range(threads * 2):
             i = next(it, None)
             if i is not None:
                 pending.add(pool.submit(do_tile, i))
         while pending:
-            fut = next(iter(pending))
             # wait for whichever finishes first
-            from concurrent.futures import FIRST_COMPLETED, wait
             fin, pending = wait(pending, return_when=FIRST_COMPLETED)
             for f in fin:
                 index, (x0, y0, tw, th), res, n_steps = f.result()
@@ -269,10 +290,5 @@ def render(desc: SceneDescription,
                 if i is not None:
                     pending.add(pool.submit(do_tile, i))
             if progress:
-                progress(done / len(tiles), f"Tiles {done}/{len(tiles)}")
-    timings["march"] = time.perf_counter() - t_march
-    stats = {"backend": kernels.backend(), "step": step, "tiles": len(tiles), "passes": passes_on,
-             "march_samples": march_samples, "threads": threads}
-    if pre is not None:
-        stats.update(pre.stats)
-    return RenderOutput(out, timings, warnings, cancelled, stats)
+                progress(done / n_tiles, f"Tiles {done}/{n_tiles}")
+    return march_samples, cancelled

@@ -173,6 +173,37 @@ class World:
     volume: Optional[Medium] = None
 
 
+@dataclass(frozen=True)
+class Tuning:
+    """The method's speed and exactness knobs, at the values measured best (docs/method.md);
+    tests and benchmarks compare variants (``dataclasses.replace``).  They travel with the
+    Settings through the precompute and the march.
+
+    ``skip_min_voxels``: grids from which optical_depth walks the media's bricks (below it a
+    grid sits in the cache and walking the bricks costs more than it saves; the result is
+    the same either way).  ``spot_cull``: the pyramid's cells a spot's cone misses are 0
+    without a read (the same result, faster).  ``refine``: how much finer than the walk's
+    lattice a mesh volume's forward peak and exact first flights are computed
+    (precompute.source.fine_stride; 1: the walk's).  ``first_flights``: a mesh volume's first
+    flights computed exactly where they mostly leave it (firstflight.py); ``exact_flights``
+    how many (1 or 2).  ``flatten``: a mesh volume's light pyramids summed over levels and
+    lights once for the march (march.flatten_levels; the exact first flights join only that
+    level).  ``skip_empty``: the march skips super-steps where every medium is empty (the
+    same result, faster).  ``adapt_tau``: the march's longer steps in thin media (the
+    density majorant's optical depth per step within it; 0: off).  ``tile``: the largest
+    tile side in pixels."""
+
+    skip_min_voxels: int = 1 << 20
+    spot_cull: bool = True
+    refine: int = 2
+    first_flights: bool = True
+    exact_flights: int = 2
+    flatten: bool = True
+    skip_empty: bool = True
+    adapt_tau: float = 0.1
+    tile: int = 64
+
+
 @dataclass
 class Settings:
     """Render quality settings.
@@ -183,7 +214,7 @@ class Settings:
     transmittance instead of 1.  ``seed``: jitter seed (same seed, same image).
     ``ambient_directions``: directions used to integrate the world light's transmittance.
     ``multiple_resolution``: lattice points along a medium's longest side for the light
-    pyramids of multiple scattering (precompute.multiple_field; never finer than the voxels).
+    pyramids of multiple scattering (precompute.lightpyramid; never finer than the voxels).
     ``passes``: names of the passes to fill; None means every pass the engine has.
     ``voxel_resolution``: voxels along the longest side when a mesh volume is voxelised.
     ``threads``: worker threads for the march; 0 means one per core.
@@ -191,6 +222,7 @@ class Settings:
     indirect light, so only with ``multiple``; not under a world volume).
     ``memory_budget_mb``: megabytes (2^20 bytes) the precompute fields may take; larger grids
     are box-downsampled with a warning (budget.py); 0 means unlimited.
+    ``tuning``: the method's speed and exactness knobs (Tuning; not in the user interface).
     """
 
     samples: int = 16
@@ -205,6 +237,7 @@ class Settings:
     voxel_resolution: int = 128
     memory_budget_mb: int = 2048
     surface_bounce: bool = True
+    tuning: Tuning = field(default_factory=Tuning)
 
 
 @dataclass

@@ -1,10 +1,11 @@
-"""Light leaving through a medium's surface (mpp_render/boundary.py) and the light pyramid's
-source on its lattice (precompute.lattice_source): docs/method.md, "Escape through the
+"""Light leaving through a medium's surface (precompute/boundary.py) and the light pyramid's
+source on its lattice (precompute.source.restricted_source): docs/method.md, "Escape through the
 surface"."""
 import numpy as np
 
-from mpp_render import boundary, precompute, pyramid
-from mpp_render.media import prepare
+from mpp_render import pyramid
+from mpp_render.precompute import boundary, lattice, source
+from mpp_render.media import PreparedMedium, prepare
 from mpp_render.scene import Light, Medium
 
 
@@ -33,12 +34,16 @@ def test_extrapolation_length():
 
 
 class _Medium:
-    """What boundary.survival reads of a prepared medium: the index <-> world maps."""
+    """What boundary.survival reads of a prepared medium: the index <-> world maps (its
+    methods PreparedMedium's)."""
 
     def __init__(self, spacing=0.1):
         self.i2w = np.eye(4)
         self.i2w[:3, :3] *= spacing
         self.w2i = np.linalg.inv(self.i2w)[:3, :]
+
+    to_world = PreparedMedium.to_world
+    to_index = PreparedMedium.to_index
 
 
 def test_survival_ramps_from_the_surface_to_the_extrapolated_boundary():
@@ -108,7 +113,7 @@ def _lit_cube(n=10, stride_light="SUN"):
 
 def voxel_source(pm, fld, light):
     from mpp_render.lights import incident
-    _, pts = precompute.lattice_points(pm, pm.grid.shape, 1)
+    _, pts = lattice.lattice_points(pm, pm.grid.shape, 1)
     _, e = incident(light, pts)
     v = fld.reshape(-1, fld.shape[-1]).astype(np.float64)
     return (v[:, :1] * pm.sigma_s[None, :]) * e * np.exp(-v[:, 1:4])
@@ -124,9 +129,9 @@ def test_lattice_source_keeps_the_voxels_power():
         vol = abs(np.linalg.det(pm.i2w[:3, :3]))
         for stride in (2, 3, 5):
             shape = tuple((s - 1 + stride - 1) // stride + 1 for s in pm.grid.shape)
-            got = precompute.lattice_source(pm, fld, light, 1, stride, shape, chunk=3)
+            got = source.restricted_source(pm, fld, light, 1, stride, shape, chunk=3)
             assert got.shape == (int(np.prod(shape)), 3)
             np.testing.assert_allclose(got.sum(0) * vol * stride ** 3, q.sum(0) * vol, rtol=1e-9)
             assert np.all(got >= 0)
-        one = precompute.lattice_source(pm, fld, light, 1, 1, pm.grid.shape)
+        one = source.restricted_source(pm, fld, light, 1, 1, pm.grid.shape)
         np.testing.assert_allclose(one, q, rtol=1e-12, atol=0)

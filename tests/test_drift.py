@@ -4,9 +4,10 @@ photon walk, and the levels moved by it."""
 import numpy as np
 import pytest
 
-from mpp_render import precompute, pyramid
+from mpp_render import pyramid
+from mpp_render.precompute import lattice, lightpyramid, source
 from mpp_render.kernels_np import level_paths, walk_displacement
-from mpp_render.media import trilinear
+from mpp_render.media import PreparedMedium, trilinear
 from mpp_render.phase import sample_hg
 from mpp_render.scene import Camera, Light
 
@@ -76,7 +77,8 @@ def blob_pyramid(n=33):
 
 
 class _Medium:
-    """What drift_levels reads of a prepared medium: g and the index <-> world maps."""
+    """What drift_levels reads of a prepared medium: g and the index <-> world maps (its
+    methods PreparedMedium's)."""
 
     def __init__(self, g, spacing=0.1):
         self.g = g
@@ -84,6 +86,9 @@ class _Medium:
         self.i2w[:3, :3] *= spacing
         self.i2w[:3, 3] = -16 * spacing
         self.w2i = np.linalg.inv(self.i2w)[:3, :]
+
+    to_world = PreparedMedium.to_world
+    to_index = PreparedMedium.to_index
 
 
 def centroid(level, k, med, c=0):
@@ -105,7 +110,7 @@ def test_levels_move_along_the_sun_and_towards_the_camera():
         med = _Medium(g, h)
         levels = blob_pyramid()
         before = [centroid(lv, k, med) for k, lv in enumerate(levels)]
-        precompute.drift_levels(levels, med, sun, cam, 1, h, sigma_s)
+        lightpyramid.drift_levels(levels, med, sun, cam, 1, h, sigma_s)
         after = [centroid(lv, k, med) for k, lv in enumerate(levels)]
         if g == 0.0:
             for a, b in zip(before, after):
@@ -138,7 +143,7 @@ def test_point_light_levels_move_away_from_the_light(side):
     cam = Camera("ORTHO", c2w, 8, 8, (-1, 1, -1, 1))
     levels = blob_pyramid()
     before = [centroid(lv, k, med) for k, lv in enumerate(levels)]
-    precompute.drift_levels(levels, med, light, cam, 1, 0.1, 3.0)
+    lightpyramid.drift_levels(levels, med, light, cam, 1, 0.1, 3.0)
     moved = [centroid(lv, k, med) - b for k, (lv, b) in enumerate(zip(levels, before))]
     assert all(abs(m[2]) < 1e-3 for m in moved)
     if side:
@@ -151,8 +156,8 @@ def source_pyramid(base, light, med, levels=4):
     """A light pyramid with the power-weighted light directions of its sources, as
     multiple_field builds it: (levels, directions)."""
     shape = base.shape[:3]
-    _, pts = precompute.lattice_points(med, shape, 1)
-    return precompute.source_pyramid(base.reshape(-1, 3).astype(np.float64), light, pts, shape,
+    _, pts = lattice.lattice_points(med, shape, 1)
+    return lightpyramid.source_pyramid(base.reshape(-1, 3).astype(np.float64), light, pts, shape,
                                      float(med.g), levels)
 
 
@@ -174,14 +179,14 @@ def test_a_spot_beam_drifts_along_the_beam_not_from_the_light():
     levels, directions = source_pyramid(base, spot, med)
     before = [lv.copy() for lv in levels]
     radial = [lv.copy() for lv in levels]
-    precompute.drift_levels(levels, med, spot, cam, 1, h, sigma_s, directions)
-    precompute.drift_levels(radial, med, spot, cam, 1, h, sigma_s)
+    lightpyramid.drift_levels(levels, med, spot, cam, 1, h, sigma_s, directions)
+    lightpyramid.drift_levels(radial, med, spot, cam, 1, h, sigma_s)
     d, v = np.array([1.0, 0, 0]), np.array([0, -1.0, 0])
     for k, (_, _, l_k) in enumerate(level_paths(h, len(levels), l_tr, g)):
         u = float(l_k) / l_tr
         drift, beta = walk_displacement(u, g)
         shift = l_tr * (drift * d + beta * (v - g * g * np.exp(-u) * d)) / (h * 2 ** k)
-        idx = precompute.lattice_index(before[k].shape[:3])
+        idx = lattice.lattice_index(before[k].shape[:3])
         padded = np.pad(before[k], ((1, 1), (1, 1), (1, 1), (0, 0)))
         want = trilinear(padded, idx - shift + 1.0).reshape(before[k].shape)
         top = float(before[k].max())
@@ -196,22 +201,22 @@ def test_mean_source_directions_round_a_point_light():
     coarser level's mean: a blob lit from the side lends its direction to the empty space."""
     med = _Medium(0.8, 0.1)
     light = Light("POINT", "pt", np.ones(3), position=np.zeros(3))
-    _, pts = precompute.lattice_points(med, (33, 33, 33), 1)
+    _, pts = lattice.lattice_points(med, (33, 33, 33), 1)
     r2 = np.maximum(np.sum(pts * pts, 1), 0.01)
     base = np.repeat((1.0 / r2)[:, None], 3, 1).reshape(33, 33, 33, 3)
     _, directions = source_pyramid(base, light, med)
-    mean = precompute.mean_source_directions(directions, light, med, 1)
+    mean = lightpyramid.mean_source_directions(directions, light, med, 1)
     assert np.linalg.norm(mean[3][2, 2, 2]) < 0.5  # level 3, at the light (level-0 index 16)
     assert mean[1][16, 8, 8] @ np.array([1.0, 0, 0]) > 0.9  # 1.6 m out along +x: radial
     far = Light("POINT", "pt", np.ones(3), position=np.array([-1.6, 1.5, 0.0]))
     blob = np.zeros((33, 33, 33, 3), np.float32)
     blob[14:19, 14:19, 14:19] = 1.0
     _, directions = source_pyramid(blob, far, med)
-    mean = precompute.mean_source_directions(directions, far, med, 1)
+    mean = lightpyramid.mean_source_directions(directions, far, med, 1)
     to_blob = -far.position / np.linalg.norm(far.position)
     point = np.array([16.0, 30.0, 16.0])  # empty on level 0, 1.4 m beside the blob
     assert directions[0][16, 30, 16, 3] == 0.0
-    own = precompute.light_direction(far, point @ med.i2w[:3, :3].T + med.i2w[:3, 3])[0]
+    own = source.light_direction(far, point @ med.i2w[:3, :3].T + med.i2w[:3, 3])[0]
     assert own @ to_blob < 0.8
     got = mean[0][16, 30, 16]
     assert got @ to_blob / np.linalg.norm(got) > 0.95
@@ -227,10 +232,10 @@ def test_each_colour_channel_drifts_by_its_own_transport_length():
     med, h = _Medium(0.7, 0.1), 0.1
     sigma = np.array([2.0, 4.0, 8.0])
     levels = blob_pyramid()
-    precompute.drift_levels(levels, med, sun, cam, 1, h, sigma)
+    lightpyramid.drift_levels(levels, med, sun, cam, 1, h, sigma)
     for c, s_c in enumerate(sigma):
         grey = blob_pyramid()
-        precompute.drift_levels(grey, med, sun, cam, 1, h, s_c)
+        lightpyramid.drift_levels(grey, med, sun, cam, 1, h, s_c)
         for k in range(len(levels)):
             np.testing.assert_allclose(levels[k][..., c], grey[k][..., c], rtol=1e-6, atol=1e-9)
     moved = [np.linalg.norm(centroid(levels[2], 2, med, c) - centroid(blob_pyramid()[2], 2, med, c))

@@ -1,4 +1,4 @@
-"""What follows a narrow beam on a lattice finer than the walk's (precompute.fine_stride): the
+"""What follows a narrow beam on a lattice finer than the walk's (precompute.source.fine_stride): the
 forward peak's light and the exact first flights, and the flattened level that carries them;
 the cells a spot's cone misses skipped without changing the irradiance (lights.outside_spot)."""
 from types import SimpleNamespace
@@ -8,8 +8,9 @@ import pytest
 
 from mpp_render import march
 from mpp_render.lights import incident, outside_spot
-from mpp_render.precompute import (FINE_POINTS, cell_mean_irradiance, fine_stride, lattice_shape,
-                                   precompute)
+from mpp_render.precompute import precompute
+from mpp_render.precompute.lattice import lattice_shape
+from mpp_render.precompute.source import FINE_POINTS, cell_mean_irradiance, fine_stride
 from mpp_render.scene import Camera, Light, Medium, SceneDescription, Settings, World
 
 
@@ -114,19 +115,19 @@ def test_a_spots_cone_culls_only_dark_cells():
 def test_no_finer_source_where_the_walk_serves(monkeypatch):
     """A dense small box (its first flights mostly stay in it: weight 0): the first flights are
     not made, and the finer lattice's source is not computed for them either."""
-    from mpp_render import precompute as pc
+    from mpp_render.precompute import lightpyramid as pc
     from mpp_render.media import prepare
     desc = beam_scene()
     desc.media[0].sigma_s = np.full(3, 40.0)
     pm = prepare(desc.media[0])
     strides = []
-    real = pc.source_lattice
+    real = pc.source_and_density
 
     def counted(*args, **kw):
         strides.append(args[4])
         return real(*args, **kw)
 
-    monkeypatch.setattr(pc, "source_lattice", counted)
+    monkeypatch.setattr(pc, "source_and_density", counted)
     pre = precompute([pm], desc.lights, desc.world, desc.camera, multiple=True,
                      multiple_resolution=25)
     msf = pre.multiple[0][0]

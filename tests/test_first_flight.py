@@ -6,6 +6,7 @@ import pytest
 
 from mpp_render import firstflight as ff
 from mpp_render.kernels_np import level_paths, level_table, table_lookup
+from mpp_render.parallel import Cancelled
 from mpp_render.phase import delta_fraction, delta_g, hg, outside_peak, peak_cone_cos
 
 
@@ -293,7 +294,7 @@ def test_stiff_flights_stay_finite(g, sigma):
 
 def test_the_flights_are_the_same_on_any_number_of_threads_and_stop_on_esc():
     """The camera directions' convolutions run on threads and are added in order: the same
-    bits on 1 and 3 threads; Esc (should_cancel) at any point returns None, without a hang."""
+    bits on 1 and 3 threads; Esc (should_cancel) at any point raises Cancelled, without a hang."""
     n = (20, 12, 12)
     q, inside, axes, dirs = beam_box(n)
     rng = np.random.default_rng(0)
@@ -319,4 +320,5 @@ def test_the_flights_are_the_same_on_any_number_of_threads_and_stop_on_esc():
             calls[0] += 1
             return calls[0] > k
 
-        assert ff.first_flight(*args, should_cancel=esc, threads=3) is None
+        with pytest.raises(Cancelled):
+            ff.first_flight(*args, should_cancel=esc, threads=3)

@@ -1,5 +1,7 @@
 """A mesh volume's light pyramids summed once over levels and lights (march.flatten_levels):
 the march reads one level instead of every level of every light, and renders what it did."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -26,13 +28,13 @@ def scene(projection="PERSP"):
 
 
 @pytest.mark.parametrize("projection", ["PERSP", "ORTHO"])
-def test_flattened_pyramids_render_what_the_levels_did(projection, monkeypatch):
+def test_flattened_pyramids_render_what_the_levels_did(projection):
     # the exact first flight (firstflight.py) joins only the flattened level: compare the walk
-    from mpp_render import firstflight
-    monkeypatch.setattr(firstflight, "ENABLED", False)
     desc = scene(projection)
+    walk = replace(desc.settings.tuning, first_flights=False)
+    desc.settings = replace(desc.settings, tuning=walk)
     flat = render(desc).passes["Volume Multiple"][..., :3]
-    monkeypatch.setattr(march, "FLATTEN", False)
+    desc.settings = replace(desc.settings, tuning=replace(walk, flatten=False))
     levels = render(desc).passes["Volume Multiple"][..., :3]
     lit = levels.sum(axis=2) > 0.05 * levels.sum(axis=2).max()
     rel = np.abs(flat - levels)[lit] / levels[lit]

@@ -49,7 +49,7 @@ def peak_fields(pm, light):
     """(pre, tau, tau*, peak): the precompute with multiple scattering on, and per voxel the
     optical depths to the light through the medium and the delta-scaled medium and the
     forward peak's light (W/m^2) the beam channels hold."""
-    from mpp_render.precompute import light_optical_depth
+    from mpp_render.precompute.lightdepth import light_optical_depth
     pre = precompute([pm], [light], World(), CAM, multiple=True)
     c, b = pre.layout.light_channels[0], pre.layout.beam_channels[0]
     f = pre.fields[0]

@@ -43,7 +43,7 @@ def test_lookup_interpolates_between_levels_and_keeps_constants():
 
 def test_upsample_matches_trilinear():
     from mpp_render.media import trilinear
-    from mpp_render.precompute import upsample
+    from mpp_render.kernels_np import upsample
     rng = np.random.default_rng(2)
     lat = rng.random((5, 6, 4, 3)).astype(np.float32)
     for stride in (1, 2, 3):
@@ -96,7 +96,7 @@ def test_lattice_values_read_what_trilinear_reads():
     """precompute.lattice_values (the density at the pyramid's lattice points) equals
     media.trilinear at those whole-voxel points, zero on the last plane and beyond."""
     from mpp_render.media import trilinear
-    from mpp_render.precompute import lattice_index, lattice_shape, lattice_values
+    from mpp_render.precompute.lattice import lattice_index, lattice_shape, lattice_values
     rng = np.random.default_rng(2)
     for shape, stride in (((20, 17, 9), 2), ((16, 16, 16), 3), ((5, 6, 7), 1)):
         f = rng.random(shape + (5,)).astype(np.float32) + 0.5

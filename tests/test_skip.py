@@ -80,7 +80,7 @@ def test_optical_depth_clipped_to_the_media_is_the_twins_and_the_exit_distance()
     """``clip`` cuts each ray where it leaves the last medium's box: the same as handing the
     kernel the exit distance of media.union_interval, in both twins."""
     from mpp_render import kernels_np
-    from mpp_render.precompute import _exit_distance
+    from mpp_render.precompute.lightdepth import _exit_distance
     rng = np.random.default_rng(11)
     media = []
     for k, sharp in enumerate((False, True)):

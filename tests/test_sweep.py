@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from mpp_render import kernels, kernels_np
-from mpp_render import precompute as P
+from mpp_render.precompute import lattice, precompute
+from mpp_render.precompute import lightdepth as P
 from mpp_render.media import prepare
 from mpp_render.scene import Light, Medium, Surface
 from mpp_render.surfaces import prepare_surfaces
@@ -149,7 +150,7 @@ def test_sweep_matches_the_exact_march_on_a_cloud_and_a_box(li, combo):
     step = min(m.voxel_size for m in media)
     light = lights()[li]
     for pm in media:
-        flat, pts = P.needed_points(pm)
+        flat, pts = lattice.needed_points(pm)
         exact = P.light_optical_depth(media, light, pts, step / 4)
         f = np.zeros(pm.grid.shape + (4,), np.float32)
         assert P.sweep_light(media, pm, light, f, 1, step) is True
@@ -175,7 +176,7 @@ def test_surfaces_shadow_the_sweep_as_the_exact_march():
     surf = prepare_surfaces([roof, ground])
     for light in (Light("SUN", "sun", np.ones(3), direction=np.array([0.2, 0.1, -0.97])),
                   Light("POINT", "pt", np.ones(3), position=np.array([2.1, 0.0, 0.6]))):
-        flat, pts = P.needed_points(pm)
+        flat, pts = lattice.needed_points(pm)
         exact = P.light_optical_depth([pm], light, pts, pm.voxel_size / 4, surfaces=surf)
         f = np.zeros(pm.grid.shape + (4,), np.float32)
         assert P.sweep_light([pm], pm, light, f, 1, pm.voxel_size, surfaces=surf,
@@ -225,10 +226,10 @@ def test_lights_that_cannot_be_swept_fall_back_to_the_exact_march():
     pm = prepare(smooth_cloud(n=10))
     far = Light("POINT", "far", np.full(3, 1e30), position=np.array([1e12, 0.0, 0.0]))
     f = np.zeros(pm.grid.shape + (4,), np.float32)
-    assert P.sweep_light([pm], pm, far, f, 1, pm.voxel_size) is None
+    assert P.sweep_light([pm], pm, far, f, 1, pm.voxel_size) is False
     cam = Camera("ORTHO", np.eye(4), 4, 4, (-1, 1, -1, 1))
-    pre = P.precompute([pm], [far], World(np.zeros(3)), cam)
-    flat, pts = P.needed_points(pm)
+    pre = precompute([pm], [far], World(np.zeros(3)), cam)
+    flat, pts = lattice.needed_points(pm)
     got = pre.fields[0].reshape(-1, pre.layout.channels)[flat, 1:4]
     want = P.light_optical_depth([pm], far, pts, pm.voxel_size)
     assert np.allclose(got, want, rtol=1e-5, atol=1e-6) and got.max() > 0.1
@@ -247,7 +248,7 @@ def test_voxels_near_sharp_surfaces_as_a_full_interpolation_finds_them():
         want = np.zeros(pm.grid.shape, bool)
         if pm.sharp:
             inside = pm.grid >= pm.threshold
-            want |= inside & P._dilate(~inside)
+            want |= inside & lattice.dilate(~inside)
         ijk = np.stack(np.meshgrid(*[np.arange(n, dtype=np.float64) for n in pm.grid.shape],
                                    indexing="ij"), -1).reshape(-1, 3)
         world = ijk @ pm.i2w[:3, :3].T + pm.i2w[:3, 3]
@@ -256,7 +257,7 @@ def test_voxels_near_sharp_surfaces_as_a_full_interpolation_finds_them():
                 continue
             ins = (trilinear(m.grid, world @ m.w2i[:, :3].T + m.w2i[:, 3]) >= m.threshold)
             ins = ins.reshape(pm.grid.shape)
-            want |= P._dilate(ins) & P._dilate(~ins)
+            want |= lattice.dilate(ins) & lattice.dilate(~ins)
         assert got.size > 0 and np.array_equal(got, np.flatnonzero(want))
     step = min(m.voxel_size for m in (cloud, box))
     light = lights()[0]

@@ -6,7 +6,7 @@ import pytest
 from mpp_render import worldfog
 from mpp_render.camera import primary_rays
 from mpp_render.media import prepare
-from mpp_render.precompute import soft_visibility
+from mpp_render.precompute.lightdepth import soft_visibility
 from mpp_render.render import render
 from mpp_render.scene import (Camera, Light, Medium, SceneDescription, Settings, Surface,
                               World)
@@ -163,7 +163,7 @@ def test_surface_shadow_on_the_fog_grid_is_prefiltered():
 
 def test_forward_scattering_fog_spreads_its_peak_with_multiple_scattering():
     """World fog with a forward peak (g 0.7) and multiple scattering on: the forward peak's
-    light (precompute.peak_light) is made on the fog's own grid, beyond it from the fog's
+    light (precompute.source.peak_light) is made on the fog's own grid, beyond it from the fog's
     analytic depth; the render is finite and the peak's light adds to Volume Multiple."""
     f = fog(sigma_s=(0.2, 0.2, 0.2), sigma_a=(0.02, 0.02, 0.02), g=0.7)
     m = np.array([[0.0, 0, -1, -6], [0, 1, 0, 0], [1, 0, 0, 0], [0, 0, 0, 1]])  # -Z along +x
@@ -175,7 +175,7 @@ def test_forward_scattering_fog_spreads_its_peak_with_multiple_scattering():
     out = render(desc)
     ms = out.passes["Volume Multiple"][..., :3]
     assert np.all(np.isfinite(ms)) and ms.mean() > 0
-    import mpp_render.precompute as pc
+    import mpp_render.precompute.run as pc
     orig = pc.peak_light
     try:   # the peak's light taken away: less multiply scattered light
         pc.peak_light = lambda *a, **k: (lambda r: (0 * r[0], r[1]))(orig(*a, **k))

@@ -1,6 +1,6 @@
 """Light escaping through a medium's surface: the survival of the light pyramid's walk.
 
-The pyramid (pyramid.py) spreads the first-scattering source with Gaussians as if the
+The pyramid (mpp_render/pyramid.py) spreads the first-scattering source with Gaussians as if the
 medium filled space: a path that leaves the medium comes back.  In a real medium it leaves
 for good.  Diffusion theory places the loss at the *extrapolated boundary*, a distance
 
@@ -30,8 +30,9 @@ from typing import Callable
 
 import numpy as np
 
-from . import kernels
-from .media import PreparedMedium
+from .. import kernels
+from ..media import PreparedMedium
+from .lattice import lattice_points
 
 MILNE_EXTRAPOLATION = 0.7104  # z_b sigma_tr' for a medium without index mismatch
 MAX_REACH = 24  # lattice cells beyond the medium searched for its nearest point
@@ -81,7 +82,6 @@ def survival(pm: PreparedMedium, occupied: np.ndarray, stride: int, h: float, z_
     w2i = pm.w2i[:3, :3]
 
     def keep(k: int, shape) -> np.ndarray:
-        from .precompute import lattice_points
         idx, x = lattice_points(pm, shape, stride * 2 ** k)
         q = idx * float(2 ** k) + pad
         if drifts[k] != 0.0:

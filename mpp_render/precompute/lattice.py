@@ -1,0 +1,102 @@
+"""Lattices on a medium's padded grid: the voxels the precompute fills (``needed_flat``),
+the lattices ``stride`` voxels apart of the light pyramid (``walk_lattice``) and of the world
+light (``coarse_lattice``); index coordinates to world positions: PreparedMedium.to_world.
+
+Index coordinates count padded-grid voxels from the grid's origin; a lattice ``stride``
+voxels apart has its point ``idx`` at index ``idx * stride``; lattices are in C order (the
+order of ``reshape(-1)``).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..media import PreparedMedium
+
+
+MULTIPLE_RESOLUTION = 64  # lattice points along the longest side for the light pyramid
+
+
+def needed_flat(pm: PreparedMedium):
+    """Flat indices of the padded grid points whose trilinear neighbourhood holds non-zero
+    density: every point of a cell with a non-zero corner (the 3x3x3 dilation of the
+    occupied points, diagonal neighbours included)."""
+    return np.flatnonzero(dilate(pm.grid > 0.0))
+
+
+def grid_points(pm: PreparedMedium, flat):
+    """World positions (N,3) of the padded grid points with flat indices ``flat``."""
+    ijk = np.stack(np.unravel_index(flat, pm.grid.shape), axis=1).astype(np.float64)
+    return pm.to_world(ijk)
+
+
+def needed_points(pm: PreparedMedium):
+    """``needed_flat`` and the world positions of those points."""
+    flat = needed_flat(pm)
+    return flat, grid_points(pm, flat)
+
+
+def lattice_shape(shape, stride: int) -> tuple:
+    """Points along each axis of a lattice ``stride`` voxels apart that covers a grid of
+    ``shape`` (its last point at or beyond the grid's last voxel)."""
+    return tuple((s - 1 + stride - 1) // stride + 1 for s in shape)
+
+
+def walk_lattice(pm: PreparedMedium, resolution: int = MULTIPLE_RESOLUTION):
+    """(stride, shape, h) of the light pyramid's lattice on ``pm``: about ``resolution``
+    points along the grid's longest side, never finer than the voxels; h its spacing, m."""
+    stride = max(1, int(np.ceil(max(pm.grid.shape) / max(int(resolution), 2))))
+    h = stride * float(np.cbrt(abs(np.linalg.det(pm.i2w[:3, :3]))))
+    return stride, lattice_shape(pm.grid.shape, stride), h
+
+
+def lattice_points(pm: PreparedMedium, shape, spacing: int):
+    """(index coordinates (N,3), world positions (N,3, m)) of a lattice of ``shape`` whose
+    points lie ``spacing`` padded-grid voxels apart from the grid's origin (a pyramid level k:
+    stride 2^k), in C order."""
+    idx = lattice_index(shape)
+    return idx, pm.to_world(idx * float(spacing))
+
+
+def lattice_values(grid: np.ndarray, idx: np.ndarray, stride: int) -> np.ndarray:
+    """``grid`` (X,Y,Z) at the lattice points ``idx`` (N,3 index coordinates, ``stride``
+    voxels apart): the voxel itself, as media.trilinear reads a whole-voxel point, and 0 on
+    the grid's last plane and beyond (trilinear's outside), without reading every channel of
+    a field eight times."""
+    ijk = idx.astype(np.int64) * int(stride)
+    ok = np.all(ijk < np.array(grid.shape[:3]) - 1, axis=1)
+    flat = np.ravel_multi_index(tuple(np.where(ok[:, None], ijk, 0).T), grid.shape[:3])
+    return np.where(ok, grid.reshape(-1)[flat], 0.0)
+
+
+def lattice_index(shape) -> np.ndarray:
+    """Index coordinates (N,3) float64 of every point of a lattice of ``shape`` (3 ints), in
+    C order (the order of ``reshape(-1)``)."""
+    return np.stack(np.unravel_index(np.arange(int(np.prod(shape))), tuple(shape)),
+                    axis=1).astype(np.float64)
+
+
+def dilate(mask):
+    """3x3x3 dilation of a boolean grid (its outer layer is padding: np.roll's wrap is harmless)."""
+    for ax in range(3):
+        mask = mask | np.roll(mask, 1, axis=ax) | np.roll(mask, -1, axis=ax)
+    return mask
+
+
+def coarse_lattice(pm: PreparedMedium, stride: int):
+    """Index points of ``pm``'s padded grid taken every ``stride`` voxels (covering the whole
+    grid) whose neighbourhood of radius ``stride`` holds density.  Returns (shape, flat
+    indices into that coarse shape, world positions (K,3))."""
+    shape = lattice_shape(pm.grid.shape, stride)
+    occ = pm.grid > 0.0
+    dil = occ.copy()
+    for ax in range(3):
+        acc = dil.copy()
+        for s in range(1, stride + 1):
+            acc |= np.roll(dil, s, axis=ax) | np.roll(dil, -s, axis=ax)
+        dil = acc
+    sub = np.zeros(shape, bool)
+    picked = dil[::stride, ::stride, ::stride]
+    sub[:picked.shape[0], :picked.shape[1], :picked.shape[2]] = picked
+    flat = np.flatnonzero(sub)
+    ijk = np.stack(np.unravel_index(flat, shape), axis=1).astype(np.float64) * stride
+    return shape, flat, pm.to_world(ijk)

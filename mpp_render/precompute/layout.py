@@ -1,0 +1,82 @@
+"""The channel layout of a medium's field array (X, Y, Z, C) float32, defined here once:
+the precompute fills it, the cache patches its parts, the march reads it.
+
+In order: channel 0 the density; per lit light 3 channels of RGB optical depth to it; with
+multiple scattering in a forward-scattering medium per lit light 3 channels of its forward
+peak's light; with a lit world 3 channels of world light, then with multiple scattering 3 of
+its multiply scattered part; last, for a medium with an emission grid only, 3 channels of its
+emitted radiance.  The world's and the emission's channels run to the end of the field
+(``world_first``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import List, Optional, Sequence
+
+import numpy as np
+
+from ..lights import is_dark
+from ..media import PreparedMedium, delta_scaled
+
+
+@dataclass
+class FieldLayout:
+    """Channel offsets in a medium's field array.  ``light_channels[i]`` is the offset of
+    light i's optical depth, or None when the light is skipped (dark).  ``channels``: the
+    channels every medium's field has; ``emission_channels[m]``: the offset of medium m's
+    emission grid (its field then has ``channels + 3``), or None.  ``beam_channels[i]``
+    (multiple scattering on, some medium with a forward peak): the offset of light i's
+    forward peak's light (W/m^2, ``peak_light``: what has scattered into the peak and not
+    out of it, spread sideways), first the optical depth through the delta-scaled media
+    (media.delta_scaled) from which it is made; right after the lights' channels."""
+
+    light_channels: List[Optional[int]]
+    ambient_channel: Optional[int]
+    channels: int
+    ambient_multiple_channel: Optional[int] = None
+    emission_channels: Optional[List[Optional[int]]] = None
+    beam_channels: Optional[List[Optional[int]]] = None
+
+    @property
+    def world_first(self) -> Optional[int]:
+        """The first world-light channel (the world's and the emission's run to the end of
+        the field), or None with an unlit world."""
+        return self.ambient_channel
+
+
+def light_channels(lights) -> List[Optional[int]]:
+    """The optical-depth channel of each light (None for a dark light): 1, 4, 7, ..."""
+    out, c = [], 1
+    for light in lights:
+        if is_dark(light):
+            out.append(None)
+        else:
+            out.append(c)
+            c += 3
+    return out
+
+
+def field_layout(media: Sequence[PreparedMedium], lights, world_color, multiple: bool,
+                 delta: Optional[Sequence[PreparedMedium]] = None) -> FieldLayout:
+    """The layout of the fields the precompute gives ``media`` lit by ``lights`` and a world
+    of colour ``world_color``, with or without ``multiple`` scattering.  ``delta``: the
+    media delta-scaled (media.delta_scaled), where the caller has them."""
+    chans = light_channels(lights)
+    c = 1 + 3 * sum(ch is not None for ch in chans)
+    beams = [None] * len(lights)
+    delta = [delta_scaled(pm) for pm in media] if delta is None else delta
+    if multiple and any(d is not pm for d, pm in zip(delta, media)):
+        for i in range(len(lights)):
+            if chans[i] is not None:
+                beams[i] = c
+                c += 3
+    amb = c if np.any(np.asarray(world_color) > 0) else None
+    amb_ms = None
+    if amb is not None:
+        c += 3
+        if multiple:
+            amb_ms = c
+            c += 3
+    return FieldLayout(chans, amb, c, amb_ms,
+                       [c if pm.emission_grid is not None else None for pm in media],
+                       beams if any(b is not None for b in beams) else None)

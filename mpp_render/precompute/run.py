@@ -1,0 +1,145 @@
+"""The precompute's entry: every medium's field (layout.py) and, with multiple scattering, the
+light pyramids (lightpyramid.py), stage by stage."""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable, List, Optional
+
+import numpy as np
+
+from .. import kernels
+from ..media import PreparedMedium, delta_scaled, density_from
+from ..parallel import check
+from ..scene import Camera, Light, Tuning, World
+from .lattice import MULTIPLE_RESOLUTION, grid_points, needed_flat
+from .layout import FieldLayout, field_layout
+from .lightdepth import (SHADOW_TAU, light_optical_depth, near_sharp_surfaces, soft_visibility,
+                         split_fog, sweep_light)
+from .lightpyramid import multiple_field
+from .source import peak_light
+from .worldlight import fill_world_light
+
+
+@dataclass
+class Precomputed:
+    """``fields``: per medium (X,Y,Z,C) float32 (layout.py); ``multiple``: per medium, per
+    light, a MultipleField or None (multiple scattering off, dark light, or no scattering)."""
+
+    fields: List[np.ndarray]
+    layout: FieldLayout
+    multiple: list = field(default_factory=list)
+    seconds: float = 0.0
+    stats: dict = field(default_factory=dict)
+
+
+def precompute(media: List[PreparedMedium], lights: List[Light], world: World, camera: Camera,
+               n_dirs: int = 64, step_factor: float = 1.0, seed: int = 0,
+               should_cancel: Optional[Callable[[], bool]] = None,
+               progress: Optional[Callable[[float, str], None]] = None,
+               surfaces=None, threads: int = 0, multiple: bool = False,
+               multiple_resolution: int = MULTIPLE_RESOLUTION,
+               tuning: Tuning = Tuning()) -> Precomputed:
+    """Field arrays for every medium, and with ``multiple`` the light pyramids; raises
+    parallel.Cancelled when ``should_cancel`` says so.  ``surfaces`` (a SurfaceSet or None)
+    shadow the lights and the sky.  Media that cannot scatter (sigma_s = 0) get no
+    multiple-scattering data.  ``tuning``: the
+    method's knobs (scene.Tuning, with the Settings)."""
+    t_start = time.perf_counter()
+    delta = [delta_scaled(pm) for pm in media]
+    layout = field_layout(media, lights, world.color, multiple, delta)
+    chans, beams = layout.light_channels, layout.beam_channels or [None] * len(lights)
+    c = layout.channels
+    ms_all = []
+    step = step_factor * min(pm.voxel_size for pm in media) if media else 1.0
+    solid, fog = split_fog(media)
+    fog_st = None if fog is None else fog.sigma_t
+    delta_of = {id(pm): d for pm, d in zip(media, delta)}
+    solid_delta = [delta_of[id(pm)] for pm in solid]
+    fog_delta = None if fog is None else delta_of[id(fog)].sigma_t
+    shadowed = surfaces is not None and not surfaces.empty
+    fields = []
+    n_pts = 0
+    n_ambient = 0
+    for mi, pm in enumerate(media):
+        cm = c if pm.emission_grid is None else c + 3
+        f = np.zeros(pm.grid.shape + (cm,), np.float32)
+        f[..., 0] = pm.grid
+        if pm.emission_grid is not None:
+            f[..., c:c + 3] = pm.emission_grid
+        flat = needed_flat(pm)
+        n_pts += len(flat)
+        pts = grid_points(pm, flat) if shadowed or fog is not None else None
+        view = f.reshape(-1, cm)
+        sharp = None
+        if layout.beam_channels is not None:   # the medium's mean sigma_s, for peak_light
+            rho = density_from(pm.grid.reshape(-1)[flat], pm.threshold)
+            occ = rho[rho > 0]
+            mean_ss = float(np.mean(pm.sigma_s)) * (float(occ.mean()) if occ.size else 0.0)
+        for li, light in enumerate(lights):
+            if chans[li] is None:
+                continue
+            if progress:
+                progress(0.0, f"Light attenuation: {light.name} on {pm.medium.name}")
+            # the unscattered beam through the media, then (multiple scattering with a forward
+            # peak) the beam of unscattered and forward-scattered light: the same optical depth
+            # through the delta-scaled media, the surfaces as opaque
+            for ch, through, own, through_fog in ((chans[li], solid, pm, fog_st),
+                                                  (beams[li], solid_delta, delta[mi], fog_delta)):
+                if ch is None:
+                    continue
+                swept = False
+                if pm is not fog:
+                    if sharp is None and (own.sharp or any(m.sharp for m in through)):
+                        # the same voxels for every light and for the delta-scaled media
+                        sharp = near_sharp_surfaces(own, through)
+                    swept = sweep_light(through, own, light, f, ch, step, surfaces=surfaces,
+                                        threads=threads, should_cancel=should_cancel,
+                                        needed=None if pts is None else (flat, pts),
+                                        fog_sigma_t=through_fog, sharp=sharp, tuning=tuning)
+                if not swept:  # the fog, or not sweepable: march from every needed voxel
+                    pts = grid_points(pm, flat) if pts is None else pts
+                    tau = light_optical_depth(through, light, pts, step,
+                                              should_cancel=should_cancel,
+                                              surfaces=None if pm is fog else surfaces,
+                                              threads=threads, fog_sigma_t=through_fog,
+                                              tuning=tuning)
+                    if pm is fog and shadowed:
+                        vis = soft_visibility(surfaces, light, pm, flat, pts, threads=threads,
+                                              should_cancel=should_cancel)
+                        tau = tau - np.log(np.maximum(vis, np.exp(-SHADOW_TAU)))[:, None]
+                    view[flat, ch:ch + 3] = tau
+            if beams[li] is not None:
+                # the beam channels: from the beam's optical depth to the forward peak's own
+                # light, spread sideways (W/m^2)
+                peak = peak_light(pm, f, light, chans[li], beams[li], mean_ss, flat, step,
+                                  multiple_resolution, should_cancel, fog=pm is fog,
+                                  tuning=tuning)
+                kernels.get("upsample_into")(f, beams[li], peak[0], peak[1], flat)
+        if layout.ambient_channel is not None:
+            if progress:
+                progress(0.0, f"World light on {pm.medium.name}")
+            got = fill_world_light(f, (layout.ambient_channel, layout.ambient_multiple_channel),
+                                   solid, pm, world, camera, flat, n_dirs, 2.0 * step,
+                                   seed=seed + mi, should_cancel=should_cancel,
+                                   surfaces=surfaces, threads=threads, tuning=tuning)
+            n_ambient += got
+        ms = [None] * len(lights)
+        if multiple and np.any(pm.sigma_s > 0):
+            for li, light in enumerate(lights):
+                if chans[li] is None:
+                    continue
+                if progress:
+                    progress(0.0, f"Light pyramid: {light.name} on {pm.medium.name}")
+                # the walk starts where the beam of unscattered and forward-scattered light
+                # first scatters out of the forward peak (docs/method.md, "The forward peak")
+                ms[li] = multiple_field(delta[mi], f, light, chans[li], camera, beam=beams[li],
+                                        resolution=multiple_resolution,
+                                        should_cancel=should_cancel, g_last=float(pm.g),
+                                        threads=threads, tuning=tuning)
+                check(should_cancel)
+        ms_all.append(ms)
+        fields.append(f)
+    return Precomputed(fields, layout, ms_all, time.perf_counter() - t_start,
+                       {"points": n_pts, "ambient_points": n_ambient,
+                        "backend": kernels.backend()})

@@ -1,0 +1,297 @@
+"""The first-scattering source Q = sigma_s E exp(-tau) (W/m^3) on a lattice: where every
+multiply scattered path starts (``restricted_source``: the voxels' power shared among the
+lattice points; ``source_and_density``: with the cells round a point light averaged and the
+density at the lattice points), and the light of the forward peak beside the unscattered beam
+(``peak_light``, W/m^2), both on the walk's lattice or one finer (``fine_stride``).
+"""
+from __future__ import annotations
+
+from typing import Callable, Optional
+
+import numpy as np
+
+from .. import pyramid
+from ..firstflight import fft_shape
+from ..lights import incident, irradiance, outside_spot, towards_light
+from ..media import PreparedMedium, delta_scaled, density_from
+from ..parallel import check
+from ..phase import delta_fraction, peak_msa
+from ..scene import Light, Tuning
+from ..worldfog import optical_depth as fog_optical_depth
+from .lattice import (MULTIPLE_RESOLUTION, dilate, lattice_index, lattice_points, lattice_shape,
+                      lattice_values, walk_lattice)
+from .lightdepth import light_optical_depth
+
+
+PEAK_PAD = 4  # lattice points beyond the grid where peak_light follows the light on
+NEAR_LIGHT_CELLS = 3  # lattice cells around a point or spot light whose source is averaged
+
+
+def near_light_cells(pm: PreparedMedium, light: Light, stride: int, shape) -> np.ndarray:
+    """Flat indices of the pyramid lattice cells within ``NEAR_LIGHT_CELLS`` cells of a point
+    or spot light inside (or next to) the medium's grid."""
+    c = pm.to_index(np.asarray(light.position, np.float64)) / stride
+    lo = np.maximum(np.floor(c - NEAR_LIGHT_CELLS).astype(int), 0)
+    hi = np.minimum(np.ceil(c + NEAR_LIGHT_CELLS).astype(int), np.array(shape) - 1)
+    if np.any(hi < lo):
+        return np.zeros(0, np.int64)
+    g = np.stack(np.meshgrid(*[np.arange(a, b + 1) for a, b in zip(lo, hi)], indexing="ij"), -1)
+    return np.ravel_multi_index(tuple(g.reshape(-1, 3).T), shape)
+
+
+def first_scattering(pm: PreparedMedium, rho, e, tau, peak=None) -> np.ndarray:
+    """The power per volume (W/m^3, (N,3)) the light's unscattered beam scatters at points of
+    density ``rho`` (N,), irradiance ``e`` (N,3, W/m^2) and optical depth ``tau`` (N,3) from
+    the light: Q = rho sigma_s E exp(-tau), where every multiply scattered path starts; with
+    the forward peak's light ``peak`` (N,3, W/m^2, ``peak_light``) beside the unscattered
+    light, Q = rho sigma_s (E exp(-tau) + peak) (``pm`` then the delta-scaled medium)."""
+    light = e * np.exp(-np.asarray(tau, np.float64))
+    if peak is not None:
+        light = light + np.asarray(peak, np.float64)
+    return (np.asarray(rho)[:, None] * pm.sigma_s[None, :]) * light
+
+
+def cell_mean_irradiance(light: Light, pts, cell: np.ndarray, n: int = 2,
+                         cull: bool = True) -> np.ndarray:
+    """The light's irradiance (W/m^2, (N,3)) averaged over the lattice cells centred on
+    ``pts`` (N,3, m) with edges the columns of ``cell`` (3,3, m): n^3 points each (midpoint
+    rule).  A spot's cone narrower than the lattice (fog_beam's is 0.2 m wide where it
+    enters, two lattice spacings) read at the points alone is over- or under-counted as the
+    lattice falls; a sun's irradiance is the same everywhere and read once, and an area
+    light's is already its emitter's integral (lights.area_incident), read once.  Cells
+    wholly outside a spot's cone (``lights.outside_spot``) are 0 without a read (``cull``;
+    the same result, faster: Tuning.spot_cull)."""
+    if light.kind in ("SUN", "AREA"):
+        return irradiance(light, pts)
+    pts = np.asarray(pts, np.float64).reshape(-1, 3)
+    cell = np.asarray(cell, np.float64)
+    corner = 0.5 * float(np.linalg.norm(np.abs(cell).sum(axis=1)))   # m, a bound
+    lit = np.flatnonzero(~outside_spot(light, pts, corner)) if cull else \
+        np.arange(len(pts))
+    if lit.size < len(pts):
+        out = np.zeros((len(pts), 3))
+        if lit.size:
+            out[lit] = cell_mean_irradiance(light, pts[lit], cell, n, cull)
+        return out
+    t = (np.arange(n) + 0.5) / n - 0.5
+    offs = np.stack(np.meshgrid(t, t, t, indexing="ij"), -1).reshape(-1, 3) @ cell.T
+    acc = np.zeros((len(pts), 3))
+    for o in offs:
+        acc += irradiance(light, pts + o)
+    return acc / len(offs)
+
+
+def peak_light(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int, beam: int,
+               mean_sigma_s: float, flat, step: float,
+               resolution: int = MULTIPLE_RESOLUTION,
+               should_cancel: Optional[Callable[[], bool]] = None, fog: bool = False,
+               tuning: Tuning = Tuning()):
+    """The light of the forward peak, W/m^2: what has scattered into the peak
+    (phase.delta_fraction) and not yet out of it, spread sideways as the peak's angles take
+    it (docs/method.md, "The forward peak spreads").  Returns (lattice (X,Y,Z,3) float32,
+    stride): on a lattice ``stride`` voxels apart, about ``resolution`` points along the
+    grid's longest side (finer where ``fine_stride`` says so), for
+    ``kernels.upsample_into``; raises parallel.Cancelled when ``should_cancel`` says so.
+
+    Along a line from the light the beam's light beyond the unscattered light is
+    B = E (exp(-tau*) - exp(-tau)) (``fld``'s ``beam`` and ``channel`` optical depths at the
+    voxels ``flat`` where they were computed; elsewhere, also beyond the grid, through
+    ``pm`` and its delta-scaled self alone, marched with ``step`` m, or for the world's
+    ``fog`` sigma_t x distance, so that the light that has left the medium goes on).  Light that scattered into the peak at a distance s'
+    from where the line entered the medium is off the line by about theta (s - s') at s,
+    theta^2 the peak's mean squared angle (phase.peak_msa); with the scatterings spread
+    evenly along the way, the spread per axis is w^2 = (theta^2 / 2) (s^2 / 3) [m^2],
+    s = (tau - tau*) / (f sigma_s) (m; the medium's mean sigma_s ``mean_sigma_s``, 1/m).
+    That is the first scattering's spread: later scatterings into the peak are the walk's
+    (the delta-scaled walk carries the whole transport of the phase function).  B is
+    blurred by that width, read from a pyramid of Gaussians: beside a narrow beam the peak's
+    light lights the medium, and beside a medium's sides it has left through them."""
+    stride, _, h = walk_lattice(pm, resolution)
+    fine = fine_stride(pm, stride, tuning)
+    stride, shape, h = fine, lattice_shape(pm.grid.shape, fine), h * fine / stride
+    f = delta_fraction(pm.g)
+    per_metre = np.sqrt(peak_msa(pm.g) / 6.0)   # w / s, the first turn's spread per axis
+    pad = 0
+    if f > 0.0 and mean_sigma_s > 0.0:   # room for the widest spread beyond the grid
+        sub = fld[::stride, ::stride, ::stride]   # the lattice's points, a view
+        deepest = np.nan_to_num(float(np.max(sub[..., channel:channel + 3]
+                                             - sub[..., beam:beam + 3])), nan=0.0, posinf=1e30)
+        reach = 3.0 * per_metre * max(deepest, 0.0) / (f * mean_sigma_s)
+        pad = int(min(np.ceil(reach / h), PEAK_PAD))
+    ext = tuple(n + 2 * pad for n in shape)
+    idx = lattice_index(ext) - pad
+    pts = pm.to_world(idx * float(stride))
+    ijk = idx.astype(np.int64) * stride
+    inside = np.all((ijk >= 0) & (ijk < np.array(pm.grid.shape)), axis=1)
+    gflat = np.ravel_multi_index(tuple(np.where(inside[:, None], ijk, 0).T), pm.grid.shape)
+    known = np.zeros(pm.grid.size, bool)
+    known[flat] = True
+    known = inside & known[gflat]
+    tau = np.zeros((len(idx), 3))
+    tau_b = np.zeros((len(idx), 3))
+    v = fld.reshape(-1, fld.shape[-1])[gflat[known]]
+    tau[known] = v[:, channel:channel + 3]
+    tau_b[known] = v[:, beam:beam + 3]
+    # the light is needed where a blur reaches the medium: within ``pad`` points of it
+    near = known.reshape(ext)
+    for _ in range(pad):
+        near = dilate(near)
+    near = np.flatnonzero(near)
+    e = np.zeros((len(idx), 3))
+    e[near] = cell_mean_irradiance(light, pts[near], stride * pm.i2w[:3, :3],
+                                   cull=tuning.spot_cull)
+    rest = np.flatnonzero(~known & np.any(e > 0.0, axis=1))  # no light, no peak: no depth
+    if rest.size and f > 0.0:
+        for out, through in ((tau, pm), (tau_b, delta_scaled(pm))):
+            got = fog_optical_depth(through.sigma_t, towards_light(light, pts[rest])[1]) if fog \
+                else light_optical_depth([through], light, pts[rest], step,
+                                         should_cancel=should_cancel, tuning=tuning)
+            out[rest] = got
+    check(should_cancel)
+    b = e * np.maximum(np.exp(-tau_b) - np.exp(-tau), 0.0)
+    if f > 0.0 and mean_sigma_s > 0.0:
+        with np.errstate(invalid="ignore"):
+            n = np.mean(tau - tau_b, axis=1)
+        s = np.nan_to_num(np.maximum(n, 0.0), nan=0.0, posinf=1e30) / (f * mean_sigma_s)
+        width = per_metre * s
+        levels = pyramid.build(b.astype(np.float32).reshape(ext + (3,)), 10)
+        check(should_cancel)
+        core = np.all((idx >= 0) & (idx < np.array(shape)), axis=1)
+        b = pyramid.lookup(levels, idx[core] + pad, width[core], h)
+    return np.ascontiguousarray(b.reshape(shape + (3,)), np.float32), stride
+
+
+def cell_mean_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int,
+                     stride: int, shape, cells: np.ndarray,
+                     beam: Optional[int] = None) -> np.ndarray:
+    """The first-scattering source Q = sigma_s E exp(-tau) (W/m^3, (len(cells), 3)) averaged
+    over the voxels of each lattice cell in ``cells`` (the voxels nearest to the cell's
+    point), with a point light's E ~ 1/r^2 read as 1/max(r^2, R^2/3): the exact mean of
+    1/r^2 over the ball of one voxel's volume (radius R) centred on the light.  Next to a
+    point light the source varies too fast for one read at the lattice point: a light
+    inside a medium then lost 25-55 % of its first-scattered power to the pyramid."""
+    ci = np.stack(np.unravel_index(cells, shape), axis=1)
+    offs = np.stack(np.meshgrid(*[np.arange(stride) - stride // 2] * 3, indexing="ij"), -1).reshape(-1, 3)
+    ijk = (ci[:, None, :] * stride + offs[None]).reshape(-1, 3)
+    ok = np.all((ijk >= 0) & (ijk < np.array(pm.grid.shape)), axis=1)
+    flat = np.ravel_multi_index(tuple(np.where(ok[:, None], ijk, 0).T), pm.grid.shape)
+    pts = pm.to_world(ijk.astype(np.float64))
+    v = fld.reshape(-1, fld.shape[-1])[flat]
+    rho = np.where(ok, density_from(v[:, 0], pm.threshold), 0.0)
+    _, e = incident(light, pts)
+    vol = abs(np.linalg.det(pm.i2w[:3, :3]))
+    r_min2 = (3.0 * vol / (4.0 * np.pi)) ** (2.0 / 3.0) / 3.0
+    r2 = np.einsum("ij,ij->i", pts - light.position, pts - light.position)
+    held = max(float(light.radius), 1e-4) ** 2  # lights.light_sample's own floor on r^2
+    e = e * (np.maximum(r2, held) / np.maximum(r2, r_min2))[:, None]
+    q = first_scattering(pm, rho, e, v[:, channel:channel + 3],
+                         None if beam is None else v[:, beam:beam + 3])
+    return q.reshape(len(cells), len(offs), 3).mean(axis=1)
+
+
+def _tent_restrict(a: np.ndarray, axis: int, stride: int, n_out: int) -> np.ndarray:
+    """``a`` restricted along ``axis`` to every ``stride``-th point with the tent weights
+    (stride - |t|) / stride^2, t = -(stride-1)..stride-1 (zero beyond the ends): each point's
+    value shared among the lattice points around it in proportion to their nearness, so that
+    the sum times the lattice spacing keeps the sum times the voxel size."""
+    n = a.shape[axis]
+    pad = [(0, 0)] * a.ndim
+    pad[axis] = (stride - 1, stride * n_out - n + stride)
+    p = np.pad(a, pad)
+    out = 0.0
+    for i, t in enumerate(range(-(stride - 1), stride)):
+        sl = [slice(None)] * a.ndim
+        sl[axis] = slice(i, i + stride * n_out, stride)
+        out = out + ((stride - abs(t)) / float(stride * stride)) * p[tuple(sl)]
+    return out
+
+
+def restricted_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int,
+                   stride: int, shape, chunk: int = 16,
+                   should_cancel: Optional[Callable[[], bool]] = None,
+                   beam: Optional[int] = None) -> np.ndarray:
+    """The first-scattering source Q = sigma_s E exp(-tau) (W/m^3, (N,3) in the C order of
+    the lattice ``shape`` ``stride`` voxels apart) from every voxel of the field ``fld``
+    (optical depth at ``channel``), each voxel's power shared among the lattice points
+    around it (``_tent_restrict`` along each axis): the lattice holds the voxels' power, where
+    reading Q at the lattice points alone missed (or doubled) the thin layer a light lights
+    inside a dense medium's face as the lattice fell against it (docs/ms_resolution.md).
+    Stride 1 reads the voxels themselves.  Made ``chunk`` voxel planes at a time; raises
+    parallel.Cancelled when ``should_cancel`` says so between them."""
+    nx = pm.grid.shape[0]
+    rows = np.zeros((nx, shape[1], shape[2], 3))
+    flat_fld = fld.reshape(nx, -1, fld.shape[-1])
+    for a in range(0, nx, chunk):
+        check(should_cancel)
+        b = min(a + chunk, nx)
+        ijk = np.stack(np.meshgrid(np.arange(a, b), np.arange(pm.grid.shape[1]),
+                                   np.arange(pm.grid.shape[2]), indexing="ij"), -1).reshape(-1, 3)
+        v = flat_fld[a:b].reshape(-1, fld.shape[-1])
+        rho = density_from(v[:, 0], pm.threshold)
+        live = rho > 0.0
+        q = np.zeros((len(v), 3))
+        if np.any(live):
+            pts = pm.to_world(ijk[live].astype(np.float64))
+            e = irradiance(light, pts)
+            q[live] = first_scattering(pm, rho[live], e, v[live, channel:channel + 3],
+                                       None if beam is None else v[live, beam:beam + 3])
+        q = q.reshape((b - a,) + tuple(pm.grid.shape[1:]) + (3,))
+        if stride > 1:
+            q = _tent_restrict(_tent_restrict(q, 1, stride, shape[1]), 2, stride, shape[2])
+        rows[a:b] = q
+    if stride > 1:
+        rows = _tent_restrict(rows, 0, stride, shape[0])
+    return rows.reshape(-1, 3)
+
+
+def source_and_density(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int,
+                   stride: int, beam: Optional[int] = None,
+                   should_cancel: Optional[Callable[[], bool]] = None):
+    """(source (N,3) W/m^3, density (N,), points (N,3) m) on the lattice ``stride`` voxels
+    apart (C order of ``lattice_shape``): the first-scattering source of ``restricted_source``,
+    averaged over the cells round a point or spot light (``cell_mean_source``), and the
+    medium's density at the lattice points.  Raises parallel.Cancelled on Esc."""
+    shape = lattice_shape(pm.grid.shape, stride)
+    idx, pts = lattice_points(pm, shape, stride)
+    rho = density_from(lattice_values(fld[..., 0], idx, stride), pm.threshold)
+    base = restricted_source(pm, fld, light, channel, stride, shape, should_cancel=should_cancel,
+                          beam=beam)
+    if light.kind in ("POINT", "SPOT"):
+        near = near_light_cells(pm, light, stride, shape)
+        if near.size:
+            base[near] = cell_mean_source(pm, fld, light, channel, stride, shape, near, beam)
+    return base, rho, pts
+
+
+# What follows a narrow beam in a mesh volume -- the forward peak's light (peak_light) and
+# the exact first flights (firstflight.py) -- is computed on a lattice finer than the walk's
+# by Tuning.refine where the first flights' FFT on it stays within FINE_POINTS: round a beam a
+# few lattice steps wide their light is as narrow (fog_beam on the walk's 64 points: the
+# beam's axis 14 % too dark, its sides 60 % too bright; docs/method.md).  Larger grids, and
+# the media of varying density (VDB grids, the world's fog), whose first flights are the
+# walk's, keep the walk's lattice (the forward peak's light alone on the finer lattice took
+# smoke_plume's precompute from 1.8 s to 5.2 s for the same error).
+FINE_POINTS = 1 << 22
+
+
+def fine_stride(pm: PreparedMedium, stride: int, tuning: Tuning = Tuning()) -> int:
+    """The stride (voxels) of the lattice for the forward peak's light and the exact first
+    flights, for a walk on ``stride``: the largest divisor of ``stride`` at most
+    stride / ``tuning.refine`` (the walk's lattice points are then among its points,
+    march.flatten_levels), or ``stride`` itself where that is 1, the medium is not a mesh
+    volume (``pm.sharp``) or the finer lattice's FFT would exceed FINE_POINTS."""
+    if not pm.sharp:
+        return stride
+    fine = next((d for d in range(stride // tuning.refine, 0, -1) if stride % d == 0), stride)
+    n = int(np.prod(fft_shape(lattice_shape(pm.grid.shape, fine))))
+    return fine if n <= FINE_POINTS else stride
+
+
+def light_direction(light: Light, points) -> np.ndarray:
+    """The direction (N,3, unit) the light travels at ``points`` (N,3, m): radial from a point
+    or spot light, the axis of a sun or area light."""
+    points = np.asarray(points, np.float64).reshape(-1, 3)
+    if light.kind in ("SUN", "AREA"):
+        axis = np.asarray(light.direction, np.float64)
+        return np.tile(axis / np.linalg.norm(axis), (len(points), 1))
+    return -towards_light(light, points)[0]

@@ -1,0 +1,123 @@
+"""The world light: the RGB radiance the constant world background brings to each voxel
+after the phase function towards the camera and the attenuation through all media,
+A(x) = L_world * integral p(w_in . w_cam(x)) T(x, -w_in) dw_in, estimated with directions
+drawn from the phase lobe (so the estimate is the mean transmittance).  w_cam(x) points from x
+to the camera, which is exact for camera rays through x.  It is smooth: computed on a coarse
+lattice (``AMBIENT_RESOLUTION`` points along the grid's longest side) and interpolated to the
+voxels whose trilinear support touches non-zero density (lattice.needed_flat; the rest stay 0).
+"""
+from __future__ import annotations
+
+from typing import List
+
+import numpy as np
+
+from .. import kernels
+from ..camera import towards_camera
+from ..media import PreparedMedium
+from ..parallel import run_chunks
+from ..phase import sample_hg
+from ..scene import Camera, Tuning, World
+from ..surfaces import occluded
+from .lattice import coarse_lattice
+from .lightdepth import SHADOW_TAU, density_lengths
+
+
+AMBIENT_RESOLUTION = 32  # lattice points along the longest side for the world light
+WORLD_RNG_BLOCK = 1 << 11  # points sharing one random stream in world_light
+WORLD_CHUNK_RAYS = 1 << 14  # rays (points x directions) per world-light chunk, for a quick Esc
+
+
+def world_chunk(n_dirs: int) -> int:
+    """Points per world-light chunk: at most ``WORLD_CHUNK_RAYS`` rays, a power of two that
+    divides ``WORLD_RNG_BLOCK`` (at least 16 points)."""
+    chunk = WORLD_RNG_BLOCK
+    while chunk > 16 and chunk * max(1, int(n_dirs)) > WORLD_CHUNK_RAYS:
+        chunk //= 2
+    return chunk
+
+
+def _block_uniforms(seed, a, b):
+    """(b - a, 2) uniforms for points a..b-1: point i takes row i mod WORLD_RNG_BLOCK of the
+    stream seeded by (seed, 7919, start of its block), so the numbers do not depend on how
+    the points are cut into chunks."""
+    parts = []
+    s = a
+    while s < b:
+        block = s - s % WORLD_RNG_BLOCK
+        e = min(b, block + WORLD_RNG_BLOCK)
+        rows = np.random.default_rng([seed, 7919, block]).random((e - block, 2))
+        parts.append(rows[s - block:])
+        s = e
+    return parts[0] if len(parts) == 1 else np.concatenate(parts)
+
+
+def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, camera: Camera,
+                points, n_dirs, step, seed=0, chunk=None, should_cancel=None, surfaces=None,
+                threads=0, multiple=False, tuning: Tuning = Tuning()):
+    """A(x) (N,3): world radiance scattered towards the camera per unit sigma_s, attenuated;
+    with ``multiple`` also A_ms(x) (N,3), the same for the sky light that has scattered on
+    its way in (the collided part exp(-tau_a) (1 - exp(-tau_s)), see docs/method.md), and the
+    pair is returned.  Points draw their jitter from streams seeded by (seed, block of
+    ``WORLD_RNG_BLOCK`` points), so the result depends on neither the thread count nor the
+    chunk size (by default ``world_chunk(n_dirs)``, short enough to serve Esc quickly).
+    Raises parallel.Cancelled on Esc."""
+    colour = np.asarray(world.color, np.float64)
+    n = len(points)
+    if n == 0 or not np.any(colour > 0):
+        return (np.zeros((n, 3)), np.zeros((n, 3))) if multiple else np.zeros((n, 3))
+    # (M, 3); with no media but the fog (which has no extinction where the sky still shows)
+    # every optical depth is 0
+    sig_t = np.stack([m.sigma_t for m in media]) if media else np.zeros((0, 3))
+    sig_s = np.stack([m.sigma_s for m in media]) if media else np.zeros((0, 3))
+    out = np.zeros((n, 3))
+    out_ms = np.zeros((n, 3))
+    golden = 0.6180339887498949
+    j = np.arange(n_dirs)
+    chunk = world_chunk(n_dirs) if chunk is None else int(chunk)
+
+    def work(a, b):
+        p = points[a:b]
+        m = len(p)
+        to_cam = towards_camera(camera, p)
+        r = _block_uniforms(seed, a, b)
+        u1 = np.mod((j[None, :] + 0.5) / n_dirs + r[:, :1], 1.0).ravel()
+        u2 = np.mod(j[None, :] * golden + r[:, 1:], 1.0).ravel()
+        axis = np.repeat(to_cam, n_dirs, axis=0)
+        w_in = sample_hg(u1, u2, pm.g, axis)  # propagation directions of the arriving light
+        d = -w_in  # march towards where the light comes from
+        pp = np.repeat(p, n_dirs, axis=0)
+        lengths = density_lengths(media, pp, d, np.full(len(pp), np.inf), step, tuning) \
+            if media else np.zeros((len(pp), 0))
+        tau = lengths @ sig_t
+        if surfaces is not None and not surfaces.empty:
+            tau += SHADOW_TAU * occluded(surfaces, pp, d, np.full(len(pp), np.inf))[:, None]
+        out[a:b] = np.exp(-tau).reshape(m, n_dirs, 3).mean(axis=1) * colour
+        if multiple:
+            tau_s = np.minimum(lengths @ sig_s, tau)
+            collided = np.exp(-(tau - tau_s)) * -np.expm1(-tau_s)
+            out_ms[a:b] = collided.reshape(m, n_dirs, 3).mean(axis=1) * colour
+
+    run_chunks(n, chunk, work, threads, should_cancel)
+    return (out, out_ms) if multiple else out
+
+
+def fill_world_light(f: np.ndarray, channels, media: List[PreparedMedium], pm: PreparedMedium,
+                     world: World, camera: Camera, flat, n_dirs, step, seed=0,
+                     should_cancel=None, surfaces=None, threads=0, tuning: Tuning = Tuning()):
+    """Write the world light (``world_light`` through ``media``, on ``coarse_lattice``,
+    interpolated trilinearly to the needed voxels ``flat``) into ``pm``'s field ``f`` at
+    ``channels`` = (A's first channel, A_ms's or None).  Returns the number of lattice
+    points."""
+    amb, amb_ms = channels
+    stride = max(1, int(round(max(pm.grid.shape) / AMBIENT_RESOLUTION)))
+    cshape, cflat, cpts = coarse_lattice(pm, stride)
+    a = world_light(media, pm, world, camera, cpts, n_dirs, step, seed=seed,
+                    should_cancel=should_cancel, surfaces=surfaces, threads=threads,
+                    multiple=amb_ms is not None, tuning=tuning)
+    up = kernels.get("upsample_into")
+    for ch, vals in zip((amb, amb_ms), a if amb_ms is not None else (a,)):
+        coarse = np.zeros((int(np.prod(cshape)), 3), np.float32)
+        coarse[cflat] = vals
+        up(f, ch, coarse.reshape(cshape + (3,)), stride, flat)
+    return len(cpts)
