@@ -22,7 +22,7 @@ with p1 composed with itself as its direction (``peak_free_twice``).  They are e
 FFT on the lattice, one kernel per colour channel, flight and camera direction (a few
 directions spread over what the camera sees of the medium, interpolated between); the walk
 then carries only the paths with at least two more scatterings
-(``kernels_np.level_table(..., exact_flights=EXACT_FLIGHTS)``).  See docs/method.md, "The
+(``mpp.level_table(..., exact_flights=EXACT_FLIGHTS)``).  See docs/method.md, "The
 first flight, exact".
 
 Where the first flights mostly stay in the medium the walk's calibration (its escape through
@@ -50,7 +50,7 @@ from .parallel import run_chunks
 from .phase import delta_fraction, hg, outside_peak, peak_cone_cos
 
 ENABLED = True      # a switch for tests and benchmarks: False leaves the walk alone
-EXACT_FLIGHTS = 2   # flights out of the beam computed exactly (march: kernels_np.level_table)
+EXACT_FLIGHTS = 2   # flights out of the beam computed exactly (march: mpp.level_table)
 ESCAPE_LOW = 0.3    # escape fraction at or below which the walk alone is used
 ESCAPE_HIGH = 0.5   # escape fraction at or above which the exact first flight alone is used
 ESCAPE_RESOLUTION = 32   # lattice points along the longest axis for the escape fraction

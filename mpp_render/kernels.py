@@ -11,6 +11,8 @@ import os
 import numpy as np
 
 from . import kernels_np
+from .lightrecord import LIGHT_FIELDS
+from .mpp import DLOG_RHO, LOG_RHO0
 from .media import BRICK
 
 try:  # pragma: no cover - depends on the build
@@ -101,7 +103,7 @@ def c_march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts
             thresholds, voxels, lights, ambient, step, depth_opacity, depth_miss, multiple=None,
             emissions=None, bricks=None, adapt_tau=0.0, emission_channels=None):
     n = len(origins)
-    nl = len(np.asarray(lights).reshape(-1, kernels_np.LIGHT_FIELDS))
+    nl = len(np.asarray(lights).reshape(-1, LIGHT_FIELDS))
     packed = None
     if multiple is not None:
         amb_ms, per_medium, tables = multiple
@@ -115,14 +117,14 @@ def c_march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts
                 table[m, li] = (len(levels), len(lv), stride, h)
                 levels.extend(_f32(x) for x in lv)
         packed = (int(amb_ms), levels, table, [_f64(t) for t in tables],
-                  kernels_np.LOG_RHO0, kernels_np.DLOG_RHO)
+                  LOG_RHO0, DLOG_RHO)
     s, t, d, m, k, e = _c.march(_f64(origins).reshape(n, 3), _f64(dirs).reshape(n, 3),
                        _f64(t0).reshape(n), _f64(t1).reshape(n), _f64(axial).reshape(n),
                        np.ascontiguousarray(keys, np.uint32).reshape(n), [_f32(f) for f in fields],
                        [_f64(w) for w in w2is], [_f64(x).reshape(3) for x in sigma_ss],
                        [_f64(x).reshape(3) for x in sigma_ts], [float(g) for g in gs],
                        [float(x) for x in thresholds], [float(v) for v in voxels],
-                       _f64(lights).reshape(-1, kernels_np.LIGHT_FIELDS), int(ambient),
+                       _f64(lights).reshape(-1, LIGHT_FIELDS), int(ambient),
                        float(step), float(depth_opacity), float(depth_miss), packed,
                        None if emissions is None else [_f64(x).reshape(3) for x in emissions],
                        None if bricks is None else [_f32(b) for b in bricks], BRICK,

@@ -40,9 +40,11 @@ from typing import List, Optional
 import numpy as np
 
 from . import firstflight, kernels
-from .kernels_np import LIGHT_FIELDS, REFINE_STEPS, RHO_TABLE, T_MIN, hash32
+from .kernels_np import REFINE_STEPS, T_MIN, hash32
+from .lightrecord import LIGHT_FIELDS
 from .lights import pack_light
 from .media import PreparedMedium
+from .mpp import RHO_TABLE
 from .passes import DEPTH_MISS, DEPTH_OPACITY
 from .precompute import FieldLayout
 from .scene import Camera, Light
@@ -93,7 +95,7 @@ class MarchContext:
         self.multiple = None
         if self.multiple_fields is not None:
             amb = self.layout.ambient_multiple_channel
-            from .kernels_np import level_table
+            from .mpp import level_table
             per_medium, tables = [], []
             for pm, mfs in zip(self.media, self.multiple_fields):
                 ref = next((m for m in mfs if m is not None), None)
@@ -143,7 +145,7 @@ def flatten_levels(pm: PreparedMedium, mfs, lights: List[Light], table: np.ndarr
                    camera: Camera, table_after: Optional[np.ndarray] = None) -> np.ndarray:
     """One level (X,Y,Z,3) float32 on the lattice ``flat_stride(mfs)`` voxels apart: at
     each point y, sum over lights l and levels k of the level read at y times the level's
-    weight and HG(cos_l(y); g_k) at density 1 (``table``: kernels_np.level_table), cos_l(y)
+    weight and HG(cos_l(y); g_k) at density 1 (``table``: mpp.level_table), cos_l(y)
     the cosine between the light's propagation at y and the direction from y to the
     ``camera``: what kernels_np.multiple_source computes at a march sample of a density-1
     medium, with the phase factor interpolated between lattice points instead of taken at
@@ -155,7 +157,8 @@ def flatten_levels(pm: PreparedMedium, mfs, lights: List[Light], table: np.ndarr
     ``table_after`` (level_table(..., exact_flights=2): the paths that scattered twice more),
     and 1 - w of the levels through ``table``."""
     from .camera import towards_camera
-    from .kernels_np import hg, light_sample, table_lookup, upsample
+    from .kernels_np import hg, light_sample, upsample
+    from .mpp import table_lookup
     from .precompute import lattice_points, lattice_shape
     ref = next(m for m in mfs if m is not None)
     stride = flat_stride(mfs)

@@ -618,7 +618,7 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
     ``g_last`` the medium's own g, that of the last scattering towards the camera.
     ``threads``: for the exact first flights' convolutions (firstflight.py)."""
     from . import boundary
-    from .kernels_np import level_paths, walk_displacement
+    from .mpp import level_paths, walk_displacement
     stride, shape, h = pyramid_lattice(pm, resolution)
     got = source_lattice(pm, fld, light, channel, stride, beam, should_cancel)
     if got is None:
@@ -761,7 +761,7 @@ def drift_levels(levels, pm: PreparedMedium, light: Light, camera: Camera, strid
     when None).  Beyond the lattice the
     source is zero.  Nothing moves for g = 0 or a medium that does not scatter
     (docs/method.md, "Drift along the light")."""
-    from .kernels_np import level_paths, walk_displacement
+    from .mpp import level_paths, walk_displacement
     g = float(pm.g)
     g_last = g if g_last is None else float(g_last)
     sigma_s = np.broadcast_to(np.asarray(sigma_s, np.float64), (3,))

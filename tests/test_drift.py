@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from mpp_render import precompute, pyramid
-from mpp_render.kernels_np import level_paths, walk_displacement
+from mpp_render.mpp import level_paths, walk_displacement
 from mpp_render.media import trilinear
 from mpp_render.phase import sample_hg
 from mpp_render.scene import Camera, Light

@@ -7,6 +7,7 @@ import pytest
 
 from mpp_render import kernels, kernels_np
 from mpp_render.media import delta_scaled, prepare
+from mpp_render.mpp import RHO_TABLE
 from mpp_render.phase import delta_fraction, delta_g, hg
 from mpp_render.precompute import precompute
 from mpp_render.march import pack_lights
@@ -152,7 +153,7 @@ def test_the_forward_peak_light_scattered_towards_the_camera(backend):
     o = np.tile([-3.0, 0.05, z], (n, 1))
     d = np.tile([1.0, 0.0, 0.0], (n, 1))
     t0, t1 = np.full(n, 2.2), np.full(n, 2.2 + L)
-    table = np.zeros((1, len(kernels_np.RHO_TABLE), 6))
+    table = np.zeros((1, len(RHO_TABLE), 6))
     out = march(o, d, t0, t1, np.ones(n), np.arange(n, dtype=np.uint32), pre.fields, [pm.w2i],
                 [pm.sigma_s], [pm.sigma_t], [pm.g], [pm.threshold], [pm.voxel_size],
                 pack_lights([SUN], pre.layout), -1, 0.02, 0.01, 1e10, (-1, [[None]], [table]))

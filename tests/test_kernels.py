@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 
 from mpp_render import kernels, kernels_np
+from mpp_render.lightrecord import L_CHANNEL, LIGHT_FIELDS
 from mpp_render.march import MarchContext, pack_lights
 from mpp_render.media import prepare
 from mpp_render.precompute import precompute
@@ -115,10 +116,10 @@ def test_march_rejects_bad_input():
     base = [np.zeros((2, 3)), np.tile([0, 0, -1.0], (2, 1)), np.zeros(2), np.ones(2), np.ones(2),
             np.zeros(2, np.uint32), f, [m.w2i for m in media], [m.sigma_s for m in media],
             [m.sigma_t for m in media], [0.0, 0.0], [-1.0, 0.5], [0.1, 0.1],
-            np.zeros((0, kernels_np.LIGHT_FIELDS)), -1, 0.1, 0.01, 1e10]
+            np.zeros((0, LIGHT_FIELDS)), -1, 0.1, 0.01, 1e10]
     kernels._c.march(*[kernels._f64(x) if i in (0, 1, 2, 3, 4) else x for i, x in enumerate(base)])
-    bad_light = np.zeros((1, kernels_np.LIGHT_FIELDS))
-    bad_light[0, kernels_np.L_CHANNEL] = 7   # beyond the 4 channels
+    bad_light = np.zeros((1, LIGHT_FIELDS))
+    bad_light[0, L_CHANNEL] = 7   # beyond the 4 channels
     cases = {13: bad_light, 14: 2, 15: 0.0, 10: [1.5, 0.0], 5: np.zeros(3, np.uint32),
              6: [np.zeros((3, 3, 3, 1), np.float64)] * 2}
     for i, bad in cases.items():
@@ -182,3 +183,24 @@ def test_an_indirect_lights_single_scattering_is_multiple(backend):
     assert np.allclose(s0 + m0, s1 + m1, rtol=1e-9, atol=1e-15)
     moved = s0.sum() - s1.sum()
     assert moved > 0.2 * s0.sum() and np.allclose(m1.sum() - m0.sum(), moved, rtol=1e-9)
+
+
+@needs_c
+def test_the_compiled_light_record_is_lightrecords():
+    """The C side's light record (csrc/light.h, exported as _kernels.light_layout) has
+    mpp_render.lightrecord's layout, field by field."""
+    from mpp_render import lightrecord
+    assert kernels._c.light_layout() == lightrecord.layout()
+    assert lightrecord.layout()["LIGHT_FIELDS"] == 40 and len(lightrecord.layout()) == 23
+
+
+def test_the_layout_and_the_model_import_no_kernel():
+    """lightrecord (the light record) and mpp (the walk model) import no kernel module: the
+    build, the tests and every stage can read them."""
+    import subprocess
+    import sys
+    from pathlib import Path
+    code = ("import sys, mpp_render.lightrecord, mpp_render.mpp; "
+            "bad = [m for m in sys.modules if m.startswith('mpp_render.kernels') or "
+            "m.startswith('mpp_render._kernels')]; assert not bad, bad")
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=Path(__file__).resolve().parents[1])
