@@ -86,7 +86,7 @@ def survival(pm: PreparedMedium, occupied: np.ndarray, stride: int, h: float, z_
         q = idx * float(2 ** k) + pad
         if drifts[k] != 0.0:
             q = q + (float(drifts[k]) * light_direction(x)) @ w2i.T / float(stride)
-        return kernels.get("trilinear")(ramp, np.clip(q, 0.0, top))[:, 0].reshape(
+        return kernels.trilinear(ramp, np.clip(q, 0.0, top))[:, 0].reshape(
             shape).astype(np.float32)
 
     return keep

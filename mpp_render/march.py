@@ -28,8 +28,8 @@ interpolation stencil straddles the surface, the first voxels towards the light 
 integrated exactly (``REFINE_STEPS`` half-voxel steps, until the stencil is wholly inside or
 outside) and the precomputed optical depth is read only from there on.
 
-The loop itself is a kernel (``kernels.get('march')``: C, or its numpy twin in
-kernels_np.march); this module packs the scene for it.  Random numbers come from a counter
+The loop itself is a kernel (``kernels.march``: C, or its numpy twin in kernels_np.march);
+this module packs the scene for it into a ``kernels.MarchInputs``.  Random numbers come from a counter
 hash of (ray key, step, dimension), so both twins draw the same ones.
 """
 from __future__ import annotations
@@ -40,6 +40,7 @@ from typing import List, Optional
 import numpy as np
 
 from . import firstflight, kernels
+from .kernels import LevelField, MarchInputs, MultipleInputs
 from .kernels_np import REFINE_STEPS, T_MIN, hash32
 from .lightrecord import LIGHT_FIELDS
 from .lights import pack_light
@@ -80,7 +81,8 @@ def ray_keys(seed: int, tile: int, n: int) -> np.ndarray:
 @dataclass
 class MarchContext:
     """What the march reads: prepared media, their fields and layout, the lights, the step
-    (m) and, for multiple scattering, the per-medium per-light MultipleFields (or None)."""
+    (m) and, for multiple scattering, the per-medium per-light MultipleFields (or None).
+    ``multiple``: what the march kernel reads of them (a kernels.MultipleInputs, or None)."""
 
     media: List[PreparedMedium]
     fields: List[np.ndarray]
@@ -111,13 +113,14 @@ class MarchContext:
                                             exact_flights=firstflight.EXACT_FLIGHTS)
                     flat = flatten_levels(pm, mfs, self.lights, table, self.camera, after)
                     stride = flat_stride(mfs)
-                    per_medium.append([([flat], stride, ref.h * stride / ref.stride)]
+                    per_medium.append([LevelField([flat], stride, ref.h * stride / ref.stride)]
                                       + [None] * (len(mfs) - 1))
                     tables.append(FLAT_TABLE)
                     continue
-                per_medium.append([None if m is None else (m.levels, m.stride, m.h) for m in mfs])
+                per_medium.append([None if m is None else LevelField(m.levels, m.stride, m.h)
+                                   for m in mfs])
                 tables.append(table)
-            self.multiple = (-1 if amb is None else amb, per_medium, tables)
+            self.multiple = MultipleInputs(-1 if amb is None else amb, per_medium, tables)
 
 
 # A medium of one density wherever it has any (a mesh volume: density_from thresholds its
@@ -197,12 +200,11 @@ def flatten_levels(pm: PreparedMedium, mfs, lights: List[Light], table: np.ndarr
 
 def march_rays(ctx: MarchContext, origins, dirs, t0, t1, axial, keys):
     """March rays; returns dict of per-ray arrays: 'single' (N,3), 'T' (N,3), 'depth' (N,)."""
-    fn = kernels.get("march")
     amb = ctx.layout.ambient_channel
     em = [np.maximum(np.asarray(m.medium.emission, np.float64).reshape(3), 0.0) for m in ctx.media]
     ec = ctx.layout.emission_channels if ctx.layout is not None else None
     ec = None if not ec or all(c is None for c in ec) else [-1 if c is None else c for c in ec]
-    single, T, depth, multi, steps, emitted = fn(
+    r = kernels.march(MarchInputs(
         origins, dirs, t0, t1, axial, keys, ctx.fields, [m.w2i for m in ctx.media],
         [m.sigma_s for m in ctx.media], [m.sigma_t for m in ctx.media],
         [float(m.g) for m in ctx.media], [m.threshold for m in ctx.media],
@@ -210,6 +212,6 @@ def march_rays(ctx: MarchContext, origins, dirs, t0, t1, axial, keys):
         ctx.step, DEPTH_OPACITY, DEPTH_MISS, ctx.multiple,
         em if any(np.any(e > 0) for e in em) else None,
         [m.march_bricks for m in ctx.media] if SKIP_EMPTY else None, adapt_tau=ADAPT_TAU,
-        emission_channels=ec)
-    return {"single": single, "T": T, "depth": depth, "multiple": multi, "steps": steps,
-            "emission": emitted}
+        emission_channels=ec))
+    return {"single": r.single, "T": r.T, "depth": r.depth, "multiple": r.multiple,
+            "steps": r.steps, "emission": r.emission}
