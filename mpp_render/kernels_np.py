@@ -536,9 +536,10 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
     ``sigma_ts`` RGB 1/m per unit density, ``gs`` HG anisotropy, ``thresholds`` (sharp
     boundary, < 0 smooth), ``voxels`` voxel size in metres.  ``lights`` (L, LIGHT_FIELDS)
     packed records; ``ambient`` the world-light channel or -1.  ``step`` metres.
-    ``multiple``: None, or (ambient_ms channel or -1, per medium a list with, per light, None
-    or the (levels, stride, h) of its MultipleField, per medium its mpp.level_table) to
-    accumulate multiple scattering too.
+    ``multiple``: None, or a kernels.MultipleInputs (ambient_ms channel or -1, per medium a
+    list with, per light, None or the kernels.LevelField (levels, stride, h) of its
+    MultipleField, per medium its mpp.level_table) to accumulate multiple scattering too.
+    (kernels.MarchInputs holds these arguments as one record; kernels.march takes it.)
 
     ``emissions``: None or per medium the RGB emitted radiance per metre (W/(m^3 sr)), given
     off wherever the medium's density is > 0 (not scaled by density, as Cycles' Principled
