@@ -22,7 +22,7 @@ with p1 composed with itself as its direction (``peak_free_twice``).  They are e
 FFT on the lattice, one kernel per colour channel, flight and camera direction (a few
 directions spread over what the camera sees of the medium, interpolated between); the walk
 then carries only the paths with at least two more scatterings
-(``kernels_np.level_table(..., exact_flights=2)``; scene.Tuning.exact_flights).  See docs/method.md, "The
+(``mpp.level_table(..., exact_flights=2)``; scene.Tuning.exact_flights).  See docs/method.md, "The
 first flight, exact".
 
 Where the first flights mostly stay in the medium the walk's calibration (its escape through

@@ -1,17 +1,31 @@
-"""Kernel dispatch: the compiled twin when it is built, otherwise the numpy twin.
+"""The kernels, by name: the compiled twin when it is built, otherwise the numpy twin.
 
-``MPP_KERNELS=numpy`` in the environment forces the numpy path (tests use it to hold the
-two twins to each other).  ``backend()`` says which one runs.  The wrappers here hand the C
-kernels contiguous arrays of the exact dtypes they check for, and turn results into numpy.
+Each kernel is an attribute (``kernels.march(inputs)``, ``kernels.optical_depth(...)``,
+``kernels.light_sweep(...)``, ``kernels.upsample_into(...)``, ``kernels.trilinear(...)``) that
+runs the active backend, or the one its ``backend`` argument names ("c" or "numpy").  The
+march takes its inputs as one ``MarchInputs`` record (the multiple-scattering part a
+``MultipleInputs`` of ``LevelField``s) and returns a ``MarchResult``.
+
+``backend()`` says which one runs: numpy where the compiled module is missing, where
+``MPP_KERNELS=numpy`` is set in the environment (the user's switch, read at import) and inside
+a ``numpy_backend()`` block (the tests' way to hold the two twins to each other; it holds in
+every thread while the block runs).  The wrappers hand the C kernels contiguous arrays of the
+exact dtypes they check for, and turn results into numpy.
 """
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import os
+import threading
+from typing import List, NamedTuple, Optional
 
 import numpy as np
 
 from . import kernels_np
+from .lightrecord import LIGHT_FIELDS
 from .media import BRICK
+from .mpp import DLOG_RHO, LOG_RHO0
 
 try:  # pragma: no cover - depends on the build
     from . import _kernels as _c  # built in place (setup.py build_ext --inplace)
@@ -21,11 +35,40 @@ except ImportError:
     except ImportError:  # the engine still renders, on numpy
         _c = None
 
-_FORCE_NUMPY = os.environ.get("MPP_KERNELS", "").lower() == "numpy"
+_ENV_NUMPY = os.environ.get("MPP_KERNELS", "").lower() == "numpy"
+_numpy_blocks = 0  # numpy_backend() blocks now open
+_blocks_lock = threading.Lock()
 
 
 def backend() -> str:
-    return "numpy" if (_c is None or _FORCE_NUMPY) else "c"
+    """"c" or "numpy": the backend a kernel called without ``backend`` runs on now."""
+    return "numpy" if (_c is None or _ENV_NUMPY or _numpy_blocks) else "c"
+
+
+@contextlib.contextmanager
+def numpy_backend():
+    """Every kernel called while the block runs (in any thread) runs on its numpy twin."""
+    global _numpy_blocks
+    with _blocks_lock:
+        _numpy_blocks += 1
+    try:
+        yield
+    finally:
+        with _blocks_lock:
+            _numpy_blocks -= 1
+
+
+def _on_c(which: Optional[str]) -> bool:
+    """Whether a kernel asked for backend ``which`` (None: the active one) runs compiled."""
+    if which is None:
+        return backend() == "c"
+    if which == "c":
+        if _c is None:
+            raise RuntimeError("the compiled kernels are not built")
+        return True
+    if which != "numpy":
+        raise ValueError(f"backend must be 'c' or 'numpy', not {which!r}")
+    return False
 
 
 FALLBACK_MESSAGE = ("MPP: the compiled kernels are not installed; rendering on the numpy path, "
@@ -51,8 +94,12 @@ def _f32(a):
     return np.ascontiguousarray(a, np.float32)
 
 
-def c_optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, offset=0.5,
-                    bricks=None, clip=False):
+def optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, offset=0.5,
+                  bricks=None, clip=False, *, backend=None):
+    """RGB optical depth (N,3) along rays (kernels_np.optical_depth)."""
+    if not _on_c(backend):
+        return kernels_np.optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds,
+                                        step, offset, bricks, clip)
     n = len(points)
     buf = _c.optical_depth(_f64(points).reshape(n, 3), _f64(dirs).reshape(n, 3),
                            _f64(t_max).reshape(n), [_f32(g) for g in grids],
@@ -63,8 +110,13 @@ def c_optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step
     return np.frombuffer(buf, np.float64).reshape(n, 3)
 
 
-def c_light_sweep(out, channel, a2w, axis, sign, i_first, i_last, coef, light_index, cone, init,
-                  p_lo, p_hi, n_sub, grids, w2is, sigma_ts, thresholds):
+def light_sweep(out, channel, a2w, axis, sign, i_first, i_last, coef, light_index, cone, init,
+                p_lo, p_hi, n_sub, grids, w2is, sigma_ts, thresholds, *, backend=None):
+    """Optical depth towards a light, written into ``out`` (kernels_np.light_sweep)."""
+    if not _on_c(backend):
+        return kernels_np.light_sweep(out, channel, a2w, axis, sign, i_first, i_last, coef,
+                                      light_index, cone, init, p_lo, p_hi, n_sub, grids, w2is,
+                                      sigma_ts, thresholds)
     if not (isinstance(out, np.ndarray) and out.dtype == np.float32 and out.flags.c_contiguous
             and out.flags.writeable and out.ndim == 4):
         raise ValueError("light_sweep: out must be a writable C-contiguous (X,Y,Z,C) float32 array")
@@ -76,7 +128,11 @@ def c_light_sweep(out, channel, a2w, axis, sign, i_first, i_last, coef, light_in
                    [float(t) for t in thresholds])
 
 
-def c_upsample_into(field, channel, lattice, stride, flat):
+def upsample_into(field, channel, lattice, stride, flat, *, backend=None):
+    """A lattice's trilinear values written into ``field`` at voxels ``flat``
+    (kernels_np.upsample_into)."""
+    if not _on_c(backend):
+        return kernels_np.upsample_into(field, channel, lattice, stride, flat)
     if not (isinstance(field, np.ndarray) and field.dtype == np.float32 and field.flags.c_contiguous
             and field.flags.writeable and field.ndim == 4):
         raise ValueError("upsample_into: field must be a writable C-contiguous (X,Y,Z,C) float32 array")
@@ -84,10 +140,10 @@ def c_upsample_into(field, channel, lattice, stride, flat):
                      np.ascontiguousarray(flat, np.int64).reshape(-1))
 
 
-def c_trilinear(grid, idx):
-    """media.trilinear on the compiled path: (N,C) for a 4-D grid, (N,) for a 3-D one.  A grid
-    that is not float32 is read by the numpy twin (the kernel would round it to float32)."""
-    if np.asarray(grid).dtype != np.float32:
+def trilinear(grid, idx, *, backend=None):
+    """media.trilinear: (N,C) for a 4-D grid, (N,) for a 3-D one.  A grid that is not float32
+    is read by the numpy twin (the kernel would round it to float32)."""
+    if not _on_c(backend) or np.asarray(grid).dtype != np.float32:
         return kernels_np.trilinear(grid, idx)
     g = np.ascontiguousarray(grid)
     flat = g.ndim == 3
@@ -97,15 +153,89 @@ def c_trilinear(grid, idx):
     return out[:, 0] if flat else out
 
 
-def c_march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs,
-            thresholds, voxels, lights, ambient, step, depth_opacity, depth_miss, multiple=None,
-            emissions=None, bricks=None, adapt_tau=0.0, emission_channels=None):
-    n = len(origins)
-    nl = len(np.asarray(lights).reshape(-1, kernels_np.LIGHT_FIELDS))
+class LevelField(NamedTuple):
+    """One light's multiple-scattering pyramid in one medium, as the march reads it."""
+    levels: list    # float32 (X,Y,Z,3) lattices; level k's spacing is h 2^k
+    stride: int     # voxels of the medium's grid per level-0 lattice step
+    h: float        # level 0's lattice spacing (m)
+
+
+class MultipleInputs(NamedTuple):
+    """The march's multiple scattering."""
+    ambient: int                                    # the world light's multiple channel, or -1
+    per_medium: List[List[Optional[LevelField]]]    # per medium, per light (None: no pyramid)
+    tables: List[np.ndarray]                        # per medium its mpp.level_table (K, R, 6)
+
+
+@dataclasses.dataclass(frozen=True)
+class MarchInputs:
+    """Everything the march kernel reads (kernels_np.march documents each field).
+
+    Per ray (N): ``origins``, ``dirs`` (N,3) world, unit directions; ``t0``, ``t1`` the
+    interval (m) to march; ``axial`` the factor from distance along the ray to depth; ``keys``
+    uint32 random keys.  Per medium: ``fields`` (X,Y,Z,C) float32 (density, then the
+    FieldLayout's channels), ``w2is`` (3,4) world -> padded index maps, ``sigma_ss``,
+    ``sigma_ts`` RGB (1/m per unit density), ``gs`` HG anisotropies, ``thresholds`` (< 0:
+    smooth), ``voxels`` voxel sizes (m).  ``lights`` (L, LIGHT_FIELDS) records
+    (lightrecord); ``ambient`` the world light's single channel or -1; ``step`` (m);
+    ``depth_opacity``, ``depth_miss`` the depth pass's threshold and miss value; then the
+    optional parts: ``multiple``, per-medium RGB ``emissions``, ``bricks``
+    (media.brick_bounds), ``adapt_tau`` (> 0: longer steps in thin media) and
+    ``emission_channels`` (per medium the first channel of its emission grid, or -1)."""
+    origins: np.ndarray
+    dirs: np.ndarray
+    t0: np.ndarray
+    t1: np.ndarray
+    axial: np.ndarray
+    keys: np.ndarray
+    fields: list
+    w2is: list
+    sigma_ss: list
+    sigma_ts: list
+    gs: list
+    thresholds: list
+    voxels: list
+    lights: np.ndarray
+    ambient: int
+    step: float
+    depth_opacity: float
+    depth_miss: float
+    multiple: Optional[MultipleInputs] = None
+    emissions: Optional[list] = None
+    bricks: Optional[list] = None
+    adapt_tau: float = 0.0
+    emission_channels: Optional[list] = None
+
+    def replace(self, **changes) -> "MarchInputs":
+        return dataclasses.replace(self, **changes)
+
+
+class MarchResult(NamedTuple):
+    """Per ray: single-scattered radiance (N,3), transmittance T (N,3), depth (N,),
+    multiple-scattered radiance (N,3), march steps taken (N,), emitted radiance (N,3)."""
+    single: np.ndarray
+    T: np.ndarray
+    depth: np.ndarray
+    multiple: np.ndarray
+    steps: np.ndarray
+    emission: np.ndarray
+
+
+def march(inputs: MarchInputs, *, backend=None) -> MarchResult:
+    """March camera rays through the media (kernels_np.march)."""
+    a = inputs
+    if not _on_c(backend):
+        return MarchResult(*kernels_np.march(
+            a.origins, a.dirs, a.t0, a.t1, a.axial, a.keys, a.fields, a.w2is, a.sigma_ss,
+            a.sigma_ts, a.gs, a.thresholds, a.voxels, a.lights, a.ambient, a.step,
+            a.depth_opacity, a.depth_miss, a.multiple, a.emissions, a.bricks, a.adapt_tau,
+            a.emission_channels))
+    n = len(a.origins)
+    nl = len(np.asarray(a.lights).reshape(-1, LIGHT_FIELDS))
     packed = None
-    if multiple is not None:
-        amb_ms, per_medium, tables = multiple
-        levels, table = [], np.zeros((len(fields), nl, 4))
+    if a.multiple is not None:
+        amb_ms, per_medium, tables = a.multiple
+        levels, table = [], np.zeros((len(a.fields), nl, 4))
         table[:, :, 0] = -1
         for m, mfs in enumerate(per_medium):
             for li, msf in enumerate(mfs or []):
@@ -114,32 +244,22 @@ def c_march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts
                 lv, stride, h = msf
                 table[m, li] = (len(levels), len(lv), stride, h)
                 levels.extend(_f32(x) for x in lv)
-        packed = (int(amb_ms), levels, table, [_f64(t) for t in tables],
-                  kernels_np.LOG_RHO0, kernels_np.DLOG_RHO)
-    s, t, d, m, k, e = _c.march(_f64(origins).reshape(n, 3), _f64(dirs).reshape(n, 3),
-                       _f64(t0).reshape(n), _f64(t1).reshape(n), _f64(axial).reshape(n),
-                       np.ascontiguousarray(keys, np.uint32).reshape(n), [_f32(f) for f in fields],
-                       [_f64(w) for w in w2is], [_f64(x).reshape(3) for x in sigma_ss],
-                       [_f64(x).reshape(3) for x in sigma_ts], [float(g) for g in gs],
-                       [float(x) for x in thresholds], [float(v) for v in voxels],
-                       _f64(lights).reshape(-1, kernels_np.LIGHT_FIELDS), int(ambient),
-                       float(step), float(depth_opacity), float(depth_miss), packed,
-                       None if emissions is None else [_f64(x).reshape(3) for x in emissions],
-                       None if bricks is None else [_f32(b) for b in bricks], BRICK,
-                       float(adapt_tau),
-                       None if emission_channels is None else [int(c) for c in emission_channels])
-    return (np.frombuffer(s, np.float64).reshape(n, 3), np.frombuffer(t, np.float64).reshape(n, 3),
-            np.frombuffer(d, np.float64).reshape(n), np.frombuffer(m, np.float64).reshape(n, 3),
-            np.frombuffer(k, np.float64).reshape(n), np.frombuffer(e, np.float64).reshape(n, 3))
-
-
-_C_WRAPPERS = {"optical_depth": c_optical_depth, "march": c_march,
-               "light_sweep": c_light_sweep, "upsample_into": c_upsample_into,
-               "trilinear": c_trilinear}
-
-
-def get(name: str):
-    """The kernel ``name`` from the active backend."""
-    if backend() == "c" and name in _C_WRAPPERS and hasattr(_c, name):
-        return _C_WRAPPERS[name]
-    return getattr(kernels_np, name)
+        packed = (int(amb_ms), levels, table, [_f64(t) for t in tables], LOG_RHO0, DLOG_RHO)
+    s, t, d, m, k, e = _c.march(
+        _f64(a.origins).reshape(n, 3), _f64(a.dirs).reshape(n, 3), _f64(a.t0).reshape(n),
+        _f64(a.t1).reshape(n), _f64(a.axial).reshape(n),
+        np.ascontiguousarray(a.keys, np.uint32).reshape(n), [_f32(f) for f in a.fields],
+        [_f64(w) for w in a.w2is], [_f64(x).reshape(3) for x in a.sigma_ss],
+        [_f64(x).reshape(3) for x in a.sigma_ts], [float(g) for g in a.gs],
+        [float(x) for x in a.thresholds], [float(v) for v in a.voxels],
+        _f64(a.lights).reshape(-1, LIGHT_FIELDS), int(a.ambient), float(a.step),
+        float(a.depth_opacity), float(a.depth_miss), packed,
+        None if a.emissions is None else [_f64(x).reshape(3) for x in a.emissions],
+        None if a.bricks is None else [_f32(b) for b in a.bricks], BRICK, float(a.adapt_tau),
+        None if a.emission_channels is None else [int(c) for c in a.emission_channels])
+    return MarchResult(np.frombuffer(s, np.float64).reshape(n, 3),
+                       np.frombuffer(t, np.float64).reshape(n, 3),
+                       np.frombuffer(d, np.float64).reshape(n),
+                       np.frombuffer(m, np.float64).reshape(n, 3),
+                       np.frombuffer(k, np.float64).reshape(n),
+                       np.frombuffer(e, np.float64).reshape(n, 3))

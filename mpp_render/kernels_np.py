@@ -1,13 +1,20 @@
 """Numpy twins of the hot kernels: the readable specification and the test oracle.
 
-Each function here has a compiled twin of the same name in ``mpp_render._kernels`` (C,
-releases the GIL); ``mpp_render.kernels`` picks one.  Both must agree to 1e-4 relative.
+Each kernel here has a compiled twin of the same name in ``mpp_render._kernels``
+(``mpp_render/csrc/``, C, releases the GIL); ``mpp_render.kernels`` picks one.  Both must agree
+to 1e-4 relative.  The helpers beside them are the twins of the C file's static helpers.  The
+light record's layout is mpp_render.lightrecord's; the walk model whose tables the march reads
+(level_table, table_lookup) is mpp_render.mpp's.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from .lightrecord import (KIND_AREA, KIND_POINT, KIND_SPOT, KIND_SUN, L_AREA, L_AX, L_AY, L_BEAM,
+                          L_BLEND, L_CHANNEL, L_COND, L_COSHALF, L_DIR, L_INDIRECT, L_INV, L_KIND,
+                          L_NORMAL, L_NORMALIZE, L_POS, L_RADIUS, L_ROUND, L_STRENGTH, LIGHT_FIELDS)
 from .media import BRICK, density_from, trilinear
+from .mpp import table_lookup
 from .phase import hg, orthonormal_basis
 
 
@@ -284,19 +291,9 @@ def uniform(keys, step: int, dim: int):
     return (h >> np.uint32(8)).astype(np.float64) * (1.0 / 16777216.0)
 
 
-# Light records for the march: one float64 row of LIGHT_FIELDS per light.
-LIGHT_FIELDS = 40
-L_KIND, L_STRENGTH, L_POS, L_DIR, L_INV, L_COSHALF, L_BLEND, L_RADIUS = 0, 1, 4, 7, 10, 19, 20, 21
-L_AX, L_AY, L_AREA, L_NORMAL, L_NORMALIZE, L_ROUND, L_CHANNEL = 22, 25, 28, 29, 32, 33, 34
-KIND_POINT, KIND_SPOT, KIND_SUN, KIND_AREA = 0, 1, 2, 3
 SPOT_DISC_POINTS = 8    # points of a sphere spot's disc its cone is averaged over (C twin)
 SPOT_DISC_PHI = 0.6180339887498949  # the lattice's second coordinate steps by the golden ratio
 SPOT_GATE_MARGIN = 1.05  # widens the disc's angular radius in the one-point test
-L_COND = 35  # condition number of the spot's inverse matrix (how much it can widen angles)
-L_BEAM = 36  # the channel of the light's forward-peak light (W/m^2), or < 1: none
-# (precompute.FieldLayout.beam_channels; read by the march with multiple scattering only)
-L_INDIRECT = 37  # 1: the light is scattered light (scene.Light.indirect): its single
-# scattering is added to the multiple output
 DIM_JITTER = 1000       # random dimension of the step jitter; lights use 2*i, 2*i + 1
 REFINE_STEPS = 8
 EDGE_EPS = 1e-6        # occupancies within this of 0 or 1 count as outside / inside
@@ -465,149 +462,6 @@ def _refined_tau(fields, w2is, thrs, sig_ts, mi, c, x, w, dist, delta):
     return tau + _fetch(fields[mi], w2is[mi], end, c, 3)
 
 
-def walk_width_sq(u, g):
-    """Per-axis variance, in units of the transport length l_tr = 1/(sigma_s (1 - g)) squared,
-    of the position of a photon after path length u l_tr since its first scattering, about
-    its mean drift g l_tr (1 - e^-u) along the beam: a persistent random walk whose direction
-    correlation decays as e^-u, started with mean cosine g.  (2 (u - 1 + e^-u) - g^2
-    (1 - e^-u)^2) / 3: ballistic u^2 (1 - g^2) / 3 for u << 1, diffusive 2u/3 for u >> 1."""
-    u = np.asarray(u, np.float64)
-    e = -np.expm1(-u)
-    return np.maximum((2.0 * (u - e) - g * g * e * e) / 3.0, 0.0)
-
-
-def walk_displacement(u, g, g_last=None):
-    """Mean displacement of the walk of ``walk_width_sq`` after path length u l_tr, in units
-    of the transport length l_tr, for the light that leaves its last scattering towards a
-    given direction v: (drift, beta) with
-
-        E[x | v] = drift d + beta (v - g_last g e^-u d)      (d: the light's direction, unit)
-
-    drift = g (1 - e^-u) is the walk's mean progress along d (g: the walk's mean cosine after
-    its first scattering).  beta is the regression of the position on the direction
-    scattered into at the end by HG of anisotropy ``g_last`` (the medium's own g, where the
-    walk is the delta-scaled medium's, phase.delta_g; g when None): Cov(x, v) / Var(v) =
-    g_last (1 - e^-u) (1 - g^2 e^-u) / (1 - g_last^2 g^2 e^-2u), traces over the three axes,
-    with Cov(x, u) from E[u(t) . u(t')] = e^-(t' - t) / l_tr and E[v | u] = g_last u.
-    beta -> g_last u / (1 + g^2) for u << 1 when g_last = g (a straight flight: the light
-    that heads towards v came from behind it, along v), 0 for g_last = 0 (an isotropic last
-    scattering forgets the path)."""
-    u = np.asarray(u, np.float64)
-    g_last = g if g_last is None else g_last
-    e = np.exp(-u)
-    em = -np.expm1(-u)
-    beta = g_last * em * (1.0 - g * g * e) / np.maximum(1.0 - (g_last * g * e) ** 2, 1e-300)
-    return g * em, beta
-
-
-_U_TABLE = np.logspace(-6, 7, 521)
-
-
-def path_length_for_width(width_sq, l_tr, g):
-    """Path length (m) at which walk_width_sq reaches ``width_sq`` (m^2), for transport
-    length ``l_tr`` (m, arrays; inf for a medium that does not scatter: ballistic flight)."""
-    table = walk_width_sq(_U_TABLE, g)
-    ratio = width_sq / np.where(np.isfinite(l_tr), l_tr * l_tr, 1.0)
-    ballistic = np.sqrt(width_sq * 3.0 / max(1.0 - g * g, 1e-6))
-    u = np.exp(np.interp(np.log(np.maximum(ratio, 1e-300)), np.log(np.maximum(table, 1e-300)),
-                         np.log(_U_TABLE)))
-    small = ~np.isfinite(l_tr) | (ratio < table[0])
-    return np.where(small, ballistic, u * np.where(np.isfinite(l_tr), l_tr, 0.0))
-
-
-# Density axis of the per-medium level tables: log-spaced relative densities.
-RHO_TABLE = np.logspace(-4, 4, 257)
-LOG_RHO0 = float(np.log(RHO_TABLE[0]))
-DLOG_RHO = float(np.log(RHO_TABLE[1]) - np.log(RHO_TABLE[0]))
-
-
-def level_paths(h, levels, l_tr, g):
-    """Per pyramid level k (width W_k = h 2^k, m; level 0 unblurred) the range [lo, hi] of the
-    path lengths (m) it stands for -- spreads w(l) within a factor sqrt(2) of W_k -- and
-    their representative length l_k (geometric mean; hi / 2 on level 0): a list of
-    (lo, hi, l_k), arrays shaped like ``l_tr`` (m)."""
-    out = []
-    lo = np.zeros(np.shape(l_tr))
-    for k in range(levels):
-        hi = path_length_for_width((h * 2.0 ** (k + 0.5)) ** 2, l_tr, g)
-        out.append((lo, hi, np.sqrt(lo * hi) if k else 0.5 * hi))
-        lo = hi
-    return out
-
-
-def level_table(g, sigma_s, sigma_a, h, levels, exact_flights=0):
-    """Per pyramid level k, density rho (RHO_TABLE) and colour channel, the path-length
-    weight int e^(-sigma_a rho l) dl (m) over the paths the level stands for, and the
-    anisotropy g g* e^(-l_k / l_tr) of the last scattering: (levels, len(RHO_TABLE), 6)
-    float64, the weights of R, G, B then their anisotropies.
-
-    ``g``, ``sigma_s``, ``sigma_a``: the medium's HG anisotropy and coefficients per unit
-    density (1/m), one per channel (3) or one for all: a chromatic medium absorbs along its
-    paths, and spreads them, by channel; ``h`` the pyramid's lattice spacing (m).  The walk
-    is the delta-scaled medium's (phase.delta_fraction: g* = g / (1 + g), sigma_s* = sigma_s
-    (1 - g^2) for g > 0; the same transport length l_tr = 1 / (sigma_s (1 - g))), started
-    with mean cosine g* where the beam first scatters out of the forward peak; the last
-    scattering, towards the camera, is the medium's own HG(g) of light whose mean cosine is
-    g* e^(-u).  Level k (width W_k = h 2^k, level 0 unblurred) stands for the paths whose
-    spread w(l) lies within a factor sqrt(2) of W_k.
-
-    ``exact_flights`` (0, 1 or 2): only the paths that have scattered at least that many
-    times since their first scattering (their first flights are then firstflight.py's): a
-    path of length l has scattered n times with the Poisson probability P_n =
-    (sigma_s* l)^n e^(-sigma_s* l) / n!, so the weight is int e^(-sigma_a l) (1 - sum_{n <
-    exact_flights} P_n) dl, and the mean cosine of those paths is
-    g* (e^(-u) - sum P_n g*^n) / (1 - sum P_n) (each scattering multiplies it by g*: the
-    straight paths keep g*, so the paths that turned hold less than the average)."""
-    from .phase import delta_fraction, delta_g
-    rho = RHO_TABLE
-    b1 = max(1.0 - g, 1e-6)
-    g_walk = delta_g(g)
-    keep = 1.0 - delta_fraction(g)
-    n_exact = int(exact_flights)
-    if n_exact not in (0, 1, 2):
-        raise ValueError("exact_flights must be 0, 1 or 2")
-    out = np.zeros((levels, len(rho), 6))
-    for c, (s_c, a_c) in enumerate(zip(np.broadcast_to(np.asarray(sigma_s, np.float64), (3,)),
-                                       np.broadcast_to(np.asarray(sigma_a, np.float64), (3,)))):
-        ss, sa = rho * s_c, rho * a_c
-        with np.errstate(divide="ignore"):
-            l_tr = np.where(ss > 0, 1.0 / (ss * b1), np.inf)
-        walk_ss = ss * keep
-        st = sa + walk_ss
-        for k, (lo, hi, l_k) in enumerate(level_paths(h, levels, l_tr, g_walk)):
-            span = hi - lo
-            weight = np.exp(-sa * lo) * span * _phi1(sa * span)
-            mean_cos = np.exp(-l_k / l_tr)
-            if n_exact:
-                # int e^(-sigma_a l) P_0 dl = int e^(-sigma_t* l) dl over [lo, hi]
-                weight = weight - np.exp(-st * lo) * span * _phi1(st * span)
-                p0 = np.exp(-walk_ss * l_k)
-                done, turned = p0, p0
-                if n_exact == 2:
-                    # int e^(-sigma_a l) P_1 dl = sigma_s* [(sigma_t* l + 1) e^(-sigma_t* l)
-                    # / sigma_t*^2] from hi to lo
-                    st2 = np.maximum(st * st, 1e-300)
-                    weight = weight - walk_ss * ((st * lo + 1.0) * np.exp(-st * lo)
-                                                 - (st * hi + 1.0) * np.exp(-st * hi)) / st2
-                    p1 = walk_ss * l_k * p0
-                    done, turned = p0 + p1, p0 + p1 * g_walk
-                weight = np.maximum(weight, 0.0)
-                mean_cos = np.where(done < 1.0 - 1e-9,
-                                    (mean_cos - turned) / np.maximum(1.0 - done, 1e-12), mean_cos)
-            out[k, :, c] = weight
-            out[k, :, 3 + c] = g * g_walk * mean_cos
-    return out
-
-
-def table_lookup(table, rho):
-    """Linear interpolation of ``table`` (levels, R, C) in log density; (levels, N, C)."""
-    f = (np.log(np.maximum(rho, 1e-300)) - LOG_RHO0) / DLOG_RHO
-    f = np.clip(f, 0.0, table.shape[1] - 1.0)
-    i = np.minimum(np.floor(f).astype(np.int64), table.shape[1] - 2)
-    t = (f - i)[None, :, None]
-    return table[:, i] * (1.0 - t) + table[:, i + 1] * t
-
-
 def multiple_source(ms_fields, table, rho, x, w2i, cos):
     """Multiply scattered radiance (N,3), W/(m^2 sr), arriving at world points ``x`` (N,3)
     of one medium of density ``rho`` (N,) and scattered towards the camera (before the final
@@ -615,7 +469,7 @@ def multiple_source(ms_fields, table, rho, x, w2i, cos):
     pyramid.
 
     ``ms_fields``: per light None or (levels, stride, h) of precompute.MultipleField;
-    ``table``: the medium's level_table; ``w2i`` world -> padded index map; ``cos`` (L,N)
+    ``table``: the medium's mpp.level_table; ``w2i`` world -> padded index map; ``cos`` (L,N)
     the cosine between each light's propagation direction and the direction to the camera.
     Level k adds pyramid_k(x) weight_k HG(cos; g_k), by colour channel.  The levels come
     moved by their paths' drift towards what the camera sees (precompute.drift_levels), having
@@ -698,13 +552,6 @@ def light_varies(lights, origins, dirs, s_a, s_b, g):
     return out
 
 
-def _phi1(z):
-    """(1 - e^-z) / z, 1 at z = 0."""
-    z = np.asarray(z, np.float64)
-    safe = np.where(z > 1e-12, z, 1.0)
-    return np.where(z > 1e-12, -np.expm1(-safe) / safe, 1.0 - 0.5 * z)
-
-
 def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs, thresholds,
           voxels, lights, ambient, step, depth_opacity, depth_miss, multiple=None, emissions=None,
           bricks=None, adapt_tau=0.0, emission_channels=None):
@@ -717,9 +564,10 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
     ``sigma_ts`` RGB 1/m per unit density, ``gs`` HG anisotropy, ``thresholds`` (sharp
     boundary, < 0 smooth), ``voxels`` voxel size in metres.  ``lights`` (L, LIGHT_FIELDS)
     packed records; ``ambient`` the world-light channel or -1.  ``step`` metres.
-    ``multiple``: None, or (ambient_ms channel or -1, per medium a list with, per light, None
-    or the (levels, stride, h) of its MultipleField, per medium its level_table) to
-    accumulate multiple scattering too.
+    ``multiple``: None, or a kernels.MultipleInputs (ambient_ms channel or -1, per medium a
+    list with, per light, None or the kernels.LevelField (levels, stride, h) of its
+    MultipleField, per medium its mpp.level_table) to accumulate multiple scattering too.
+    (kernels.MarchInputs holds these arguments as one record; kernels.march takes it.)
 
     ``emissions``: None or per medium the RGB emitted radiance per metre (W/(m^3 sr)), given
     off wherever the medium's density is > 0 (not scaled by density, as Cycles' Principled

@@ -30,12 +30,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .kernels_np import (KIND_AREA, KIND_POINT, KIND_SPOT, KIND_SUN, L_AREA, L_AX, L_AY,
-                         L_BEAM, L_BLEND, L_CHANNEL, L_COND, L_COSHALF, L_DIR, L_INDIRECT, L_INV,
-                         L_KIND, L_NORMAL,
-                         L_NORMALIZE, L_POS, L_RADIUS, L_ROUND, L_STRENGTH, LIGHT_FIELDS,
-                         SPOT_GATE_MARGIN,
-                         light_sample)
+from .kernels_np import SPOT_GATE_MARGIN, light_sample
+from .lightrecord import (KIND_AREA, KIND_POINT, KIND_SPOT, KIND_SUN, L_AREA, L_AX, L_AY, L_BEAM,
+                          L_BLEND, L_CHANNEL, L_COND, L_COSHALF, L_DIR, L_INDIRECT, L_INV, L_KIND,
+                          L_NORMAL, L_NORMALIZE, L_POS, L_RADIUS, L_ROUND, L_STRENGTH, LIGHT_FIELDS)
 from .scene import Light
 
 
@@ -56,7 +54,7 @@ _KINDS = {"POINT": KIND_POINT, "SPOT": KIND_SPOT, "SUN": KIND_SUN, "AREA": KIND_
 
 
 def pack_light(light: Light, channel: int = -1, beam: int = -1) -> np.ndarray:
-    """The light as one float64 record of ``LIGHT_FIELDS`` (layout in kernels_np), the form
+    """The light as one float64 record of ``LIGHT_FIELDS`` (layout: lightrecord), the form
     the kernels read; ``channel`` is its optical-depth channel in the media fields or -1,
     ``beam`` that of its forward peak's light (precompute.FieldLayout.beam_channels) or -1."""
     if light.kind not in _KINDS:

@@ -28,8 +28,8 @@ interpolation stencil straddles the surface, the first voxels towards the light 
 integrated exactly (``REFINE_STEPS`` half-voxel steps, until the stencil is wholly inside or
 outside) and the precomputed optical depth is read only from there on.
 
-The loop itself is a kernel (``kernels.get('march')``: C, or its numpy twin in
-kernels_np.march); this module packs the scene for it.  Random numbers come from a counter
+The loop itself is a kernel (``kernels.march``: C, or its numpy twin in kernels_np.march);
+this module packs the scene for it into a ``kernels.MarchInputs``.  Random numbers come from a counter
 hash of (ray key, step, dimension), so both twins draw the same ones.
 """
 from __future__ import annotations
@@ -40,9 +40,12 @@ from typing import List, Optional
 import numpy as np
 
 from . import kernels
-from .kernels_np import LIGHT_FIELDS, REFINE_STEPS, RHO_TABLE, T_MIN, hash32
+from .kernels import LevelField, MarchInputs, MultipleInputs
+from .kernels_np import REFINE_STEPS, T_MIN, hash32
+from .lightrecord import LIGHT_FIELDS
 from .lights import pack_light
 from .media import PreparedMedium
+from .mpp import RHO_TABLE
 from .passes import DEPTH_MISS, DEPTH_OPACITY
 from .precompute.layout import FieldLayout
 from .scene import Camera, Light, Tuning
@@ -77,7 +80,8 @@ def ray_keys(seed: int, tile: int, n: int) -> np.ndarray:
 @dataclass
 class MarchContext:
     """What the march reads: prepared media, their fields and layout, the lights, the step
-    (m) and, for multiple scattering, the per-medium per-light MultipleFields (or None)."""
+    (m) and, for multiple scattering, the per-medium per-light MultipleFields (or None).
+    ``multiple``: what the march kernel reads of them (a kernels.MultipleInputs, or None)."""
 
     media: List[PreparedMedium]
     fields: List[np.ndarray]
@@ -93,7 +97,7 @@ class MarchContext:
         self.multiple = None
         if self.multiple_fields is not None:
             amb = self.layout.ambient_multiple_channel
-            from .kernels_np import level_table
+            from .mpp import level_table
             per_medium, tables = [], []
             for pm, mfs in zip(self.media, self.multiple_fields):
                 ref = next((m for m in mfs if m is not None), None)
@@ -108,13 +112,14 @@ class MarchContext:
                                             exact_flights=self.tuning.exact_flights)
                     flat = flatten_levels(pm, mfs, self.lights, table, self.camera, after)
                     stride = flat_stride(mfs)
-                    per_medium.append([([flat], stride, ref.h * stride / ref.stride)]
+                    per_medium.append([LevelField([flat], stride, ref.h * stride / ref.stride)]
                                       + [None] * (len(mfs) - 1))
                     tables.append(FLAT_TABLE)
                     continue
-                per_medium.append([None if m is None else (m.levels, m.stride, m.h) for m in mfs])
+                per_medium.append([None if m is None else LevelField(m.levels, m.stride, m.h)
+                                   for m in mfs])
                 tables.append(table)
-            self.multiple = (-1 if amb is None else amb, per_medium, tables)
+            self.multiple = MultipleInputs(-1 if amb is None else amb, per_medium, tables)
 
 
 # A medium of one density wherever it has any (a mesh volume: density_from thresholds its
@@ -141,7 +146,7 @@ def flatten_levels(pm: PreparedMedium, mfs, lights: List[Light], table: np.ndarr
                    camera: Camera, table_after: Optional[np.ndarray] = None) -> np.ndarray:
     """One level (X,Y,Z,3) float32 on the lattice ``flat_stride(mfs)`` voxels apart: at
     each point y, sum over lights l and levels k of the level read at y times the level's
-    weight and HG(cos_l(y); g_k) at density 1 (``table``: kernels_np.level_table), cos_l(y)
+    weight and HG(cos_l(y); g_k) at density 1 (``table``: mpp.level_table), cos_l(y)
     the cosine between the light's propagation at y and the direction from y to the
     ``camera``: what kernels_np.multiple_source computes at a march sample of a density-1
     medium, with the phase factor interpolated between lattice points instead of taken at
@@ -153,7 +158,8 @@ def flatten_levels(pm: PreparedMedium, mfs, lights: List[Light], table: np.ndarr
     ``table_after`` (level_table(..., exact_flights=2): the paths that scattered twice more),
     and 1 - w of the levels through ``table``."""
     from .camera import towards_camera
-    from .kernels_np import hg, light_sample, table_lookup, upsample
+    from .kernels_np import hg, light_sample, upsample
+    from .mpp import table_lookup
     from .precompute.lattice import lattice_points, lattice_shape
     ref = next(m for m in mfs if m is not None)
     stride = flat_stride(mfs)
@@ -192,12 +198,11 @@ def flatten_levels(pm: PreparedMedium, mfs, lights: List[Light], table: np.ndarr
 
 def march_rays(ctx: MarchContext, origins, dirs, t0, t1, axial, keys):
     """March rays; returns dict of per-ray arrays: 'single' (N,3), 'T' (N,3), 'depth' (N,)."""
-    fn = kernels.get("march")
     amb = ctx.layout.ambient_channel
     em = [np.maximum(np.asarray(m.medium.emission, np.float64).reshape(3), 0.0) for m in ctx.media]
     ec = ctx.layout.emission_channels if ctx.layout is not None else None
     ec = None if not ec or all(c is None for c in ec) else [-1 if c is None else c for c in ec]
-    single, T, depth, multi, steps, emitted = fn(
+    r = kernels.march(MarchInputs(
         origins, dirs, t0, t1, axial, keys, ctx.fields, [m.w2i for m in ctx.media],
         [m.sigma_s for m in ctx.media], [m.sigma_t for m in ctx.media],
         [float(m.g) for m in ctx.media], [m.threshold for m in ctx.media],
@@ -205,7 +210,6 @@ def march_rays(ctx: MarchContext, origins, dirs, t0, t1, axial, keys):
         ctx.step, DEPTH_OPACITY, DEPTH_MISS, ctx.multiple,
         em if any(np.any(e > 0) for e in em) else None,
         [m.march_bricks for m in ctx.media] if ctx.tuning.skip_empty else None,
-        adapt_tau=ctx.tuning.adapt_tau,
-        emission_channels=ec)
-    return {"single": single, "T": T, "depth": depth, "multiple": multi, "steps": steps,
-            "emission": emitted}
+        adapt_tau=ctx.tuning.adapt_tau, emission_channels=ec))
+    return {"single": r.single, "T": r.T, "depth": r.depth, "multiple": r.multiple,
+            "steps": r.steps, "emission": r.emission}

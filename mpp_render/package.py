@@ -3,7 +3,8 @@
 The compiled kernels travel as a wheel, the way Blender extensions ship binary modules::
 
     repository --copy--> staging dir (no .git/.venv/build outputs, no loose *.so)
-      setup.py build_ext (the project's own flags; sanitizers off) --> _kernels*.so
+      setup.py build_ext (mpp_render/csrc/*.c, the project's own flags; sanitizers off)
+        --> _kernels*.so
       --> wheels/mpp_render_kernels-<version>-cp311-cp311-linux_x86_64.whl
           (top-level package ``mpp_render_kernels`` holding that ``_kernels`` module)
       staged blender_manifest.toml gets ``wheels = ["./wheels/...whl"]``

@@ -76,7 +76,7 @@ def lookup(levels: List[np.ndarray], idx, width, h: float):
     k0 = np.minimum(k0, len(levels) - 2) if len(levels) > 1 else k0
     fr = lev - k0
     out = np.zeros((len(idx),) + levels[0].shape[3:])
-    trilinear = kernels.get("trilinear")
+    trilinear = kernels.trilinear
     for k in np.unique(k0):
         sel = np.flatnonzero(k0 == k)
         a = trilinear(levels[k], idx[sel] / 2.0 ** k)

@@ -129,7 +129,7 @@ def render(desc: SceneDescription,
     ctx = MarchContext(media, pre.fields if pre else [], pre.layout if pre else None,
                        media_lights, step, pre.multiple if st.multiple else None,
                        cam, st.tuning) if media else None
-    od = kernels.get("optical_depth")
+    od = kernels.optical_depth
     step_light = step
 
     solid = split_fog(media)[0]

@@ -3,8 +3,9 @@ sanitising of bad values, the memory budget, and blackbody colours (blackbody.py
 import numpy as np
 import pytest
 
-from mpp_render import blackbody, kernels, kernels_np
+from mpp_render import blackbody, kernels
 from mpp_render.budget import fit_media
+from mpp_render.kernels import MarchInputs, MarchResult
 from mpp_render.march import MarchContext, pack_lights
 from mpp_render.media import prepare
 from mpp_render.precompute import precompute
@@ -33,12 +34,13 @@ def hot_medium(shape=(10, 9, 8), emission=(0.0, 0.0, 0.0)):
 def march_args(rng, media, lights, pre, n=2000):
     o, d, t0, t1 = downward_rays(rng, n, 1.5, 0.2, 2.0)
     ec = [-1 if c is None else c for c in pre.layout.emission_channels]
-    return (o, d, t0, t1, np.ones(n), rng.integers(0, 2**32, n, dtype=np.uint32), pre.fields,
-            [m.w2i for m in media], [m.sigma_s for m in media], [m.sigma_t for m in media],
-            [m.g for m in media], [m.threshold for m in media], [m.voxel_size for m in media],
-            pack_lights(lights, pre.layout), -1, 0.07, 0.01, 1e10, None,
-            [np.maximum(m.medium.emission, 0) for m in media],
-            [m.march_bricks for m in media], 0.1, ec)
+    return MarchInputs(o, d, t0, t1, np.ones(n), rng.integers(0, 2**32, n, dtype=np.uint32),
+                       pre.fields, [m.w2i for m in media], [m.sigma_s for m in media],
+                       [m.sigma_t for m in media], [m.g for m in media],
+                       [m.threshold for m in media], [m.voxel_size for m in media],
+                       pack_lights(lights, pre.layout), -1, 0.07, 0.01, 1e10, None,
+                       [np.maximum(m.medium.emission, 0) for m in media],
+                       [m.march_bricks for m in media], 0.1, ec)
 
 
 def two_media():
@@ -64,16 +66,17 @@ def test_march_twins_agree_with_emission_grids():
     media = two_media()
     lights = [Light("POINT", "pt", np.full(3, 100.0), position=np.array([0.5, 0.0, 3.0]))]
     pre = precompute(media, lights, World(), Camera("PERSP", np.eye(4), 4, 4, (-1, 1, -1, 1)))
-    args = march_args(rng, media, lights, pre)
-    a = kernels_np.march(*args)
-    b = kernels.c_march(*args)
-    for x, y, name in zip(a, b, ("single", "T", "depth", "multiple", "steps", "emission")):
+    inputs = march_args(rng, media, lights, pre)
+    a = kernels.march(inputs, backend="numpy")
+    b = kernels.march(inputs, backend="c")
+    for x, y, name in zip(a, b, MarchResult._fields):
         assert np.all(np.isfinite(y)), name
         assert np.all(np.abs(x - y) <= 1e-4 * np.maximum(np.abs(x), 1e-6)), name
-    assert a[5].max() > 0.1
+    assert a.emission.max() > 0.1
     # the grid adds to the constant emission: without it the Emission pass is smaller
-    no_grid = kernels_np.march(*args[:-1], None)
-    assert np.all(no_grid[5] <= a[5] + 1e-12) and no_grid[5].sum() < 0.9 * a[5].sum()
+    no_grid = kernels.march(inputs.replace(emission_channels=None), backend="numpy")
+    assert np.all(no_grid.emission <= a.emission + 1e-12)
+    assert no_grid.emission.sum() < 0.9 * a.emission.sum()
 
 
 @needs_c
@@ -81,11 +84,10 @@ def test_march_rejects_an_emission_channel_outside_the_fields():
     rng = np.random.default_rng(1)
     media = two_media()
     pre = precompute(media, [], World(), Camera("PERSP", np.eye(4), 4, 4, (-1, 1, -1, 1)))
-    args = list(march_args(rng, media, [], pre, n=10))
+    inputs = march_args(rng, media, [], pre, n=10)
     for bad in ([pre.fields[0].shape[3] - 2, -1], [-1, pre.layout.channels], [-1, 0], [1]):
-        args[-1] = bad
         with pytest.raises(ValueError):
-            kernels.c_march(*args)
+            kernels.march(inputs.replace(emission_channels=bad), backend="c")
 
 
 def test_emission_grid_only_shines_in_the_emission_pass_where_it_is_hot():
@@ -181,13 +183,13 @@ def test_march_does_not_skip_a_glow_where_there_is_no_density():
     pm = prepare(Medium("fire", d, i2w, np.full(3, 1.0), np.full(3, 0.5), emission_grid=glow))
     pre = precompute([pm], [], World(), Camera("PERSP", np.eye(4), 4, 4, (-1, 1, -1, 1)))
     rng = np.random.default_rng(5)
-    base = list(march_args(rng, [pm], [], pre, n=400))
+    base = march_args(rng, [pm], [], pre, n=400)
     out = {}
     for name, bricks in (("none", None), ("march", [pm.march_bricks]), ("density", [pm.bricks])):
-        args = base[:-3] + [bricks, 0.1, base[-1]]
-        out[name] = [kernels_np.march(*args)[5]]
+        inputs = base.replace(bricks=bricks, adapt_tau=0.1)
+        out[name] = [kernels.march(inputs, backend="numpy").emission]
         if kernels._c is not None:
-            out[name].append(kernels.c_march(*args)[5])
+            out[name].append(kernels.march(inputs, backend="c").emission)
     assert out["none"][0].sum() > 1.0
     for a, b in zip(out["march"], out["none"]):
         np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12)

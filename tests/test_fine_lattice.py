@@ -72,13 +72,13 @@ def test_the_first_flights_and_the_flattened_level_take_the_finer_lattice():
     assert np.all(np.isfinite(msf.first.field)) and msf.first.field.max() > 0.0
     ctx = march.MarchContext([pm], pre.fields, pre.layout, desc.lights, 0.05, pre.multiple,
                              desc.camera)
-    (flat,), stride, _ = ctx.multiple[1][0][0]
+    (flat,), stride, _ = ctx.multiple.per_medium[0][0]
     assert stride == 1 and flat.shape[:3] == lattice_shape(pm.grid.shape, 1)
     msf.first.field = np.ascontiguousarray(msf.first.field[::2, ::2, ::2])
     msf.first.stride = 2
     ctx = march.MarchContext([pm], pre.fields, pre.layout, desc.lights, 0.05, pre.multiple,
                              desc.camera)
-    (coarse,), stride, _ = ctx.multiple[1][0][0]
+    (coarse,), stride, _ = ctx.multiple.per_medium[0][0]
     assert stride == 2
     sub = flat[::2, ::2, ::2]   # the walk's lattice has a point beyond the grid's last voxel
     coarse = coarse[:sub.shape[0], :sub.shape[1], :sub.shape[2]]

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from mpp_render import firstflight as ff
-from mpp_render.kernels_np import level_paths, level_table, table_lookup
+from mpp_render.mpp import level_paths, level_table, table_lookup
 from mpp_render.parallel import Cancelled
 from mpp_render.phase import delta_fraction, delta_g, hg, outside_peak, peak_cone_cos
 

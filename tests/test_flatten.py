@@ -53,15 +53,15 @@ def test_only_mesh_volumes_are_flattened():
     pre = precompute([pm], desc.lights, desc.world, desc.camera, multiple=True)
     ctx = march.MarchContext([pm], pre.fields, pre.layout, desc.lights, 0.05, pre.multiple,
                              desc.camera)
-    per_medium = ctx.multiple[1][0]
-    assert len(per_medium[0][0]) == 1 and per_medium[1] is None
-    assert ctx.multiple[2][0] is march.FLAT_TABLE
+    per_light = ctx.multiple.per_medium[0]
+    assert len(per_light[0].levels) == 1 and per_light[1] is None
+    assert ctx.multiple.tables[0] is march.FLAT_TABLE
     cloud = prepare(Medium("cloud", np.linspace(0.1, 1.0, 24 ** 3, dtype=np.float32).reshape(
         (24,) * 3), desc.media[0].index_to_world, desc.media[0].sigma_s, desc.media[0].sigma_a, 0.5))
     pre = precompute([cloud], desc.lights, desc.world, desc.camera, multiple=True)
     ctx = march.MarchContext([cloud], pre.fields, pre.layout, desc.lights, 0.05, pre.multiple,
                              desc.camera)
-    assert all(m is not None and len(m[0]) > 1 for m in ctx.multiple[1][0])
+    assert all(m is not None and len(m.levels) > 1 for m in ctx.multiple.per_medium[0])
 
 
 def test_the_first_flight_joins_the_flattened_level():
@@ -79,12 +79,12 @@ def test_the_first_flight_joins_the_flattened_level():
         assert f.weight[2] > 0.0 and np.all(np.isfinite(f.field)) and f.field[..., 2].max() > 0
     ctx = march.MarchContext([pm], pre.fields, pre.layout, desc.lights, 0.05, pre.multiple,
                              desc.camera)
-    with_first = ctx.multiple[1][0][0][0][0]
+    with_first = ctx.multiple.per_medium[0][0].levels[0]
     for m in pre.multiple[0]:
         m.first = None
     ctx = march.MarchContext([pm], pre.fields, pre.layout, desc.lights, 0.05, pre.multiple,
                              desc.camera)
-    walk = ctx.multiple[1][0][0][0][0]
+    walk = ctx.multiple.per_medium[0][0].levels[0]
     weight = np.max([f.weight for f in firsts], axis=0)
     for c in range(3):
         changed = not np.allclose(with_first[..., c], walk[..., c], rtol=1e-6, atol=0.0)

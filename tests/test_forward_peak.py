@@ -5,8 +5,10 @@ adding it, scattered towards the camera, to the multiply scattered light."""
 import numpy as np
 import pytest
 
-from mpp_render import kernels, kernels_np
+from mpp_render import kernels
+from mpp_render.kernels import MarchInputs, MultipleInputs
 from mpp_render.media import delta_scaled, prepare
+from mpp_render.mpp import RHO_TABLE
 from mpp_render.phase import delta_fraction, delta_g, hg
 from mpp_render.precompute import precompute
 from mpp_render.march import pack_lights
@@ -136,7 +138,10 @@ def test_the_forward_peak_light_scattered_towards_the_camera(backend):
     attenuated along the ray: sigma_s HG(0; g) P (1 - e^(-sigma_t L)) / sigma_t."""
     if backend == "c" and kernels._c is None:
         pytest.skip("compiled kernels not built")
-    march = kernels_np.march if backend == "numpy" else kernels.c_march
+
+    def march(*args):
+        return kernels.march(MarchInputs(*args), backend=backend)
+
     g = 0.7
     pm = cube(g)
     pre = precompute([pm], [SUN], World(), CAM, multiple=True)
@@ -152,11 +157,12 @@ def test_the_forward_peak_light_scattered_towards_the_camera(backend):
     o = np.tile([-3.0, 0.05, z], (n, 1))
     d = np.tile([1.0, 0.0, 0.0], (n, 1))
     t0, t1 = np.full(n, 2.2), np.full(n, 2.2 + L)
-    table = np.zeros((1, len(kernels_np.RHO_TABLE), 6))
+    table = np.zeros((1, len(RHO_TABLE), 6))
     out = march(o, d, t0, t1, np.ones(n), np.arange(n, dtype=np.uint32), pre.fields, [pm.w2i],
                 [pm.sigma_s], [pm.sigma_t], [pm.g], [pm.threshold], [pm.voxel_size],
-                pack_lights([SUN], pre.layout), -1, 0.02, 0.01, 1e10, (-1, [[None]], [table]))
-    single, multi = out[0], out[3]
+                pack_lights([SUN], pre.layout), -1, 0.02, 0.01, 1e10,
+                MultipleInputs(-1, [[None]], [table]))
+    single, multi = out.single, out.multiple
     st = pm.sigma_t
     along = (1 - np.exp(-st * L)) / st
     want_ms = pm.sigma_s * hg(0.0, g) * peak * along
@@ -168,8 +174,8 @@ def test_the_forward_peak_light_scattered_towards_the_camera(backend):
     off = march(o, d, t0, t1, np.ones(n), np.arange(n, dtype=np.uint32), pre.fields, [pm.w2i],
                 [pm.sigma_s], [pm.sigma_t], [pm.g], [pm.threshold], [pm.voxel_size],
                 pack_lights([SUN], pre.layout), -1, 0.02, 0.01, 1e10, None)
-    assert np.all(off[3] == 0.0)
-    np.testing.assert_allclose(off[0], single)
+    assert np.all(off.multiple == 0.0)
+    np.testing.assert_allclose(off.single, single)
 
 
 def test_the_peak_mean_squared_angle_matches_sampled_directions():

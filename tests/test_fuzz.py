@@ -7,7 +7,8 @@ import os
 import numpy as np
 import pytest
 
-from mpp_render import kernels, kernels_np
+from mpp_render import kernels
+from mpp_render.lightrecord import L_CHANNEL, L_KIND, LIGHT_FIELDS
 from mpp_render.media import brick_bounds
 
 pytestmark = pytest.mark.skipif(kernels._c is None, reason="compiled kernels not built")
@@ -40,12 +41,12 @@ def random_case(rng):
         gs.append(float(rng.uniform(-0.99, 0.99)))
         thr.append(float(rng.choice([-1.0, 0.5])))
         vox.append(float(rng.uniform(0.01, 1)))
-    lights = rng.normal(size=(nl, kernels_np.LIGHT_FIELDS)) * 3
-    lights[:, kernels_np.L_KIND] = rng.integers(0, 4, nl)
-    lights[:, kernels_np.L_CHANNEL] = 1 + 3 * np.arange(nl)
+    lights = rng.normal(size=(nl, LIGHT_FIELDS)) * 3
+    lights[:, L_KIND] = rng.integers(0, 4, nl)
+    lights[:, L_CHANNEL] = 1 + 3 * np.arange(nl)
     lights = spoil(lights, rng, 0.03)
-    lights[:, kernels_np.L_KIND] = np.clip(np.nan_to_num(lights[:, kernels_np.L_KIND]), 0, 3).round()
-    lights[:, kernels_np.L_CHANNEL] = 1 + 3 * np.arange(nl)
+    lights[:, L_KIND] = np.clip(np.nan_to_num(lights[:, L_KIND]), 0, 3).round()
+    lights[:, L_CHANNEL] = 1 + 3 * np.arange(nl)
     o = spoil(rng.uniform(-4, 4, (n, 3)), rng)
     d = spoil(rng.normal(size=(n, 3)), rng)
     t0 = spoil(rng.uniform(0, 2, n), rng)

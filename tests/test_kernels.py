@@ -2,7 +2,9 @@
 import numpy as np
 import pytest
 
-from mpp_render import kernels, kernels_np
+from mpp_render import kernels
+from mpp_render.kernels import MarchInputs, MarchResult
+from mpp_render.lightrecord import L_CHANNEL, LIGHT_FIELDS
 from mpp_render.march import MarchContext, pack_lights
 from mpp_render.media import prepare
 from mpp_render.precompute import precompute
@@ -75,36 +77,38 @@ def test_march_twins_agree_on_random_rays(lights, density):
     multiple = MarchContext(media, pre.fields, pre.layout, lights, 0.07, pre.multiple).multiple
     n = 3000
     o, d, t0, t1 = downward_rays(rng, n, 2.0, 0.3, 2.5)
-    args = (o, d, t0, t1, rng.uniform(0.5, 1, n), rng.integers(0, 2**32, n, dtype=np.uint32),
-            pre.fields, [m.w2i for m in media], [m.sigma_s for m in media],
-            [m.sigma_t for m in media], [m.g for m in media], [m.threshold for m in media],
-            [m.voxel_size for m in media], pack_lights(lights, pre.layout),
-            pre.layout.ambient_channel, 0.07, 0.01, 1e10, multiple,
-            [np.array([0.1, 0.2, 0.3]), np.zeros(3)])
-    a = kernels_np.march(*args)
-    b = kernels.c_march(*args)
-    for x, y, name in zip(a, b, ("single", "T", "depth", "multiple", "steps", "emission")):
+    inputs = MarchInputs(o, d, t0, t1, rng.uniform(0.5, 1, n),
+                         rng.integers(0, 2**32, n, dtype=np.uint32), pre.fields,
+                         [m.w2i for m in media], [m.sigma_s for m in media],
+                         [m.sigma_t for m in media], [m.g for m in media],
+                         [m.threshold for m in media], [m.voxel_size for m in media],
+                         pack_lights(lights, pre.layout), pre.layout.ambient_channel, 0.07, 0.01,
+                         1e10, multiple, [np.array([0.1, 0.2, 0.3]), np.zeros(3)])
+    a = kernels.march(inputs, backend="numpy")
+    b = kernels.march(inputs, backend="c")
+    for x, y, name in zip(a, b, MarchResult._fields):
         assert np.all(np.isfinite(y)), name
         assert np.all(np.abs(x - y) <= 1e-4 * np.maximum(np.abs(x), 1e-6)), name
     # skipping empty bricks changes nothing but the count of samples taken; longer steps in
     # thin media (adapt_tau) change the samples: the twins still agree, sample for sample
     bricks = [m.bricks for m in media]
     for adapt in (0.0, 0.3):
-        c_np = kernels_np.march(*args, bricks=bricks, adapt_tau=adapt)
-        c = kernels.c_march(*args, bricks=bricks, adapt_tau=adapt)
-        for x, y, name in zip(c_np, c, ("single", "T", "depth", "multiple", "steps", "emission")):
+        skipping = inputs.replace(bricks=bricks, adapt_tau=adapt)
+        c_np = kernels.march(skipping, backend="numpy")
+        c = kernels.march(skipping, backend="c")
+        for x, y, name in zip(c_np, c, MarchResult._fields):
             assert np.all(np.abs(x - y) <= 1e-4 * np.maximum(np.abs(x), 1e-6)), (name, adapt)
-        assert np.all(c[4] <= a[4]) and c[4].sum() < 0.9 * a[4].sum()
+        assert np.all(c.steps <= a.steps) and c.steps.sum() < 0.9 * a.steps.sum()
         if adapt == 0:
-            skipped = c[4].sum()
+            skipped = c.steps.sum()
         elif density < 1.0 and len(lights) == 3:
-            assert c[4].sum() < 0.6 * skipped  # the thin smoke takes longer steps
+            assert c.steps.sum() < 0.6 * skipped  # the thin smoke takes longer steps
         if adapt == 0:
             for x, y in zip(a[:4], c[:4]):
                 assert np.all(np.abs(x - y) <= 1e-4 * np.maximum(np.abs(x), 1e-6))
-    assert a[0].max() > 0.01 and a[1].min() < 0.5   # the rays did see the media
-    assert a[3].max() > 0.01                         # and multiple scattering
-    assert a[5].max() > 0.01                         # and the smoke's emission
+    assert a.single.max() > 0.01 and a.T.min() < 0.5   # the rays did see the media
+    assert a.multiple.max() > 0.01                      # and multiple scattering
+    assert a.emission.max() > 0.01                      # and the smoke's emission
 
 
 @needs_c
@@ -115,10 +119,10 @@ def test_march_rejects_bad_input():
     base = [np.zeros((2, 3)), np.tile([0, 0, -1.0], (2, 1)), np.zeros(2), np.ones(2), np.ones(2),
             np.zeros(2, np.uint32), f, [m.w2i for m in media], [m.sigma_s for m in media],
             [m.sigma_t for m in media], [0.0, 0.0], [-1.0, 0.5], [0.1, 0.1],
-            np.zeros((0, kernels_np.LIGHT_FIELDS)), -1, 0.1, 0.01, 1e10]
+            np.zeros((0, LIGHT_FIELDS)), -1, 0.1, 0.01, 1e10]
     kernels._c.march(*[kernels._f64(x) if i in (0, 1, 2, 3, 4) else x for i, x in enumerate(base)])
-    bad_light = np.zeros((1, kernels_np.LIGHT_FIELDS))
-    bad_light[0, kernels_np.L_CHANNEL] = 7   # beyond the 4 channels
+    bad_light = np.zeros((1, LIGHT_FIELDS))
+    bad_light[0, L_CHANNEL] = 7   # beyond the 4 channels
     cases = {13: bad_light, 14: 2, 15: 0.0, 10: [1.5, 0.0], 5: np.zeros(3, np.uint32),
              6: [np.zeros((3, 3, 3, 1), np.float64)] * 2}
     for i, bad in cases.items():
@@ -135,7 +139,10 @@ def test_trilinear_twins_agree_and_read_nothing_outside():
     coordinates (0, no read outside the grid); a float64 grid goes to the numpy twin whole."""
     from mpp_render.media import trilinear
     rng = np.random.default_rng(4)
-    c = kernels._C_WRAPPERS["trilinear"]
+
+    def c(grid, idx):
+        return kernels.trilinear(grid, idx, backend="c")
+
     for shape in ((7, 5, 4, 3), (2, 2, 2, 1), (9, 1, 6, 2)):
         g = rng.random(shape).astype(np.float32)
         idx = rng.uniform(-1.5, max(shape[:3]) + 0.5, (4000, 3))
@@ -167,18 +174,55 @@ def test_an_indirect_lights_single_scattering_is_multiple(backend):
     cam.cam_to_world[:3, 3] = [0, 0, 6]
     o, d, t0, t1 = downward_rays(rng, 500, 2.0, 0.3, 2.5)
     axial, keys = rng.uniform(0.5, 1, 500), rng.integers(0, 2**32, 500, dtype=np.uint32)
-    march = kernels_np.march if backend == "numpy" else kernels.c_march
     out = []
     for lights in (all_lights(), indirect_lights()):
         pre = precompute(media, lights, World(np.zeros(3)), cam, n_dirs=8, multiple=True)
         multiple = MarchContext(media, pre.fields, pre.layout, lights, 0.07, pre.multiple).multiple
-        out.append(march(o, d, t0, t1, axial, keys, pre.fields, [m.w2i for m in media],
-                         [m.sigma_s for m in media], [m.sigma_t for m in media],
-                         [m.g for m in media], [m.threshold for m in media],
-                         [m.voxel_size for m in media], pack_lights(lights, pre.layout), -1,
-                         0.07, 0.01, 1e10, multiple))
+        out.append(kernels.march(MarchInputs(
+            o, d, t0, t1, axial, keys, pre.fields, [m.w2i for m in media],
+            [m.sigma_s for m in media], [m.sigma_t for m in media], [m.g for m in media],
+            [m.threshold for m in media], [m.voxel_size for m in media],
+            pack_lights(lights, pre.layout), -1, 0.07, 0.01, 1e10, multiple), backend=backend))
     (s0, T0, _, m0, _, _), (s1, T1, _, m1, _, _) = out
     assert np.array_equal(T0, T1)
     assert np.allclose(s0 + m0, s1 + m1, rtol=1e-9, atol=1e-15)
     moved = s0.sum() - s1.sum()
     assert moved > 0.2 * s0.sum() and np.allclose(m1.sum() - m0.sum(), moved, rtol=1e-9)
+
+
+@needs_c
+def test_the_compiled_light_record_is_lightrecords():
+    """The C side's light record (csrc/light.h, exported as _kernels.light_layout) has
+    mpp_render.lightrecord's layout, field by field."""
+    from mpp_render import lightrecord
+    assert kernels._c.light_layout() == lightrecord.layout()
+    assert lightrecord.layout()["LIGHT_FIELDS"] == 40 and len(lightrecord.layout()) == 23
+
+
+def test_the_layout_and_the_model_import_no_kernel():
+    """lightrecord (the light record) and mpp (the walk model) import no kernel module: the
+    build, the tests and every stage can read them."""
+    import subprocess
+    import sys
+    from pathlib import Path
+    code = ("import sys, mpp_render.lightrecord, mpp_render.mpp; "
+            "bad = [m for m in sys.modules if m.startswith('mpp_render.kernels') or "
+            "m.startswith('mpp_render._kernels')]; assert not bad, bad")
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=Path(__file__).resolve().parents[1])
+
+
+def test_numpy_backend_holds_in_every_thread_and_a_call_can_name_its_backend():
+    """kernels.numpy_backend() puts every kernel call in the block on the numpy twins, also in
+    worker threads (precompute and the render's tiles run there); afterwards the backend is
+    what it was.  A call's own ``backend`` names one; an unknown name is an error."""
+    from concurrent.futures import ThreadPoolExecutor
+    before = kernels.backend()
+    with kernels.numpy_backend():
+        assert kernels.backend() == "numpy"
+        with ThreadPoolExecutor(2) as pool:
+            assert pool.submit(kernels.backend).result() == "numpy"
+    assert kernels.backend() == before
+    grid, idx = np.ones((2, 2, 2), np.float32), np.full((1, 3), 0.5)
+    assert kernels.trilinear(grid, idx, backend="numpy")[0] == 1.0
+    with pytest.raises(ValueError):
+        kernels.trilinear(grid, idx, backend="cuda")

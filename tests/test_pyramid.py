@@ -79,17 +79,17 @@ def test_upsample_into_twins_agree_and_write_only_the_given_voxels():
         a = np.full(shape + (7,), -1.0, np.float32)
         b = a.copy()
         kernels_np.upsample_into(a, 2, lat, stride, flat)
-        kernels.c_upsample_into(b, 2, lat, stride, flat)
+        kernels.upsample_into(b, 2, lat, stride, flat, backend="c")
         assert np.allclose(a, b, rtol=1e-5, atol=1e-6)
         untouched = np.ones(int(np.prod(shape)), bool)
         untouched[flat] = False
         assert np.all(b.reshape(-1, 7)[untouched] == -1.0) and np.all(b[..., [0, 1, 5, 6]] == -1.0)
     with pytest.raises(ValueError):
-        kernels.c_upsample_into(b, 5, lat, stride, flat)      # channels past the field
+        kernels.upsample_into(b, 5, lat, stride, flat, backend="c")      # channels past the field
     with pytest.raises(ValueError):
-        kernels.c_upsample_into(b, 0, lat, stride, np.array([10 ** 9]))
+        kernels.upsample_into(b, 0, lat, stride, np.array([10 ** 9]), backend="c")
     with pytest.raises(ValueError):
-        kernels.c_upsample_into(b, 0, lat, 0, flat)
+        kernels.upsample_into(b, 0, lat, 0, flat, backend="c")
 
 
 def test_lattice_values_read_what_trilinear_reads():

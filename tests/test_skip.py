@@ -70,8 +70,8 @@ def test_optical_depth_is_the_same_with_bricks():
         args = (p, d, t, [x.grid for x in ms], [x.w2i for x in ms], [x.sigma_t for x in ms],
                 [x.threshold for x in ms])
         for step in (0.02, 0.07):
-            a = kernels.c_optical_depth(*args, step)
-            b = kernels.c_optical_depth(*args, step, bricks=[x.bricks for x in ms])
+            a = kernels.optical_depth(*args, step, backend="c")
+            b = kernels.optical_depth(*args, step, bricks=[x.bricks for x in ms], backend="c")
             assert np.allclose(a, b, rtol=1e-12, atol=1e-12), (sub, step)
             assert a.max() > 0.5 and (a == 0).mean() > 0.05
 
@@ -102,6 +102,6 @@ def test_optical_depth_clipped_to_the_media_is_the_twins_and_the_exit_distance()
     got_np = kernels_np.optical_depth(p, d, limit, *args, clip=True)
     assert np.allclose(got_np, want, rtol=1e-9, atol=1e-12)
     if kernels._c is not None:
-        got_c = kernels.c_optical_depth(p, d, limit, *args, clip=True)
+        got_c = kernels.optical_depth(p, d, limit, *args, clip=True, backend="c")
         assert np.allclose(got_c, want, rtol=1e-4, atol=1e-9)
     assert want.max() > 0.3 and (want == 0).mean() > 0.05

@@ -1,6 +1,8 @@
 """The light sweep (kernels light_sweep, precompute.sweep_light): optical depth to a light for
 every voxel by following the light's rays slab by slab.  Its C and numpy twins agree, chunks
 partition the voxels, and the result matches Beer-Lambert and the exact per-voxel march."""
+import contextlib
+
 import numpy as np
 import pytest
 
@@ -76,7 +78,7 @@ def test_twins_agree_and_chunks_partition_the_voxels(li):
             b = whole.copy()
             cuts = sorted(set([0, pyr.n_p - 1] + list(rng.integers(1, pyr.n_p - 1, 3))))
             for lo, hi in zip(cuts, cuts[1:]):
-                kernels.c_light_sweep(*sweep_args(media, pm, light, pyr, L, init, lo, hi, b, step))
+                kernels.light_sweep(*sweep_args(media, pm, light, pyr, L, init, lo, hi, b, step), backend="c")
             mine = ~np.isnan(a[..., 1])
             assert np.array_equal(mine, ~np.isnan(b[..., 1]))  # the same voxels, once each
             assert np.allclose(a[mine][:, 1:4], b[mine][:, 1:4], rtol=1e-4, atol=1e-5)
@@ -86,18 +88,17 @@ def test_twins_agree_and_chunks_partition_the_voxels(li):
 
 
 @pytest.mark.parametrize("backend", ["numpy", "c"])
-def test_homogeneous_box_under_a_sun_is_beer_lambert(backend, monkeypatch):
+def test_homogeneous_box_under_a_sun_is_beer_lambert(backend):
     if backend == "c" and kernels._c is None:
         pytest.skip("compiled kernels not built")
-    if backend == "numpy":
-        monkeypatch.setattr(kernels, "_FORCE_NUMPY", True)
     box = sharp_box(n=16, centre=(0.0, 0.0, 0.0), size=2.0)
     pm = prepare(box)
     w = np.array([0.35, -0.2, -0.915])
     w /= np.linalg.norm(w)
     sun = Light("SUN", "sun", np.ones(3), direction=w)
     f = np.zeros(pm.grid.shape + (4,), np.float32)
-    assert P.sweep_light([pm], pm, sun, f, 1, pm.voxel_size) is True
+    with kernels.numpy_backend() if backend == "numpy" else contextlib.nullcontext():
+        assert P.sweep_light([pm], pm, sun, f, 1, pm.voxel_size) is True
     ijk = np.stack(np.meshgrid(*[np.arange(s) for s in pm.grid.shape], indexing="ij"), -1).reshape(-1, 3)
     x = ijk @ pm.i2w[:3, :3].T + pm.i2w[:3, 3]
     # distance from x to the cube's surface (|x|_inf = 1) travelling towards the sun (-w)
@@ -210,13 +211,13 @@ def test_light_sweep_rejects_bad_input():
     ro = out.copy()
     ro.flags.writeable = False
     with pytest.raises(ValueError):
-        kernels.c_light_sweep(ro, *good[1:])
+        kernels.light_sweep(ro, *good[1:], backend="c")
     nan_init = init.copy()
     nan_init[0, 0, 0] = np.nan
     args = list(good)
     args[10] = nan_init
     with pytest.raises(ValueError):
-        kernels.c_light_sweep(*args)
+        kernels.light_sweep(*args, backend="c")
 
 
 def test_lights_that_cannot_be_swept_fall_back_to_the_exact_march():

@@ -16,9 +16,17 @@ if [ ! -x .venv/bin/python ] || ! cmp -s requirements.txt .venv/.requirements 2>
     .venv/bin/python -m pip install -q -r requirements.txt >&2
     cp requirements.txt .venv/.requirements
 fi
-# (Re)build the C kernels when the source is newer than the module.
+# (Re)build the C kernels when any source or header (mpp_render/csrc/) is newer than the module.
 SO=$(ls mpp_render/_kernels*.so 2>/dev/null | head -1 || true)
-if [ -z "$SO" ] || [ mpp_render/_kernels.c -nt "$SO" ] || [ setup.py -nt "$SO" ]; then
+stale=""
+if [ -z "$SO" ] || [ setup.py -nt "$SO" ]; then
+    stale=1
+else
+    for f in mpp_render/csrc/*.c mpp_render/csrc/*.h; do
+        if [ "$f" -nt "$SO" ]; then stale=1; break; fi
+    done
+fi
+if [ -n "$stale" ]; then
     echo "[dev] building C kernels" >&2
     .venv/bin/python setup.py -q build_ext --inplace >&2
 fi

@@ -17,7 +17,7 @@ keep the fraction
 of their light: 1 inside the medium, falling linearly to 0 at z_b outside it, read where the
 level's paths have drifted to.  dist (m) is the distance to the nearest point of the medium
 on the lattice; D_k = g (1 - exp(-l_k / l_tr)) l_tr the mean progress along the light's
-direction d of the paths of level k (``kernels_np.walk_displacement``): forward-scattering
+direction d of the paths of level k (``mpp.walk_displacement``): forward-scattering
 light that enters through a face heads inwards, and is lost less than its symmetric blur
 around the face says.  Level 0 (the unblurred source) loses nothing.
 
@@ -86,7 +86,7 @@ def survival(pm: PreparedMedium, occupied: np.ndarray, stride: int, h: float, z_
         q = idx * float(2 ** k) + pad
         if drifts[k] != 0.0:
             q = q + (float(drifts[k]) * light_direction(x)) @ w2i.T / float(stride)
-        return kernels.get("trilinear")(ramp, np.clip(q, 0.0, top))[:, 0].reshape(
+        return kernels.trilinear(ramp, np.clip(q, 0.0, top))[:, 0].reshape(
             shape).astype(np.float32)
 
     return keep

@@ -72,7 +72,7 @@ def density_lengths(media: List[PreparedMedium], points, dirs, t_max, step,
     with each medium's coefficient a unit vector, three media per call).  Any RGB optical
     depth through the media is then a product with their coefficients (M, 3), so one march
     gives both the extinction and the scattering optical depth."""
-    od = kernels.get("optical_depth")
+    od = kernels.optical_depth
     n, M = len(points), len(media)
     out = np.zeros((n, M))
     # the rays end where they leave the last medium, of all of them (not only of the group)
@@ -102,7 +102,7 @@ def light_optical_depth(media: List[PreparedMedium], light: Light, points, step,
     fog's sigma_t x distance (worldfog.optical_depth).  ``media`` must not hold the fog.
     ``coefficient`` (see _media_arrays_for) picks what is integrated; shadows and fog are
     added to 'sigma_t' only.  Raises parallel.Cancelled on Esc."""
-    od = kernels.get("optical_depth")
+    od = kernels.optical_depth
     arrays = _media_arrays_for(media, coefficient) if media else None
     # the bricks bound density_from(grid), which 'length' does not integrate
     bricks = None if coefficient == "length" else media_bricks(media, tuning)
@@ -306,7 +306,7 @@ def near_sharp_surfaces(pm: PreparedMedium, media: List[PreparedMedium]):
             idx = m.to_index(world)
             near = np.flatnonzero(np.all((idx > -1.0) & (idx < np.array(m.grid.shape)), axis=1))
             inside = np.zeros(len(world), bool)   # beyond m's grid m has no density
-            inside[near] = kernels.get("trilinear")(m.grid, idx[near]) >= m.threshold
+            inside[near] = kernels.trilinear(m.grid, idx[near]) >= m.threshold
             inside = inside.reshape(pm.grid.shape)
             out |= dilate(inside) & dilate(~inside)
     return np.flatnonzero(out)
@@ -337,7 +337,7 @@ def sweep_light(media: List[PreparedMedium], pm: PreparedMedium, light: Light, f
     if plan is None:
         return False
     pyramids, L = plan
-    sweep = kernels.get("light_sweep")
+    sweep = kernels.light_sweep
     grids, w2is, sigmas, thrs = kernel_arrays(media)
     a2w = pm.i2w[:3, :]
     n_threads = worker_count(threads)

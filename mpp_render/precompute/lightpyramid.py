@@ -15,7 +15,7 @@ import numpy as np
 from .. import kernels, pyramid
 from ..camera import towards_camera
 from ..firstflight import FirstFlight, first_flight, flight_weight
-from ..kernels_np import level_paths, walk_displacement
+from ..mpp import level_paths, walk_displacement
 from ..media import PreparedMedium
 from ..parallel import check
 from ..scene import Camera, Light, Tuning
@@ -144,7 +144,7 @@ def drift_levels(levels, pm: PreparedMedium, light: Light, camera: Camera, strid
     representative length l_k) start from a first scattering of the light travelling along d
     and drift forward along it; of the light that leaves x towards the camera (v, unit,
     towards the camera's position; its axis for an orthographic camera), those that arrive
-    heading towards v came further along v (``kernels_np.walk_displacement``).
+    heading towards v came further along v (``mpp.walk_displacement``).
 
     d belongs to the first scatterings read, not to x: ``directions`` (one (X,Y,Z,4) array
     per level, blurred with it) holds the power-weighted sum of the light's direction at the
@@ -171,7 +171,7 @@ def drift_levels(levels, pm: PreparedMedium, light: Light, camera: Camera, strid
     paths = [level_paths(h, len(levels), l_c, g) for l_c, _ in groups]
     if directions is not None:
         mean_directions = mean_source_directions(directions, light, pm, stride)
-    read = kernels.get("trilinear")   # a float64 grid (the mean directions) reads on numpy
+    read = kernels.trilinear   # a float64 grid (the mean directions) reads on numpy
     for k in range(len(levels)):
         lev = levels[k]
         idx, x = lattice_points(pm, lev.shape[:3], stride * 2 ** k)
@@ -209,7 +209,7 @@ def mean_source_directions(directions, light: Light, pm: PreparedMedium, stride:
         idx, x = lattice_points(pm, sums.shape[:3], stride * 2 ** k)
         if k + 1 < len(directions):
             coarser = np.pad(out[k + 1], ((1, 1), (1, 1), (1, 1), (0, 0)), mode="edge")
-            mean = kernels.get("trilinear")(coarser, idx / 2.0 + 1.0)
+            mean = kernels.trilinear(coarser, idx / 2.0 + 1.0)
         else:
             mean = light_direction(light, x)
         power = sums[..., 3].reshape(-1)

@@ -115,7 +115,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                 peak = peak_light(pm, f, light, chans[li], beams[li], mean_ss, flat, step,
                                   multiple_resolution, should_cancel, fog=pm is fog,
                                   tuning=tuning)
-                kernels.get("upsample_into")(f, beams[li], peak[0], peak[1], flat)
+                kernels.upsample_into(f, beams[li], peak[0], peak[1], flat)
         if layout.ambient_channel is not None:
             if progress:
                 progress(0.0, f"World light on {pm.medium.name}")

@@ -115,7 +115,7 @@ def fill_world_light(f: np.ndarray, channels, media: List[PreparedMedium], pm: P
     a = world_light(media, pm, world, camera, cpts, n_dirs, step, seed=seed,
                     should_cancel=should_cancel, surfaces=surfaces, threads=threads,
                     multiple=amb_ms is not None, tuning=tuning)
-    up = kernels.get("upsample_into")
+    up = kernels.upsample_into
     for ch, vals in zip((amb, amb_ms), a if amb_ms is not None else (a,)):
         coarse = np.zeros((int(np.prod(cshape)), 3), np.float32)
         coarse[cflat] = vals

@@ -1,0 +1,16 @@
+/* The Python entry points of mpp_render._kernels, one file each; module.c lists them. */
+#ifndef MPP_KERNELS_H
+#define MPP_KERNELS_H
+
+#include "common.h"
+
+extern const char optical_depth_doc[], light_sweep_doc[], upsample_into_doc[], march_doc[],
+    trilinear_doc[], light_layout_doc[];
+PyObject *optical_depth(PyObject *self, PyObject *args);
+PyObject *light_sweep(PyObject *self, PyObject *args);
+PyObject *upsample_into(PyObject *self, PyObject *args);
+PyObject *march(PyObject *self, PyObject *args);
+PyObject *py_trilinear(PyObject *self, PyObject *args);
+PyObject *light_layout(PyObject *self, PyObject *noargs);
+
+#endif

@@ -1,0 +1,193 @@
+/* The light record (one float64 row of LIGHT_FIELDS per light) and light_sample.
+ *
+ * The layout (L_* offsets, KIND_* kinds) is mpp_render/lightrecord.py's; module.c exports these
+ * values as _kernels.light_layout() and tests/test_kernels.py holds them to the Python module.
+ */
+#ifndef MPP_LIGHT_H
+#define MPP_LIGHT_H
+
+#include "common.h"
+
+#define LIGHT_FIELDS 40
+#define L_KIND 0
+#define L_STRENGTH 1
+#define L_POS 4
+#define L_DIR 7
+#define L_INV 10
+#define L_COSHALF 19
+#define L_BLEND 20
+#define L_RADIUS 21
+#define L_AX 22
+#define L_AY 25
+#define L_AREA 28
+#define L_NORMAL 29
+#define L_NORMALIZE 32
+#define L_ROUND 33
+#define L_CHANNEL 34
+#define L_COND 35
+#define L_BEAM 36      /* the channel of the forward peak's light (W/m^2), < 1: none */
+#define L_INDIRECT 37  /* 1: scattered light (a surface's bounce): its single scattering is multiple */
+#define KIND_POINT 0
+#define KIND_SPOT 1
+#define KIND_SUN 2
+#define KIND_AREA 3
+#define SPOT_DISC_POINTS 8  /* kernels_np.SPOT_DISC_POINTS */
+#define SPOT_DISC_PHI 0.6180339887498949
+#define SPOT_GATE_MARGIN 1.05
+
+static inline void disc_map(double u1, double u2, int round_shape, double *pa, double *pb) {
+    double a = 2.0 * u1 - 1.0, b = 2.0 * u2 - 1.0;
+    if (!round_shape) { *pa = a; *pb = b; return; }
+    int big = fabs(a) > fabs(b);
+    double r = big ? a : b, phi;
+    if (a == 0.0 && b == 0.0) phi = 0.0;
+    else if (big) phi = (M_PI / 4) * b / (a == 0.0 ? 1.0 : a);
+    else phi = M_PI / 2 - (M_PI / 4) * a / (b == 0.0 ? 1.0 : b);
+    *pa = r * cos(phi); *pb = r * sin(phi);
+}
+
+static inline void basis(const double n[3], double t1[3], double t2[3]) {
+    double sign = n[2] >= 0.0 ? 1.0 : -1.0;
+    double a = -1.0 / (sign + n[2]);
+    double b = n[0] * n[1] * a;
+    t1[0] = 1.0 + sign * n[0] * n[0] * a; t1[1] = sign * b; t1[2] = -sign * n[0];
+    t2[0] = b; t2[1] = sign + n[1] * n[1] * a; t2[2] = -n[1];
+}
+
+/* Cosine between the spot's axis and the propagation direction v (world), measured in the
+ * light's local frame (its inverse matrix L_INV: non-uniform scale included). */
+static inline double spot_cos(const double *L, const double v[3]) {
+    const double *M = L + L_INV;
+    double loc[3];
+    for (int r = 0; r < 3; r++) loc[r] = M[3 * r] * v[0] + M[3 * r + 1] * v[1] + M[3 * r + 2] * v[2];
+    double ln = sqrt(loc[0] * loc[0] + loc[1] * loc[1] + loc[2] * loc[2]);
+    return -loc[2] / (ln > 1e-30 ? ln : 1e-30);
+}
+
+/* Light record `L` at point x: propagation direction d, irradiance e, unit direction to the
+ * centre wc and its distance dc (INFINITY for the sun), and ds, the distance to the emitting
+ * point(s) sampled (their irradiance-weighted mean; dc for a point without radius). */
+static inline void light_sample(const double *L, const double x[3], double u1, double u2,
+                         double d[3], double e[3], double wc[3], double *dc, double *ds) {
+    int kind = (int)L[L_KIND];
+    if (kind == KIND_SUN) {
+        for (int a = 0; a < 3; a++) { d[a] = L[L_DIR + a]; e[a] = L[L_STRENGTH + a]; wc[a] = -d[a]; }
+        *dc = INFINITY;
+        *ds = INFINITY;
+        return;
+    }
+    const double *c = L + L_POS;
+    double vc[3] = {c[0] - x[0], c[1] - x[1], c[2] - x[2]};
+    double dcc = sqrt(vc[0] * vc[0] + vc[1] * vc[1] + vc[2] * vc[2]);
+    double inv_dc = 1.0 / (dcc > 1e-30 ? dcc : 1e-30);
+    for (int a = 0; a < 3; a++) wc[a] = vc[a] * inv_dc;
+    *dc = dcc;
+    double pa, pb;
+    disc_map(u1, u2, kind != KIND_AREA || L[L_ROUND] > 0, &pa, &pb);
+    if (kind == KIND_POINT || kind == KIND_SPOT) {
+        double radius = L[L_RADIUS], t1[3] = {0, 0, 0}, t2[3] = {0, 0, 0};
+        if (radius > 0.0) {
+            double nn[3] = {-wc[0], -wc[1], -wc[2]};
+            basis(nn, t1, t2);
+        }
+        /* a spot with a radius averages its cone over SPOT_DISC_POINTS points of the disc:
+         * (u1, u2) shifts a fixed lattice (Cranley-Patterson), so each point is uniform and
+         * the mean irradiance unbiased; one random point would light x or not (noise) */
+        int n_pts = (kind == KIND_SPOT && radius > 0.0) ? SPOT_DISC_POINTS : 1;
+        if (n_pts > 1 && radius < dcc) {
+            /* one point where the cone is the same over the whole disc: the disc's directions
+             * lie within alpha of the centre's (wider in the light's frame by L_COND) */
+            double out[3] = {-wc[0], -wc[1], -wc[2]};
+            double cc = spot_cos(L, out);
+            cc = cc < -1.0 ? -1.0 : (cc > 1.0 ? 1.0 : cc);
+            double th = acos(cc), spread = SPOT_GATE_MARGIN * L[L_COND] * asin(radius / dcc);
+            double ch = L[L_COSHALF], bl = L[L_BLEND];
+            double th_out = acos(ch), cin = ch + (1.0 - ch) * bl;
+            double th_in = bl > 0.0 ? acos(cin < 1.0 ? cin : 1.0) : th_out;
+            if (th - spread > th_out || th + spread < th_in) n_pts = 1;
+        }
+        double rmin = 1e-4, esum = 0.0, dsum[3] = {0, 0, 0}, lsum = 0.0;
+        /* 1 - cos theta_max of the disc's cone, without cancellation for r << d */
+        double hyp = sqrt(dcc * dcc + radius * radius);
+        double omc_max = radius > 0.0 ? radius * radius / (hyp * (hyp + dcc)) : 0.0;
+        double e_disc = radius > 0.0 ? 2.0 * omc_max / (radius * radius) : 0.0;
+        for (int i = 0; i < n_pts; i++) {
+            if (i > 0) {
+                double ua = u1 + (double)i / (double)SPOT_DISC_POINTS, ub = (double)i * SPOT_DISC_PHI;
+                ub = u2 + (ub - floor(ub));
+                if (ua >= 1.0) ua -= 1.0;
+                if (ub >= 1.0) ub -= 1.0;
+                disc_map(ua, ub, 1, &pa, &pb);
+            }
+            double di[3], den, dist;  /* the irradiance per unit intensity is att / den */
+            if (radius > 0.0) {
+                /* Cycles' soft-falloff lamp: a disc of radius r facing x with radiance
+                 * I / (pi r^2); the disc subtends the cone of half-angle atan(r / d) about wc,
+                 * irradiance I / (pi r^2) * 2 pi (1 - cos theta_max), exact also inside r.
+                 * The disc point (pa, pb) maps to a direction uniform in that solid angle. */
+                double s = pa * pa + pb * pb, omc = s * omc_max;
+                double cos_t = 1.0 - omc, sin_t = sqrt(omc * (2.0 - omc) > 0.0 ? omc * (2.0 - omc) : 0.0);
+                double rs = s > 0.0 ? sin_t / sqrt(s) : 0.0;
+                for (int a = 0; a < 3; a++) di[a] = -(wc[a] * cos_t + (t1[a] * pa + t2[a] * pb) * rs);
+                den = 1.0 / e_disc;
+                dist = dcc / (cos_t > 1e-12 ? cos_t : 1e-12);  /* to the disc along di */
+            } else {
+                double v[3] = {x[0] - c[0], x[1] - c[1], x[2] - c[2]};
+                dist = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+                double id = 1.0 / (dist > 1e-30 ? dist : 1e-30);
+                for (int a = 0; a < 3; a++) di[a] = v[a] * id;
+                den = dist * dist > rmin * rmin ? dist * dist : rmin * rmin;
+            }
+            if (i == 0)
+                for (int a = 0; a < 3; a++) d[a] = di[a];
+            double att = 1.0;
+            if (kind == KIND_SPOT) {
+                double cos_t = spot_cos(L, di);
+                double ch = L[L_COSHALF], bl = L[L_BLEND];
+                if (bl <= 0.0) att = cos_t > ch ? 1.0 : 0.0;
+                else {
+                    double q = (cos_t - ch) / ((1.0 - ch) * bl);
+                    q = q < 0.0 ? 0.0 : (q > 1.0 ? 1.0 : q);
+                    att = q * q * (3.0 - 2.0 * q);
+                }
+            }
+            esum += att / den;
+            lsum += att / den * dist;
+            for (int a = 0; a < 3; a++) dsum[a] += att / den * di[a];
+        }
+        *ds = (radius > 0.0 && esum > 0.0) ? lsum / esum : dcc;
+        /* the direction: the irradiance-weighted mean over the points, so that the phase
+         * function sees the light from the part of the disc that lights x */
+        double dn = sqrt(dsum[0] * dsum[0] + dsum[1] * dsum[1] + dsum[2] * dsum[2]);
+        if (n_pts > 1 && dn > 0.0)
+            for (int a = 0; a < 3; a++) d[a] = dsum[a] / dn;
+        for (int a = 0; a < 3; a++) e[a] = L[L_STRENGTH + a] / (4.0 * M_PI) * (esum / (double)n_pts);
+        return;
+    }
+    /* AREA */
+    double src[3], v[3];
+    for (int a = 0; a < 3; a++) src[a] = c[a] + L[L_AX + a] * pa + L[L_AY + a] * pb;
+    for (int a = 0; a < 3; a++) v[a] = x[a] - src[a];
+    double dist2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+    if (!(dist2 > 1e-8)) dist2 = 1e-8;
+    double dist = sqrt(dist2);
+    *ds = dist;
+    for (int a = 0; a < 3; a++) d[a] = v[a] / dist;
+    double cos_l = d[0] * L[L_NORMAL] + d[1] * L[L_NORMAL + 1] + d[2] * L[L_NORMAL + 2];
+    if (cos_l < 0.0) cos_l = 0.0;
+    double area = L[L_AREA];
+    double norm = (L[L_NORMALIZE] > 0 && area > 0) ? area : 1.0;
+    for (int a = 0; a < 3; a++) e[a] = L[L_STRENGTH + a] / M_PI / norm * (cos_l * area / dist2);
+}
+
+/* The optical depth to an emitting point at distance ds, from the field's depth to the light's
+ * centre at distance dc: the centre's path's mean extinction times the emitting point's path
+ * length, ds / dc (exact in a homogeneous medium).  Near the centre the field's trilinear
+ * depth stands for at least half a voxel's path, so dc is taken as at least that. */
+static inline double path_stretch(double ds, double dc, double voxel) {
+    double lo = 0.5 * voxel;
+    return ds / (dc > lo ? dc : lo);
+}
+
+
+#endif

@@ -1,0 +1,640 @@
+/* The camera-ray march (twin of kernels_np.march). */
+#include "bricks.h"
+#include "kernels.h"
+#include "light.h"
+
+#define MAX_LIGHTS 64
+#define MAX_CH 256
+#define DIM_JITTER 1000
+#define REFINE_STEPS 8
+#define EDGE_EPS 1e-6
+#define T_MIN 1e-6
+#define MAX_STEPS 1000000L  /* per ray: a 256^3 grid needs ~1000 */
+#define SUPER 4             /* steps per super-step (kernels_np.SUPER) */
+
+static inline double hg_phase(double c, double g) {
+    double denom = 1.0 + g * g - 2.0 * g * c;
+    if (denom < 1e-12) denom = 1e-12;
+    return (1.0 - g * g) / (4.0 * M_PI * denom * sqrt(denom));
+}
+
+static void refined_tau(const Grid *f, int nm, int mi, int c, const double x[3], const double w[3],
+                        double dist, double delta, double tau[3]) {
+    double end[3] = {x[0], x[1], x[2]};
+    tau[0] = tau[1] = tau[2] = 0.0;
+    for (int k = 1; k <= REFINE_STEPS; k++) {
+        double seg = dist - (k - 1) * delta;
+        seg = seg < 0.0 ? 0.0 : (seg > delta ? delta : seg);
+        double s_mid = (k - 1) * delta + 0.5 * seg, s_end = (k - 1) * delta + seg, mid[3];
+        for (int a = 0; a < 3; a++) { mid[a] = x[a] + w[a] * s_mid; end[a] = x[a] + w[a] * s_end; }
+        for (int m = 0; m < nm; m++) {
+            double rho = density_from(&f[m], fetch0(&f[m], mid));
+            for (int a = 0; a < 3; a++) tau[a] += rho * seg * f[m].sig[a];
+        }
+        double occ = fetch0(&f[mi], end);
+        if (occ <= EDGE_EPS || occ >= 1.0 - EDGE_EPS || seg < delta) break;
+    }
+    double idx[3], v[3];
+    to_index(&f[mi], end, idx);
+    trilinear(&f[mi], idx, c, 3, v);
+    for (int a = 0; a < 3; a++) tau[a] += v[a];
+}
+
+
+/* ---- multiple scattering (twin of kernels_np.multiple_source) ---- */
+#define MAX_LEVELS 16
+typedef struct {
+    int first[MAX_MEDIA][MAX_LIGHTS];   /* index of level 0 in `lv`, or -1 */
+    int nlev[MAX_MEDIA][MAX_LIGHTS];
+    double stride[MAX_MEDIA][MAX_LIGHTS], h[MAX_MEDIA][MAX_LIGHTS];
+    const double *tab[MAX_MEDIA];       /* per medium (K, nr, 6): weight R,G,B, anisotropy R,G,B */
+    int tabk[MAX_MEDIA];
+    Py_ssize_t nr;
+    double lr0, dlr;                    /* log density of table entry 0, spacing */
+    int amb;                            /* world-light multiple channel or -1 */
+} MS;
+
+static void multiple_source_c(const MS *ms, const Grid *lv, int m, int nl, const double *cosl,
+                              double rho, const double x[3], const double *w2i, double out[3]) {
+    double idx_w[3];
+    for (int r = 0; r < 3; r++)
+        idx_w[r] = w2i[4 * r] * x[0] + w2i[4 * r + 1] * x[1] + w2i[4 * r + 2] * x[2] + w2i[4 * r + 3];
+    out[0] = out[1] = out[2] = 0.0;
+    double f = (log(rho > 1e-300 ? rho : 1e-300) - ms->lr0) / ms->dlr;
+    double fmax = (double)(ms->nr - 1);
+    f = f < 0.0 ? 0.0 : (f > fmax ? fmax : f);
+    Py_ssize_t i = (Py_ssize_t)floor(f);
+    if (i > ms->nr - 2) i = ms->nr - 2;
+    double t = f - (double)i;
+    const double *tab = ms->tab[m];
+    for (int l = 0; l < nl; l++) {
+        int f0 = ms->first[m][l], K = ms->nlev[m][l];
+        if (f0 < 0 || K <= 0) continue;
+        if (K > ms->tabk[m]) K = ms->tabk[m];
+        double stride = ms->stride[m][l];
+        for (int k = 0; k < K; k++) {
+            const double *e0 = tab + ((Py_ssize_t)k * ms->nr + i) * 6, *e1 = e0 + 6;
+            double scale = stride * ldexp(1.0, k), idx[3], q[3];
+            for (int a = 0; a < 3; a++) idx[a] = idx_w[a] / scale;
+            if (trilinear(&lv[f0 + k], idx, 0, 3, q)) {
+                double phase = 0.0, g_prev = 0.0;
+                for (int a = 0; a < 3; a++) {  /* by channel; one phase when they agree */
+                    double gk = e0[3 + a] * (1.0 - t) + e1[3 + a] * t;
+                    if (a == 0 || gk != g_prev) phase = hg_phase(cosl[l], gk);
+                    g_prev = gk;
+                    double weight = e0[a] * (1.0 - t) + e1[a] * t;
+                    out[a] += q[a] * (weight * phase);
+                }
+            }
+        }
+    }
+}
+
+#define LIGHT_VARIATION 0.2  /* kernels_np.LIGHT_VARIATION */
+
+/* Whether the light a lit local light scatters towards the camera (its irradiance at its
+ * centre, before the media, times the phase function of anisotropy g) differs by more than
+ * LIGHT_VARIATION between the ends of the segment [s_a, s_b] of the ray o + s d: a spot's cone
+ * edge, a nearby light or a forward-scattering lobe, whose shape longer steps would miss.
+ * Twin of kernels_np.light_varies. */
+static int light_varies(const double *LR, Py_ssize_t nl, const int *chan, const double o[3],
+                        const double d[3], double s_a, double s_b, double g) {
+    double xa[3], xb[3], wi[3], e[3], wc[3], dc, ds;
+    for (int q = 0; q < 3; q++) { xa[q] = o[q] + d[q] * s_a; xb[q] = o[q] + d[q] * s_b; }
+    for (Py_ssize_t l = 0; l < nl; l++) {
+        if (chan[l] < 0 || (int)LR[l * LIGHT_FIELDS + L_KIND] == KIND_SUN) continue;
+        light_sample(LR + l * LIGHT_FIELDS, xa, 0.5, 0.5, wi, e, wc, &dc, &ds);
+        double ea = (e[0] + e[1] + e[2]) * hg_phase(-(wi[0] * d[0] + wi[1] * d[1] + wi[2] * d[2]), g);
+        light_sample(LR + l * LIGHT_FIELDS, xb, 0.5, 0.5, wi, e, wc, &dc, &ds);
+        double eb = (e[0] + e[1] + e[2]) * hg_phase(-(wi[0] * d[0] + wi[1] * d[1] + wi[2] * d[2]), g);
+        double hi = ea > eb ? ea : eb, lo = ea > eb ? eb : ea;
+        if (hi > 0.0 && !(lo >= (1.0 - LIGHT_VARIATION) * hi)) return 1;
+    }
+    return 0;
+}
+
+/* ---- the march's inputs ---- */
+
+/* Everything march() was given, parsed and checked (march_parse), and the buffers holding it
+ * (march_release).  The loops read it without the GIL. */
+typedef struct {
+    Py_ssize_t n;                          /* rays */
+    const double *O, *D, *T0, *T1, *AX;    /* origins, dirs (n, 3); t0, t1, axial (n) */
+    const uint32_t *K;                     /* each ray's random key */
+    int ng, skip;                          /* media; skip: brick bounds were given */
+    Grid g[MAX_MEDIA];
+    Bricks bks[MAX_MEDIA];
+    double sig_s[MAX_MEDIA][3], gg[MAX_MEDIA], voxel[MAX_MEDIA], emit[MAX_MEDIA][3];
+    int emc[MAX_MEDIA];                    /* first channel of each medium's emission grid, or -1 */
+    int use_em;
+    const double *LR;                      /* light records (nl, LIGHT_FIELDS) */
+    Py_ssize_t nl;
+    int chan[MAX_LIGHTS], beam[MAX_LIGHTS], indirect[MAX_LIGHTS], jitter[MAX_LIGHTS];
+    int ambient;
+    double step, depth_opacity, depth_miss, adapt_tau, thr_op;
+    int use_ms;                            /* multiple scattering from the pyramid levels lv */
+    MS ms;
+    Grid *lv;
+    double sig_max[MAX_MEDIA];             /* largest extinction per unit density, over channels */
+    double g_lobe;                         /* the most anisotropic medium's g (light_varies) */
+    int adapt;                             /* longer steps in thin media */
+    Buf bo, bd, b0, b1, bax, bk, bl, btab, gb[MAX_MEDIA], btabs[MAX_MEDIA], kb[MAX_MEDIA];
+    int ntabs, nkb, nlv;
+    Buf *lvb;
+} March;
+
+static void march_release(March *c) {
+    buf_release(&c->btab);
+    for (int m = 0; m < c->ntabs; m++) buf_release(&c->btabs[m]);
+    if (c->lvb) for (int i = 0; i < c->nlv; i++) buf_release(&c->lvb[i]);
+    free(c->lvb); free(c->lv);
+    buf_release(&c->bo); buf_release(&c->bd); buf_release(&c->b0); buf_release(&c->b1);
+    buf_release(&c->bax); buf_release(&c->bk); buf_release(&c->bl);
+    for (int m = 0; m < c->ng; m++) buf_release(&c->gb[m]);
+    for (int m = 0; m < c->nkb; m++) buf_release(&c->kb[m]);
+}
+
+/* The per-medium lists: scattering coefficients, anisotropies, voxel sizes, emissions and
+ * emission channels. */
+static int parse_media(March *c, PyObject *sss, PyObject *gsl, PyObject *vox, PyObject *pem,
+                       PyObject *pec) {
+    int ng = c->ng;
+    if (!PyList_Check(sss) || PyList_GET_SIZE(sss) != ng) {
+        PyErr_SetString(PyExc_ValueError, "sigma_ss: one RGB array per medium");
+        return -1;
+    }
+    for (int m = 0; m < ng; m++) {
+        Buf sb;
+        Py_ssize_t s3[1] = {3};
+        if (get_buf(PyList_GET_ITEM(sss, m), &sb, 'd', 1, s3, "sigma_s") < 0) return -1;
+        memcpy(c->sig_s[m], sb.view.buf, 3 * sizeof(double));
+        buf_release(&sb);
+        if (c->g[m].nc > MAX_CH) {
+            PyErr_SetString(PyExc_ValueError, "fields: too many channels");
+            return -1;
+        }
+    }
+    if (parse_doubles(gsl, ng, c->gg, "gs") < 0 || parse_doubles(vox, ng, c->voxel, "voxels") < 0)
+        return -1;
+    if (pem != Py_None) {
+        if (!PyList_Check(pem) || PyList_GET_SIZE(pem) != ng) {
+            PyErr_SetString(PyExc_ValueError, "emissions: one RGB array per medium");
+            return -1;
+        }
+        for (int m = 0; m < ng; m++) {
+            Buf eb;
+            Py_ssize_t s3[1] = {3};
+            if (get_buf(PyList_GET_ITEM(pem, m), &eb, 'd', 1, s3, "emission") < 0) return -1;
+            memcpy(c->emit[m], eb.view.buf, 3 * sizeof(double));
+            buf_release(&eb);
+            for (int a = 0; a < 3; a++)
+                if (!isfinite(c->emit[m][a])) {
+                    PyErr_SetString(PyExc_ValueError, "emission: non-finite value");
+                    return -1;
+                }
+        }
+        c->use_em = 1;
+    }
+    for (int m = 0; m < ng; m++) c->emc[m] = -1;
+    if (pec != Py_None) {
+        if (!PyList_Check(pec) || PyList_GET_SIZE(pec) != ng) {
+            PyErr_SetString(PyExc_ValueError, "emission_channels: one int per medium");
+            return -1;
+        }
+        for (int m = 0; m < ng; m++) {
+            long ch = PyLong_AsLong(PyList_GET_ITEM(pec, m));
+            if (ch == -1 && PyErr_Occurred()) return -1;
+            if (ch >= 0 && (ch < 1 || ch + 3 > c->g[m].nc)) {
+                PyErr_SetString(PyExc_ValueError, "emission_channels: channel outside the fields");
+                return -1;
+            }
+            c->emc[m] = ch < 0 ? -1 : (int)ch;
+        }
+    }
+    for (int m = 0; m < ng; m++) {
+        if (!(c->gg[m] > -1.0 && c->gg[m] < 1.0) || !(c->voxel[m] > 0.0) || !isfinite(c->voxel[m])) {
+            PyErr_SetString(PyExc_ValueError, "gs must lie in (-1, 1) and voxels be positive");
+            return -1;
+        }
+    }
+    return 0;
+}
+
+/* The light records (their kinds and channels checked against the fields) and the ambient
+ * channel. */
+static int parse_lights(March *c, PyObject *plights) {
+    Py_ssize_t s_l[2] = {-1, LIGHT_FIELDS};
+    if (get_buf(plights, &c->bl, 'd', 2, s_l, "lights") < 0) return -1;
+    Py_ssize_t nl = s_l[0];
+    if (nl > MAX_LIGHTS) {
+        PyErr_SetString(PyExc_ValueError, "lights: at most 64 per call");
+        return -1;
+    }
+    c->nl = nl;
+    const double *LR = c->LR = (const double *)c->bl.view.buf;
+    for (Py_ssize_t l = 0; l < nl; l++) {
+        double cf = LR[l * LIGHT_FIELDS + L_CHANNEL], kf = LR[l * LIGHT_FIELDS + L_KIND];
+        c->indirect[l] = LR[l * LIGHT_FIELDS + L_INDIRECT] > 0.5;
+        double bf = LR[l * LIGHT_FIELDS + L_BEAM];
+        c->beam[l] = (cf >= 0 && bf >= 1.0 && bf < 1e9) ? (int)bf : -1;
+        for (int m = 0; m < c->ng; m++)
+            if (c->beam[l] >= 0 && c->beam[l] + 3 > c->g[m].nc) {
+                PyErr_SetString(PyExc_ValueError, "lights: beam channel outside the fields");
+                return -1;
+            }
+        if (!(kf == KIND_POINT || kf == KIND_SPOT || kf == KIND_SUN || kf == KIND_AREA)) {
+            PyErr_SetString(PyExc_ValueError, "lights: unknown kind");
+            return -1;
+        }
+        c->chan[l] = cf < 0 ? -1 : (int)cf;
+        for (int m = 0; m < c->ng; m++)
+            if (c->chan[l] >= 0 && (c->chan[l] < 1 || c->chan[l] + 3 > c->g[m].nc)) {
+                PyErr_SetString(PyExc_ValueError, "lights: channel outside the fields");
+                return -1;
+            }
+    }
+    for (int m = 0; m < c->ng; m++)
+        if (c->ambient >= 0 && (c->ambient < 1 || c->ambient + 3 > c->g[m].nc)) {
+            PyErr_SetString(PyExc_ValueError, "ambient channel outside the fields");
+            return -1;
+        }
+    return 0;
+}
+
+/* The multiple-scattering pack (amb_ms, levels list, table (M, L, 4) [first, count, stride, h],
+ * per-medium level tables [(K, nr, 6)], log density of entry 0, spacing). */
+static int parse_multiple(March *c, PyObject *pms) {
+    PyObject *plv, *ptab, *ptabs;
+    int amb_ms, ng = c->ng;
+    Py_ssize_t nl = c->nl;
+    double lr0, dlr;
+    MS *ms = &c->ms;
+    if (!PyTuple_Check(pms) || !PyArg_ParseTuple(pms, "iOOOdd", &amb_ms, &plv, &ptab, &ptabs, &lr0, &dlr)) {
+        PyErr_SetString(PyExc_ValueError, "multiple: expected (amb, levels, table, tables, lr0, dlr)");
+        return -1;
+    }
+    if (!PyList_Check(plv) || PyList_GET_SIZE(plv) > 100000) {
+        PyErr_SetString(PyExc_ValueError, "multiple: levels must be a list");
+        return -1;
+    }
+    if (!PyList_Check(ptabs) || PyList_GET_SIZE(ptabs) != ng || !(dlr > 0.0) || !isfinite(lr0) ||
+        !isfinite(dlr)) {
+        PyErr_SetString(PyExc_ValueError, "multiple: one level table per medium, dlr > 0");
+        return -1;
+    }
+    int nlv = c->nlv = (int)PyList_GET_SIZE(plv);
+    c->lvb = (Buf *)calloc((size_t)(nlv > 0 ? nlv : 1), sizeof(Buf));
+    c->lv = (Grid *)calloc((size_t)(nlv > 0 ? nlv : 1), sizeof(Grid));
+    if (!c->lvb || !c->lv) { PyErr_NoMemory(); return -1; }
+    for (int i = 0; i < nlv; i++) {
+        Py_ssize_t sh[4] = {-1, -1, -1, 3};
+        if (get_buf(PyList_GET_ITEM(plv, i), &c->lvb[i], 'f', 4, sh, "pyramid level") < 0) return -1;
+        if (sh[0] < 2 || sh[1] < 2 || sh[2] < 2) {
+            PyErr_SetString(PyExc_ValueError, "pyramid level: every extent must be >= 2");
+            return -1;
+        }
+        Grid *lv = &c->lv[i];
+        lv->data = (const float *)c->lvb[i].view.buf;
+        lv->nx = sh[0]; lv->ny = sh[1]; lv->nz = sh[2]; lv->nc = 3;
+        lv->thr = -1.0;
+    }
+    Py_ssize_t nr = -1;
+    for (int m = 0; m < ng; m++) {
+        Py_ssize_t st[3] = {-1, nr, 6};
+        if (get_buf(PyList_GET_ITEM(ptabs, m), &c->btabs[m], 'd', 3, st, "level table") < 0) return -1;
+        c->ntabs = m + 1;
+        if (st[0] < 1 || st[0] > MAX_LEVELS || st[1] < 2) {
+            PyErr_SetString(PyExc_ValueError, "level table: 1..16 levels and >= 2 densities");
+            return -1;
+        }
+        nr = st[1];
+        ms->tab[m] = (const double *)c->btabs[m].view.buf;
+        ms->tabk[m] = (int)st[0];
+    }
+    ms->nr = nr;
+    ms->lr0 = lr0;
+    ms->dlr = dlr;
+    Py_ssize_t s_tab[3] = {ng, nl, 4};
+    if (get_buf(ptab, &c->btab, 'd', 3, s_tab, "multiple table") < 0) return -1;
+    const double *T = (const double *)c->btab.view.buf;
+    for (int m = 0; m < ng; m++)
+        for (Py_ssize_t l = 0; l < nl; l++) {
+            const double *r = T + ((Py_ssize_t)m * nl + l) * 4;
+            int first = (int)r[0], cnt = (int)r[1];
+            if (!(r[1] >= 1.0) || !(r[0] >= 0.0)) { ms->first[m][l] = -1; ms->nlev[m][l] = 0; continue; }
+            if (cnt > MAX_LEVELS || first > nlv - cnt || !(r[2] >= 1.0) || !(r[2] < 1e9) ||
+                !(r[3] > 0.0) || !isfinite(r[3])) {
+                PyErr_SetString(PyExc_ValueError, "multiple table: bad level range, stride or h");
+                return -1;
+            }
+            ms->first[m][l] = first; ms->nlev[m][l] = cnt;
+            ms->stride[m][l] = r[2]; ms->h[m][l] = r[3];
+        }
+    for (int m = 0; m < ng; m++)
+        if (amb_ms >= 0 && (amb_ms < 1 || amb_ms + 3 > c->g[m].nc)) {
+            PyErr_SetString(PyExc_ValueError, "ambient multiple channel outside the fields");
+            return -1;
+        }
+    ms->amb = amb_ms;
+    c->use_ms = 1;
+    return 0;
+}
+
+/* Parse and check march()'s arguments into c (the caller releases it whatever the outcome). */
+static int march_parse(March *c, PyObject *args) {
+    PyObject *po, *pd, *pt0, *pt1, *pax, *pk, *fields, *w2is, *sss, *sts, *gsl, *thrs, *vox, *plights;
+    PyObject *pms = Py_None, *pem = Py_None, *pbk = Py_None, *pec = Py_None;
+    int brick = 4;
+    c->adapt_tau = 0.0;
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOiddd|OOOidO", &po, &pd, &pt0, &pt1, &pax, &pk, &fields,
+                          &w2is, &sss, &sts, &gsl, &thrs, &vox, &plights, &c->ambient, &c->step,
+                          &c->depth_opacity, &c->depth_miss, &pms, &pem, &pbk, &brick, &c->adapt_tau,
+                          &pec))
+        return -1;
+    if (!isfinite(c->adapt_tau)) {
+        PyErr_SetString(PyExc_ValueError, "adapt_tau must be finite");
+        return -1;
+    }
+    if (!(c->step > 0.0) || !isfinite(c->step)) {
+        PyErr_SetString(PyExc_ValueError, "step must be a positive finite length");
+        return -1;
+    }
+    Py_ssize_t s_o[2] = {-1, 3};
+    if (get_buf(po, &c->bo, 'd', 2, s_o, "origins") < 0) return -1;
+    Py_ssize_t n = c->n = s_o[0];
+    Py_ssize_t s_d[2] = {n, 3}, s_n[1] = {n}, s_n2[1] = {n}, s_n3[1] = {n}, s_n4[1] = {n};
+    if (get_buf(pd, &c->bd, 'd', 2, s_d, "dirs") < 0) return -1;
+    if (get_buf(pt0, &c->b0, 'd', 1, s_n, "t0") < 0) return -1;
+    if (get_buf(pt1, &c->b1, 'd', 1, s_n2, "t1") < 0) return -1;
+    if (get_buf(pax, &c->bax, 'd', 1, s_n3, "axial") < 0) return -1;
+    if (get_buf(pk, &c->bk, 'I', 1, s_n4, "keys") < 0) return -1;
+    if (parse_grids(fields, w2is, sts, thrs, c->g, c->gb, &c->ng, 1) < 0) return -1;
+    if (parse_bricks(pbk, brick, c->g, c->ng, c->bks, c->kb, &c->nkb) < 0) return -1;
+    c->skip = pbk != Py_None;
+    if (parse_media(c, sss, gsl, vox, pem, pec) < 0) return -1;
+    if (parse_lights(c, plights) < 0) return -1;
+    if (pms != Py_None && parse_multiple(c, pms) < 0) return -1;
+    c->O = (const double *)c->bo.view.buf;
+    c->D = (const double *)c->bd.view.buf;
+    c->T0 = (const double *)c->b0.view.buf;
+    c->T1 = (const double *)c->b1.view.buf;
+    c->AX = (const double *)c->bax.view.buf;
+    c->K = (const uint32_t *)c->bk.view.buf;
+    return 0;
+}
+
+/* What the rays share, derived from the inputs: the extinction bounds, which lights draw
+ * random numbers and whether steps may lengthen. */
+static void march_prepare(March *c) {
+    int ng = c->ng;
+    c->thr_op = 1.0 - c->depth_opacity;
+    c->g_lobe = 0.0;
+    for (int m = 0; m < ng; m++) if (fabs(c->gg[m]) > fabs(c->g_lobe)) c->g_lobe = c->gg[m];
+    for (int m = 0; m < ng; m++) {
+        const double *sig = c->g[m].sig;
+        c->sig_max[m] = sig[0] > sig[1] ? sig[0] : sig[1];
+        c->sig_max[m] = c->sig_max[m] > sig[2] ? c->sig_max[m] : sig[2];
+        if (!(c->sig_max[m] > 0.0)) c->sig_max[m] = 1.0;  /* a medium that only scatters nothing still counts */
+    }
+    /* lights whose sample does not depend on the random pair (a sun, a point or spot without
+     * radius) draw none */
+    for (Py_ssize_t l = 0; l < c->nl; l++) {
+        const double *L = c->LR + l * LIGHT_FIELDS;
+        int kind = (int)L[L_KIND];
+        c->jitter[l] = kind == KIND_AREA || ((kind == KIND_POINT || kind == KIND_SPOT) && L[L_RADIUS] > 0.0);
+    }
+    /* longer steps in thin media only where every lit light is sampled without jitter: the
+     * jittered ones (area, sphere) average their shape over the steps' samples */
+    c->adapt = c->adapt_tau > 0.0;
+    for (Py_ssize_t l = 0; l < c->nl; l++)
+        if (c->chan[l] >= 0 && c->jitter[l]) c->adapt = 0;
+}
+
+/* ---- the march itself ---- */
+
+/* The lights seen from one march sample: propagation direction wi, irradiance e, direction wc
+ * and distance dc to the centre, distance ds to the emitting point(s) sampled (light_sample). */
+typedef struct {
+    double wi[MAX_LIGHTS][3], e[MAX_LIGHTS][3], wc[MAX_LIGHTS][3], dc[MAX_LIGHTS], ds[MAX_LIGHTS];
+} LightsAt;
+
+/* What the media add at one march sample: extinction, the single-scattered, multiple-scattered
+ * and emitted radiance per unit length. */
+typedef struct {
+    double sig_t[3], src[3], src_ms[3], src_em[3];
+} Sources;
+
+/* How many steps super-step [s_lo, s_hi] of ray o + s d is cut into: SUPER without bricks;
+ * with bricks 0 where every medium is empty and, with adapt, the fewest (at least 1) that keep
+ * the majorant's optical depth per step <= adapt_tau.  lo, lv: the ray in each medium's index
+ * coordinates. */
+static int super_step_count(const March *c, const double o[3], const double d[3],
+                            const double lo[][3], const double lv[][3], double s_lo, double s_hi) {
+    int n_sub = SUPER;
+    if (!c->skip) return n_sub;
+    double maj = 0.0;
+    int sharp = 0;  /* a mesh volume's surface must keep the steps short */
+    for (int m = 0; m < c->ng; m++) {
+        double mm = segment_majorant(&c->g[m], &c->bks[m], lo[m], lv[m], s_lo, s_hi);
+        maj += mm * c->sig_max[m];
+        sharp |= c->g[m].thr >= 0.0 && mm > 0.0;
+    }
+    if (!(maj > 0.0)) return 0;  /* wholly empty: nothing to add */
+    if (c->adapt && !sharp) {
+        double want = ceil(maj * (s_hi - s_lo) / c->adapt_tau);
+        n_sub = want < 1.0 ? 1 : (want > (double)SUPER ? SUPER : (int)want);
+        if (n_sub < SUPER && light_varies(c->LR, c->nl, c->chan, o, d, s_lo, s_hi, c->g_lobe))
+            n_sub = SUPER;
+    }
+    return n_sub;
+}
+
+/* Every light at x, march step k of the ray with random key `key`. */
+static void sample_lights(const March *c, const double x[3], uint32_t key, long k, LightsAt *la) {
+    for (Py_ssize_t l = 0; l < c->nl; l++) {
+        double u1 = 0.5, u2 = 0.5;
+        if (c->jitter[l]) { u1 = uniform01(key, k, 2 * l); u2 = uniform01(key, k, 2 * l + 1); }
+        light_sample(c->LR + l * LIGHT_FIELDS, x, u1, u2, la->wi[l], la->e[l], la->wc[l], &la->dc[l],
+                     &la->ds[l]);
+    }
+}
+
+/* Medium m's part of the sources at x (seen along d), added to s. */
+static void medium_sources(const March *c, int m, const double x[3], const double d[3],
+                           const LightsAt *la, Sources *s) {
+    const Grid *g = &c->g[m];
+    double idx[3], v[MAX_CH];
+    to_index(g, x, idx);
+    Tri tw;
+    if (!tri_setup(g, idx, &tw)) return;
+    if (c->emc[m] >= 0) {  /* an emission grid shines whatever the density */
+        double ev[3];
+        tri_get(&tw, c->emc[m], 3, ev);
+        for (int a = 0; a < 3; a++) s->src_em[a] += ev[a];
+    }
+    double rho = density_from(g, tri_get1(&tw, 0));  /* the density first */
+    if (!(rho > 0.0)) return;
+    tri_get(&tw, 0, (int)g->nc, v);
+    for (int a = 0; a < 3; a++) s->sig_t[a] += rho * g->sig[a];
+    if (c->use_em)
+        for (int a = 0; a < 3; a++) s->src_em[a] += c->emit[m][a];
+    int edge = g->thr >= 0.0 && v[0] > EDGE_EPS && v[0] < 1.0 - EDGE_EPS;
+    double inc[3] = {0, 0, 0}, beam_inc[3] = {0, 0, 0}, ind_inc[3] = {0, 0, 0};
+    for (Py_ssize_t l = 0; l < c->nl; l++) {
+        int ch = c->chan[l];
+        if (ch < 0) continue;
+        double tau[3] = {v[ch], v[ch + 1], v[ch + 2]};
+        if (edge) refined_tau(c->g, c->ng, m, ch, x, la->wc[l], la->dc[l], 0.5 * c->voxel[m], tau);
+        if (la->ds[l] != la->dc[l])  /* light from an emitter point off the centre */
+            for (int a = 0; a < 3; a++) tau[a] *= path_stretch(la->ds[l], la->dc[l], c->voxel[m]);
+        int cb = c->use_ms ? c->beam[l] : -1;
+        const double *wi = la->wi[l];
+        double cs = -(wi[0] * d[0] + wi[1] * d[1] + wi[2] * d[2]);
+        double p = hg_phase(cs, c->gg[m]);
+        exp3(tau, tau);
+        double *to = c->indirect[l] ? ind_inc : inc;  /* a bounce's light: multiple */
+        for (int a = 0; a < 3; a++) to[a] += p * la->e[l][a] * tau[a];
+        if (cb >= 0)  /* the forward peak's light (precompute.peak_light) */
+            for (int a = 0; a < 3; a++)
+                beam_inc[a] += p * (v[cb + a] > 0.0 ? v[cb + a] : 0.0);
+    }
+    if (c->ambient >= 0)
+        for (int a = 0; a < 3; a++) inc[a] += v[c->ambient + a];
+    for (int a = 0; a < 3; a++) s->src[a] += rho * c->sig_s[m][a] * inc[a];
+    for (int a = 0; a < 3; a++) s->src_ms[a] += rho * c->sig_s[m][a] * ind_inc[a];
+    if (c->use_ms) {
+        double cosl[MAX_LIGHTS], msi[3];
+        for (Py_ssize_t l = 0; l < c->nl; l++) {
+            const double *wi = la->wi[l];
+            cosl[l] = -(wi[0] * d[0] + wi[1] * d[1] + wi[2] * d[2]);
+        }
+        multiple_source_c(&c->ms, c->lv, m, (int)c->nl, cosl, rho, x, g->w2i, msi);
+        if (c->ms.amb >= 0)
+            for (int a = 0; a < 3; a++) msi[a] += v[c->ms.amb + a];
+        for (int a = 0; a < 3; a++) s->src_ms[a] += rho * c->sig_s[m][a] * (msi[a] + beam_inc[a]);
+    }
+}
+
+/* One ray's running sums: transmittance T, single S, multiple M and emitted E radiance, and
+ * the depth where it turned opaque (depth_miss until then). */
+typedef struct {
+    double T[3], S[3], M[3], E[3], depth;
+} RaySums;
+
+/* Integrates one step [seg, seg + hl] of constant sources s into the ray's sums (exactly, for
+ * the exponential attenuation over the step); `axial` turns the ray's distance into depth. */
+static void integrate_step(const March *c, const Sources *s, double seg, double hl, double axial,
+                           RaySums *r) {
+    double Tb[3] = {r->T[0], r->T[1], r->T[2]}, xt[3], att[3];
+    for (int a = 0; a < 3; a++) xt[a] = s->sig_t[a] * hl;
+    exp3(xt, att);
+    int grey = xt[0] == xt[1] && xt[1] == xt[2];
+    double frac0 = xt[0] > 1e-7 ? -expm1(-xt[0]) / xt[0] : 1.0 - 0.5 * xt[0];
+    for (int a = 0; a < 3; a++) {
+        double frac = grey ? frac0 : (xt[a] > 1e-7 ? -expm1(-xt[a]) / xt[a] : 1.0 - 0.5 * xt[a]);
+        r->S[a] += Tb[a] * s->src[a] * (frac * hl);
+        r->M[a] += Tb[a] * s->src_ms[a] * (frac * hl);
+        r->E[a] += Tb[a] * s->src_em[a] * (frac * hl);
+        r->T[a] = Tb[a] * att[a];
+    }
+    double thr_op = c->thr_op;
+    double tb = (Tb[0] + Tb[1] + Tb[2]) / 3.0, ta = (r->T[0] + r->T[1] + r->T[2]) / 3.0;
+    if (r->depth >= c->depth_miss && ta <= thr_op && tb > thr_op) {
+        double fr = log(tb / thr_op) / log(tb / (ta > 1e-300 ? ta : 1e-300));
+        fr = fr < 0.0 ? 0.0 : (fr > 1.0 ? 1.0 : fr);
+        r->depth = (seg + fr * hl) * axial;
+    }
+}
+
+/* Marches ray r; returns the number of steps it took. */
+static long march_ray(const March *c, Py_ssize_t r, RaySums *sums) {
+    const double *o = c->O + 3 * r, *d = c->D + 3 * r;
+    const double t0 = c->T0[r], t1 = c->T1[r], step = c->step;
+    const uint32_t key = c->K[r];
+    for (int a = 0; a < 3; a++) { sums->T[a] = 1.0; sums->S[a] = sums->M[a] = sums->E[a] = 0.0; }
+    sums->depth = c->depth_miss;
+    /* Super-step K covers [t0 + SUPER K step, t0 + SUPER (K + 1) step] (the last one ends at
+     * t1) and is cut into n_sub equal steps (super_step_count), each read at one jittered
+     * point. */
+    long taken = 0, K = 0;
+    int done = 0;
+    double lo[MAX_MEDIA][3], lvv[MAX_MEDIA][3];
+    if (c->skip)
+        for (int m = 0; m < c->ng; m++) ray_to_index(&c->g[m], o, d, lo[m], lvv[m]);
+    while (!done && K < MAX_STEPS / SUPER) {
+        double s_lo = t0 + (double)(SUPER * K) * step;
+        if (!(s_lo < t1)) break;
+        double s_hi = t0 + (double)(SUPER * (K + 1)) * step;
+        s_hi = s_hi < t1 ? s_hi : t1;
+        int n_sub = super_step_count(c, o, d, (const double (*)[3])lo, (const double (*)[3])lvv,
+                                     s_lo, s_hi);
+        if (n_sub == 0) { K++; continue; }
+        double H = (double)SUPER * step / (double)n_sub;
+        for (int jj = 0; jj < n_sub; jj++) {
+            long k = SUPER * K + jj;
+            double seg = s_lo + (double)jj * H;
+            if (!(seg < t1)) break;
+            double hl = t1 - seg < H ? t1 - seg : H;
+            double t = seg + uniform01(key, k, DIM_JITTER) * H;
+            double ts = t < seg + hl ? t : seg + hl, x[3];
+            for (int q = 0; q < 3; q++) x[q] = o[q] + d[q] * ts;
+            LightsAt la;
+            sample_lights(c, x, key, k, &la);
+            Sources s = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}, {0, 0, 0}};
+            for (int m = 0; m < c->ng; m++) medium_sources(c, m, x, d, &la, &s);
+            taken++;
+            integrate_step(c, &s, seg, hl, c->AX[r], sums);
+            double tmax = sums->T[0] > sums->T[1] ? sums->T[0] : sums->T[1];
+            tmax = tmax > sums->T[2] ? tmax : sums->T[2];
+            /* opaque enough, or a step that no longer advances t: stop */
+            if (!(tmax > T_MIN) || !(seg + H > seg)) { done = 1; break; }
+        }
+        K++;
+    }
+    return taken;
+}
+
+const char march_doc[] =
+    "march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs, thresholds,\n"
+    "      voxels, lights, ambient, step, depth_opacity, depth_miss[, multiple, emissions, bricks, brick,\n"
+    "      adapt_tau, emission_channels])\n"
+    "  -> (single, T, depth, multiple, steps, emission) as bytes of float64\n"
+    "Twin of kernels_np.march.";
+
+PyObject *march(PyObject *self, PyObject *args) {
+    March *c = (March *)calloc(1, sizeof(March));
+    if (!c) return PyErr_NoMemory();
+    PyObject *o_s = NULL, *o_t = NULL, *o_d = NULL, *o_m = NULL, *o_k = NULL, *o_e = NULL, *result = NULL;
+    if (march_parse(c, args) < 0) goto done;
+    Py_ssize_t n = c->n;
+    o_s = PyByteArray_FromStringAndSize(NULL, (Py_ssize_t)(n * 3 * sizeof(double)));
+    o_t = PyByteArray_FromStringAndSize(NULL, (Py_ssize_t)(n * 3 * sizeof(double)));
+    o_d = PyByteArray_FromStringAndSize(NULL, (Py_ssize_t)(n * sizeof(double)));
+    o_m = PyByteArray_FromStringAndSize(NULL, (Py_ssize_t)(n * 3 * sizeof(double)));
+    o_k = PyByteArray_FromStringAndSize(NULL, (Py_ssize_t)(n * sizeof(double)));
+    o_e = PyByteArray_FromStringAndSize(NULL, (Py_ssize_t)(n * 3 * sizeof(double)));
+    if (!o_s || !o_t || !o_d || !o_m || !o_k || !o_e) goto done;
+    double *OS = (double *)PyByteArray_AS_STRING(o_s), *OT = (double *)PyByteArray_AS_STRING(o_t),
+           *OD = (double *)PyByteArray_AS_STRING(o_d), *OM = (double *)PyByteArray_AS_STRING(o_m),
+           *OK = (double *)PyByteArray_AS_STRING(o_k), *OE = (double *)PyByteArray_AS_STRING(o_e);
+    march_prepare(c);
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t r = 0; r < n; r++) {
+        RaySums sums;
+        long taken = march_ray(c, r, &sums);
+        for (int a = 0; a < 3; a++) {
+            OS[3 * r + a] = sums.S[a]; OT[3 * r + a] = sums.T[a];
+            OM[3 * r + a] = sums.M[a]; OE[3 * r + a] = sums.E[a];
+        }
+        OK[r] = (double)taken;
+        OD[r] = sums.depth;
+    }
+    Py_END_ALLOW_THREADS
+    result = PyTuple_Pack(6, o_s, o_t, o_d, o_m, o_k, o_e);
+done:
+    Py_XDECREF(o_s); Py_XDECREF(o_t); Py_XDECREF(o_d); Py_XDECREF(o_m); Py_XDECREF(o_k);
+    Py_XDECREF(o_e);
+    march_release(c);
+    free(c);
+    return result;
+}

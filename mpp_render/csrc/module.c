@@ -1,0 +1,51 @@
+/* mpp_render._kernels: the method table.  Each kernel lives in its own file (optical_depth.c,
+ * sweep.c, march.c, upsample.c, trilinear.c) over the shared headers common.h (buffers, grids,
+ * trilinear reads, random numbers), bricks.h (empty space) and light.h (the light record).
+ */
+#include "kernels.h"
+#include "light.h"
+
+const char light_layout_doc[] =
+    "light_layout() -> dict\n"
+    "The light record's layout as compiled: LIGHT_FIELDS, the L_* offsets and the KIND_* kinds\n"
+    "(held to mpp_render.lightrecord by the tests).";
+
+PyObject *light_layout(PyObject *self, PyObject *noargs) {
+    static const struct { const char *name; long value; } fields[] = {
+        {"LIGHT_FIELDS", LIGHT_FIELDS}, {"L_KIND", L_KIND}, {"L_STRENGTH", L_STRENGTH},
+        {"L_POS", L_POS}, {"L_DIR", L_DIR}, {"L_INV", L_INV}, {"L_COSHALF", L_COSHALF},
+        {"L_BLEND", L_BLEND}, {"L_RADIUS", L_RADIUS}, {"L_AX", L_AX}, {"L_AY", L_AY},
+        {"L_AREA", L_AREA}, {"L_NORMAL", L_NORMAL}, {"L_NORMALIZE", L_NORMALIZE},
+        {"L_ROUND", L_ROUND}, {"L_CHANNEL", L_CHANNEL}, {"L_COND", L_COND}, {"L_BEAM", L_BEAM},
+        {"L_INDIRECT", L_INDIRECT}, {"KIND_POINT", KIND_POINT}, {"KIND_SPOT", KIND_SPOT},
+        {"KIND_SUN", KIND_SUN}, {"KIND_AREA", KIND_AREA},
+    };
+    PyObject *d = PyDict_New();
+    if (!d) return NULL;
+    for (size_t i = 0; i < sizeof fields / sizeof fields[0]; i++) {
+        PyObject *v = PyLong_FromLong(fields[i].value);
+        if (!v || PyDict_SetItemString(d, fields[i].name, v) < 0) {
+            Py_XDECREF(v);
+            Py_DECREF(d);
+            return NULL;
+        }
+        Py_DECREF(v);
+    }
+    return d;
+}
+
+static PyMethodDef methods[] = {
+    {"march", march, METH_VARARGS, march_doc},
+    {"optical_depth", optical_depth, METH_VARARGS, optical_depth_doc},
+    {"light_sweep", light_sweep, METH_VARARGS, light_sweep_doc},
+    {"upsample_into", upsample_into, METH_VARARGS, upsample_into_doc},
+    {"trilinear", py_trilinear, METH_VARARGS, trilinear_doc},
+    {"light_layout", light_layout, METH_NOARGS, light_layout_doc},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef moduledef = {PyModuleDef_HEAD_INIT, "_kernels",
+                                       "Compiled twins of mpp_render.kernels_np.", -1, methods,
+                                       NULL, NULL, NULL, NULL};
+
+PyMODINIT_FUNC PyInit__kernels(void) { return PyModule_Create(&moduledef); }

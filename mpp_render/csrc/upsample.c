@@ -1,0 +1,78 @@
+/* Lattice upsampling (twin of kernels_np.upsample_into). */
+#include "kernels.h"
+
+const char upsample_into_doc[] =
+    "upsample_into(field, channel, lattice, stride, flat) -> None\n"
+    "Twin of kernels_np.upsample_into: trilinear values of the lattice (point j at fine index\n"
+    "j * stride) written into field[..., channel:channel + C] at the flat voxel indices.";
+
+PyObject *upsample_into(PyObject *self, PyObject *args) {
+    PyObject *pf, *pl, *pflat;
+    int channel, stride;
+    if (!PyArg_ParseTuple(args, "OiOiO", &pf, &channel, &pl, &stride, &pflat)) return NULL;
+    Buf bf = {0}, bl = {0}, bx = {0};
+    int ok = 0;
+    Py_ssize_t sf[4] = {-1, -1, -1, -1}, sl[4] = {-1, -1, -1, -1}, sx[1] = {-1};
+    if (get_buf_ex(pf, &bf, 'f', 4, sf, "field", PyBUF_WRITABLE) < 0) goto done;
+    if (get_buf(pl, &bl, 'f', 4, sl, "lattice") < 0) goto done;
+    if (PyObject_GetBuffer(pflat, &bx.view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | PyBUF_ND) < 0) {
+        PyErr_Clear();
+        PyErr_SetString(PyExc_ValueError, "flat: expected a C-contiguous int64 array");
+        goto done;
+    }
+    bx.held = 1;
+    {
+        const char *fm = bx.view.format ? bx.view.format : "B";
+        if (fm[0] == '<' || fm[0] == '=' || fm[0] == '@') fm++;
+        if (bx.view.ndim != 1 || bx.view.itemsize != 8 || (fm[0] != 'q' && fm[0] != 'l') || fm[1]) {
+            PyErr_SetString(PyExc_ValueError, "flat: expected a 1-D int64 array");
+            goto done;
+        }
+        sx[0] = bx.view.shape[0];
+    }
+    Py_ssize_t nc = sl[3];
+    if (stride < 1 || nc < 1 || channel < 0 || channel + nc > sf[3] || sl[0] < 1 || sl[1] < 1 ||
+        sl[2] < 1) {
+        PyErr_SetString(PyExc_ValueError, "upsample_into: bad stride, channel or lattice");
+        goto done;
+    }
+    const int64_t *FL = (const int64_t *)bx.view.buf;
+    Py_ssize_t nvox = sf[0] * sf[1] * sf[2];
+    for (Py_ssize_t q = 0; q < sx[0]; q++)
+        if (FL[q] < 0 || FL[q] >= nvox) {
+            PyErr_SetString(PyExc_ValueError, "flat: index outside the field");
+            goto done;
+        }
+    float *F = (float *)bf.view.buf;
+    const float *LT = (const float *)bl.view.buf;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t q = 0; q < sx[0]; q++) {
+        Py_ssize_t f = (Py_ssize_t)FL[q], ijk[3] = {f / (sf[1] * sf[2]), (f / sf[2]) % sf[1], f % sf[2]};
+        Py_ssize_t lo[3], hi[3];
+        double t[3];
+        for (int a = 0; a < 3; a++) {
+            lo[a] = ijk[a] / stride;
+            if (lo[a] > sl[a] - 1) lo[a] = sl[a] - 1;
+            hi[a] = lo[a] + 1 > sl[a] - 1 ? sl[a] - 1 : lo[a] + 1;
+            t[a] = (double)(ijk[a] - lo[a] * stride) / (double)stride;
+        }
+        for (Py_ssize_t c = 0; c < nc; c++) {
+            double v = 0.0;
+            for (int cx = 0; cx < 2; cx++)
+                for (int cy = 0; cy < 2; cy++)
+                    for (int cz = 0; cz < 2; cz++) {
+                        double w = (cx ? t[0] : 1.0 - t[0]) * (cy ? t[1] : 1.0 - t[1]) *
+                                   (cz ? t[2] : 1.0 - t[2]);
+                        Py_ssize_t i = cx ? hi[0] : lo[0], j = cy ? hi[1] : lo[1], k = cz ? hi[2] : lo[2];
+                        v += w * (double)LT[((i * sl[1] + j) * sl[2] + k) * nc + c];
+                    }
+            F[f * sf[3] + channel + c] = (float)v;
+        }
+    }
+    Py_END_ALLOW_THREADS
+    ok = 1;
+done:
+    buf_release(&bf); buf_release(&bl); buf_release(&bx);
+    if (!ok) return NULL;
+    Py_RETURN_NONE;
+}
