@@ -1,10 +1,10 @@
 """The memory budget: media whose precompute would not fit are box-downsampled first.
 
-The precompute (precompute.py) holds one float32 field per medium on its padded grid
+The precompute (precompute/) holds one float32 field per medium on its padded grid
 (nx+2, ny+2, nz+2) with ``1 + 3 L + 6`` channels: density, the optical depth to each of the L
 lights that emit, and the world light (single and multiply scattered); 3 L more with
 multiple scattering in a forward-scattering medium (the light of each light's forward peak,
-precompute.FieldLayout.beam_channels).  ``field_bytes`` is
+precompute/layout.py).  ``field_bytes`` is
 that size; it dominates the render's memory.  When the sum over media exceeds the budget,
 the grid with the largest field is made one integer factor coarser, again and again, until
 the sum fits (so the largest grids shrink first and end up about equally coarse).
