@@ -30,12 +30,153 @@ from __future__ import annotations
 
 import numpy as np
 
-from .kernels_np import SPOT_GATE_MARGIN, light_sample
 from .lightrecord import (KIND_AREA, KIND_POINT, KIND_SPOT, KIND_SUN, L_AREA, L_AX, L_AY, L_BEAM,
                           L_BLEND, L_CHANNEL, L_COND, L_COSHALF, L_DIR, L_INDIRECT, L_INV, L_KIND,
                           L_NORMAL, L_NORMALIZE, L_POS, L_RADIUS, L_ROUND, L_STRENGTH, LIGHT_FIELDS)
+from .phase import orthonormal_basis
 from .scene import Light
 
+
+# The light as the march kernel samples it (the C twin: csrc/light.h).
+SPOT_DISC_POINTS = 8    # points of a sphere spot's disc its cone is averaged over (C twin)
+SPOT_DISC_PHI = 0.6180339887498949  # the lattice's second coordinate steps by the golden ratio
+SPOT_GATE_MARGIN = 1.05  # widens the disc's angular radius in the one-point test
+
+
+def _disc(a, b, round_shape):
+    """Square [-1,1]^2 (identity) or concentric map to the unit disc."""
+    if not round_shape:
+        return a, b
+    big = np.abs(a) > np.abs(b)
+    r = np.where(big, a, b)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        phi = np.where(big, (np.pi / 4) * b / np.where(a == 0, 1, a),
+                       np.pi / 2 - (np.pi / 4) * a / np.where(b == 0, 1, b))
+    phi = np.where((a == 0) & (b == 0), 0.0, phi)
+    return r * np.cos(phi), r * np.sin(phi)
+
+
+def _spot_cos(rec, v):
+    """(N,) cosines between the spot's axis and propagation directions ``v`` (N,3), measured
+    in the light's local frame (its inverse matrix: non-uniform scale included)."""
+    loc = v @ rec[L_INV:L_INV + 9].reshape(3, 3).T
+    return -loc[:, 2] / np.maximum(np.sqrt(np.einsum("ij,ij->i", loc, loc)), 1e-30)
+
+
+def light_sample(rec, x, u1, u2, disc_points: int = SPOT_DISC_POINTS):
+    """(propagation direction (N,3), irradiance (N,3), unit direction to the light centre
+    (N,3), distance to the centre (N,), distance to the emitting point(s) sampled (N,): their
+    irradiance-weighted mean; the centre's for a point without radius) of packed light
+    ``rec`` (lightrecord.py) at points ``x`` (N,3, m), jitter ``u1``, ``u2`` (N,) in [0, 1).
+    ``disc_points``: the directions a spot with a radius averages its cone over (the C
+    twin's SPOT_DISC_POINTS)."""
+    kind = int(rec[L_KIND])
+    s = rec[L_STRENGTH:L_STRENGTH + 3]
+    n = len(x)
+    if kind == KIND_SUN:
+        d = np.broadcast_to(rec[L_DIR:L_DIR + 3], (n, 3)).copy()
+        return d, np.broadcast_to(s, (n, 3)).copy(), -d, np.full(n, np.inf), np.full(n, np.inf)
+    centre = rec[L_POS:L_POS + 3]
+    vc = centre - x
+    dc = np.sqrt(np.einsum("ij,ij->i", vc, vc))
+    wc = vc / np.maximum(dc, 1e-30)[:, None]
+    a, b = _disc(2.0 * u1 - 1.0, 2.0 * u2 - 1.0, kind != KIND_AREA or rec[L_ROUND] > 0)
+    if kind in (KIND_POINT, KIND_SPOT):
+        radius = rec[L_RADIUS]
+        t1 = t2 = np.zeros((n, 3))
+        if radius > 0.0:
+            t1, t2 = orthonormal_basis(-wc)
+        # a spot with a radius averages its cone over disc_points points of the disc
+        n_pts = disc_points if (kind == KIND_SPOT and radius > 0.0) else 1
+        many = np.full(n, n_pts > 1)
+        if n_pts > 1:  # one point where the cone is the same over the whole disc
+            th = np.arccos(np.clip(_spot_cos(rec, -wc), -1.0, 1.0))
+            inside = radius < dc
+            spread = SPOT_GATE_MARGIN * rec[L_COND] * np.arcsin(np.where(inside, radius / np.where(inside, dc, 1.0), 1.0))
+            ch, bl = rec[L_COSHALF], rec[L_BLEND]
+            th_out = np.arccos(ch)
+            th_in = np.arccos(min(ch + (1.0 - ch) * bl, 1.0)) if bl > 0.0 else th_out
+            many = ~(inside & ((th - spread > th_out) | (th + spread < th_in)))
+        esum = np.zeros(n)
+        lsum = np.zeros(n)
+        dsum = np.zeros((n, 3))
+        d = None
+        # 1 - cos(theta_max) of the cone the facing disc subtends, without cancellation
+        hyp = np.sqrt(dc * dc + radius * radius)
+        omc_max = radius * radius / (hyp * (hyp + dc)) if radius > 0.0 else np.zeros(n)
+        e_disc = 2.0 * omc_max / (radius * radius) if radius > 0.0 else np.zeros(n)
+        for i in range(n_pts):
+            if i > 0:
+                if not many.any():
+                    break
+                ua = u1 + i / disc_points
+                ub = i * SPOT_DISC_PHI
+                ub = u2 + (ub - np.floor(ub))
+                ua = np.where(ua >= 1.0, ua - 1.0, ua)
+                ub = np.where(ub >= 1.0, ub - 1.0, ub)
+                a, b = _disc(2.0 * ua - 1.0, 2.0 * ub - 1.0, True)
+            a, b = np.broadcast_to(a, (n,)), np.broadcast_to(b, (n,))
+            if radius > 0.0:
+                # Cycles' soft-falloff lamp (C twin): a disc facing x of radiance I/(pi r^2);
+                # the disc point (a, b) maps to a direction uniform in the disc's solid angle
+                s2 = a * a + b * b
+                omc = s2 * omc_max
+                cos_t = 1.0 - omc
+                sin_t = np.sqrt(np.maximum(omc * (2.0 - omc), 0.0))
+                rs = np.where(s2 > 0.0, sin_t / np.sqrt(np.where(s2 > 0.0, s2, 1.0)), 0.0)
+                di = -(wc * cos_t[:, None] + (t1 * a[:, None] + t2 * b[:, None]) * rs[:, None])
+                r2 = 1.0 / e_disc
+                dist = dc / np.maximum(cos_t, 1e-12)  # to the disc along di
+            else:
+                v = x - centre
+                dist = np.sqrt(np.einsum("ij,ij->i", v, v))
+                di = v / np.maximum(dist, 1e-30)[:, None]
+                r2 = np.maximum(dist * dist, 1e-4 ** 2)
+            if i == 0:
+                d = di
+            att = 1.0
+            if kind == KIND_SPOT:
+                cos_t = _spot_cos(rec, di)
+                ch, bl = rec[L_COSHALF], rec[L_BLEND]
+                if bl <= 0.0:
+                    att = (cos_t > ch).astype(np.float64)
+                else:
+                    q = np.clip((cos_t - ch) / ((1.0 - ch) * bl), 0.0, 1.0)
+                    att = q * q * (3.0 - 2.0 * q)
+            w = np.broadcast_to(att / r2, (n,))
+            if i == 0:
+                e1 = w.copy()
+                ds1 = np.broadcast_to(dist, (n,)).copy()
+            else:
+                w = np.where(many, w, 0.0)
+            esum = esum + w
+            lsum = lsum + w * dist
+            dsum = dsum + w[:, None] * di
+        ds = np.where(esum > 0.0, lsum / np.where(esum > 0.0, esum, 1.0), dc) if radius > 0.0 else dc
+        if n_pts > 1:  # the irradiance-weighted mean direction, as the phase function sees it
+            dn = np.sqrt(np.einsum("ij,ij->i", dsum, dsum))
+            d = np.where((many & (dn > 0.0))[:, None], dsum / np.where(dn > 0.0, dn, 1.0)[:, None], d)
+            ds = np.where(many, ds, np.where(e1 > 0.0, ds1, dc)) if radius > 0.0 else dc
+            esum = np.where(many, esum / n_pts, e1)
+        e = s[None, :] / (4.0 * np.pi) * esum[:, None]
+        return d, e, wc, dc, ds
+    # AREA
+    src = centre + rec[L_AX:L_AX + 3] * a[:, None] + rec[L_AY:L_AY + 3] * b[:, None]
+    v = x - src
+    dist2 = np.maximum(np.einsum("ij,ij->i", v, v), 1e-8)
+    d = v / np.sqrt(dist2)[:, None]
+    cos_l = np.maximum(d @ rec[L_NORMAL:L_NORMAL + 3], 0.0)
+    area = rec[L_AREA]
+    radiance = s / np.pi / (area if (rec[L_NORMALIZE] > 0 and area > 0) else 1.0)
+    return d, radiance[None, :] * (cos_l * area / dist2)[:, None], wc, dc, np.sqrt(dist2)
+
+
+def path_stretch(ds, dc, voxel):
+    """(N,) factor from the field's optical depth to the light's centre (distance ``dc``, m) to
+    that to the emitting point sampled (``ds``): the centre path's mean extinction times the
+    point's path length, ds / dc (exact in a homogeneous medium); dc at least half a voxel,
+    the path the field's trilinear depth stands for next to the centre (C twin)."""
+    return ds / np.maximum(dc, 0.5 * voxel)
 
 def area_geometry(light: Light):
     """World-space centre, local X and Y half-axes (scaled) and the emitter area (m^2)."""

@@ -158,7 +158,8 @@ def flatten_levels(pm: PreparedMedium, mfs, lights: List[Light], table: np.ndarr
     ``table_after`` (level_table(..., exact_flights=2): the paths that scattered twice more),
     and 1 - w of the levels through ``table``."""
     from .camera import towards_camera
-    from .kernels_np import hg, light_sample, upsample
+    from .kernels_np import hg, upsample
+    from .lights import light_sample
     from .mpp import table_lookup
     from .precompute.lattice import lattice_points, lattice_shape
     ref = next(m for m in mfs if m is not None)

@@ -225,7 +225,7 @@ def tail(fog: Medium, lights: List[Light], origins, dirs, s0, s1, nodes: int = T
     pos = st[st > 0]
     live = np.flatnonzero(length > 0)
     if used and pos.size and np.any(ss > 0) and live.size:
-        from .kernels_np import light_sample
+        from .lights import light_sample
         sig = float(pos.min())
         recs = [pack_light(li) for li in used]
         with np.errstate(over="ignore"):

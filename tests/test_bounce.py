@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from mpp_render.bounce import SUB, TILES, bounce_lights, media_corners, plane_of
-from mpp_render.kernels_np import light_sample
+from mpp_render.lights import light_sample
 from mpp_render.lights import incident, irradiance, pack_light
 from mpp_render.media import prepare
 from mpp_render.render import render

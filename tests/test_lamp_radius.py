@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from mpp_render import kernels_np
+from mpp_render import lights
 from mpp_render.lights import pack_light
 from mpp_render.scene import Light
 
@@ -31,7 +31,7 @@ def test_irradiance_is_the_disc_integral(d0):
     rec = pack_light(lamp(r, P))
     u = np.random.default_rng(1).random((64, 2))
     x = np.tile([0.0, 0.0, d0], (len(u), 1))
-    d, e, wc, dc, ds = kernels_np.light_sample(rec, x, u[:, 0], u[:, 1])
+    d, e, wc, dc, ds = lights.light_sample(rec, x, u[:, 0], u[:, 1])
     I = P / (4 * np.pi)
     closed = 2 * I * (1 - d0 / math.hypot(d0, r)) / r ** 2
     assert np.allclose(e, closed, rtol=1e-12)                    # every sample: the whole disc
@@ -46,7 +46,7 @@ def test_directions_fill_the_cone_and_distance_is_the_disc_mean():
     k = 128  # a stratified grid over (u1, u2)
     g = (np.stack(np.meshgrid(np.arange(k), np.arange(k), indexing="ij"), -1).reshape(-1, 2) + 0.5) / k
     x = np.tile([0.0, 0.0, d0], (len(g), 1))
-    d, e, wc, dc, ds = kernels_np.light_sample(rec, x, g[:, 0], g[:, 1])
+    d, e, wc, dc, ds = lights.light_sample(rec, x, g[:, 0], g[:, 1])
     cos = -np.einsum("ij,ij->i", d, wc)         # propagation direction against the way to the centre
     cos_max = d0 / math.hypot(d0, r)
     assert cos.min() >= cos_max - 1e-12 and cos.max() <= 1.0 + 1e-12
@@ -61,7 +61,7 @@ def test_directions_fill_the_cone_and_distance_is_the_disc_mean():
 def test_radius_zero_stays_a_point():
     rec = pack_light(lamp(0.0, 4 * np.pi))
     x = np.array([[0.0, 0.0, 2.0], [1.0, 0.0, 0.0]])
-    d, e, wc, dc, ds = kernels_np.light_sample(rec, x, np.full(2, 0.3), np.full(2, 0.7))
+    d, e, wc, dc, ds = lights.light_sample(rec, x, np.full(2, 0.3), np.full(2, 0.7))
     assert np.allclose(e[:, 0], 1.0 / np.array([4.0, 1.0]))
     assert np.array_equal(ds, dc)               # no stretch of the optical depth
 
@@ -71,6 +71,6 @@ def test_path_stretch_is_exact_in_a_homogeneous_medium():
     dc = np.array([0.05, 0.2, 1.0])
     ds = np.array([0.3, 0.25, 1.01])
     tau_centre = sigma * dc
-    assert np.allclose(tau_centre * kernels_np.path_stretch(ds, dc, voxel), sigma * ds)
+    assert np.allclose(tau_centre * lights.path_stretch(ds, dc, voxel), sigma * ds)
     # next to the centre the field's depth stands for half a voxel's path
-    assert kernels_np.path_stretch(np.array([0.1]), np.array([0.001]), voxel)[0] == pytest.approx(0.1 / 0.005)
+    assert lights.path_stretch(np.array([0.1]), np.array([0.001]), voxel)[0] == pytest.approx(0.1 / 0.005)
