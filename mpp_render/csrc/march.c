@@ -154,21 +154,32 @@ static void march_release(March *c) {
     for (int m = 0; m < c->nkb; m++) buf_release(&c->kb[m]);
 }
 
+/* A list of `ng` float64 RGB arrays into out[m][0..2]; `list_msg` names what the list must
+ * be, `what` each array (the messages of a bad call). */
+static int parse_rgb_list(PyObject *list, int ng, double (*out)[3], const char *list_msg,
+                          const char *what) {
+    if (!PyList_Check(list) || PyList_GET_SIZE(list) != ng) {
+        PyErr_SetString(PyExc_ValueError, list_msg);
+        return -1;
+    }
+    for (int m = 0; m < ng; m++) {
+        Buf b;
+        Py_ssize_t s3[1] = {3};
+        if (get_buf(PyList_GET_ITEM(list, m), &b, 'd', 1, s3, what) < 0) return -1;
+        memcpy(out[m], b.view.buf, 3 * sizeof(double));
+        buf_release(&b);
+    }
+    return 0;
+}
+
 /* The per-medium lists: scattering coefficients, anisotropies, voxel sizes, emissions and
  * emission channels. */
 static int parse_media(March *c, PyObject *sss, PyObject *gsl, PyObject *vox, PyObject *pem,
                        PyObject *pec) {
     int ng = c->ng;
-    if (!PyList_Check(sss) || PyList_GET_SIZE(sss) != ng) {
-        PyErr_SetString(PyExc_ValueError, "sigma_ss: one RGB array per medium");
+    if (parse_rgb_list(sss, ng, c->sig_s, "sigma_ss: one RGB array per medium", "sigma_s") < 0)
         return -1;
-    }
     for (int m = 0; m < ng; m++) {
-        Buf sb;
-        Py_ssize_t s3[1] = {3};
-        if (get_buf(PyList_GET_ITEM(sss, m), &sb, 'd', 1, s3, "sigma_s") < 0) return -1;
-        memcpy(c->sig_s[m], sb.view.buf, 3 * sizeof(double));
-        buf_release(&sb);
         if (c->g[m].nc > MAX_CH) {
             PyErr_SetString(PyExc_ValueError, "fields: too many channels");
             return -1;
@@ -177,16 +188,9 @@ static int parse_media(March *c, PyObject *sss, PyObject *gsl, PyObject *vox, Py
     if (parse_doubles(gsl, ng, c->gg, "gs") < 0 || parse_doubles(vox, ng, c->voxel, "voxels") < 0)
         return -1;
     if (pem != Py_None) {
-        if (!PyList_Check(pem) || PyList_GET_SIZE(pem) != ng) {
-            PyErr_SetString(PyExc_ValueError, "emissions: one RGB array per medium");
+        if (parse_rgb_list(pem, ng, c->emit, "emissions: one RGB array per medium", "emission") < 0)
             return -1;
-        }
         for (int m = 0; m < ng; m++) {
-            Buf eb;
-            Py_ssize_t s3[1] = {3};
-            if (get_buf(PyList_GET_ITEM(pem, m), &eb, 'd', 1, s3, "emission") < 0) return -1;
-            memcpy(c->emit[m], eb.view.buf, 3 * sizeof(double));
-            buf_release(&eb);
             for (int a = 0; a < 3; a++)
                 if (!isfinite(c->emit[m][a])) {
                     PyErr_SetString(PyExc_ValueError, "emission: non-finite value");
