@@ -291,11 +291,12 @@ def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, r
                 tau = media_optical_depth(po[hit], w[hit], t_hit[hit])
                 out[hit] += albedo[hit] * seen * np.exp(-tau)
         if np.any(wc > 0):
-            vis = ~np.isfinite(t_hit)
-            tau = media_optical_depth(po, w, np.full(n_pts, np.inf))
             # the uniform sky seen through one cosine-distributed direction, reflected by
-            # every layer with its directional albedo
-            out += albedo * wc * (np.exp(-tau) * vis[:, None])
+            # every layer with its directional albedo (where no surface hides it)
+            sky = np.flatnonzero(~np.isfinite(t_hit))
+            if sky.size:
+                tau = media_optical_depth(po[sky], w[sky], np.full(sky.size, np.inf))
+                out[sky] += albedo[sky] * wc * np.exp(-tau)
         if media_radiance is not None:
             out += albedo * media_radiance(po, w, t_hit)
     return out
