@@ -1,6 +1,7 @@
 """Accuracy of every public scene against the Cycles references, with pictures.
 
     .venv/bin/python benchmarks/accuracy.py [--scenes a,b] [--samples 16] [--out docs]
+    .venv/bin/python benchmarks/accuracy.py --keep-single docs/accuracy.json   # full only
     .venv/bin/python benchmarks/accuracy.py --rows A.json B.json [--out docs]   # report only
 
 For each scene: our render with multiple scattering off against ``ss_s*.exr`` (Cycles with
@@ -52,7 +53,7 @@ def panel(ours, ref):
                            heat((ours - ref).mean(axis=2), scale)], axis=1)
 
 
-def render_scene(name, samples, tmp):
+def render_scene(name, samples, tmp, single_row=None):
     import bpy
 
     from mpp_render import metrics
@@ -65,6 +66,10 @@ def render_scene(name, samples, tmp):
     row = {"scene": name}
     images = {}
     for single in (True, False):
+        if single and single_row is not None:
+            row["single"] = single_row   # kept from an earlier run (--keep-single)
+            images["single"] = None
+            continue
         bpy.ops.wm.open_mainfile(filepath=os.path.join(scene_dir, "scene.blend"))
         sc = bpy.context.scene
         spp = metrics.SINGLE_SCATTERING_SAMPLES.get(name, samples) if single else samples
@@ -166,6 +171,10 @@ def main(argv=None):
     ap.add_argument("--scenes", default=None)
     ap.add_argument("--samples", type=int, default=16)
     ap.add_argument("--out", default=os.path.join(REPO, "docs"))
+    ap.add_argument("--keep-single", default=None,
+                    help="an earlier accuracy.json whose single-scattering rows are kept "
+                         "(render only the full images: for a change to multiple scattering "
+                         "alone)")
     ap.add_argument("--rows", nargs="*", default=None,
                     help="write the report from the JSON rows of earlier runs (accuracy.json "
                          "files, later ones replacing earlier rows of the same scene) instead "
@@ -187,10 +196,14 @@ def main(argv=None):
     from mpp_render.blender import batch
     batch.register()
     os.makedirs(os.path.join(args.out, "images"), exist_ok=True)
+    kept = {}
+    if args.keep_single:
+        with open(args.keep_single) as f:
+            kept = {r["scene"]: r["single"] for r in json.load(f)}
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for name in names:
-            row, pic = render_scene(name, args.samples, tmp)
+            row, pic = render_scene(name, args.samples, tmp, kept.get(name))
             write_png(os.path.join(args.out, "images", f"{name}.png"), pic)
             rows.append(row)
             print(json.dumps(row), flush=True)

@@ -240,12 +240,13 @@ def camera_key(camera) -> tuple:
 
 def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, surfaces=None,
                       threads: int = 0, multiple: bool = False, multiple_resolution=None,
-                      should_cancel: Optional[Callable[[], bool]] = None,
+                      multiple_paths: int = 0, should_cancel: Optional[Callable[[], bool]] = None,
                       progress=None, cache: Optional[Cache] = None, tuning=None):
     """``precompute.precompute`` reusing earlier results kept in ``cache`` (default ``CACHE``).
 
     One entry (kind 'precompute') per *light key* -- the media, lights, surfaces, multiple
-    scattering and its resolution (and then the camera position), thread count, the tuning
+    scattering, its resolution and traced paths (and then the camera position, and the seed
+    of the paths), thread count, the tuning
     (scene.Tuning) and whether the world is lit -- holds the fields and pyramids
     and the *world key* they were computed for (world colour, camera position, ambient
     directions, seed).  Then:
@@ -275,15 +276,18 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
     # the thread count does not change the numbers; it is keyed anyway so that a render with
     # other threads still runs (and checks) the precompute
     common = (media_key(media), surfaces_key(surfaces), bool(multiple),
-              int(multiple_resolution) if multiple else 0, int(threads), tuning)
+              int(multiple_resolution) if multiple else 0,
+              int(multiple_paths) if multiple else 0, int(threads), tuning)
     # the light pyramids are moved towards what the camera sees (precompute.lightpyramid.drift_levels)
     light_key = digest("lights", common, list(lights), has_world,
-                       camera_key(camera) if multiple else None)
+                       camera_key(camera) if multiple else None,
+                       int(seed) if multiple and multiple_paths > 0 else None)
     world_key = digest("world", common, np.asarray(world.color, np.float64), camera_key(camera),
                        int(n_dirs), int(seed)) if has_world else None
     kw = dict(n_dirs=n_dirs, seed=seed, should_cancel=should_cancel, progress=progress,
               surfaces=surfaces, threads=threads, multiple=multiple,
-              multiple_resolution=multiple_resolution, tuning=tuning)
+              multiple_resolution=multiple_resolution, multiple_paths=multiple_paths,
+              tuning=tuning)
 
     def result(pre, reused):
         return pre_mod.Precomputed(pre.fields, pre.layout, pre.multiple, pre.seconds,

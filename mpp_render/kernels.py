@@ -263,3 +263,56 @@ def march(inputs: MarchInputs, *, backend=None) -> MarchResult:
                        np.frombuffer(m, np.float64).reshape(n, 3),
                        np.frombuffer(k, np.float64).reshape(n),
                        np.frombuffer(e, np.float64).reshape(n, 3))
+
+
+def trace_paths(inp, *, threads: int = 1, should_cancel=None, backend=None):
+    """Light paths' deposits (LX,LY,LZ,3) float64 for ``inp`` (a paths.PathInputs; the numpy
+    twin is paths.trace_paths_np).  The paths are cut into ``PATH_BLOCKS`` blocks, each with
+    its own sums added in a fixed order, which ``threads`` workers share (the caller sizes
+    them: parallel.worker_count):
+    the result is the same bits for any thread count (frames match across farm machines).
+    Each block runs ``PATH_CHUNK`` paths a call, asking ``should_cancel`` between calls:
+    None when it says so."""
+    from .paths import ROULETTE, trace_paths_np
+    if not _on_c(backend) or not hasattr(_c, "trace_paths"):
+        return trace_paths_np(inp)
+    shape = tuple(inp.towards.shape[:3]) + (3,)
+    n = int(inp.n_paths)
+    if n <= 0 or len(inp.cdf) == 0:
+        return np.zeros(shape)
+    blocks = min(PATH_BLOCKS, n)
+    workers = max(1, min(int(threads), blocks))
+    cuts = np.linspace(0, n, blocks + 1).astype(np.int64)
+    outs = [np.zeros(shape) for _ in range(blocks)]
+    args = (_f32(inp.density), _f64(inp.w2i).reshape(3, 4), _f64(inp.i2w).reshape(3, 3),
+            _f64(inp.sigma_s).reshape(3), _f64(inp.sigma_t).reshape(3), float(inp.g),
+            float(inp.g if inp.g_last is None else inp.g_last), int(inp.stride), _f64(inp.towards), _f64(inp.starts), _f64(inp.weights),
+            _f64(inp.dirs), _f64(inp.cdf).reshape(-1), float(inp.rate))
+
+    cancelled = []
+
+    def work(i):
+        for a in range(int(cuts[i]), int(cuts[i + 1]), PATH_CHUNK):
+            if cancelled or (should_cancel is not None and should_cancel()):
+                cancelled.append(True)
+                return
+            _c.trace_paths(outs[i], *args, a, min(a + PATH_CHUNK, int(cuts[i + 1])), n,
+                           int(inp.seed) & 0xFFFFFFFF, int(inp.max_collisions), float(ROULETTE))
+
+    if workers == 1:
+        for i in range(blocks):
+            work(i)
+    else:
+        from concurrent.futures import ThreadPoolExecutor
+        with ThreadPoolExecutor(workers) as ex:
+            list(ex.map(work, range(blocks)))
+    if cancelled:
+        return None
+    total = outs[0]
+    for o in outs[1:]:
+        total += o
+    return total
+
+
+PATH_BLOCKS = 4   # trace_paths' blocks of paths (its sums' order, whatever the threads)
+PATH_CHUNK = 16384   # paths per call of the compiled tracer, between checks for Esc

@@ -103,6 +103,13 @@ class MarchContext:
                 ref = next((m for m in mfs if m is not None), None)
                 table = np.zeros((1, len(RHO_TABLE), 6)) if ref is None else \
                     level_table(pm.g, pm.sigma_s, pm.sigma_a, ref.h, len(ref.levels))
+                if ref is not None and ref.traced:
+                    # the traced paths' M of every light, summed (paths.py)
+                    total = sum(m.levels[0] for m in mfs if m is not None)
+                    per_medium.append([LevelField([np.ascontiguousarray(total, np.float32)],
+                                                  ref.stride, ref.h)] + [None] * (len(mfs) - 1))
+                    tables.append(FLAT_TABLE)
+                    continue
                 # flattened as the precompute decided (MultipleField.flat)
                 if ref is not None and ref.flat and self.camera is not None:
                     after = None

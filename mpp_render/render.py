@@ -120,6 +120,7 @@ def render(desc: SceneDescription,
                                           surfaces=None if surf.empty else surf,
                                           threads=st.threads, multiple=st.multiple,
                                           multiple_resolution=st.multiple_resolution,
+                                          multiple_paths=st.multiple_paths,
                                           tuning=st.tuning)
         except Cancelled:
             return RenderOutput(out, {"precompute": time.perf_counter() - t_pre}, warnings, True)

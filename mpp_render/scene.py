@@ -204,6 +204,20 @@ class Tuning:
     tile: int = 64
 
 
+# light paths per light and medium at the default quality (docs/method.md, "Traced paths")
+MULTIPLE_PATHS = 1_000_000
+
+# What the Quality menu sets (blender/properties.py; docs/usage.md gives what each costs and
+# how close it comes on the public scenes).  Preview: the walk's smooth, biased multiple
+# scattering and few samples; Final (the defaults): traced paths; Reference: four times the
+# paths on a lattice twice as fine, for a converged look at 8x the memory per lattice.
+QUALITY_PRESETS = {
+    "PREVIEW": dict(samples=4, multiple_paths=0, multiple_resolution=64),
+    "FINAL": dict(samples=16, multiple_paths=MULTIPLE_PATHS, multiple_resolution=64),
+    "REFERENCE": dict(samples=16, multiple_paths=4 * MULTIPLE_PATHS, multiple_resolution=128),
+}
+
+
 @dataclass
 class Settings:
     """Render quality settings.
@@ -215,6 +229,9 @@ class Settings:
     ``ambient_directions``: directions used to integrate the world light's transmittance.
     ``multiple_resolution``: lattice points along a medium's longest side for the light
     pyramids of multiple scattering (precompute.lightpyramid; never finer than the voxels).
+    ``multiple_paths``: light paths traced per light and medium for multiple scattering
+    (paths.py, precompute.lightpaths; more: less noise in it); 0: the walk of the light
+    pyramid instead (mpp.py).
     ``passes``: names of the passes to fill; None means every pass the engine has.
     ``voxel_resolution``: voxels along the longest side when a mesh volume is voxelised.
     ``threads``: worker threads for the march; 0 means one per core.
@@ -232,6 +249,7 @@ class Settings:
     seed: int = 0
     ambient_directions: int = 32
     multiple_resolution: int = 64
+    multiple_paths: int = MULTIPLE_PATHS
     passes: Optional[List[str]] = None
     threads: int = 0
     voxel_resolution: int = 128

@@ -106,7 +106,7 @@ def reference():
 
 
 @pytest.mark.parametrize("delay,stage", [(0.3, None), (0.1, "Light attenuation: pt"),
-                                         (0.2, "World light"), (0.05, "Light pyramid"),
+                                         (0.2, "World light"), (0.05, "Light paths"),
                                          (0.1, "Tiles")])
 def test_esc_returns_within_half_a_second(delay, stage, reference):
     esc = Esc(delay, stage)

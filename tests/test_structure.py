@@ -12,7 +12,7 @@ LAYERS = [
     {"cli", "__main__", "package", "blender"},                          # entry points, glue
     {"render", "cache", "bounce", "budget", "metrics", "exr"},          # the frame; I/O
     {"precompute", "march", "firstflight", "pyramid", "parallel"},      # the two stages
-    {"kernels", "kernels_np", "_kernels"},                              # C kernels, numpy twins
+    {"kernels", "kernels_np", "_kernels", "paths"},                     # C kernels, numpy twins
     {"lights", "surfaces", "worldfog", "media", "phase", "mpp", "lightrecord", "camera",
      "blackbody", "passes"},                                            # physics, media, model
     {"scene"},                                                          # the description

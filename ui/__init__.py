@@ -47,6 +47,7 @@ class MPP_PT_sampling(MPPPanel, bpy.types.Panel):
         layout = self.split_layout()
         mpp = context.scene.mpp
         col = layout.column()
+        col.prop(mpp, "quality")
         col.prop(mpp, "samples")
         col.prop(mpp, "seed")
 
@@ -73,6 +74,7 @@ class MPP_PT_light_paths(MPPPanel, bpy.types.Panel):
         sub = col.column()
         sub.active = mpp.multiple
         sub.prop(mpp, "multiple_resolution")
+        sub.prop(mpp, "multiple_paths")
         sub.prop(mpp, "surface_bounce")
         col.prop(mpp, "ambient_directions")
 

@@ -7,9 +7,9 @@ defaults do.
 from __future__ import annotations
 
 import bpy
-from bpy.props import BoolProperty, FloatProperty, IntProperty, PointerProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty
 
-from ..scene import Settings
+from ..scene import MULTIPLE_PATHS, QUALITY_PRESETS, Settings
 
 
 def _refresh_passes(self, context):
@@ -19,8 +19,26 @@ def _refresh_passes(self, context):
         view_layer.update_render_passes()
 
 
+def _apply_quality(self, context):
+    """The Quality menu writes its preset's samples, paths and resolution (scene.py)."""
+    for name, value in QUALITY_PRESETS[self.quality].items():
+        setattr(self, name, value)
+
+
 class MPPRenderSettings(bpy.types.PropertyGroup):
     """Per-scene settings of the MPP engine (``scene.mpp``)."""
+
+    quality: EnumProperty(
+        name="Quality", default="FINAL", update=_apply_quality,
+        items=[("PREVIEW", "Preview", "4 samples and the fast most-probable-path model of "
+                "multiple scattering: smooth, seconds, but biased (docs/accuracy.md)"),
+               ("FINAL", "Final", "16 samples and 1 million traced light paths per light for "
+                "multiple scattering: the defaults"),
+               ("REFERENCE", "Reference", "16 samples, 4 million paths per light on a lattice "
+                "twice as fine: closest to Cycles, several times the precompute")],
+        description="Sets Samples, Multiple Scattering Paths and Resolution together "
+                    "(they stay editable). docs/usage.md gives each one's time and error on "
+                    "the public scenes")
 
     samples: IntProperty(
         name="Samples", default=16, min=1, soft_max=1024,
@@ -47,6 +65,12 @@ class MPPRenderSettings(bpy.types.PropertyGroup):
                     "pass also shifts in brightness with it (measured between 16 and 128: "
                     "within 10% in the public smoke and clouds, up to 25% in thin slabs; "
                     "docs/ms_resolution.md). The accuracy figures in the docs are at 64")
+    multiple_paths: IntProperty(
+        name="Multiple Scattering Paths", default=MULTIPLE_PATHS, min=0, soft_max=20_000_000,
+        description="Light paths (count) traced per light and volume for the multiply "
+                    "scattered light. More: less noise in it (it converges to Cycles' as "
+                    "paths and resolution grow), a longer precompute. 0 = the fast "
+                    "most-probable-path model instead (smooth, but biased: docs/accuracy.md)")
     surface_bounce: BoolProperty(
         name="Surface Bounce", default=True,
         description="Flat surfaces (a ground, a wall) reflect the lights' light into the "
@@ -84,6 +108,7 @@ def settings_from_scene(scene) -> Settings:
         seed=int(p.seed),
         ambient_directions=int(p.ambient_directions),
         multiple_resolution=int(p.multiple_resolution),
+        multiple_paths=int(p.multiple_paths),
         passes=None,
         threads=int(p.threads),
         voxel_resolution=int(p.voxel_resolution),

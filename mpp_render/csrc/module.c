@@ -1,5 +1,5 @@
 /* mpp_render._kernels: the method table.  Each kernel lives in its own file (optical_depth.c,
- * sweep.c, march.c, upsample.c, trilinear.c) over the shared headers common.h (buffers, grids,
+ * sweep.c, march.c, upsample.c, trilinear.c, paths.c) over the shared headers common.h (buffers, grids,
  * trilinear reads, random numbers), bricks.h (empty space) and light.h (the light record).
  */
 #include "kernels.h"
@@ -40,6 +40,7 @@ static PyMethodDef methods[] = {
     {"light_sweep", light_sweep, METH_VARARGS, light_sweep_doc},
     {"upsample_into", upsample_into, METH_VARARGS, upsample_into_doc},
     {"trilinear", py_trilinear, METH_VARARGS, trilinear_doc},
+    {"trace_paths", trace_paths, METH_VARARGS, trace_paths_doc},
     {"light_layout", light_layout, METH_NOARGS, light_layout_doc},
     {NULL, NULL, 0, NULL},
 };

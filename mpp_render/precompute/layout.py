@@ -57,15 +57,18 @@ def light_channels(lights) -> List[Optional[int]]:
 
 
 def field_layout(media: Sequence[PreparedMedium], lights, world_color, multiple: bool,
-                 delta: Optional[Sequence[PreparedMedium]] = None) -> FieldLayout:
+                 delta: Optional[Sequence[PreparedMedium]] = None,
+                 peak: bool = True) -> FieldLayout:
     """The layout of the fields the precompute gives ``media`` lit by ``lights`` and a world
     of colour ``world_color``, with or without ``multiple`` scattering.  ``delta``: the
-    media delta-scaled (media.delta_scaled), where the caller has them."""
+    media delta-scaled (media.delta_scaled), where the caller has them.  ``peak``: whether
+    multiple scattering carries the forward peak's light apart (the walk's beam channels,
+    precompute.source.peak_light); traced paths (paths.py) carry it themselves."""
     chans = light_channels(lights)
     c = 1 + 3 * sum(ch is not None for ch in chans)
     beams = [None] * len(lights)
     delta = [delta_scaled(pm) for pm in media] if delta is None else delta
-    if multiple and any(d is not pm for d, pm in zip(delta, media)):
+    if multiple and peak and any(d is not pm for d, pm in zip(delta, media)):
         for i in range(len(lights)):
             if chans[i] is not None:
                 beams[i] = c

@@ -33,13 +33,15 @@ class MultipleField:
     scattered path), each level moved by its paths' drift (``drift_levels``).  ``first``:
     None, or for a mesh volume whose first flights mostly leave it the exact first two
     flights (firstflight.FirstFlight on the finest lattice) that replace the walk's, by their
-    weight (march.flatten_levels).  ``flat``: the march sums the levels once (``flattens``)."""
+    weight (march.flatten_levels).  ``flat``: the march sums the levels once (``flattens``).
+    ``traced``: ``levels`` is one level, the traced paths' M (paths.py), read as it is."""
 
     stride: int
     h: float
     levels: list
     first: Optional[FirstFlight] = None
     flat: bool = False
+    traced: bool = False
 
 
 def flattens(pm: PreparedMedium, camera: Optional[Camera], tuning: Tuning = Tuning()) -> bool:

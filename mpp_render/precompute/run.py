@@ -16,7 +16,8 @@ from .lattice import MULTIPLE_RESOLUTION, grid_points, needed_flat
 from .layout import FieldLayout, field_layout
 from .lightdepth import (SHADOW_TAU, light_optical_depth, near_sharp_surfaces, soft_visibility,
                          split_fog, sweep_light)
-from .lightpyramid import multiple_field
+from .lightpaths import traced_multiple
+from .lightpyramid import MultipleField, multiple_field
 from .source import peak_light
 from .worldlight import fill_world_light
 
@@ -38,16 +39,17 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                should_cancel: Optional[Callable[[], bool]] = None,
                progress: Optional[Callable[[float, str], None]] = None,
                surfaces=None, threads: int = 0, multiple: bool = False,
-               multiple_resolution: int = MULTIPLE_RESOLUTION,
+               multiple_resolution: int = MULTIPLE_RESOLUTION, multiple_paths: int = 0,
                tuning: Tuning = Tuning()) -> Precomputed:
     """Field arrays for every medium, and with ``multiple`` the light pyramids; raises
     parallel.Cancelled when ``should_cancel`` says so.  ``surfaces`` (a SurfaceSet or None)
     shadow the lights and the sky.  Media that cannot scatter (sigma_s = 0) get no
-    multiple-scattering data.  ``tuning``: the
+    multiple-scattering data.  ``multiple_paths``: light paths traced per light and medium
+    for multiple scattering (precompute.lightpaths); 0: the walk of the light pyramid.  ``tuning``: the
     method's knobs (scene.Tuning, with the Settings)."""
     t_start = time.perf_counter()
     delta = [delta_scaled(pm) for pm in media]
-    layout = field_layout(media, lights, world.color, multiple, delta)
+    layout = field_layout(media, lights, world.color, multiple, delta, peak=multiple_paths <= 0)
     chans, beams = layout.light_channels, layout.beam_channels or [None] * len(lights)
     c = layout.channels
     ms_all = []
@@ -130,9 +132,20 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                 if chans[li] is None:
                     continue
                 if progress:
-                    progress(0.0, f"Light pyramid: {light.name} on {pm.medium.name}")
+                    stage = "Light paths" if multiple_paths > 0 else "Light pyramid"
+                    progress(0.0, f"{stage}: {light.name} on {pm.medium.name}")
                 # the walk starts where the beam of unscattered and forward-scattered light
                 # first scatters out of the forward peak (docs/method.md, "The forward peak")
+                traced = None
+                if multiple_paths > 0 and camera is not None:
+                    # light paths traced from the first scatterings (precompute.lightpaths)
+                    traced = traced_multiple(pm, f, light, chans[li], camera, multiple_paths,
+                                             multiple_resolution, seed=seed + 7919 * mi + li,
+                                             threads=threads, should_cancel=should_cancel)
+                if traced is not None:
+                    ms[li] = MultipleField(traced[0], traced[1], [traced[2]], traced=True)
+                    check(should_cancel)
+                    continue
                 ms[li] = multiple_field(delta[mi], f, light, chans[li], camera, beam=beams[li],
                                         resolution=multiple_resolution,
                                         should_cancel=should_cancel, g_last=float(pm.g),

@@ -161,13 +161,26 @@ def peak_light(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int, 
     return np.ascontiguousarray(b.reshape(shape + (3,)), np.float32), stride
 
 
+def point_falloff(r2, radius: float) -> np.ndarray:
+    """A point light's irradiance per unit intensity (1/m^2) at squared distances ``r2``
+    (m^2): Cycles' soft-falloff disc of ``radius``, 2 (1 - r / sqrt(r^2 + R^2)) / R^2
+    (lights.light_sample), 1 / r^2 without a radius (floored at light_sample's 1e-8 m^2)."""
+    r2 = np.asarray(r2, np.float64)
+    if radius <= 0.0:
+        return 1.0 / np.maximum(r2, 1e-8)
+    big = float(radius) ** 2
+    return 2.0 * (1.0 - np.sqrt(r2 / (r2 + big))) / big
+
+
 def cell_mean_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int,
                      stride: int, shape, cells: np.ndarray,
                      beam: Optional[int] = None) -> np.ndarray:
     """The first-scattering source Q = sigma_s E exp(-tau) (W/m^3, (len(cells), 3)) averaged
     over the voxels of each lattice cell in ``cells`` (the voxels nearest to the cell's
-    point), with a point light's E ~ 1/r^2 read as 1/max(r^2, R^2/3): the exact mean of
-    1/r^2 over the ball of one voxel's volume (radius R) centred on the light.  Next to a
+    point), with a point light's falloff (``point_falloff``) read at max(r^2, R^2/3): for a
+    light without radius the exact mean of 1/r^2 over the ball of one voxel's volume
+    (radius R) centred on the light; a lamp's disc is finite at its centre and changes
+    nothing beyond R.  Next to a
     point light the source varies too fast for one read at the lattice point: a light
     inside a medium then lost 25-55 % of its first-scattered power to the pyramid."""
     ci = np.stack(np.unravel_index(cells, shape), axis=1)
@@ -182,14 +195,14 @@ def cell_mean_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel:
     vol = abs(np.linalg.det(pm.i2w[:3, :3]))
     r_min2 = (3.0 * vol / (4.0 * np.pi)) ** (2.0 / 3.0) / 3.0
     r2 = np.einsum("ij,ij->i", pts - light.position, pts - light.position)
-    held = max(float(light.radius), 1e-4) ** 2  # lights.light_sample's own floor on r^2
-    e = e * (np.maximum(r2, held) / np.maximum(r2, r_min2))[:, None]
+    e = e * (point_falloff(np.maximum(r2, r_min2), light.radius)
+             / point_falloff(r2, light.radius))[:, None]
     q = first_scattering(pm, rho, e, v[:, channel:channel + 3],
                          None if beam is None else v[:, beam:beam + 3])
     return q.reshape(len(cells), len(offs), 3).mean(axis=1)
 
 
-def _tent_restrict(a: np.ndarray, axis: int, stride: int, n_out: int) -> np.ndarray:
+def tent_restrict(a: np.ndarray, axis: int, stride: int, n_out: int) -> np.ndarray:
     """``a`` restricted along ``axis`` to every ``stride``-th point with the tent weights
     (stride - |t|) / stride^2, t = -(stride-1)..stride-1 (zero beyond the ends): each point's
     value shared among the lattice points around it in proportion to their nearness, so that
@@ -213,7 +226,7 @@ def restricted_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel
     """The first-scattering source Q = sigma_s E exp(-tau) (W/m^3, (N,3) in the C order of
     the lattice ``shape`` ``stride`` voxels apart) from every voxel of the field ``fld``
     (optical depth at ``channel``), each voxel's power shared among the lattice points
-    around it (``_tent_restrict`` along each axis): the lattice holds the voxels' power, where
+    around it (``tent_restrict`` along each axis): the lattice holds the voxels' power, where
     reading Q at the lattice points alone missed (or doubled) the thin layer a light lights
     inside a dense medium's face as the lattice fell against it (docs/ms_resolution.md).
     Stride 1 reads the voxels themselves.  Made ``chunk`` voxel planes at a time; raises
@@ -237,10 +250,10 @@ def restricted_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel
                                        None if beam is None else v[live, beam:beam + 3])
         q = q.reshape((b - a,) + tuple(pm.grid.shape[1:]) + (3,))
         if stride > 1:
-            q = _tent_restrict(_tent_restrict(q, 1, stride, shape[1]), 2, stride, shape[2])
+            q = tent_restrict(tent_restrict(q, 1, stride, shape[1]), 2, stride, shape[2])
         rows[a:b] = q
     if stride > 1:
-        rows = _tent_restrict(rows, 0, stride, shape[0])
+        rows = tent_restrict(rows, 0, stride, shape[0])
     return rows.reshape(-1, 3)
 
 

@@ -41,8 +41,14 @@ TARGET = {"rel_rmse_4": 0.03, "bias": 0.02}
 # axes of the view and the first flights and the forward peak's light a finer lattice on
 # small grids ("Round a narrow beam": fog_beam 0.212 -> 0.096).  The trades are measured and
 # stated there.
-FULL_BOUND = {"cloud_vdb": 0.040, "colored_sphere": 0.070, "fog_beam": 0.110,
-              "slab_forward": 0.086, "slab_isotropic": 0.036, "smoke_plume": 0.038}
+# Set again when multiple scattering became traced light paths (docs/method.md 9.9), from
+# 0.040 / 0.070 / 0.110 / 0.086 / 0.036 / 0.038: cloud_vdb 0.035 -> 0.016, colored_sphere
+# 0.059 -> 0.018, slab_forward 0.074 -> 0.069 down; slab_isotropic 0.029 -> 0.042,
+# smoke_plume 0.023 -> 0.036 and fog_beam 0.098 -> 0.324 up (the beam, two lattice cells
+# wide, loses 14 % of its glow to the rows beside it: the walk carried its forward peak at the
+# voxels' resolution).  The trade was taken for the suite's worst scenes (docs/accuracy.md).
+FULL_BOUND = {"cloud_vdb": 0.020, "colored_sphere": 0.024, "fog_beam": 0.360,
+              "slab_forward": 0.080, "slab_isotropic": 0.048, "smoke_plume": 0.040}
 SCENE_NAMES = sorted(FULL_BOUND)
 
 

@@ -58,6 +58,18 @@ def test_engine_and_settings_register(empty_scene):
     assert st.multiple_resolution == 24
 
 
+def test_quality_presets_set_samples_paths_and_resolution(empty_scene):
+    from mpp_render.scene import QUALITY_PRESETS
+    assert properties.settings_from_scene(empty_scene).multiple_paths == Settings().multiple_paths
+    for name in ("PREVIEW", "REFERENCE", "FINAL"):
+        empty_scene.mpp.quality = name
+        st = properties.settings_from_scene(empty_scene)
+        for key, value in QUALITY_PRESETS[name].items():
+            assert getattr(st, key) == value, (name, key)
+    # the defaults are the Final preset
+    assert all(getattr(Settings(), k) == v for k, v in QUALITY_PRESETS["FINAL"].items())
+
+
 def test_render_writes_every_pass_to_blenders_multilayer_exr(empty_scene, tmp_path):
     sc = small_scene(empty_scene)
     ims = sc.render.image_settings

@@ -1,0 +1,75 @@
+"""Multiple scattering by traced light paths (paths.py) on the light pyramid's lattice: the
+paths start where each light's unscattered beam first scatters (source.py) and their
+deposits, seen from the camera, become the one level the march reads (march.MarchContext).
+"""
+from __future__ import annotations
+
+from typing import Optional
+
+import numpy as np
+
+from .. import kernels
+from ..camera import towards_camera
+from ..media import density_from
+from ..parallel import Cancelled, worker_count
+from ..paths import PATHS_MAX_SPAN, PathInputs, from_power, rate_span
+from .lattice import lattice_points, walk_lattice
+from .source import light_direction, source_and_density, tent_restrict
+
+
+# paths per lattice point the medium fills, at most (the Paths setting caps the total): a
+# 64-point lattice of a mesh cube holds 85 000 such points, past the default 1 000 000 paths
+PATHS_PER_POINT = 32
+
+
+def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: int,
+                    resolution: int, seed: int = 0, threads: int = 0,
+                    beam: Optional[int] = None, g_last: Optional[float] = None,
+                    should_cancel=None):
+    """(stride, h, M) for ``light`` on medium ``pm`` (its field ``fld``, the light's optical
+    depth at ``channel``): M float32 (LX,LY,LZ,3) W/(m^2 sr) on the light pyramid's lattice
+    (lattice.walk_lattice at ``resolution``), from ``n_paths`` paths (paths.py; at most
+    ``PATHS_PER_POINT`` per lattice point the medium fills) started
+    where its unscattered light first scatters (source.source_and_density), seen from
+    ``camera``; ``threads`` share them; raises parallel.Cancelled when ``should_cancel``
+    says so.  ``pm`` may be, as for the walk
+    (lightpyramid.multiple_field), the delta-scaled medium with the forward peak's light
+    at ``beam`` and the medium's own anisotropy ``g_last`` for the last scattering (measured
+    worse than the medium itself on p_point_in_cube, 0.127 against 0.072, better on
+    fog_beam, 0.244 against 0.307: the precompute traces the medium itself).  None where
+    the medium is too dense for paths (paths.PATHS_MAX_SPAN): the caller keeps the walk."""
+    stride, shape, h = walk_lattice(pm, resolution)
+    base, _, pts = source_and_density(pm, fld, light, channel, stride, beam)
+    i2w = np.asarray(pm.i2w[:3, :3], np.float64)
+    vol = float(abs(np.linalg.det(i2w))) * stride ** 3
+    power = base * vol
+    live = power.sum(axis=1) > 0.0
+    if not np.any(live):
+        return stride, h, np.zeros(tuple(shape) + (3,), np.float32)
+    _, lpts = lattice_points(pm, shape, stride)
+    towards = np.ascontiguousarray(towards_camera(camera, lpts).reshape(tuple(shape) + (3,)))
+    density = np.ascontiguousarray(density_from(pm.grid, pm.threshold), np.float32)
+    st = np.asarray(pm.sigma_t, np.float64)
+    rate = max(float(density.max()) * float(st.max()), 1.0 / h)
+    if not rate_span(rate, i2w, density.shape) <= PATHS_MAX_SPAN:
+        return None
+    mean_rho = density.astype(np.float64)
+    for axis in range(3):
+        mean_rho = tent_restrict(mean_rho, axis, stride, shape[axis])
+    # a small medium needs no more paths than PATHS_PER_POINT per lattice point it fills
+    n_paths = min(int(n_paths), PATHS_PER_POINT * int(np.count_nonzero(mean_rho > 0.0)))
+    weights, cdf = from_power(power[live])
+    inp = PathInputs(density, np.asarray(pm.w2i, np.float64), i2w,
+                     np.asarray(pm.sigma_s, np.float64), st, float(pm.g), stride, towards,
+                     np.ascontiguousarray(pts[live]), weights,
+                     np.ascontiguousarray(light_direction(light, pts[live])), cdf, rate,
+                     int(n_paths), int(seed), g_last=g_last)
+    acc = kernels.trace_paths(inp, threads=worker_count(threads), should_cancel=should_cancel)
+    if acc is None:
+        raise Cancelled()
+    # the deposits are density-weighted: divide by the density under each point's tent
+    # (the lattice cell's mean), so that M is the medium's own average there and a point
+    # beside the medium's surface is not diluted by the empty side
+    mean_rho = mean_rho[..., None] * vol
+    m = np.divide(acc, mean_rho, out=np.zeros_like(acc), where=mean_rho > 0.0)
+    return stride, h, np.ascontiguousarray(m, np.float32)

@@ -1,0 +1,153 @@
+"""Traced light paths for multiple scattering (paths.py, csrc/paths.c): the twins agree, the
+estimate keeps energy where the answer is known in closed form, its second order matches an
+independent quadrature of the double-scattering integral, it converges as paths are added,
+it does not depend on the thread count, and bad input raises instead of crashing."""
+import numpy as np
+import pytest
+
+from mpp_render import kernels
+from mpp_render.paths import MAX_RATE_SPAN, PathInputs, from_power, rate_span, trace_paths_np
+from mpp_render.phase import hg
+from mpp_render.precompute.lattice import lattice_shape
+
+needs_c = pytest.mark.skipif(kernels._c is None, reason="compiled kernels not built")
+
+
+def cube_case(n=48, stride=2, vox=0.05, sigma_t=2.0, albedo=0.9, g=0.3, n_paths=20000,
+              light=(-0.2, 0.1, -0.3), camera=(0.0, -7.5, 0.8), max_collisions=4096, seed=1):
+    """(PathInputs, lattice points (LX,LY,LZ,3) m): a homogeneous cube of n^3 voxels of side
+    ``vox`` (m) centred on the origin, its first scatterings (1 W, the light propagating
+    along +x) at the one point ``light``, seen from ``camera``."""
+    ls = lattice_shape((n, n, n), stride)
+    half = 0.5 * (n - 1) * vox
+    i2w = np.eye(3) * vox
+    w2i = np.concatenate([np.eye(3) / vox, np.full((3, 1), half / vox)], axis=1)
+    idx = np.stack(np.meshgrid(*[np.arange(s) * stride for s in ls], indexing="ij"), -1)
+    pts = idx * vox - half
+    v = np.asarray(camera) - pts
+    towards = v / np.linalg.norm(v, axis=-1, keepdims=True)
+    starts = np.asarray([light], np.float64)
+    w, cdf = from_power(np.ones((1, 3)))
+    dirs = np.array([[1.0, 0.0, 0.0]])
+    rate = max(sigma_t, 1.0 / (stride * vox))
+    return PathInputs(np.ones((n, n, n), np.float32), w2i, i2w, np.full(3, albedo * sigma_t),
+                      np.full(3, sigma_t), g, stride, np.ascontiguousarray(towards), starts, w,
+                      dirs, cdf, rate, n_paths, seed, max_collisions), pts
+
+
+def test_twins_agree_on_a_chromatic_grid():
+    rng = np.random.default_rng(1)
+    n, stride, vox = 20, 2, 0.1
+    ls = lattice_shape((n, n, n), stride)
+    tow = rng.normal(size=ls + (3,))
+    tow /= np.linalg.norm(tow, axis=-1, keepdims=True)
+    starts = rng.random((6, 3)) * 1.8
+    d = rng.normal(size=(6, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    w, cdf = from_power(rng.random((6, 3)) + 0.1)
+    inp = PathInputs(rng.random((n, n, n)).astype(np.float32), np.concatenate(
+        [np.eye(3) / vox, np.zeros((3, 1))], 1), np.eye(3) * vox, np.array([1.0, 1.5, 2.0]),
+        np.array([2.0, 2.0, 2.5]), 0.6, stride, tow, starts, w, d, cdf, 5.0, 2000, 5)
+    a = trace_paths_np(inp)
+    b = kernels.trace_paths(inp, threads=2)
+    assert a.sum() > 0.0
+    assert np.abs(a - b).max() <= 1e-9 * np.abs(a).max()
+
+
+@needs_c
+def test_same_bits_for_any_thread_count():
+    inp, _ = cube_case(n_paths=5000)
+    ref = kernels.trace_paths(inp, threads=1)
+    for t in (2, 3, 8):
+        assert np.array_equal(kernels.trace_paths(inp, threads=t), ref)
+
+
+@pytest.mark.parametrize("max_collisions, expected", [(1, 1.0 / 2.0), (4096, 1.0 / 0.4)])
+def test_isotropic_track_length_in_a_large_medium(max_collisions, expected):
+    """g = 0: the deposits times 4 pi are the scattered light's track length per watt, 1 /
+    sigma_t for the first flights alone and 1 / sigma_a for every flight (infinite medium;
+    the cube's faces are 7.4 diffusion lengths 1 / sqrt(3 sigma_a sigma_t) from the
+    source)."""
+    inp, _ = cube_case(n=96, vox=0.1, sigma_t=2.0, albedo=0.8, g=0.0, n_paths=20000,
+                       light=(0.0, 0.0, 0.0), max_collisions=max_collisions)
+    got = kernels.trace_paths(inp).sum(axis=(0, 1, 2)) * 4.0 * np.pi
+    assert got == pytest.approx(np.full(3, expected), rel=0.03)
+
+
+def test_second_order_matches_the_point_source_closed_form():
+    """A point of first scattering whose light leaves isotropically (g = 0 at the first
+    scattering): the first flights' light at x is e^{-sigma_t r} / (4 pi r^2) W/m^2, and M(x)
+    that times p(w . v).  The tracer's lattice values, away from the source, match it."""
+    inp, pts = cube_case(n=48, stride=2, vox=0.05, sigma_t=1.0, albedo=0.9, g=0.0,
+                         n_paths=400000, light=(0.0, 0.0, 0.0), max_collisions=1)
+    inp = PathInputs(**{**inp.__dict__, "g": 0.0})
+    acc = kernels.trace_paths(inp)
+    vol = (inp.stride * 0.05) ** 3
+    m = acc[..., 0] / vol
+    r = np.linalg.norm(pts, axis=-1)
+    exact = np.exp(-1.0 * r) / (4.0 * np.pi * np.maximum(r, 1e-9) ** 2) / (4.0 * np.pi)
+    # shells 0.3-0.9 m from the source (off the lattice's smoothing of the 1/r^2 peak)
+    for lo, hi in ((0.3, 0.5), (0.5, 0.7), (0.7, 0.9)):
+        sel = (r >= lo) & (r < hi)
+        assert m[sel].mean() == pytest.approx(exact[sel].mean(), rel=0.04), (lo, hi)
+
+
+def test_error_falls_as_paths_are_added():
+    inp, _ = cube_case(n=32, stride=2, vox=0.06, n_paths=320000, seed=9)
+    ref = kernels.trace_paths(inp)
+    errs = []
+    for n in (5000, 80000):
+        got = kernels.trace_paths(PathInputs(**{**inp.__dict__, "n_paths": n, "seed": 3}))
+        errs.append(np.sqrt(np.mean((got - ref) ** 2)))
+    assert errs[1] < 0.4 * errs[0], errs
+
+
+def test_rate_span_guards_dense_grids():
+    i2w = np.eye(3) * 0.01
+    assert rate_span(100.0, i2w, (100, 100, 100)) == pytest.approx(100.0 * np.sqrt(3.0))
+    assert not rate_span(1e9, i2w, (100, 100, 100)) <= MAX_RATE_SPAN
+
+
+@needs_c
+def test_bad_input_raises():
+    inp, _ = cube_case(n=8, n_paths=10)
+    args = dict(inp.__dict__)
+    for change in (dict(rate=0.0), dict(rate=np.nan), dict(stride=0), dict(g=np.nan),
+                   dict(rate=1e12), dict(towards=np.zeros((2, 2, 2, 2))),
+                   dict(weights=np.ones((2, 3))), dict(cdf=np.ones(3)),
+                   dict(sigma_t=np.zeros(3)), dict(density=np.ones((4, 4), np.float32))):
+        with pytest.raises(ValueError):
+            kernels.trace_paths(PathInputs(**{**args, **change}))
+
+
+@needs_c
+def test_spoiled_values_finish():
+    """NaN, inf and huge values in the grid, the maps and the starts end paths or give
+    non-finite sums; they never hang or crash."""
+    rng = np.random.default_rng(4)
+    for _ in range(20):
+        inp, _ = cube_case(n=10, n_paths=50, seed=int(rng.integers(1 << 30)))
+        d = dict(inp.__dict__)
+        dens = d["density"].copy()
+        dens.reshape(-1)[rng.integers(0, dens.size, 20)] = rng.choice(
+            [np.nan, np.inf, -1.0, 1e30], 20)
+        d["density"] = dens
+        if rng.random() < 0.5:
+            d["starts"] = np.array([[np.nan, 0.0, np.inf]])
+        if rng.random() < 0.3:
+            w2i = d["w2i"].copy()
+            w2i[rng.integers(3), rng.integers(4)] = rng.choice([np.nan, np.inf, 1e300])
+            d["w2i"] = w2i
+        kernels.trace_paths(PathInputs(**d))
+
+
+@needs_c
+def test_esc_stops_the_paths_between_chunks():
+    inp, _ = cube_case(n_paths=200000)
+    calls = []
+
+    def esc():
+        calls.append(1)
+        return len(calls) > 2
+    assert kernels.trace_paths(inp, threads=2, should_cancel=esc) is None
+    assert kernels.trace_paths(inp, threads=2, should_cancel=lambda: False) is not None
