@@ -151,3 +151,27 @@ def test_esc_stops_the_paths_between_chunks():
         return len(calls) > 2
     assert kernels.trace_paths(inp, threads=2, should_cancel=esc) is None
     assert kernels.trace_paths(inp, threads=2, should_cancel=lambda: False) is not None
+
+
+def test_a_medium_too_dense_for_paths_keeps_the_walk():
+    """Optical size beyond paths.PATHS_MAX_SPAN: the precompute keeps the walk (on the medium
+    itself, since the layout has no forward-peak channels with paths on) and the multiply
+    scattered light is there, finite; a thinner medium is traced."""
+    from mpp_render.media import prepare
+    from mpp_render.precompute import precompute
+    from mpp_render.scene import Camera, Light, Medium, World
+    cam = Camera("PERSP", np.eye(4), 4, 4, (-1, 1, -1, 1))
+    cam.cam_to_world[:3, 3] = [0.0, 0.0, 5.0]
+    sun = Light("SUN", "sun", np.full(3, 3.0), direction=np.array([0.3, 0.2, -0.93]))
+    i2w = np.eye(4)
+    i2w[:3, :3] *= 2.0 / 16
+    i2w[:3, 3] = -1.0 + 1.0 / 16
+    for sigma, traced in ((700.0, False), (5.0, True)):   # 2400 and 17 along the diagonal
+        pm = prepare(Medium("m", np.ones((16, 16, 16), np.float32), i2w, np.full(3, 0.9 * sigma),
+                            np.full(3, 0.1 * sigma), 0.6))
+        pre = precompute([pm], [sun], World(), cam, multiple=True, multiple_paths=20000,
+                         multiple_resolution=8)
+        msf = pre.multiple[0][0]
+        assert msf.traced == traced and pre.layout.beam_channels is None
+        assert all(np.all(np.isfinite(lev)) for lev in msf.levels)
+        assert max(float(lev.max()) for lev in msf.levels) > 0.0

@@ -134,8 +134,6 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                 if progress:
                     stage = "Light paths" if multiple_paths > 0 else "Light pyramid"
                     progress(0.0, f"{stage}: {light.name} on {pm.medium.name}")
-                # the walk starts where the beam of unscattered and forward-scattered light
-                # first scatters out of the forward peak (docs/method.md, "The forward peak")
                 traced = None
                 if multiple_paths > 0 and camera is not None:
                     # light paths traced from the first scatterings (precompute.lightpaths)
@@ -146,7 +144,12 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                     ms[li] = MultipleField(traced[0], traced[1], [traced[2]], traced=True)
                     check(should_cancel)
                     continue
-                ms[li] = multiple_field(delta[mi], f, light, chans[li], camera, beam=beams[li],
+                # the walk starts where the beam of unscattered and forward-scattered light
+                # first scatters out of the forward peak (docs/method.md, "The forward peak");
+                # without beam channels (paths asked for, the medium too dense for them) from
+                # the whole first scattering: the medium itself, unsplit
+                walker = delta[mi] if beams[li] is not None else pm
+                ms[li] = multiple_field(walker, f, light, chans[li], camera, beam=beams[li],
                                         resolution=multiple_resolution,
                                         should_cancel=should_cancel, g_last=float(pm.g),
                                         threads=threads, tuning=tuning)
