@@ -4,15 +4,16 @@ The walk of the light pyramid (mpp.py, precompute/lightpyramid.py) is a model: s
 cheap, but with errors no setting removes.  This module estimates the same quantity by Monte
 Carlo, so that it converges as paths are added and the lattice is refined:
 
-    M(y) = (1 / V) integral over the lattice cell of y of
-           integral over directions of L_1+(x, w) p(w . v(y); g) dw  d^3x        [W/(m^2 sr)]
+    M(y) = integral of rho(x) t_y(x) [integral over directions of L_1+(x, w) p(w . v(y); g) dw]
+           d^3x / integral of rho(x) t_y(x) d^3x                                  [W/(m^2 sr)]
 
-where L_1+ is the radiance of the light that has scattered at least once, v(y) the unit
-direction from the lattice point y to the camera and p the medium's Henyey-Greenstein phase
-function (phase.py: cosine between propagation directions).  The march reads it as one
-flattened level (march.MarchContext): J_ms(x) = rho(x) sigma_s M(x), the radiance that the
-medium at x scatters towards the camera from the light that has scattered before, i.e. every
-order from the second on.  Single scattering stays the march's exact one.
+(t_y the trilinear tent of lattice point y, rho the density) where L_1+ is the radiance of
+the light that has scattered at least once, v(y) the unit direction from the lattice point y
+to the camera and p the medium's Henyey-Greenstein phase function (phase.py: cosine between
+propagation directions).  The march reads it as one flattened level (march.MarchContext):
+J_ms(x) = rho(x) sigma_s M(x), the radiance that the medium at x scatters towards the camera
+from the light that has scattered before, i.e. every order from the second on.  Single
+scattering stays the march's exact one.
 
 **Paths.**  Each path starts where the light's unscattered beam first scatters: a lattice
 point drawn in proportion to its first-scattering power Q V (precompute.source:
@@ -26,12 +27,14 @@ points around it and p(w . v) at that point (the track-length estimate of the in
 rho L p against each point's tent, unbiased for any mu >= the majorant; divided by the
 tent's integral of rho, precompute.lightpaths makes M the medium's mean under the tent, so
 a lattice point beside the medium's surface is not diluted by the empty side); a tentative
-point is a real collision with probability
-rho sigma_t,max / mu.  Chromatic media use spectral tracking weights: a real collision
-multiplies channel c by sigma_s,c / sigma_t,max, a null one by
-(1 - rho sigma_t,c / mu) / (1 - rho sigma_t,max / mu).  After ``MAX_COLLISIONS`` real
-collisions, or once it leaves the grid, a path ends; below a tenth of its start weight it
-survives a Russian roulette.  Surfaces do not stop paths.
+point is a real collision with probability rho sigma_t,max / mu.  Chromatic media use
+spectral tracking weights: a real collision multiplies channel c by
+sigma_s,c / sigma_t,max, a null one by (1 - rho sigma_t,c / mu) / (1 - rho sigma_t,max / mu).
+After ``MAX_COLLISIONS`` real collisions, or once it leaves the grid, a path ends; below a
+tenth of its start weight it survives a Russian roulette; after ``MAX_EVENTS`` tentative
+collisions it ends too.  A rate that would put more than ``MAX_RATE_SPAN`` tentative points
+along the grid's diagonal is refused (``rate_span``), and beyond ``PATHS_MAX_SPAN`` the
+precompute keeps the walk.  Surfaces do not stop paths.
 
 Random numbers are the march's counter hash (kernels_np.uniform) of (path key, event,
 dimension), so the C kernel (csrc/paths.c) and this numpy twin draw the same numbers and
@@ -44,7 +47,7 @@ from typing import Optional
 
 import numpy as np
 
-from .kernels_np import hash32, uniform
+from .kernels_np import hash32
 from .phase import clamp_g, hg, orthonormal_basis
 
 __all__ = ["PathInputs", "trace_paths_np", "MAX_COLLISIONS", "ROULETTE", "PATHS_MAX_SPAN"]
@@ -108,7 +111,8 @@ def from_power(power: np.ndarray):
 def rate_span(rate: float, i2w: np.ndarray, shape) -> float:
     """Tentative collisions at ``rate`` (1/m) along the diagonal of a grid of ``shape`` voxels
     whose index steps are the columns of ``i2w`` (3,3, m)."""
-    return float(rate) * float(np.linalg.norm(np.asarray(i2w, np.float64) @ np.asarray(shape, np.float64)))
+    diagonal = np.asarray(i2w, np.float64) @ np.asarray(shape, np.float64)
+    return float(rate) * float(np.linalg.norm(diagonal))
 
 
 def path_keys(seed: int, n: int) -> np.ndarray:

@@ -150,8 +150,8 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
     long stride, lo, hi, n_paths, max_hits;
     unsigned long seed;
     if (!PyArg_ParseTuple(args, "OOOOOOddlOOOOOdlllkld", &po, &pd, &pw2i, &pi2w, &pss, &pst, &g,
-                          &g_last, &stride, &ptw, &pstarts, &pws, &pdirs, &pcdf, &rate, &lo, &hi, &n_paths,
-                          &seed, &max_hits, &roulette))
+                          &g_last, &stride, &ptw, &pstarts, &pws, &pdirs, &pcdf, &rate, &lo, &hi,
+                          &n_paths, &seed, &max_hits, &roulette))
         return NULL;
     Buf bo = {0}, bd = {0}, bw = {0}, bi = {0}, bss = {0}, bst = {0}, btw = {0}, bs = {0},
         bws = {0}, bdir = {0}, bc = {0};
@@ -172,8 +172,9 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
     if (get_buf(pdirs, &bdir, 'd', 2, sn, "dirs") < 0) goto done;
     sc[0] = sn[0];
     if (get_buf(pcdf, &bc, 'd', 1, sc, "cdf") < 0) goto done;
-    if (stride < 1 || !(rate > 0.0) || !isfinite(rate) || !isfinite(g) || !isfinite(g_last) || n_paths < 1 ||
-        lo < 0 || hi < lo || hi > n_paths || max_hits < 1 || !(roulette >= 0.0) || sn[0] < 1) {
+    if (stride < 1 || !(rate > 0.0) || !isfinite(rate) || !isfinite(g) || !isfinite(g_last) ||
+        n_paths < 1 || lo < 0 || hi < lo || hi > n_paths || max_hits < 1 || !(roulette >= 0.0) ||
+        sn[0] < 1) {
         PyErr_SetString(PyExc_ValueError, "trace_paths: bad stride, rate, g, path range or caps");
         goto done;
     }
@@ -189,8 +190,8 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
         double span = rate * sqrt(diag2);
         if (!(span <= MAX_RATE_SPAN)) {
             PyErr_SetString(PyExc_ValueError,
-                            "trace_paths: the rate of tentative collisions is too high for the grid "
-                            "(or the grid's size is not finite)");
+                            "trace_paths: the rate of tentative collisions is too high for the "
+                            "grid (or the grid's size is not finite)");
             goto done;
         }
     }
