@@ -286,7 +286,7 @@ def trace_paths(inp, *, threads: int = 1, should_cancel=None, backend=None):
     outs = [np.zeros(shape) for _ in range(blocks)]
     args = (_f32(inp.density), _f64(inp.w2i).reshape(3, 4), _f64(inp.i2w).reshape(3, 3),
             _f64(inp.sigma_s).reshape(3), _f64(inp.sigma_t).reshape(3), float(inp.g),
-            float(inp.g if inp.g_last is None else inp.g_last), int(inp.stride),
+            int(inp.stride),
             _f64(inp.towards), _f64(inp.starts), _f64(inp.weights), _f64(inp.dirs),
             _f64(inp.cdf).reshape(-1), float(inp.rate))
 

@@ -43,12 +43,11 @@ trace the same paths.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Optional
 
 import numpy as np
 
-from .kernels_np import hash32
-from .phase import clamp_g, hg, orthonormal_basis
+from .kernels_np import hash32, uniform
+from .phase import clamp_g, hg, sample_hg
 
 __all__ = ["PathInputs", "trace_paths_np", "MAX_COLLISIONS", "ROULETTE", "PATHS_MAX_SPAN"]
 
@@ -77,9 +76,7 @@ class PathInputs:
     drawing it, ``from_power``); ``dirs``: (N,3) unit propagation of the light there;
     ``cdf``: (N,) the cumulative probabilities of the starts; ``rate``: mu, tentative
     collisions per metre; ``n_paths``; ``seed``; ``max_collisions``: real collisions after
-    which a path ends (1: the first flights alone, the second order); ``g_last``: the
-    anisotropy of the last scattering, towards the camera (None: ``g``; a delta-scaled
-    medium's paths turn by its g* and are seen through the medium's own g)."""
+    which a path ends (1: the first flights alone, the second order)."""
 
     density: np.ndarray
     w2i: np.ndarray
@@ -97,7 +94,6 @@ class PathInputs:
     n_paths: int
     seed: int = 0
     max_collisions: int = MAX_COLLISIONS
-    g_last: Optional[float] = None
 
 
 def from_power(power: np.ndarray):
@@ -121,26 +117,10 @@ def path_keys(seed: int, n: int) -> np.ndarray:
     return hash32(np.arange(n, dtype=np.uint32) ^ base)
 
 
-def _u(keys, event, dim):
-    salt = hash32(((np.asarray(event, np.int64) * 0x9E3779B1 + dim * 0x85EBCA77)
-                   & 0xFFFFFFFF).astype(np.uint32))
-    h = hash32(np.asarray(keys, np.uint32) ^ salt)
-    return (h >> np.uint32(8)).astype(np.float64) * (1.0 / 16777216.0)
-
-
 def _turn(u1, u2, g, axis):
-    """HG-distributed directions about ``axis`` (phase.sample_hg with per-path draws)."""
-    if abs(g) < 1e-4:
-        cos_t = 1.0 - 2.0 * u1
-    else:
-        s = (1.0 - g * g) / (1.0 - g + 2.0 * g * u1)
-        cos_t = (1.0 + g * g - s * s) / (2.0 * g)
-    cos_t = np.clip(cos_t, -1.0, 1.0)
-    sin_t = np.sqrt(np.maximum(0.0, 1.0 - cos_t * cos_t))
-    phi = 2.0 * np.pi * u2
-    t1, t2 = orthonormal_basis(axis)
-    d = t1 * (sin_t * np.cos(phi))[:, None] + t2 * (sin_t * np.sin(phi))[:, None] \
-        + axis * cos_t[:, None]
+    """HG-distributed unit directions about ``axis`` (phase.sample_hg, renormalised as the C
+    twin does)."""
+    d = sample_hg(u1, u2, g, axis)
     return d / np.linalg.norm(d, axis=1, keepdims=True)
 
 
@@ -154,13 +134,13 @@ def trace_paths_np(inp: PathInputs) -> np.ndarray:
     if n <= 0 or len(inp.cdf) == 0:
         return out.reshape(lshape + (3,))
     g = clamp_g(inp.g)
-    g_last = g if inp.g_last is None else clamp_g(inp.g_last)
     keys = path_keys(inp.seed, n)
-    k = np.minimum(np.searchsorted(inp.cdf, _u(keys, 0, _D_PICK), side="right"), len(inp.cdf) - 1)
-    off = np.stack([_u(keys, 0, _D_JIT + 2 * a) + _u(keys, 0, _D_JIT + 2 * a + 1) - 1.0
+    k = np.minimum(np.searchsorted(inp.cdf, uniform(keys, 0, _D_PICK), side="right"),
+                   len(inp.cdf) - 1)
+    off = np.stack([uniform(keys, 0, _D_JIT + 2 * a) + uniform(keys, 0, _D_JIT + 2 * a + 1) - 1.0
                     for a in range(3)], axis=1) * inp.stride
     pos = inp.starts[k] + off @ inp.i2w.T
-    d = _turn(_u(keys, 0, _D_DIR), _u(keys, 0, _D_DIR + 1), g, inp.dirs[k])
+    d = _turn(uniform(keys, 0, _D_DIR), uniform(keys, 0, _D_DIR + 1), g, inp.dirs[k])
     w = inp.weights[k] / n
     w0 = w.max(axis=1)
     event = np.zeros(n, np.int64)
@@ -175,7 +155,7 @@ def trace_paths_np(inp: PathInputs) -> np.ndarray:
         kk = keys[alive]
         ev = event[alive] + 1
         event[alive] = ev
-        t = -np.log(1.0 - _u(kk, ev, _D_FLY)) / mu
+        t = -np.log(1.0 - uniform(kk, ev, _D_FLY)) / mu
         p = pos[alive] + t[:, None] * d[alive]
         pos[alive] = p
         idx = p @ inp.w2i[:, :3].T + inp.w2i[:, 3]
@@ -199,11 +179,11 @@ def trace_paths_np(inp: PathInputs) -> np.ndarray:
             ok = np.all((c >= 0) & (c < lsh), axis=1)
             share = np.prod(np.where(o == 1, fr, 1.0 - fr), axis=1) * ok
             flat = np.ravel_multi_index(tuple(np.where(ok[:, None], c, 0).T), lshape)
-            ph = hg(np.einsum("ij,ij->i", da, tw[flat]), g_last)
+            ph = hg(np.einsum("ij,ij->i", da, tw[flat]), g)
             for ch in range(3):
                 out[:, ch] += np.bincount(flat, wd[:, ch] * share * ph, minlength=len(out))
         p_hit = np.minimum(rho * st_max / mu, 1.0)
-        hit = _u(kk, ev, _D_HIT) < p_hit
+        hit = uniform(kk, ev, _D_HIT) < p_hit
         wa = w[alive]
         # null collisions: spectral tracking weights
         null = ~hit
@@ -213,14 +193,14 @@ def trace_paths_np(inp: PathInputs) -> np.ndarray:
         if np.any(hit):
             wa[hit] *= (np.asarray(inp.sigma_s, np.float64) / st_max)[None, :]
             hi = alive[hit]
-            d[hi] = _turn(_u(kk[hit], ev[hit], _D_TURN), _u(kk[hit], ev[hit], _D_TURN + 1),
-                          g, d[hi])
+            d[hi] = _turn(uniform(kk[hit], ev[hit], _D_TURN),
+                          uniform(kk[hit], ev[hit], _D_TURN + 1), g, d[hi])
             hits[hi] += 1
         w[alive] = wa
         # roulette after a real collision; the collision cap
         m = w[alive].max(axis=1) / np.maximum(w0[alive], 1e-300)
         q = np.where(hit & (m < ROULETTE), m / ROULETTE, 1.0)
-        survive = _u(kk, ev, _D_RR) < q
+        survive = uniform(kk, ev, _D_RR) < q
         w[alive] = w[alive] / np.maximum(q, 1e-300)[:, None]
         keep = survive & (hits[alive] < inp.max_collisions) & (w[alive].max(axis=1) > 0.0) \
             & (ev < MAX_EVENTS)

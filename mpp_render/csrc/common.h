@@ -200,6 +200,14 @@ static inline double inside_fraction(const Grid *g, const double o[3], const dou
     return (ia ? cross - sa : sb - cross) / len;
 }
 
+/* Henyey-Greenstein p(c) in 1/sr (twin of phase.hg; the caller clamps g): c the cosine
+ * between the propagation directions before and after the scattering. */
+static inline double hg_phase(double c, double g) {
+    double denom = 1.0 + g * g - 2.0 * g * c;
+    if (denom < 1e-12) denom = 1e-12;
+    return (1.0 - g * g) / (4.0 * M_PI * denom * sqrt(denom));
+}
+
 /* Counter-based random numbers (twins of kernels_np.hash32 and kernels_np.uniform). */
 static inline uint32_t hash32(uint32_t x) {
     x ^= x >> 16; x *= 0x7FEB352Du; x ^= x >> 15; x *= 0x846CA68Bu; x ^= x >> 16;

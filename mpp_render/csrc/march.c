@@ -12,12 +12,6 @@
 #define MAX_STEPS 1000000L  /* per ray: a 256^3 grid needs ~1000 */
 #define SUPER 4             /* steps per super-step (kernels_np.SUPER) */
 
-static inline double hg_phase(double c, double g) {
-    double denom = 1.0 + g * g - 2.0 * g * c;
-    if (denom < 1e-12) denom = 1e-12;
-    return (1.0 - g * g) / (4.0 * M_PI * denom * sqrt(denom));
-}
-
 static void refined_tau(const Grid *f, int nm, int mi, int c, const double x[3], const double w[3],
                         double dist, double delta, double tau[3]) {
     double end[3] = {x[0], x[1], x[2]};

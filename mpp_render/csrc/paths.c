@@ -4,11 +4,11 @@
  * of bounds or loops without end.  The loop runs without the GIL.
  */
 #include "kernels.h"
+#include "light.h"   /* basis: the orthonormal frame of phase.orthonormal_basis */
 
 const char trace_paths_doc[] =
-    "trace_paths(out, density, w2i, i2w, sigma_s, sigma_t, g, g_last, stride, towards, starts,\n"
-    "            weights, dirs, cdf, rate, path_lo, path_hi, n_paths, seed, max_collisions,\n"
-    "            roulette)\n"
+    "trace_paths(out, density, w2i, i2w, sigma_s, sigma_t, g, stride, towards, starts, weights,\n"
+    "            dirs, cdf, rate, path_lo, path_hi, n_paths, seed, max_collisions, roulette)\n"
     "Twin of mpp_render.paths.trace_paths_np: adds to out (LX,LY,LZ,3) float64 the deposits\n"
     "of paths path_lo..path_hi-1 of n_paths.";
 
@@ -21,21 +21,6 @@ const char trace_paths_doc[] =
 #define D_HIT 11
 #define D_TURN 12
 #define D_RR 14
-
-static inline double hg_phase(double c, double g) {
-    double d = 1.0 + g * g - 2.0 * g * c;
-    if (d < 1e-12) d = 1e-12;
-    return (1.0 - g * g) / (4.0 * M_PI * d * sqrt(d));
-}
-
-/* Duff et al. 2017, as phase.orthonormal_basis */
-static inline void basis(const double n[3], double t1[3], double t2[3]) {
-    double sign = n[2] >= 0.0 ? 1.0 : -1.0;
-    double a = -1.0 / (sign + n[2]);
-    double b = n[0] * n[1] * a;
-    t1[0] = 1.0 + sign * n[0] * n[0] * a; t1[1] = sign * b; t1[2] = -sign * n[0];
-    t2[0] = b; t2[1] = sign + n[1] * n[1] * a; t2[2] = -n[1];
-}
 
 static inline void turn(double u1, double u2, double g, const double axis[3], double out[3]) {
     double c;
@@ -62,7 +47,7 @@ static inline void turn(double u1, double u2, double g, const double axis[3], do
 typedef struct {
     const float *dens;
     Py_ssize_t n[3];
-    double w2i[12], i2w[9], ss[3], st[3], st_max, g, g_last, mu, roulette;
+    double w2i[12], i2w[9], ss[3], st[3], st_max, g, mu, roulette;
     long stride, max_hits;
     const double *tw;
     Py_ssize_t ls[3];
@@ -120,7 +105,7 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
             if (!ok) continue;
             Py_ssize_t flat = (cc[0] * T->ls[1] + cc[1]) * T->ls[2] + cc[2];
             const double *tv = T->tw + 3 * flat;
-            double ph = hg_phase(d[0] * tv[0] + d[1] * tv[1] + d[2] * tv[2], T->g_last);
+            double ph = hg_phase(d[0] * tv[0] + d[1] * tv[1] + d[2] * tv[2], T->g);
             for (int c = 0; c < 3; c++) T->out[3 * flat + c] += (w[c] / T->mu) * rho * share * ph;
         }
         double p_hit = rho * T->st_max / T->mu;
@@ -146,11 +131,11 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
 
 PyObject *trace_paths(PyObject *self, PyObject *args) {
     PyObject *po, *pd, *pw2i, *pi2w, *pss, *pst, *ptw, *pstarts, *pws, *pdirs, *pcdf;
-    double g, g_last, rate, roulette;
+    double g, rate, roulette;
     long stride, lo, hi, n_paths, max_hits;
     unsigned long seed;
-    if (!PyArg_ParseTuple(args, "OOOOOOddlOOOOOdlllkld", &po, &pd, &pw2i, &pi2w, &pss, &pst, &g,
-                          &g_last, &stride, &ptw, &pstarts, &pws, &pdirs, &pcdf, &rate, &lo, &hi,
+    if (!PyArg_ParseTuple(args, "OOOOOOdlOOOOOdlllkld", &po, &pd, &pw2i, &pi2w, &pss, &pst, &g,
+                          &stride, &ptw, &pstarts, &pws, &pdirs, &pcdf, &rate, &lo, &hi,
                           &n_paths, &seed, &max_hits, &roulette))
         return NULL;
     Buf bo = {0}, bd = {0}, bw = {0}, bi = {0}, bss = {0}, bst = {0}, btw = {0}, bs = {0},
@@ -172,7 +157,7 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
     if (get_buf(pdirs, &bdir, 'd', 2, sn, "dirs") < 0) goto done;
     sc[0] = sn[0];
     if (get_buf(pcdf, &bc, 'd', 1, sc, "cdf") < 0) goto done;
-    if (stride < 1 || !(rate > 0.0) || !isfinite(rate) || !isfinite(g) || !isfinite(g_last) ||
+    if (stride < 1 || !(rate > 0.0) || !isfinite(rate) || !isfinite(g) ||
         n_paths < 1 || lo < 0 || hi < lo || hi > n_paths || max_hits < 1 || !(roulette >= 0.0) ||
         sn[0] < 1) {
         PyErr_SetString(PyExc_ValueError, "trace_paths: bad stride, rate, g, path range or caps");
@@ -208,7 +193,6 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
         goto done;
     }
     T.g = g > 0.999 ? 0.999 : (g < -0.999 ? -0.999 : g);
-    T.g_last = g_last > 0.999 ? 0.999 : (g_last < -0.999 ? -0.999 : g_last);
     T.mu = rate;
     T.roulette = roulette;
     T.stride = stride;

@@ -4,8 +4,6 @@ deposits, seen from the camera, become the one level the march reads (march.Marc
 """
 from __future__ import annotations
 
-from typing import Optional
-
 import numpy as np
 
 from .. import kernels
@@ -23,23 +21,18 @@ PATHS_PER_POINT = 32
 
 
 def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: int,
-                    resolution: int, seed: int = 0, threads: int = 0,
-                    beam: Optional[int] = None, g_last: Optional[float] = None,
-                    should_cancel=None):
+                    resolution: int, seed: int = 0, threads: int = 0, should_cancel=None):
     """(stride, h, M) for ``light`` on medium ``pm`` (its field ``fld``, the light's optical
     depth at ``channel``): M float32 (LX,LY,LZ,3) W/(m^2 sr) on the light pyramid's lattice
     (lattice.walk_lattice at ``resolution``), from ``n_paths`` paths (paths.py; at most
     ``PATHS_PER_POINT`` per lattice point the medium fills) started
     where its unscattered light first scatters (source.source_and_density), seen from
     ``camera``; ``threads`` share them; raises parallel.Cancelled when ``should_cancel``
-    says so.  ``pm`` may be, as for the walk
-    (lightpyramid.multiple_field), the delta-scaled medium with the forward peak's light
-    at ``beam`` and the medium's own anisotropy ``g_last`` for the last scattering (measured
-    worse than the medium itself on p_point_in_cube, 0.127 against 0.072, better on
-    fog_beam, 0.244 against 0.307: the precompute traces the medium itself).  None where
+    says so.  ``pm`` is the medium itself, not delta-scaled: the paths carry the forward
+    peak (the split was measured worse, docs/history.md).  None where
     the medium is too dense for paths (paths.PATHS_MAX_SPAN): the caller keeps the walk."""
     stride, shape, h = walk_lattice(pm, resolution)
-    base, _, pts = source_and_density(pm, fld, light, channel, stride, beam)
+    base, _, pts = source_and_density(pm, fld, light, channel, stride)
     i2w = np.asarray(pm.i2w[:3, :3], np.float64)
     vol = float(abs(np.linalg.det(i2w))) * stride ** 3
     power = base * vol
@@ -63,7 +56,7 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
                      np.asarray(pm.sigma_s, np.float64), st, float(pm.g), stride, towards,
                      np.ascontiguousarray(pts[live]), weights,
                      np.ascontiguousarray(light_direction(light, pts[live])), cdf, rate,
-                     int(n_paths), int(seed), g_last=g_last)
+                     int(n_paths), int(seed))
     acc = kernels.trace_paths(inp, threads=worker_count(threads), should_cancel=should_cancel)
     if acc is None:
         raise Cancelled()
