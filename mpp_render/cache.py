@@ -241,7 +241,8 @@ def camera_key(camera) -> tuple:
 def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, surfaces=None,
                       threads: int = 0, multiple: bool = False, multiple_resolution=None,
                       multiple_paths: int = 0, should_cancel: Optional[Callable[[], bool]] = None,
-                      progress=None, cache: Optional[Cache] = None, tuning=None):
+                      progress=None, cache: Optional[Cache] = None, tuning=None,
+                      surface_bounce: bool = True):
     """``precompute.precompute`` reusing earlier results kept in ``cache`` (default ``CACHE``).
 
     One entry (kind 'precompute') per *light key* -- the media, lights, surfaces, multiple
@@ -277,7 +278,8 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
     # other threads still runs (and checks) the precompute
     common = (media_key(media), surfaces_key(surfaces), bool(multiple),
               int(multiple_resolution) if multiple else 0,
-              int(multiple_paths) if multiple else 0, int(threads), tuning)
+              int(multiple_paths) if multiple else 0, int(threads), tuning,
+              bool(surface_bounce) if multiple else None)
     # the light pyramids are moved towards what the camera sees (precompute.lightpyramid.drift_levels)
     light_key = digest("lights", common, list(lights), has_world,
                        camera_key(camera) if multiple else None,
@@ -287,7 +289,7 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
     kw = dict(n_dirs=n_dirs, seed=seed, should_cancel=should_cancel, progress=progress,
               surfaces=surfaces, threads=threads, multiple=multiple,
               multiple_resolution=multiple_resolution, multiple_paths=multiple_paths,
-              tuning=tuning)
+              tuning=tuning, surface_bounce=surface_bounce)
 
     def result(pre, reused):
         return pre_mod.Precomputed(pre.fields, pre.layout, pre.multiple, pre.seconds,

@@ -289,6 +289,11 @@ def trace_paths(inp, *, threads: int = 1, should_cancel=None, backend=None):
             int(inp.stride),
             _f64(inp.towards), _f64(inp.starts), _f64(inp.weights), _f64(inp.dirs),
             _f64(inp.cdf).reshape(-1), float(inp.rate))
+    tri = _f64(inp.triangles).reshape(-1, 9)
+    extra = (float(inp.jitter), int(inp.lobe), float(inp.outside),
+             _f64(np.append(np.asarray(inp.reach_centre, np.float64).reshape(3),
+                            float(inp.reach_radius))),
+             tri, _f64(inp.albedo).reshape(len(tri), 3))
 
     cancelled = []
 
@@ -298,7 +303,8 @@ def trace_paths(inp, *, threads: int = 1, should_cancel=None, backend=None):
                 cancelled.append(True)
                 return
             _c.trace_paths(outs[i], *args, a, min(a + PATH_CHUNK, int(cuts[i + 1])), n,
-                           int(inp.seed) & 0xFFFFFFFF, int(inp.max_collisions), float(ROULETTE))
+                           int(inp.seed) & 0xFFFFFFFF, int(inp.max_collisions), float(ROULETTE),
+                           *extra)
 
     if workers == 1:
         for i in range(blocks):

@@ -178,6 +178,34 @@ def path_stretch(ds, dc, voxel):
     the path the field's trilinear depth stands for next to the centre (C twin)."""
     return ds / np.maximum(dc, 0.5 * voxel)
 
+DISC_NODES = 8   # Gauss-Legendre points of disc_transmittance over a lamp's disc
+
+
+def disc_transmittance(light: Light, x, tau, voxel: float, nodes: int = DISC_NODES):
+    """The transmittance (N,3) a lamp's light reaches points ``x`` (N,3, m) with, from the
+    optical depth ``tau`` (N,3) to its centre: for a POINT or SPOT light with a radius the
+    mean over its soft-falloff disc (light_sample: every disc point carries the same
+    irradiance, and its squared radius s^2 is uniform in [0, 1]) of
+    exp(-tau path_stretch(d / cos theta, d, voxel)), cos theta = 1 - s^2 (1 - cos theta_max),
+    by ``nodes``-point Gauss-Legendre quadrature in s^2 -- what the march's random disc
+    points average to; exp(-tau) for any other light.  Round a lamp inside a dense medium the
+    centre's depth alone made its first scattering too bright (the plume's second order 27 %
+    over Cycles' with a 0.3 m lamp)."""
+    tau = np.asarray(tau, np.float64)
+    radius = float(getattr(light, "radius", 0.0) or 0.0)
+    if light.kind not in ("POINT", "SPOT") or radius <= 0.0:
+        return np.exp(-tau)
+    x = np.asarray(x, np.float64).reshape(-1, 3)
+    dc = np.linalg.norm(x - np.asarray(light.position, np.float64), axis=1)
+    hyp = np.sqrt(dc * dc + radius * radius)
+    omc_max = radius * radius / (hyp * (hyp + dc))
+    k, kw = np.polynomial.legendre.leggauss(nodes)
+    s2, w = 0.5 * (k + 1.0), 0.5 * kw
+    cos_t = 1.0 - s2[None, :] * omc_max[:, None]
+    stretch = path_stretch(dc[:, None] / cos_t, dc[:, None], voxel)          # (N,K)
+    return np.einsum("k,nkc->nc", w, np.exp(-tau[:, None, :] * stretch[..., None]))
+
+
 def area_geometry(light: Light):
     """World-space centre, local X and Y half-axes (scaled) and the emitter area (m^2)."""
     m = np.asarray(light.matrix, np.float64)

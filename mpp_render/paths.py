@@ -27,14 +27,34 @@ points around it and p(w . v) at that point (the track-length estimate of the in
 rho L p against each point's tent, unbiased for any mu >= the majorant; divided by the
 tent's integral of rho, precompute.lightpaths makes M the medium's mean under the tent, so
 a lattice point beside the medium's surface is not diluted by the empty side); a tentative
-point is a real collision with probability rho sigma_t,max / mu.  Chromatic media use
-spectral tracking weights: a real collision multiplies channel c by
-sigma_s,c / sigma_t,max, a null one by (1 - rho sigma_t,c / mu) / (1 - rho sigma_t,max / mu).
-After ``MAX_COLLISIONS`` real collisions, or once it leaves the grid, a path ends; below a
-tenth of its start weight it survives a Russian roulette; after ``MAX_EVENTS`` tentative
-collisions it ends too.  A rate that would put more than ``MAX_RATE_SPAN`` tentative points
-along the grid's diagonal is refused (``rate_span``), and beyond ``PATHS_MAX_SPAN`` the
-precompute keeps the walk.  Surfaces do not stop paths.
+point is a real collision with probability P = rho sigma_t,max / mu.  Chromatic media use
+spectral tracking (Kutz et al. 2017, "Spectral and decomposition tracking"): P =
+rho sigma_t,max / (rho sigma_t,max + mu - rho sigma_t,min), so that a null collision stays
+possible while any channel has null density; a real collision multiplies channel c by
+rho sigma_s,c / (mu P), a null one by (mu - rho sigma_t,c) / (mu (1 - P)).
+After ``MAX_COLLISIONS`` real collisions and bounces a path ends; below a tenth of its start
+weight it survives a Russian roulette; after ``MAX_EVENTS`` tentative collisions it ends too.
+A rate that would put more than ``MAX_RATE_SPAN`` tentative points along the grid's diagonal
+is refused (``rate_span``), and beyond ``PATHS_MAX_SPAN`` the precompute keeps the walk.
+
+**Beyond the grid.**  The grid's box in index space is [-0.5, n - 0.5] per axis (the
+nearest-voxel domain).  A flight that crosses its face stops there and starts again
+(exponential flights forget their past).  Outside, the medium has the density ``outside``
+(1 for the world's fog, which fills all space; 0 for any other medium): a path flies there
+with the rate outside x sigma_t,max and deposits nothing; in empty space it flies straight to
+the box, or away for good.  A path outside beyond ``reach_radius`` of ``reach_centre`` ends.
+
+**Surfaces.**  Every flight is tested against the ``triangles`` (Moller-Trumbore, culled by
+boxes of 64 triangles); the nearest one hit before the flight's end stops it, and the path
+reflects diffusely (a cosine-distributed direction on the side it came from) with its weight
+times the triangle's ``albedo`` (RGB), a bounce that counts as a collision for the roulette
+and the cap.  Albedo 0 absorbs.
+
+**Starts.**  ``lobe`` 0: the first direction is drawn from p about ``dirs`` and the start is
+offset by a tent of half-width ``jitter`` lattice steps per index axis (1: the lattice
+point's own tent; 0: the point itself).  ``lobe`` 1 (a surface): the direction is
+cosine-distributed about ``dirs`` (the lit side's normal), and the offset a tent of half-width
+``jitter`` metres in the plane across it.
 
 Random numbers are the march's counter hash (kernels_np.uniform) of (path key, event,
 dimension), so the C kernel (csrc/paths.c) and this numpy twin draw the same numbers and
@@ -42,7 +62,7 @@ trace the same paths.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -55,13 +75,15 @@ MAX_COLLISIONS = 4096    # real collisions after which a path ends (albedo 1, op
 ROULETTE = 0.1           # below this fraction of its start weight a path plays roulette
 MAX_EVENTS = 1_000_000   # tentative collisions after which a path ends (csrc/paths.c)
 MAX_RATE_SPAN = 1e6      # the most tentative collisions along the grid's diagonal (csrc/paths.c)
+T_MIN = 1e-9             # m: a surface nearer than this along a flight is not hit (csrc/paths.c)
+FAR = 1e30               # m: how far a flight into empty space is tested against surfaces
 # Beyond this many tentative collisions along the grid's diagonal (an optical size of about
 # 2000) the precompute keeps the walk: an albedo-1 medium of optical depth 1e3 took 370 us a
 # path (4096 collisions each), 6 minutes for a default render's paths.
 PATHS_MAX_SPAN = 2000.0
 
 # random dimensions
-_D_PICK, _D_JIT, _D_DIR, _D_FLY, _D_HIT, _D_TURN, _D_RR = 0, 1, 7, 10, 11, 12, 14
+_D_PICK, _D_JIT, _D_DIR, _D_FLY, _D_HIT, _D_TURN, _D_RR, _D_BOUNCE = 0, 1, 7, 10, 11, 12, 14, 15
 
 
 @dataclass
@@ -75,8 +97,12 @@ class PathInputs:
     W, the weight of a path from each (its first-scattering power over the probability of
     drawing it, ``from_power``); ``dirs``: (N,3) unit propagation of the light there;
     ``cdf``: (N,) the cumulative probabilities of the starts; ``rate``: mu, tentative
-    collisions per metre; ``n_paths``; ``seed``; ``max_collisions``: real collisions after
-    which a path ends (1: the first flights alone, the second order)."""
+    collisions per metre; ``n_paths``; ``seed``; ``max_collisions``: real collisions (and
+    bounces) after which a path ends (1: the first flights alone, the second order);
+    ``jitter``, ``lobe``: how a path leaves its start (module docstring, "Starts");
+    ``outside``: the density beyond the grid; ``reach_centre`` (3,) m, ``reach_radius`` m:
+    where a path outside ends; ``triangles``: (T,3,3) each triangle's corner and two edges
+    (m); ``albedo``: (T,3) their diffuse albedo."""
 
     density: np.ndarray
     w2i: np.ndarray
@@ -94,6 +120,13 @@ class PathInputs:
     n_paths: int
     seed: int = 0
     max_collisions: int = MAX_COLLISIONS
+    jitter: float = 1.0
+    lobe: int = 0
+    outside: float = 0.0
+    reach_centre: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    reach_radius: float = np.inf
+    triangles: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3)))
+    albedo: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
 
 def from_power(power: np.ndarray):
@@ -124,10 +157,96 @@ def _turn(u1, u2, g, axis):
     return d / np.linalg.norm(d, axis=1, keepdims=True)
 
 
+def _dot(a, b):
+    """Row-wise dot products of (..., 3) arrays, summed in the C kernel's order."""
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
+
+
+def _cross(a, b):
+    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
+                     a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
+
+
+def _to_index(inp, p):
+    w = inp.w2i
+    return np.stack([w[r, 0] * p[:, 0] + w[r, 1] * p[:, 1] + w[r, 2] * p[:, 2] + w[r, 3]
+                     for r in range(3)], axis=1)
+
+
+def _box_cross(inp, pos, d, want_exit):
+    """Ray parameter (m) where o + t d leaves (``want_exit``) or enters the grid's box in index
+    space, [-0.5, n - 0.5] per axis; inf where it does not (csrc/paths.c box_cross)."""
+    io = _to_index(inp, pos)
+    w = inp.w2i
+    idd = np.stack([w[r, 0] * d[:, 0] + w[r, 1] * d[:, 1] + w[r, 2] * d[:, 2] for r in range(3)], 1)
+    t0 = np.zeros(len(pos))
+    t1 = np.full(len(pos), np.inf)
+    miss = np.zeros(len(pos), bool)
+    for r in range(3):
+        lo, hi = -0.5, float(inp.density.shape[r]) - 0.5
+        zero = idd[:, r] == 0.0
+        miss |= zero & ~((io[:, r] >= lo) & (io[:, r] <= hi))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ta = (lo - io[:, r]) / idd[:, r]
+            tb = (hi - io[:, r]) / idd[:, r]
+        a, b = np.where(ta > tb, tb, ta), np.where(ta > tb, ta, tb)
+        t0 = np.where(~zero & (a > t0), a, t0)
+        t1 = np.where(~zero & (b < t1), b, t1)
+    res = np.where(want_exit, t1, np.where(t0 > 0.0, t0, np.inf))
+    return np.where(miss | ~(t1 >= t0), np.inf, res)
+
+
+def _surface_hit(inp, o, d, tmax, skip):
+    """(t, triangle) of the nearest surface hit on (T_MIN, tmax), not triangle ``skip``;
+    triangle -1 and t = tmax where none (csrc/paths.c surface_hit)."""
+    tri = np.asarray(inp.triangles, np.float64).reshape(-1, 3, 3)
+    v0, e1, e2 = tri[None, :, 0], tri[None, :, 1], tri[None, :, 2]
+    dd, oo = d[:, None, :], o[:, None, :]
+    p = _cross(dd, e2)
+    det = _dot(p, e1)
+    ok = np.abs(det) > 1e-300
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / np.where(ok, det, 1.0)
+        s = oo - v0
+        u = _dot(s, p) * inv
+        q = _cross(s, e1)
+        v = _dot(dd, q) * inv
+        t = _dot(e2, q) * inv
+        hit = ok & (u >= 0.0) & (u <= 1.0) & (v >= 0.0) & (u + v <= 1.0) & (t > T_MIN) \
+            & (t < tmax[:, None]) & (np.arange(len(tri))[None, :] != skip[:, None])
+    t = np.where(hit, t, np.inf)
+    k = np.argmin(t, axis=1) if len(tri) else np.zeros(len(o), np.int64)
+    tk = t[np.arange(len(o)), k] if len(tri) else np.full(len(o), np.inf)
+    found = np.isfinite(tk)
+    return np.where(found, tk, tmax), np.where(found, k, -1)
+
+
+def _cosine(u1, u2, n):
+    """Cosine-distributed unit directions about unit normals ``n`` (csrc/paths.c cosine_dir)."""
+    from .phase import orthonormal_basis
+    c = np.sqrt(u1)
+    st = np.sqrt(np.maximum(0.0, 1.0 - u1))
+    phi = 2.0 * np.pi * u2
+    t1, t2 = orthonormal_basis(n)
+    out = t1 * (st * np.cos(phi))[:, None] + t2 * (st * np.sin(phi))[:, None] + n * c[:, None]
+    return out / np.sqrt(_dot(out, out))[:, None]
+
+
+def _survive(keys, ev, w, w0, hits, max_hits):
+    """Russian roulette after a real collision or a bounce (csrc/paths.c survive): (alive, w)."""
+    m = w.max(axis=1) / np.maximum(w0, 1e-300)
+    q = np.where(m < ROULETTE, m / ROULETTE, 1.0)
+    live = uniform(keys, ev, _D_RR) < q
+    w = w / np.maximum(q, 1e-300)[:, None]
+    return live & (hits < max_hits) & (w.max(axis=1) > 0.0), w
+
+
 def trace_paths_np(inp: PathInputs) -> np.ndarray:
     """The numpy twin of csrc/paths.c: float64 (LX,LY,LZ,3) sums of weight / mu x density x
-    trilinear share x p(w . v) over every tentative point of ``inp.n_paths`` paths (W m / sr;
-    divide by the cell volume times the mean density under the point's tent for M)."""
+    trilinear share x p(w . v) over every tentative point of ``inp.n_paths`` paths inside the
+    grid (W m / sr; divide by the cell volume times the mean density under the point's tent
+    for M)."""
     lshape = inp.towards.shape[:3]
     out = np.zeros((int(np.prod(lshape)), 3))
     n = int(inp.n_paths)
@@ -138,72 +257,145 @@ def trace_paths_np(inp: PathInputs) -> np.ndarray:
     k = np.minimum(np.searchsorted(inp.cdf, uniform(keys, 0, _D_PICK), side="right"),
                    len(inp.cdf) - 1)
     off = np.stack([uniform(keys, 0, _D_JIT + 2 * a) + uniform(keys, 0, _D_JIT + 2 * a + 1) - 1.0
-                    for a in range(3)], axis=1) * inp.stride
-    pos = inp.starts[k] + off @ inp.i2w.T
-    d = _turn(uniform(keys, 0, _D_DIR), uniform(keys, 0, _D_DIR + 1), g, inp.dirs[k])
+                    for a in range(3)], axis=1)
+    if int(inp.lobe) == 1:      # a surface: a tent of half-width jitter metres in its plane
+        from .phase import orthonormal_basis
+        t1, t2 = orthonormal_basis(inp.dirs[k])
+        off = off * float(inp.jitter)
+        pos = inp.starts[k] + t1 * off[:, :1] + t2 * off[:, 1:2]
+    else:                       # a lattice point: half-width jitter lattice steps
+        off = off * (inp.stride * float(inp.jitter))
+        pos = inp.starts[k] + np.stack([_dot(off, inp.i2w[a]) for a in range(3)], axis=1)
+    if int(inp.lobe) == 1:
+        d = _cosine(uniform(keys, 0, _D_DIR), uniform(keys, 0, _D_DIR + 1), inp.dirs[k])
+    else:
+        d = _turn(uniform(keys, 0, _D_DIR), uniform(keys, 0, _D_DIR + 1), g, inp.dirs[k])
     w = inp.weights[k] / n
     w0 = w.max(axis=1)
     event = np.zeros(n, np.int64)
     hits = np.zeros(n, np.int64)
-    alive = np.arange(n)
+    skip = np.full(n, -1, np.int64)
     shape = np.array(inp.density.shape)
+    inside = np.all((np.floor(_to_index(inp, pos) + 0.5) >= 0)
+                    & (np.floor(_to_index(inp, pos) + 0.5) < shape), axis=1)
+    alive = np.arange(n)
     lsh = np.array(lshape)
-    st_max = float(np.max(inp.sigma_t))
+    st = np.asarray(inp.sigma_t, np.float64)
+    ss = np.asarray(inp.sigma_s, np.float64)
+    st_max, st_min = float(np.max(st)), float(np.min(st))
     mu = float(inp.rate)
+    outside = float(inp.outside)
+    centre = np.asarray(inp.reach_centre, np.float64).reshape(3)
+    radius = float(inp.reach_radius)
+    albedo = np.asarray(inp.albedo, np.float64).reshape(-1, 3)
+    n_tri = len(albedo)
     tw = inp.towards.reshape(-1, 3)
     while alive.size:
         kk = keys[alive]
         ev = event[alive] + 1
         event[alive] = ev
-        t = -np.log(1.0 - uniform(kk, ev, _D_FLY)) / mu
-        p = pos[alive] + t[:, None] * d[alive]
-        pos[alive] = p
-        idx = p @ inp.w2i[:, :3].T + inp.w2i[:, 3]
-        vox = np.floor(idx + 0.5).astype(np.int64)
-        inside = np.all((vox >= 0) & (vox < shape), axis=1)
-        alive, idx, vox, kk, ev = alive[inside], idx[inside], vox[inside], kk[inside], ev[inside]
-        if not alive.size:
-            break
-        rho = inp.density[tuple(vox.T)].astype(np.float64)
-        rho = np.where(rho >= 0.0, rho, 0.0)
-        # deposit, weighted by the density: the 8 lattice points round the point, each with
-        # its own phase
-        lat = idx / inp.stride
-        base = np.floor(lat).astype(np.int64)
-        fr = lat - base
-        wd = w[alive] * (rho / mu)[:, None]
-        da = d[alive]
-        for corner in range(8):
-            o = np.array([(corner >> 2) & 1, (corner >> 1) & 1, corner & 1])
-            c = base + o
-            ok = np.all((c >= 0) & (c < lsh), axis=1)
-            share = np.prod(np.where(o == 1, fr, 1.0 - fr), axis=1) * ok
-            flat = np.ravel_multi_index(tuple(np.where(ok[:, None], c, 0).T), lshape)
-            ph = hg(np.einsum("ij,ij->i", da, tw[flat]), g)
-            for ch in range(3):
-                out[:, ch] += np.bincount(flat, wd[:, ch] * share * ph, minlength=len(out))
-        p_hit = np.minimum(rho * st_max / mu, 1.0)
-        hit = uniform(kk, ev, _D_HIT) < p_hit
-        wa = w[alive]
-        # null collisions: spectral tracking weights
-        null = ~hit
-        if np.any(null):
-            num = 1.0 - rho[null, None] * inp.sigma_t[None, :] / mu
-            wa[null] *= num / np.maximum(1.0 - p_hit[null], 1e-12)[:, None]
-        if np.any(hit):
-            wa[hit] *= (np.asarray(inp.sigma_s, np.float64) / st_max)[None, :]
-            hi = alive[hit]
-            d[hi] = _turn(uniform(kk[hit], ev[hit], _D_TURN),
-                          uniform(kk[hit], ev[hit], _D_TURN + 1), g, d[hi])
-            hits[hi] += 1
-        w[alive] = wa
-        # roulette after a real collision; the collision cap
-        m = w[alive].max(axis=1) / np.maximum(w0[alive], 1e-300)
-        q = np.where(hit & (m < ROULETTE), m / ROULETTE, 1.0)
-        survive = uniform(kk, ev, _D_RR) < q
-        w[alive] = w[alive] / np.maximum(q, 1e-300)[:, None]
-        keep = survive & (hits[alive] < inp.max_collisions) & (w[alive].max(axis=1) > 0.0) \
-            & (ev < MAX_EVENTS)
-        alive = alive[keep]
+        ins = inside[alive]
+        rate = np.where(ins, mu, outside * st_max)
+        with np.errstate(divide="ignore"):
+            t = np.where(rate > 0.0, -np.log(1.0 - uniform(kk, ev, _D_FLY)) /
+                         np.where(rate > 0.0, rate, 1.0), np.inf)
+        tb = _box_cross(inp, pos[alive], d[alive], ins)
+        tseg = np.minimum(t, tb)
+        keep = np.ones(len(alive), bool)
+        bounced = np.zeros(len(alive), bool)
+        if n_tri:
+            ts, tri = _surface_hit(inp, pos[alive], d[alive], np.minimum(tseg, FAR), skip[alive])
+            bounced = tri >= 0
+            if np.any(bounced):
+                b = alive[bounced]
+                tk = tri[bounced]
+                pos[b] += ts[bounced, None] * d[b]
+                tv = np.asarray(inp.triangles, np.float64).reshape(-1, 3, 3)[tk]
+                nrm = _cross(tv[:, 1], tv[:, 2])
+                nrm = nrm / np.sqrt(_dot(nrm, nrm))[:, None]
+                nrm = np.where((_dot(nrm, d[b]) > 0.0)[:, None], -nrm, nrm)
+                w[b] *= albedo[tk]
+                d[b] = _cosine(uniform(kk[bounced], ev[bounced], _D_BOUNCE),
+                               uniform(kk[bounced], ev[bounced], _D_BOUNCE + 1), nrm)
+                hits[b] += 1
+                skip[b] = tk
+                live, w[b] = _survive(kk[bounced], ev[bounced], w[b], w0[b], hits[b],
+                                      inp.max_collisions)
+                keep[bounced] = live
+        rest = ~bounced
+        skip[alive[rest]] = -1
+        gone = rest & ~(tseg < np.inf)
+        keep[gone] = False
+        cross = rest & ~gone & (tb <= t)
+        if np.any(cross):
+            c = alive[cross]
+            pos[c] += tb[cross, None] * d[c]
+            inside[c] = ~inside[c]
+        coll = rest & ~gone & ~cross
+        if np.any(coll):
+            ci = alive[coll]
+            pos[ci] += t[coll, None] * d[ci]
+            rho = np.full(len(ci), outside)
+            out_c = ~ins[coll]
+            if np.any(out_c):
+                r2 = np.sum((pos[ci[out_c]] - centre) ** 2, axis=1)
+                far = ~(r2 <= radius * radius)
+                idx_far = np.flatnonzero(coll)[np.flatnonzero(out_c)[far]]
+                keep[idx_far] = False
+            inn = ins[coll]
+            if np.any(inn):
+                pi = ci[inn]
+                idx = _to_index(inp, pos[pi])
+                vox = np.floor(idx + 0.5)
+                vox = np.minimum(np.where(vox >= 0.0, vox, 0.0), shape - 1).astype(np.int64)
+                r = inp.density[tuple(vox.T)].astype(np.float64)
+                r = np.where(r >= 0.0, r, 0.0)
+                rho[inn] = r
+                # deposit, weighted by the density: the 8 lattice points round the point,
+                # each with its own phase
+                lat = idx / inp.stride
+                base = np.floor(lat).astype(np.int64)
+                fr = lat - base
+                wd = w[pi] * (r / mu)[:, None]
+                da = d[pi]
+                for corner in range(8):
+                    o = np.array([(corner >> 2) & 1, (corner >> 1) & 1, corner & 1])
+                    cc = base + o
+                    ok = np.all((cc >= 0) & (cc < lsh), axis=1)
+                    share = np.prod(np.where(o == 1, fr, 1.0 - fr), axis=1) * ok
+                    flat = np.ravel_multi_index(tuple(np.where(ok[:, None], cc, 0).T), lshape)
+                    ph = hg(_dot(da, tw[flat]), g)
+                    for ch in range(3):
+                        out[:, ch] += np.bincount(flat, wd[:, ch] * share * ph, minlength=len(out))
+            live_c = keep[coll]
+            rc = rate[coll]
+            kc, ec = kk[coll], ev[coll]
+            wc = w[ci]
+            if st_min == st_max:
+                p_hit = np.minimum(rho * st_max / rc, 1.0)
+                hit = uniform(kc, ec, _D_HIT) < p_hit
+                num = 1.0 - rho[:, None] * st[None, :] / rc[:, None]
+                wc = np.where(hit[:, None], wc * (ss / st_max)[None, :],
+                              wc * num / np.maximum(1.0 - p_hit, 1e-12)[:, None])
+            else:
+                real = rho * st_max
+                nul = np.maximum(rc - rho * st_min, 0.0)
+                p_hit = real / np.maximum(real + nul, 1e-300)
+                hit = uniform(kc, ec, _D_HIT) < p_hit
+                w_null = np.maximum(rc[:, None] - rho[:, None] * st[None, :], 0.0) / \
+                    np.maximum(rc * (1.0 - p_hit), 1e-300)[:, None]
+                w_real = rho[:, None] * ss[None, :] / np.maximum(rc * p_hit, 1e-300)[:, None]
+                wc = wc * np.where(hit[:, None], w_real, w_null)
+            if np.any(hit):
+                hi = ci[hit]
+                d[hi] = _turn(uniform(kc[hit], ec[hit], _D_TURN),
+                              uniform(kc[hit], ec[hit], _D_TURN + 1), g, d[hi])
+                hits[hi] += 1
+                live_h, wc[hit] = _survive(kc[hit], ec[hit], wc[hit], w0[hi], hits[hi],
+                                           inp.max_collisions)
+                live_c[hit] &= live_h
+            live_c[~hit] &= wc[~hit].max(axis=1) > 0.0
+            w[ci] = wc
+            keep[coll] = live_c
+        alive = alive[keep & (ev < MAX_EVENTS)]
     return out.reshape(lshape + (3,))
-

@@ -104,11 +104,13 @@ def render(desc: SceneDescription,
     pre = None
     step = auto_step(desc, media)
     media_lights = lights
-    if media and st.multiple and st.surface_bounce and desc.surfaces and fog_pm is None:
-        from .bounce import bounce_lights  # flat surfaces light the media back: indirect light,
-        # on with multiple scattering (Cycles' volume_bounces = 0 leaves it out too); not
-        # under a world volume, whose grid spans the whole view: each bounce light would cost
-        # a light's precompute over all of it (bounce.py)
+    if media and st.multiple and st.surface_bounce and desc.surfaces and fog_pm is None \
+            and st.multiple_paths <= 0:
+        from .bounce import bounce_lights  # the walk's light from flat surfaces: indirect
+        # light, on with multiple scattering (Cycles' volume_bounces = 0 leaves it out too);
+        # traced paths start on the lit surfaces instead (precompute.pathstarts); not under
+        # a world volume, whose grid spans the whole view: each bounce light would cost a
+        # light's precompute over all of it (bounce.py)
         media_lights = list(lights) + bounce_lights(desc.surfaces, lights, media, step)
     if media:
         # the light and world-light parts are reused from earlier renders when their inputs
@@ -121,6 +123,7 @@ def render(desc: SceneDescription,
                                           threads=st.threads, multiple=st.multiple,
                                           multiple_resolution=st.multiple_resolution,
                                           multiple_paths=st.multiple_paths,
+                                          surface_bounce=st.surface_bounce,
                                           tuning=st.tuning)
         except Cancelled:
             return RenderOutput(out, {"precompute": time.perf_counter() - t_pre}, warnings, True)

@@ -235,8 +235,10 @@ class Settings:
     ``passes``: names of the passes to fill; None means every pass the engine has.
     ``voxel_resolution``: voxels along the longest side when a mesh volume is voxelised.
     ``threads``: worker threads for the march; 0 means one per core.
-    ``surface_bounce``: flat diffuse surfaces reflect the lights into the media (bounce.py;
-    indirect light, so only with ``multiple``; not under a world volume).
+    ``surface_bounce``: surfaces reflect light into the media (indirect light, so only with
+    ``multiple``): the traced paths start on the lit surfaces and reflect off every surface
+    (precompute.pathstarts); with the walk (``multiple_paths`` 0) flat surfaces become area
+    lights (bounce.py; not under a world volume).
     ``memory_budget_mb``: megabytes (2^20 bytes) the precompute fields may take; larger grids
     are box-downsampled with a warning (budget.py); 0 means unlimited.
     ``tuning``: the method's speed and exactness knobs (Tuning; not in the user interface).

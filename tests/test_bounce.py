@@ -134,18 +134,39 @@ def test_a_turned_square_is_tiled_along_its_sides():
         assert np.allclose(l.strength, 0.5 * 2.0 * 9.0 / 4, rtol=1e-9)
 
 
-def test_no_bounce_under_a_world_volume():
-    """Under the world's fog (whose grid spans the view) the setting changes nothing: the
-    ground's rectangles would each cost a light's precompute over the whole view."""
+def test_the_walk_has_no_bounce_under_a_world_volume():
+    """With the walk (Light Paths 0), under the world's fog (whose grid spans the view) the
+    setting changes nothing: the ground's rectangles would each cost a light's precompute
+    over the whole view."""
     from test_worldfog import camera, fog, point
     def go(bounce):
         desc = SceneDescription(camera(12, 8, (0.0, -8.0, 1.0)), lights=[point((0.0, 0.0, 1.0))],
                                 surfaces=[flat_ground(half=20.0)], world=World(volume=fog()),
                                 settings=Settings(samples=1, surface_bounce=bounce,
-                                                  voxel_resolution=24, multiple_resolution=12))
+                                                  voxel_resolution=24, multiple_resolution=12,
+                                                  multiple_paths=0))
         return render(desc).passes["Combined"]
     on = go(True)
     assert np.all(np.isfinite(on)) and on[..., :3].mean() > 0 and np.array_equal(on, go(False))
+
+
+def test_traced_paths_bring_the_ground_light_into_a_world_fog():
+    """With traced paths the lit ground under a lamp in the world's fog sends light back into
+    the fog (paths start on it and reflect off it): Volume Multiple gains, Volume Single
+    stays the lamp's alone."""
+    from test_worldfog import camera, fog, point
+    def go(bounce):
+        desc = SceneDescription(camera(12, 8, (0.0, -8.0, 1.0)), lights=[point((0.0, 0.0, 1.0))],
+                                surfaces=[flat_ground(half=20.0, albedo=0.8)],
+                                world=World(volume=fog()),
+                                settings=Settings(samples=1, surface_bounce=bounce,
+                                                  voxel_resolution=24, multiple_resolution=12,
+                                                  multiple_paths=20000))
+        return render(desc).passes
+    on, off = go(True), go(False)
+    assert on["Volume Multiple"][..., :3].mean() > 1.1 * off["Volume Multiple"][..., :3].mean()
+    assert np.array_equal(on["Volume Single"], off["Volume Single"])
+    assert np.all(np.isfinite(on["Combined"]))
 
 
 def test_a_ground_with_a_hole_reflects_only_where_it_is():

@@ -73,10 +73,11 @@ class MPPRenderSettings(bpy.types.PropertyGroup):
                     "most-probable-path model instead (smooth, but biased: docs/accuracy.md)")
     surface_bounce: BoolProperty(
         name="Surface Bounce", default=True,
-        description="Flat surfaces (a ground, a wall) reflect the lights' light into the "
-                    "volumes once, diffusely, as area lights over the part under the volumes "
-                    "(indirect light: with Multiple Scattering on; none under a World volume). "
-                    "Off: the volumes are lit by the lights and the world alone")
+        description="Surfaces (a ground, a wall) reflect light into the volumes, diffusely: "
+                    "the light paths start on the lit surfaces and bounce off them (with "
+                    "Light Paths 0, flat surfaces reflect the lights once, as area lights, "
+                    "none under a World volume). Indirect light: with Multiple Scattering on. "
+                    "Off: the surfaces only absorb")
     ambient_directions: IntProperty(
         name="Ambient Directions", default=32, min=1, soft_max=512,
         description="Directions (count) per voxel used to integrate the world light's "

@@ -8,12 +8,16 @@
 
 const char trace_paths_doc[] =
     "trace_paths(out, density, w2i, i2w, sigma_s, sigma_t, g, stride, towards, starts, weights,\n"
-    "            dirs, cdf, rate, path_lo, path_hi, n_paths, seed, max_collisions, roulette)\n"
+    "            dirs, cdf, rate, path_lo, path_hi, n_paths, seed, max_collisions, roulette,\n"
+    "            jitter, lobe, outside, reach, triangles, albedo)\n"
     "Twin of mpp_render.paths.trace_paths_np: adds to out (LX,LY,LZ,3) float64 the deposits\n"
     "of paths path_lo..path_hi-1 of n_paths.";
 
 #define MAX_EVENTS 1000000L   /* tentative collisions per path, whatever the medium */
 #define MAX_RATE_SPAN 1e6    /* rate x the grid's diagonal (m): tentative points across it */
+#define TRI_CHUNK 64         /* triangles per culling box */
+#define T_MIN 1e-9           /* m: a surface closer than this along a segment is not hit */
+#define FAR 1e30             /* m: how far a segment into empty space is tested */
 #define D_PICK 0
 #define D_JIT 1
 #define D_DIR 7
@@ -21,17 +25,10 @@ const char trace_paths_doc[] =
 #define D_HIT 11
 #define D_TURN 12
 #define D_RR 14
+#define D_BOUNCE 15
 
-static inline void turn(double u1, double u2, double g, const double axis[3], double out[3]) {
-    double c;
-    if (fabs(g) < 1e-4) {
-        c = 1.0 - 2.0 * u1;
-    } else {
-        double s = (1.0 - g * g) / (1.0 - g + 2.0 * g * u1);
-        c = (1.0 + g * g - s * s) / (2.0 * g);
-    }
-    if (c < -1.0) c = -1.0;
-    if (c > 1.0) c = 1.0;
+/* The unit direction at cosine c and azimuth 2 pi u2 about the unit vector axis. */
+static inline void about(double c, double u2, const double axis[3], double out[3]) {
     double st = sqrt(fmax(0.0, 1.0 - c * c)), phi = 2.0 * M_PI * u2;
     double t1[3], t2[3];
     basis(axis, t1, t2);
@@ -44,102 +41,295 @@ static inline void turn(double u1, double u2, double g, const double axis[3], do
     for (int a = 0; a < 3; a++) out[a] /= len;
 }
 
+/* An HG-distributed direction about the propagation direction axis (phase.sample_hg). */
+static inline void turn(double u1, double u2, double g, const double axis[3], double out[3]) {
+    double c;
+    if (fabs(g) < 1e-4) {
+        c = 1.0 - 2.0 * u1;
+    } else {
+        double s = (1.0 - g * g) / (1.0 - g + 2.0 * g * u1);
+        c = (1.0 + g * g - s * s) / (2.0 * g);
+    }
+    if (c < -1.0) c = -1.0;
+    if (c > 1.0) c = 1.0;
+    about(c, u2, axis, out);
+}
+
+/* A cosine-distributed unit direction about the unit normal n (Lambertian reflection). */
+static inline void cosine_dir(double u1, double u2, const double n[3], double out[3]) {
+    about(sqrt(u1), u2, n, out);
+}
+
 typedef struct {
     const float *dens;
     Py_ssize_t n[3];
-    double w2i[12], i2w[9], ss[3], st[3], st_max, g, mu, roulette;
+    double w2i[12], i2w[9], ss[3], st[3], st_max, st_min, g, mu, roulette, jitter, outside;
+    double reach[4];          /* centre (m) and radius (m) beyond which a path outside ends */
     long stride, max_hits;
+    int lobe;                 /* 0: the first direction by the phase function, 1: cosine */
     const double *tw;
     Py_ssize_t ls[3];
     double *out;
+    const double *tri, *alb;  /* (T,9) corner and two edges; (T,3) diffuse albedo */
+    Py_ssize_t n_tri, n_box;
+    const double *box;        /* (n_box,6) lo, hi of each TRI_CHUNK triangles */
 } Tracer;
+
+/* Where the ray o + t d (t >= 0) enters (want_exit 0) or leaves (1) the grid's box in index
+ * space, [-0.5, n - 0.5] per axis (the nearest-voxel domain); INFINITY when it does not. */
+static double box_cross(const Tracer *T, const double o[3], const double d[3], int want_exit) {
+    double t0 = 0.0, t1 = INFINITY;
+    for (int r = 0; r < 3; r++) {
+        double io = T->w2i[4 * r] * o[0] + T->w2i[4 * r + 1] * o[1] + T->w2i[4 * r + 2] * o[2] +
+                    T->w2i[4 * r + 3];
+        double id = T->w2i[4 * r] * d[0] + T->w2i[4 * r + 1] * d[1] + T->w2i[4 * r + 2] * d[2];
+        double lo = -0.5, hi = (double)T->n[r] - 0.5;
+        if (id == 0.0) {
+            if (!(io >= lo && io <= hi)) return INFINITY;
+            continue;
+        }
+        double ta = (lo - io) / id, tb = (hi - io) / id;
+        if (ta > tb) { double x = ta; ta = tb; tb = x; }
+        if (ta > t0) t0 = ta;
+        if (tb < t1) t1 = tb;
+    }
+    if (!(t1 >= t0)) return INFINITY;
+    return want_exit ? t1 : (t0 > 0.0 ? t0 : INFINITY);
+}
+
+/* The nearest triangle hit by o + t d for t in (T_MIN, tmax), other than ``skip`` (the one the
+ * path leaves); -1 when none.  Moller-Trumbore, as surfaces.intersect. */
+static Py_ssize_t surface_hit(const Tracer *T, const double o[3], const double d[3], double tmax,
+                              Py_ssize_t skip, double *t_hit) {
+    Py_ssize_t found = -1;
+    double best = tmax;
+    for (Py_ssize_t bi = 0; bi < T->n_box; bi++) {
+        const double *B = T->box + 6 * bi;
+        double t0 = 0.0, t1 = best;
+        int miss = 0;
+        for (int a = 0; a < 3 && !miss; a++) {
+            if (d[a] == 0.0) {
+                if (o[a] < B[a] || o[a] > B[3 + a]) miss = 1;
+                continue;
+            }
+            double ta = (B[a] - o[a]) / d[a], tb = (B[3 + a] - o[a]) / d[a];
+            if (ta > tb) { double x = ta; ta = tb; tb = x; }
+            if (ta > t0) t0 = ta;
+            if (tb < t1) t1 = tb;
+            if (t1 < t0) miss = 1;
+        }
+        if (miss) continue;
+        Py_ssize_t end = (bi + 1) * TRI_CHUNK < T->n_tri ? (bi + 1) * TRI_CHUNK : T->n_tri;
+        for (Py_ssize_t k = bi * TRI_CHUNK; k < end; k++) {
+            if (k == skip) continue;
+            const double *v0 = T->tri + 9 * k, *e1 = v0 + 3, *e2 = v0 + 6;
+            double p[3] = {d[1] * e2[2] - d[2] * e2[1], d[2] * e2[0] - d[0] * e2[2],
+                           d[0] * e2[1] - d[1] * e2[0]};
+            double det = p[0] * e1[0] + p[1] * e1[1] + p[2] * e1[2];
+            if (!(fabs(det) > 1e-300)) continue;
+            double inv = 1.0 / det;
+            double s[3] = {o[0] - v0[0], o[1] - v0[1], o[2] - v0[2]};
+            double u = (s[0] * p[0] + s[1] * p[1] + s[2] * p[2]) * inv;
+            if (!(u >= 0.0 && u <= 1.0)) continue;
+            double q[3] = {s[1] * e1[2] - s[2] * e1[1], s[2] * e1[0] - s[0] * e1[2],
+                           s[0] * e1[1] - s[1] * e1[0]};
+            double v = (d[0] * q[0] + d[1] * q[1] + d[2] * q[2]) * inv;
+            if (!(v >= 0.0 && u + v <= 1.0)) continue;
+            double t = (e2[0] * q[0] + e2[1] * q[1] + e2[2] * q[2]) * inv;
+            if (t > T_MIN && t < best) {
+                best = t;
+                found = k;
+            }
+        }
+    }
+    *t_hit = best;
+    return found;
+}
+
+/* After a real collision or a bounce: Russian roulette below T->roulette of the start weight.
+ * 0 when the path ends (roulette, the collision cap, or no weight left). */
+static inline int survive(const Tracer *T, uint32_t key, long ev, double w[3], double w0,
+                          long hits) {
+    double m = fmax(w[0], fmax(w[1], w[2])) / fmax(w0, 1e-300);
+    double q = m < T->roulette ? m / T->roulette : 1.0;
+    int live = uniform01(key, ev, D_RR) < q;
+    for (int c = 0; c < 3; c++) w[c] /= fmax(q, 1e-300);
+    return live && hits < T->max_hits && fmax(w[0], fmax(w[1], w[2])) > 0.0;
+}
 
 static void trace_one(const Tracer *T, uint32_t key, const double *start, const double *w_start,
                       const double *dir, double inv_n) {
     double pos[3], d[3], w[3], off[3], w0 = 0.0;
-    for (int a = 0; a < 3; a++)
-        off[a] = (uniform01(key, 0, D_JIT + 2 * a) + uniform01(key, 0, D_JIT + 2 * a + 1) - 1.0) *
-                 (double)T->stride;
-    for (int a = 0; a < 3; a++)
-        pos[a] = start[a] + T->i2w[3 * a] * off[0] + T->i2w[3 * a + 1] * off[1] +
-                 T->i2w[3 * a + 2] * off[2];
-    turn(uniform01(key, 0, D_DIR), uniform01(key, 0, D_DIR + 1), T->g, dir, d);
+    if (T->lobe == 1) {   /* a surface: a tent of half-width jitter metres in its plane */
+        double t1[3], t2[3];
+        basis(dir, t1, t2);
+        for (int a = 0; a < 2; a++)
+            off[a] = (uniform01(key, 0, D_JIT + 2 * a) + uniform01(key, 0, D_JIT + 2 * a + 1) -
+                      1.0) * T->jitter;
+        for (int a = 0; a < 3; a++) pos[a] = start[a] + t1[a] * off[0] + t2[a] * off[1];
+    } else {              /* a lattice point: a tent of half-width jitter lattice steps */
+        for (int a = 0; a < 3; a++)
+            off[a] = (uniform01(key, 0, D_JIT + 2 * a) + uniform01(key, 0, D_JIT + 2 * a + 1) -
+                      1.0) * ((double)T->stride * T->jitter);
+        for (int a = 0; a < 3; a++)
+            pos[a] = start[a] + T->i2w[3 * a] * off[0] + T->i2w[3 * a + 1] * off[1] +
+                     T->i2w[3 * a + 2] * off[2];
+    }
+    if (T->lobe == 1)
+        cosine_dir(uniform01(key, 0, D_DIR), uniform01(key, 0, D_DIR + 1), dir, d);
+    else
+        turn(uniform01(key, 0, D_DIR), uniform01(key, 0, D_DIR + 1), T->g, dir, d);
     for (int c = 0; c < 3; c++) {
         w[c] = w_start[c] * inv_n;
         if (w[c] > w0) w0 = w[c];
     }
     long hits = 0;
-    for (long ev = 1; ev <= MAX_EVENTS; ev++) {
-        double t = -log(1.0 - uniform01(key, ev, D_FLY)) / T->mu, idx[3];
-        for (int a = 0; a < 3; a++) pos[a] += t * d[a];
+    Py_ssize_t skip = -1;
+    int inside;
+    {
+        double idx0[3];
         for (int r = 0; r < 3; r++)
-            idx[r] = T->w2i[4 * r] * pos[0] + T->w2i[4 * r + 1] * pos[1] +
-                     T->w2i[4 * r + 2] * pos[2] + T->w2i[4 * r + 3];
-        Py_ssize_t v[3];
+            idx0[r] = T->w2i[4 * r] * pos[0] + T->w2i[4 * r + 1] * pos[1] +
+                      T->w2i[4 * r + 2] * pos[2] + T->w2i[4 * r + 3];
+        inside = 1;
         for (int a = 0; a < 3; a++) {
-            double f = floor(idx[a] + 0.5);
-            if (!(f >= 0.0 && f < (double)T->n[a])) return;   /* left the grid (or NaN) */
-            v[a] = (Py_ssize_t)f;
+            double f = floor(idx0[a] + 0.5);
+            if (!(f >= 0.0 && f < (double)T->n[a])) inside = 0;
         }
-        double rho = (double)T->dens[(v[0] * T->n[1] + v[1]) * T->n[2] + v[2]];
-        if (!(rho >= 0.0)) rho = 0.0;   /* NaN or negative density: empty */
-        /* deposit, weighted by the density, on the 8 lattice points round the point */
-        double lat[3], fr[3];
-        Py_ssize_t b[3];
-        for (int a = 0; a < 3; a++) {
-            lat[a] = idx[a] / (double)T->stride;
-            double fl = floor(lat[a]);
-            b[a] = (Py_ssize_t)fl;
-            fr[a] = lat[a] - fl;
-        }
-        for (int corner = 0; corner < 8; corner++) {
-            int o[3] = {(corner >> 2) & 1, (corner >> 1) & 1, corner & 1};
-            Py_ssize_t cc[3];
-            double share = 1.0;
-            int ok = 1;
-            for (int a = 0; a < 3; a++) {
-                cc[a] = b[a] + o[a];
-                if (cc[a] < 0 || cc[a] >= T->ls[a]) ok = 0;
-                share *= o[a] ? fr[a] : 1.0 - fr[a];
+    }
+    for (long ev = 1; ev <= MAX_EVENTS; ev++) {
+        double rate = inside ? T->mu : T->outside * T->st_max;
+        double t = rate > 0.0 ? -log(1.0 - uniform01(key, ev, D_FLY)) / rate : INFINITY;
+        double tb = box_cross(T, pos, d, inside);
+        double tseg = fmin(t, tb);
+        if (T->n_tri > 0) {
+            double ts;
+            Py_ssize_t k = surface_hit(T, pos, d, fmin(tseg, FAR), skip, &ts);
+            if (k >= 0) {   /* a diffuse bounce off the surface, on the side the path came from */
+                const double *e1 = T->tri + 9 * k + 3, *e2 = T->tri + 9 * k + 6;
+                double nrm[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                                 e1[0] * e2[1] - e1[1] * e2[0]};
+                double len = sqrt(nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2]);
+                double side = (nrm[0] * d[0] + nrm[1] * d[1] + nrm[2] * d[2]) > 0.0 ? -1.0 : 1.0;
+                for (int a = 0; a < 3; a++) {
+                    pos[a] += ts * d[a];
+                    nrm[a] *= side / len;
+                }
+                for (int c = 0; c < 3; c++) w[c] *= T->alb[3 * k + c];
+                cosine_dir(uniform01(key, ev, D_BOUNCE), uniform01(key, ev, D_BOUNCE + 1), nrm, d);
+                hits++;
+                skip = k;
+                if (!survive(T, key, ev, w, w0, hits)) return;
+                continue;
             }
-            if (!ok) continue;
-            Py_ssize_t flat = (cc[0] * T->ls[1] + cc[1]) * T->ls[2] + cc[2];
-            const double *tv = T->tw + 3 * flat;
-            double ph = hg_phase(d[0] * tv[0] + d[1] * tv[1] + d[2] * tv[2], T->g);
-            for (int c = 0; c < 3; c++) T->out[3 * flat + c] += (w[c] / T->mu) * rho * share * ph;
         }
-        double p_hit = rho * T->st_max / T->mu;
-        if (p_hit > 1.0) p_hit = 1.0;
-        int hit = uniform01(key, ev, D_HIT) < p_hit;
-        if (!hit) {
-            double den = fmax(1.0 - p_hit, 1e-12);
-            for (int c = 0; c < 3; c++) w[c] *= (1.0 - rho * T->st[c] / T->mu) / den;
+        skip = -1;
+        if (!(tseg < INFINITY)) return;   /* flies off into empty space */
+        if (tb <= t) {                    /* into or out of the grid: the flight starts again */
+            for (int a = 0; a < 3; a++) pos[a] += tb * d[a];
+            inside = !inside;
+            continue;
+        }
+        for (int a = 0; a < 3; a++) pos[a] += t * d[a];
+        double rho;
+        if (!inside) {
+            double r2 = 0.0;
+            for (int a = 0; a < 3; a++) r2 += (pos[a] - T->reach[a]) * (pos[a] - T->reach[a]);
+            if (!(r2 <= T->reach[3] * T->reach[3])) return;   /* too far to come back */
+            rho = T->outside;
         } else {
-            for (int c = 0; c < 3; c++) w[c] *= T->ss[c] / T->st_max;
+            double idx[3];
+            for (int r = 0; r < 3; r++)
+                idx[r] = T->w2i[4 * r] * pos[0] + T->w2i[4 * r + 1] * pos[1] +
+                         T->w2i[4 * r + 2] * pos[2] + T->w2i[4 * r + 3];
+            Py_ssize_t v[3];
+            for (int a = 0; a < 3; a++) {
+                double f = floor(idx[a] + 0.5);
+                if (!(f >= 0.0)) f = 0.0;   /* on the box's face (or NaN): the edge voxel */
+                if (f > (double)(T->n[a] - 1)) f = (double)(T->n[a] - 1);
+                v[a] = (Py_ssize_t)f;
+            }
+            rho = (double)T->dens[(v[0] * T->n[1] + v[1]) * T->n[2] + v[2]];
+            if (!(rho >= 0.0)) rho = 0.0;   /* NaN or negative density: empty */
+            /* deposit, weighted by the density, on the 8 lattice points round the point */
+            double lat[3], fr[3];
+            Py_ssize_t b[3];
+            for (int a = 0; a < 3; a++) {
+                lat[a] = idx[a] / (double)T->stride;
+                double fl = floor(lat[a]);
+                if (!(fl > -2.0)) fl = -2.0;   /* NaN guard: no corner in range */
+                b[a] = (Py_ssize_t)fl;
+                fr[a] = lat[a] - fl;
+            }
+            for (int corner = 0; corner < 8; corner++) {
+                int o[3] = {(corner >> 2) & 1, (corner >> 1) & 1, corner & 1};
+                Py_ssize_t cc[3];
+                double share = 1.0;
+                int ok = 1;
+                for (int a = 0; a < 3; a++) {
+                    cc[a] = b[a] + o[a];
+                    if (cc[a] < 0 || cc[a] >= T->ls[a]) ok = 0;
+                    share *= o[a] ? fr[a] : 1.0 - fr[a];
+                }
+                if (!ok) continue;
+                Py_ssize_t flat = (cc[0] * T->ls[1] + cc[1]) * T->ls[2] + cc[2];
+                const double *tv = T->tw + 3 * flat;
+                double ph = hg_phase(d[0] * tv[0] + d[1] * tv[1] + d[2] * tv[2], T->g);
+                for (int c = 0; c < 3; c++)
+                    T->out[3 * flat + c] += (w[c] / T->mu) * rho * share * ph;
+            }
+        }
+        /* real or null collision; chromatic media use spectral tracking (Kutz et al. 2017),
+         * whose null probability stays > 0 while any channel has null density */
+        double p_hit;
+        int hit;
+        if (T->st_min == T->st_max) {
+            p_hit = rho * T->st_max / rate;
+            if (p_hit > 1.0) p_hit = 1.0;
+            hit = uniform01(key, ev, D_HIT) < p_hit;
+            if (!hit) {
+                double den = fmax(1.0 - p_hit, 1e-12);
+                for (int c = 0; c < 3; c++) w[c] *= (1.0 - rho * T->st[c] / rate) / den;
+            } else {
+                for (int c = 0; c < 3; c++) w[c] *= T->ss[c] / T->st_max;
+            }
+        } else {
+            double real = rho * T->st_max, nul = fmax(rate - rho * T->st_min, 0.0);
+            p_hit = real / fmax(real + nul, 1e-300);
+            hit = uniform01(key, ev, D_HIT) < p_hit;
+            if (!hit) {
+                for (int c = 0; c < 3; c++)
+                    w[c] *= fmax(rate - rho * T->st[c], 0.0) / fmax(rate * (1.0 - p_hit), 1e-300);
+            } else {
+                for (int c = 0; c < 3; c++) w[c] *= rho * T->ss[c] / fmax(rate * p_hit, 1e-300);
+            }
+        }
+        if (hit) {
             double nd[3];
             turn(uniform01(key, ev, D_TURN), uniform01(key, ev, D_TURN + 1), T->g, d, nd);
             for (int a = 0; a < 3; a++) d[a] = nd[a];
             hits++;
+            if (!survive(T, key, ev, w, w0, hits)) return;
+        } else if (!(fmax(w[0], fmax(w[1], w[2])) > 0.0)) {
+            return;
         }
-        double m = fmax(w[0], fmax(w[1], w[2])) / fmax(w0, 1e-300);
-        double q = (hit && m < T->roulette) ? m / T->roulette : 1.0;
-        int survive = uniform01(key, ev, D_RR) < q;
-        for (int c = 0; c < 3; c++) w[c] /= fmax(q, 1e-300);
-        if (!survive || hits >= T->max_hits || !(fmax(w[0], fmax(w[1], w[2])) > 0.0)) return;
     }
 }
 
 PyObject *trace_paths(PyObject *self, PyObject *args) {
-    PyObject *po, *pd, *pw2i, *pi2w, *pss, *pst, *ptw, *pstarts, *pws, *pdirs, *pcdf;
-    double g, rate, roulette;
-    long stride, lo, hi, n_paths, max_hits;
+    PyObject *po, *pd, *pw2i, *pi2w, *pss, *pst, *ptw, *pstarts, *pws, *pdirs, *pcdf, *preach,
+        *ptri, *palb;
+    double g, rate, roulette, jitter, outside;
+    long stride, lo, hi, n_paths, max_hits, lobe;
     unsigned long seed;
-    if (!PyArg_ParseTuple(args, "OOOOOOdlOOOOOdlllkld", &po, &pd, &pw2i, &pi2w, &pss, &pst, &g,
-                          &stride, &ptw, &pstarts, &pws, &pdirs, &pcdf, &rate, &lo, &hi,
-                          &n_paths, &seed, &max_hits, &roulette))
+    if (!PyArg_ParseTuple(args, "OOOOOOdlOOOOOdlllklddldOOO", &po, &pd, &pw2i, &pi2w, &pss, &pst,
+                          &g, &stride, &ptw, &pstarts, &pws, &pdirs, &pcdf, &rate, &lo, &hi,
+                          &n_paths, &seed, &max_hits, &roulette, &jitter, &lobe, &outside,
+                          &preach, &ptri, &palb))
         return NULL;
     Buf bo = {0}, bd = {0}, bw = {0}, bi = {0}, bss = {0}, bst = {0}, btw = {0}, bs = {0},
-        bws = {0}, bdir = {0}, bc = {0};
+        bws = {0}, bdir = {0}, bc = {0}, br = {0}, bt = {0}, ba = {0};
+    double *boxes = NULL;
     int ok = 0;
     Py_ssize_t so[4] = {-1, -1, -1, 3}, sd[3] = {-1, -1, -1}, sw[2] = {3, 4}, si[2] = {3, 3},
                s3[1] = {3}, stw[4] = {-1, -1, -1, 3}, sn[2] = {-1, 3}, sc[1] = {-1};
@@ -157,6 +347,16 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
     if (get_buf(pdirs, &bdir, 'd', 2, sn, "dirs") < 0) goto done;
     sc[0] = sn[0];
     if (get_buf(pcdf, &bc, 'd', 1, sc, "cdf") < 0) goto done;
+    Py_ssize_t s4[1] = {4}, stri[2] = {-1, 9}, salb[2] = {-1, 3};
+    if (get_buf(preach, &br, 'd', 1, s4, "reach") < 0) goto done;
+    if (get_buf(ptri, &bt, 'd', 2, stri, "triangles") < 0) goto done;
+    salb[0] = stri[0];
+    if (get_buf(palb, &ba, 'd', 2, salb, "albedo") < 0) goto done;
+    if (!(jitter >= 0.0) || !isfinite(jitter) || (lobe != 0 && lobe != 1) ||
+        !(outside >= 0.0) || !isfinite(outside) || !(((const double *)br.view.buf)[3] >= 0.0)) {
+        PyErr_SetString(PyExc_ValueError, "trace_paths: bad jitter, lobe, outside or reach");
+        goto done;
+    }
     if (stride < 1 || !(rate > 0.0) || !isfinite(rate) || !isfinite(g) ||
         n_paths < 1 || lo < 0 || hi < lo || hi > n_paths || max_hits < 1 || !(roulette >= 0.0) ||
         sn[0] < 1) {
@@ -197,6 +397,42 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
     T.roulette = roulette;
     T.stride = stride;
     T.max_hits = max_hits;
+    T.st_min = fmin(T.st[0], fmin(T.st[1], T.st[2]));
+    T.jitter = jitter;
+    T.lobe = (int)lobe;
+    T.outside = outside;
+    memcpy(T.reach, br.view.buf, sizeof T.reach);
+    T.tri = (const double *)bt.view.buf;
+    T.alb = (const double *)ba.view.buf;
+    T.n_tri = stri[0];
+    T.n_box = (T.n_tri + TRI_CHUNK - 1) / TRI_CHUNK;
+    if (T.n_box > 0) {
+        boxes = (double *)malloc(sizeof(double) * 6 * (size_t)T.n_box);
+        if (!boxes) {
+            PyErr_NoMemory();
+            goto done;
+        }
+        for (Py_ssize_t bx = 0; bx < T.n_box; bx++) {
+            double *B = boxes + 6 * bx;
+            for (int a = 0; a < 3; a++) { B[a] = INFINITY; B[3 + a] = -INFINITY; }
+            Py_ssize_t end = (bx + 1) * TRI_CHUNK < T.n_tri ? (bx + 1) * TRI_CHUNK : T.n_tri;
+            for (Py_ssize_t k = bx * TRI_CHUNK; k < end; k++) {
+                const double *v = T.tri + 9 * k;
+                for (int corner = 0; corner < 3; corner++)
+                    for (int a = 0; a < 3; a++) {
+                        double x = v[a] + (corner ? v[3 * corner + a] : 0.0);
+                        if (x < B[a]) B[a] = x;
+                        if (x > B[3 + a]) B[3 + a] = x;
+                    }
+            }
+            for (int a = 0; a < 3; a++) {   /* a little wider, so a grazing ray still tests */
+                double pad = 1e-9 * (1.0 + fabs(B[a]) + fabs(B[3 + a]));
+                B[a] -= pad;
+                B[3 + a] += pad;
+            }
+        }
+    }
+    T.box = boxes;
     T.tw = (const double *)btw.view.buf;
     T.out = (double *)bo.view.buf;
     const double *S = (const double *)bs.view.buf, *W = (const double *)bws.view.buf,
@@ -221,7 +457,8 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
 done:
     buf_release(&bo); buf_release(&bd); buf_release(&bw); buf_release(&bi); buf_release(&bss);
     buf_release(&bst); buf_release(&btw); buf_release(&bs); buf_release(&bws);
-    buf_release(&bdir); buf_release(&bc);
+    buf_release(&bdir); buf_release(&bc); buf_release(&br); buf_release(&bt); buf_release(&ba);
+    free(boxes);
     if (!ok) return NULL;
     Py_RETURN_NONE;
 }

@@ -4,6 +4,8 @@ deposits, seen from the camera, become the one level the march reads (march.Marc
 """
 from __future__ import annotations
 
+from typing import Optional
+
 import numpy as np
 
 from .. import kernels
@@ -12,6 +14,7 @@ from ..media import density_from
 from ..parallel import Cancelled, worker_count
 from ..paths import PATHS_MAX_SPAN, PathInputs, from_power, rate_span
 from .lattice import lattice_points, walk_lattice
+from .pathstarts import Surroundings, fog_starts, reach, surface_albedo, surface_starts
 from .source import light_direction, source_and_density, tent_restrict
 
 
@@ -21,27 +24,49 @@ PATHS_PER_POINT = 32
 
 
 def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: int,
-                    resolution: int, seed: int = 0, threads: int = 0, should_cancel=None):
+                    resolution: int, seed: int = 0, threads: int = 0, should_cancel=None,
+                    around: Optional[Surroundings] = None):
     """(stride, h, M) for ``light`` on medium ``pm`` (its field ``fld``, the light's optical
     depth at ``channel``): M float32 (LX,LY,LZ,3) W/(m^2 sr) on the light pyramid's lattice
     (lattice.walk_lattice at ``resolution``), from ``n_paths`` paths (paths.py; at most
-    ``PATHS_PER_POINT`` per lattice point the medium fills) started
-    where its unscattered light first scatters (source.source_and_density), seen from
-    ``camera``; ``threads`` share them; raises parallel.Cancelled when ``should_cancel``
-    says so.  ``pm`` is the medium itself, not delta-scaled: the paths carry the forward
-    peak (the split was measured worse, docs/history.md).  None where
-    the medium is too dense for paths (paths.PATHS_MAX_SPAN): the caller keeps the walk."""
+    ``PATHS_PER_POINT`` per lattice point the medium fills) seen from ``camera``; ``threads``
+    share them; raises parallel.Cancelled when ``should_cancel`` says so.  The paths start
+    where the light's unscattered beam first scatters in the medium (source.source_and_density),
+    and with ``around`` (pathstarts.Surroundings) also where it first scatters in the world
+    fog beyond the fog's grid and where the lit surfaces reflect it (pathstarts.py); they
+    reflect off the surfaces, and in the world fog they fly on beyond its grid.  Each kind
+    of start gets paths in proportion to its power.  ``pm`` is the medium itself, not
+    delta-scaled: the paths carry the forward peak (the split was measured worse,
+    docs/history.md).  None where the medium is too dense for paths
+    (paths.PATHS_MAX_SPAN): the caller keeps the walk."""
     stride, shape, h = walk_lattice(pm, resolution)
     base, _, pts = source_and_density(pm, fld, light, channel, stride)
     i2w = np.asarray(pm.i2w[:3, :3], np.float64)
     vol = float(abs(np.linalg.det(i2w))) * stride ** 3
     power = base * vol
     live = power.sum(axis=1) > 0.0
-    if not np.any(live):
+    fog = pm.kind == "fog"
+    # the fog is the same everywhere: its paths see no padding ramp at the grid's faces
+    density = np.ones(pm.grid.shape, np.float32) if fog else \
+        np.ascontiguousarray(density_from(pm.grid, pm.threshold), np.float32)
+    sets = []   # (points, power W, directions, jitter, lobe)
+    if np.any(live):
+        sets.append((pts[live], power[live], light_direction(light, pts[live]), 1.0, 0))
+    surf = around.surfaces if around is not None and around.surfaces is not None \
+        and not around.surfaces.empty else None
+    if around is not None:
+        if fog:
+            got = fog_starts(pm, light, around, seed + 1)
+            if got is not None:
+                sets.append(got + (0.0, 0))
+        if surf is not None:
+            got = surface_starts(pm, light, around, seed + 2)
+            if got is not None:
+                sets.append(got[:3] + (got[3], 1))
+    if not sets:
         return stride, h, np.zeros(tuple(shape) + (3,), np.float32)
     _, lpts = lattice_points(pm, shape, stride)
     towards = np.ascontiguousarray(towards_camera(camera, lpts).reshape(tuple(shape) + (3,)))
-    density = np.ascontiguousarray(density_from(pm.grid, pm.threshold), np.float32)
     st = np.asarray(pm.sigma_t, np.float64)
     rate = max(float(density.max()) * float(st.max()), 1.0 / h)
     if not rate_span(rate, i2w, density.shape) <= PATHS_MAX_SPAN:
@@ -51,15 +76,24 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
         mean_rho = tent_restrict(mean_rho, axis, stride, shape[axis])
     # a small medium needs no more paths than PATHS_PER_POINT per lattice point it fills
     n_paths = min(int(n_paths), PATHS_PER_POINT * int(np.count_nonzero(mean_rho > 0.0)))
-    weights, cdf = from_power(power[live])
-    inp = PathInputs(density, np.asarray(pm.w2i, np.float64), i2w,
-                     np.asarray(pm.sigma_s, np.float64), st, float(pm.g), stride, towards,
-                     np.ascontiguousarray(pts[live]), weights,
-                     np.ascontiguousarray(light_direction(light, pts[live])), cdf, rate,
-                     int(n_paths), int(seed))
-    acc = kernels.trace_paths(inp, threads=worker_count(threads), should_cancel=should_cancel)
-    if acc is None:
-        raise Cancelled()
+    centre, radius = reach(pm)
+    extra = dict(outside=1.0 if fog else 0.0, reach_centre=centre, reach_radius=radius)
+    if surf is not None:
+        albedo = surface_albedo(surf) if around.bounce else np.zeros((len(surf.v0), 3))
+        extra.update(triangles=np.stack([surf.v0, surf.e1, surf.e2], axis=1), albedo=albedo)
+    totals = np.array([float(p.sum()) for _, p, _, _, _ in sets])
+    acc = None
+    for k, (starts, pw, dirs, jitter, lobe) in enumerate(sets):
+        n_k = max(1, int(round(n_paths * totals[k] / totals.sum())))
+        weights, cdf = from_power(pw)
+        inp = PathInputs(density, np.asarray(pm.w2i, np.float64), i2w,
+                         np.asarray(pm.sigma_s, np.float64), st, float(pm.g), stride, towards,
+                         np.ascontiguousarray(starts), weights, np.ascontiguousarray(dirs), cdf,
+                         rate, n_k, int(seed) + 104729 * k, jitter=jitter, lobe=lobe, **extra)
+        got = kernels.trace_paths(inp, threads=worker_count(threads), should_cancel=should_cancel)
+        if got is None:
+            raise Cancelled()
+        acc = got if acc is None else acc + got
     # the deposits are density-weighted: divide by the density under each point's tent
     # (the lattice cell's mean), so that M is the medium's own average there and a point
     # beside the medium's surface is not diluted by the empty side

@@ -17,6 +17,7 @@ from .layout import FieldLayout, field_layout
 from .lightdepth import (SHADOW_TAU, light_optical_depth, near_sharp_surfaces, soft_visibility,
                          split_fog, sweep_light)
 from .lightpaths import traced_multiple
+from .pathstarts import Surroundings
 from .lightpyramid import MultipleField, multiple_field
 from .source import peak_light
 from .worldlight import fill_world_light
@@ -40,13 +41,14 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                progress: Optional[Callable[[float, str], None]] = None,
                surfaces=None, threads: int = 0, multiple: bool = False,
                multiple_resolution: int = MULTIPLE_RESOLUTION, multiple_paths: int = 0,
-               tuning: Tuning = Tuning()) -> Precomputed:
+               tuning: Tuning = Tuning(), surface_bounce: bool = True) -> Precomputed:
     """Field arrays for every medium, and with ``multiple`` the light pyramids; raises
     parallel.Cancelled when ``should_cancel`` says so.  ``surfaces`` (a SurfaceSet or None)
     shadow the lights and the sky.  Media that cannot scatter (sigma_s = 0) get no
     multiple-scattering data.  ``multiple_paths``: light paths traced per light and medium
     for multiple scattering (precompute.lightpaths); 0: the walk of the light pyramid.  ``tuning``: the
-    method's knobs (scene.Tuning, with the Settings)."""
+    method's knobs (scene.Tuning, with the Settings).  ``surface_bounce``: the traced paths
+    start on the lit surfaces and reflect off them (else the surfaces only absorb them)."""
     t_start = time.perf_counter()
     delta = [delta_scaled(pm) for pm in media]
     layout = field_layout(media, lights, world.color, multiple, delta, peak=multiple_paths <= 0)
@@ -60,6 +62,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
     solid_delta = [delta_of[id(pm)] for pm in solid]
     fog_delta = None if fog is None else delta_of[id(fog)].sigma_t
     shadowed = surfaces is not None and not surfaces.empty
+    around = Surroundings(solid, fog_st, surfaces if shadowed else None, step,
+                          bool(surface_bounce))
     fields = []
     n_pts = 0
     n_ambient = 0
@@ -139,7 +143,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                     # light paths traced from the first scatterings (precompute.lightpaths)
                     traced = traced_multiple(pm, f, light, chans[li], camera, multiple_paths,
                                              multiple_resolution, seed=seed + 7919 * mi + li,
-                                             threads=threads, should_cancel=should_cancel)
+                                             threads=threads, should_cancel=should_cancel,
+                                             around=around)
                 if traced is not None:
                     ms[li] = MultipleField(traced[0], traced[1], [traced[2]], traced=True)
                     check(should_cancel)

@@ -12,7 +12,7 @@ import numpy as np
 
 from .. import pyramid
 from ..firstflight import fft_shape
-from ..lights import incident, irradiance, outside_spot, towards_light
+from ..lights import disc_transmittance, incident, irradiance, outside_spot, towards_light
 from ..media import PreparedMedium, delta_scaled, density_from
 from ..parallel import check
 from ..phase import delta_fraction, peak_msa
@@ -39,13 +39,15 @@ def near_light_cells(pm: PreparedMedium, light: Light, stride: int, shape) -> np
     return np.ravel_multi_index(tuple(g.reshape(-1, 3).T), shape)
 
 
-def first_scattering(pm: PreparedMedium, rho, e, tau, peak=None) -> np.ndarray:
+def first_scattering(pm: PreparedMedium, rho, e, tau, peak=None, trans=None) -> np.ndarray:
     """The power per volume (W/m^3, (N,3)) the light's unscattered beam scatters at points of
     density ``rho`` (N,), irradiance ``e`` (N,3, W/m^2) and optical depth ``tau`` (N,3) from
     the light: Q = rho sigma_s E exp(-tau), where every multiply scattered path starts; with
     the forward peak's light ``peak`` (N,3, W/m^2, ``peak_light``) beside the unscattered
-    light, Q = rho sigma_s (E exp(-tau) + peak) (``pm`` then the delta-scaled medium)."""
-    light = e * np.exp(-np.asarray(tau, np.float64))
+    light, Q = rho sigma_s (E exp(-tau) + peak) (``pm`` then the delta-scaled medium).
+    ``trans`` (N,3): the transmittance to use instead of exp(-tau) (a lamp's disc mean,
+    lights.disc_transmittance)."""
+    light = e * (np.exp(-np.asarray(tau, np.float64)) if trans is None else trans)
     if peak is not None:
         light = light + np.asarray(peak, np.float64)
     return (np.asarray(rho)[:, None] * pm.sigma_s[None, :]) * light
@@ -197,8 +199,9 @@ def cell_mean_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel:
     r2 = np.einsum("ij,ij->i", pts - light.position, pts - light.position)
     e = e * (point_falloff(np.maximum(r2, r_min2), light.radius)
              / point_falloff(r2, light.radius))[:, None]
-    q = first_scattering(pm, rho, e, v[:, channel:channel + 3],
-                         None if beam is None else v[:, beam:beam + 3])
+    tau = v[:, channel:channel + 3]
+    q = first_scattering(pm, rho, e, tau, None if beam is None else v[:, beam:beam + 3],
+                         disc_transmittance(light, pts, tau, pm.voxel_size))
     return q.reshape(len(cells), len(offs), 3).mean(axis=1)
 
 
@@ -246,8 +249,10 @@ def restricted_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel
         if np.any(live):
             pts = pm.to_world(ijk[live].astype(np.float64))
             e = irradiance(light, pts)
-            q[live] = first_scattering(pm, rho[live], e, v[live, channel:channel + 3],
-                                       None if beam is None else v[live, beam:beam + 3])
+            tau = v[live, channel:channel + 3]
+            q[live] = first_scattering(pm, rho[live], e, tau,
+                                       None if beam is None else v[live, beam:beam + 3],
+                                       disc_transmittance(light, pts, tau, pm.voxel_size))
         q = q.reshape((b - a,) + tuple(pm.grid.shape[1:]) + (3,))
         if stride > 1:
             q = tent_restrict(tent_restrict(q, 1, stride, shape[1]), 2, stride, shape[2])

@@ -1,0 +1,171 @@
+"""Where light paths start besides the lattice's first scatterings (precompute.lightpaths):
+
+* **The world fog beyond its grid** (``fog_starts``).  The fog fills all space, but its grid
+  only covers what the camera sees; light that first scatters beside or behind it still
+  reaches the fog in view.  Points are drawn round the light: a direction uniform over the
+  light's sphere (a spot's cone, an area light's hemisphere), a distance r with density
+  sigma e^(-sigma r) (sigma the smallest extinction), so a point's probability density is
+  p(x) = sigma e^(-sigma r) / (Omega r^2) (Omega the solid angle sampled).  Those inside the
+  grid's data (where the lattice's own source is) are dropped.  Each kept point carries the
+  power Q(x) / (p(x) M) (W, M the points drawn) with Q = sigma_s E e^(-tau) the
+  first-scattering source (W/m^3): E the light's irradiance, tau its optical depth through
+  the fog, the other media and the surfaces' shadows (lightdepth.light_optical_depth).
+* **Lit surfaces** (``surface_starts``).  A diffuse surface sends back R E cos(theta) of the
+  light it receives (R its diffuse albedo, base colour x (1 - metallic), W/m^2), a cosine
+  lobe about its normal on the lit side.  Points are drawn uniformly over the area A of the
+  triangles within reach of the medium, each with power R E cos(theta) e^(-tau) A / M (W).
+
+Both return (points (N,3) m, power (N,3) W, directions (N,3) unit): the light's propagation
+for fog points, the lit side's normal for surface points.  All lengths in metres.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import List, Optional
+
+import numpy as np
+
+from ..lights import disc_transmittance, incident
+from ..scene import Light
+from .lightdepth import light_optical_depth, light_position
+from .source import light_direction
+
+FOG_POINTS = 16384       # first scatterings drawn round a light in the fog, per light
+SURFACE_POINTS = 16384   # points drawn on the surfaces within reach, per light
+REACH_MFP = 10.0         # a path in the fog this many mean free paths beyond the grid ends
+LIFT = 1e-6              # surface points are lifted this fraction of the scene's size
+
+
+@dataclass
+class Surroundings:
+    """What lies round the medium whose paths are traced: ``solid`` the media other than the
+    world fog (prepared; they attenuate the light), ``fog_sigma_t`` the fog's RGB extinction
+    (1/m, None without one), ``surfaces`` a surfaces.SurfaceSet or None, ``step`` the march
+    step (m) of the light's optical depth, ``bounce`` whether the surfaces reflect light
+    (Settings.surface_bounce; else they only absorb it)."""
+
+    solid: List
+    fog_sigma_t: Optional[np.ndarray]
+    surfaces: object
+    step: float
+    bounce: bool = True
+
+
+def reach(pm) -> tuple:
+    """(centre (3,) m, radius m) of the sphere within which paths of medium ``pm`` may return
+    to it: for the world fog its grid's half-diagonal plus ``REACH_MFP`` mean free paths, for
+    another medium twice its grid's half-diagonal (surfaces within it send light in)."""
+    n = np.array(pm.grid.shape, np.float64) - 1.0
+    corners = np.stack(np.meshgrid(*[[0.0, x] for x in n], indexing="ij"), -1).reshape(-1, 3)
+    world = corners @ pm.i2w[:3, :3].T + pm.i2w[:3, 3]
+    centre = world.mean(axis=0)
+    half = float(np.max(np.linalg.norm(world - centre, axis=1)))
+    if pm.kind == "fog":
+        st = np.asarray(pm.sigma_t, np.float64)
+        return centre, half + REACH_MFP / float(st[st > 0].min())
+    return centre, 2.0 * half
+
+
+def _cone(light: Light):
+    """(axis (3,), cos of the half-angle) of the directions a light sends light into."""
+    if light.kind == "SPOT":
+        axis = np.asarray(light.direction, np.float64)
+        half = min(0.5 * float(light.spot_size) * 1.05 + 1e-3, np.pi)
+        return axis / np.linalg.norm(axis), float(np.cos(half))
+    if light.kind == "AREA":
+        axis = np.asarray(light.direction, np.float64)
+        return axis / np.linalg.norm(axis), 0.0
+    return np.array([0.0, 0.0, 1.0]), -1.0
+
+
+def fog_starts(pm, light: Light, around: Surroundings, seed: int):
+    """First scatterings of ``light`` in the world fog ``pm`` beyond its grid (module
+    docstring), or None when none carries light (a sun: the fog has put it out)."""
+    if light.kind == "SUN":
+        return None
+    st = np.asarray(pm.sigma_t, np.float64)
+    sig = float(st[st > 0].min())
+    rng = np.random.default_rng(seed)
+    u = rng.random((FOG_POINTS, 3))
+    axis, cmin = _cone(light)
+    c = 1.0 - u[:, 0] * (1.0 - cmin)
+    s = np.sqrt(np.maximum(0.0, 1.0 - c * c))
+    phi = 2.0 * np.pi * u[:, 1]
+    from ..phase import orthonormal_basis
+    t1, t2 = orthonormal_basis(axis[None, :])
+    d = t1 * (s * np.cos(phi))[:, None] + t2 * (s * np.sin(phi))[:, None] + axis * c[:, None]
+    r = -np.log1p(-u[:, 2]) / sig
+    x = light_position(light) + d * r[:, None]
+    idx = pm.to_index(x)
+    inside = np.all((idx >= 0.5) & (idx <= np.array(pm.grid.shape) - 1.5), axis=1)
+    keep = ~inside & (r > 0.0)
+    if not np.any(keep):
+        return None
+    x, r = x[keep], r[keep]
+    _, e = incident(light, x)
+    tau = light_optical_depth(around.solid, light, x, around.step, surfaces=around.surfaces,
+                              fog_sigma_t=st)
+    q = np.asarray(pm.sigma_s, np.float64) * e * disc_transmittance(light, x, tau, around.step)
+    omega = 2.0 * np.pi * (1.0 - cmin)
+    pdf = sig * np.exp(-sig * r) / (omega * r * r)
+    power = q / (pdf * FOG_POINTS)[:, None]
+    live = np.all(np.isfinite(power), axis=1) & (power.sum(axis=1) > 0.0)
+    if not np.any(live):
+        return None
+    return x[live], power[live], light_direction(light, x[live])
+
+
+def surface_albedo(ss) -> np.ndarray:
+    """(T,3) diffuse albedo of every triangle of SurfaceSet ``ss``: base colour clipped to
+    [0, 1] x (1 - metallic)."""
+    p = ss.params
+    base = np.clip(p["base_color"], 0.0, 1.0) * (1.0 - np.clip(p["metallic"], 0.0, 1.0))[:, None]
+    return np.ascontiguousarray(base[ss.surface], np.float64)
+
+
+def surface_starts(pm, light: Light, around: Surroundings, seed: int):
+    """(points, power, normals, jitter m) of the light ``light`` reflects off the surfaces
+    within ``reach(pm)`` (module docstring), or None when they reflect none."""
+    ss = around.surfaces
+    if ss is None or ss.empty or not around.bounce:
+        return None
+    centre, radius = reach(pm)
+    corners = np.stack([ss.v0, ss.v0 + ss.e1, ss.v0 + ss.e2], axis=1)
+    lo, hi = corners.min(axis=1), corners.max(axis=1)
+    gap = np.linalg.norm(np.maximum(np.maximum(lo - centre, centre - hi), 0.0), axis=1)
+    albedo = surface_albedo(ss)
+    cand = np.flatnonzero((gap <= radius) & (albedo.max(axis=1) > 0.0))
+    if not cand.size:
+        return None
+    area = 0.5 * np.linalg.norm(np.cross(ss.e1[cand], ss.e2[cand]), axis=1)
+    total = float(area.sum())
+    if not (total > 0.0):
+        return None
+    rng = np.random.default_rng(seed)
+    pick = cand[np.minimum(np.searchsorted(np.cumsum(area) / total, rng.random(SURFACE_POINTS),
+                                           side="right"), len(cand) - 1)]
+    a, b = rng.random(SURFACE_POINTS), rng.random(SURFACE_POINTS)
+    flip = a + b > 1.0
+    a, b = np.where(flip, 1.0 - a, a), np.where(flip, 1.0 - b, b)
+    p = ss.v0[pick] + a[:, None] * ss.e1[pick] + b[:, None] * ss.e2[pick]
+    near = np.linalg.norm(p - centre, axis=1) <= radius
+    if not np.any(near):
+        return None
+    p, pick = p[near], pick[near]
+    d, e = incident(light, p)
+    n = ss.normal[pick]
+    cos = -np.einsum("ij,ij->i", d, n)
+    n = np.where((cos < 0.0)[:, None], -n, n)          # the lit side
+    lit = (np.abs(cos) > 0.0) & (e.max(axis=1) > 0.0)
+    if not np.any(lit):
+        return None
+    p = p[lit] + n[lit] * (LIFT * ss.scale)
+    tau = light_optical_depth(around.solid, light, p, around.step, surfaces=ss,
+                              fog_sigma_t=around.fog_sigma_t)
+    power = albedo[pick[lit]] * e[lit] * np.abs(cos[lit])[:, None] * \
+        disc_transmittance(light, p, tau, around.step) * \
+        (total / SURFACE_POINTS)
+    live = np.all(np.isfinite(power), axis=1) & (power.sum(axis=1) > 0.0)
+    if not np.any(live):
+        return None
+    return p[live], power[live], n[lit][live], float(np.sqrt(total / SURFACE_POINTS))
