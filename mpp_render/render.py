@@ -130,6 +130,9 @@ def render(desc: SceneDescription,
     timings["precompute"] = time.perf_counter() - t_pre
 
     bg = np.asarray(world.color, np.float64)
+    far = None   # the fog's multiply scattered light beyond its grid, for the tail
+    if pre is not None and st.multiple and pre.multiple and fog_pm is not None:
+        far = worldfog.far_field(pre.multiple[[m is fog_pm for m in media].index(True)])
     ctx = MarchContext(media, pre.fields if pre else [], pre.layout if pre else None,
                        media_lights, step, pre.multiple if st.multiple else None,
                        cam, st.tuning) if media else None
@@ -192,8 +195,10 @@ def render(desc: SceneDescription,
             r["depth"][hit] = np.minimum(r["depth"][hit], dh)
         if fog_pm is not None:  # the homogeneous fog beyond its grid, seen through the march
             s0 = np.maximum(worldfog.tail_start(fog_pm, o, d), tmin)
-            t_single, t_emit, t_trans = worldfog.tail(fog, lights, o, d, s0, t_end)
+            t_single, t_emit, t_trans, t_multi = worldfog.tail(fog, lights, o, d, s0, t_end,
+                                                               far=far)
             r = dict(r, single=r["single"] + r["T"] * t_single,
+                     multiple=r["multiple"] + r["T"] * t_multi,
                      emission=r["emission"] + r["T"] * t_emit, T=r["T"] * t_trans)
         npx = th * tw
 

@@ -157,6 +157,17 @@ def bounded_medium(desc: SceneDescription, fog: Medium, media=(),
     if not np.isfinite(depth):   # emission only, nothing to bound it: the content, or 10 m
         depth = max(d_content, near + 10.0)
     depth = max(depth, near + 1e-3)
+    shape, i2w, voxel = frustum_box(cam, near, depth, resolution)
+    med = Medium(name=fog.name, density=np.ones(shape, np.float32), index_to_world=i2w,
+                 sigma_s=np.asarray(fog.sigma_s, np.float64), sigma_a=np.asarray(fog.sigma_a, np.float64),
+                 g=float(fog.g), emission=np.asarray(fog.emission, np.float64), source="WORLD")
+    return FogBox(med, float(depth), voxel)
+
+
+def frustum_box(cam, near: float, depth: float, resolution: int):
+    """(shape, index_to_world (4,4), voxel m) of a grid of cubic voxels, ``resolution`` along
+    its longest side (at least 8), on the camera-aligned box round the view frustum from
+    axial depth ``near`` to ``depth`` (m), ``MARGIN_VOXELS`` wider on every side."""
     xmin, xmax, ymin, ymax = (float(v) for v in cam.plane)
     if str(cam.projection).upper() == "ORTHO":
         lo = np.array([xmin, ymin, -depth])
@@ -172,11 +183,24 @@ def bounded_medium(desc: SceneDescription, fog: Medium, media=(),
     local = np.eye(4)
     local[:3, :3] = np.eye(3) * voxel
     local[:3, 3] = lo
-    c2w = np.asarray(cam.cam_to_world, np.float64)
-    med = Medium(name=fog.name, density=np.ones(shape, np.float32), index_to_world=c2w @ local,
-                 sigma_s=np.asarray(fog.sigma_s, np.float64), sigma_a=np.asarray(fog.sigma_a, np.float64),
-                 g=float(fog.g), emission=np.asarray(fog.emission, np.float64), source="WORLD")
-    return FogBox(med, float(depth), voxel)
+    return shape, np.asarray(cam.cam_to_world, np.float64) @ local, voxel
+
+
+@dataclass
+class FarField:
+    """The fog's multiply scattered light far from the camera, for the tail: ``M`` float32
+    (X,Y,Z,3) W/(m^2 sr) (paths.py's M, summed over the lights) on the voxels of a coarse
+    frustum box (``frustum_box`` to the depth ``view_depth``), ``w2i`` (3,4) world ->
+    its index."""
+
+    w2i: np.ndarray
+    M: np.ndarray
+
+    def read(self, x) -> np.ndarray:
+        """M (N,3) at world points ``x`` (N,3), trilinear; 0 outside the box."""
+        from .media import trilinear
+        idx = np.asarray(x, np.float64) @ self.w2i[:, :3].T + self.w2i[:, 3]
+        return trilinear(self.M.astype(np.float64), idx)
 
 
 def tail_start(pm, origins, dirs) -> np.ndarray:
@@ -198,14 +222,25 @@ def tail_start(pm, origins, dirs) -> np.ndarray:
 
 # -- beyond the box -----------------------------------------------------------------------
 
-def tail(fog: Medium, lights: List[Light], origins, dirs, s0, s1, nodes: int = TAIL_NODES):
+def far_field(fields) -> Optional[FarField]:
+    """The sum of the lights' FarFields in ``fields`` (the fog's MultipleFields, None where a
+    light has none), or None when none has one."""
+    fars = [f.far for f in fields if f is not None and getattr(f, "far", None) is not None]
+    if not fars:
+        return None
+    return FarField(fars[0].w2i, np.sum([f.M for f in fars], axis=0).astype(np.float32))
+
+
+def tail(fog: Medium, lights: List[Light], origins, dirs, s0, s1, nodes: int = TAIL_NODES,
+         far: Optional[FarField] = None):
     """What the homogeneous fog adds to rays o + s d over s in [s0, s1] (s1 may be inf;
     nothing where s1 <= s0), as seen from s0: ``(single (N,3), emission (N,3),
-    transmittance (N,3))``, radiance in W/(m^2 sr).  Single scattering of the POINT, SPOT
-    and AREA ``lights`` through the fog alone (no shadows), by ``nodes``-point Gauss-Legendre
-    quadrature in u = 1 - exp(-sigma (s - s0)), sigma the smallest positive extinction.  Emission
-    in channels without extinction over an infinite stretch would be infinite; it is left
-    out there (the caller warns)."""
+    transmittance (N,3), multiple (N,3))``, radiance in W/(m^2 sr).  Single scattering of the
+    POINT, SPOT and AREA ``lights`` through the fog alone (no shadows), by ``nodes``-point
+    Gauss-Legendre quadrature in u = 1 - exp(-sigma (s - s0)), sigma the smallest positive
+    extinction; multiple scattering sigma_s M at the same nodes, M read from ``far`` (0
+    without it).  Emission in channels without extinction over an infinite stretch would be
+    infinite; it is left out there (the caller warns)."""
     o = np.asarray(origins, np.float64)
     d = np.asarray(dirs, np.float64)
     s0 = np.asarray(s0, np.float64)
@@ -221,10 +256,11 @@ def tail(fog: Medium, lights: List[Light], origins, dirs, s0, s1, nodes: int = T
         emitted = np.where(st > 0, em * -np.expm1(-st * np.where(finite, L, 1e300)) / np.where(st > 0, st, 1.0),
                            np.where(finite, em * np.where(finite, L, 0.0), 0.0))
     single = np.zeros((n, 3))
+    multiple = np.zeros((n, 3))
     used = [li for li in lights if li.kind != "SUN" and np.any(np.asarray(li.strength) > 0)]
     pos = st[st > 0]
     live = np.flatnonzero(length > 0)
-    if used and pos.size and np.any(ss > 0) and live.size:
+    if (used or far is not None) and pos.size and np.any(ss > 0) and live.size:
         from .lights import light_sample
         sig = float(pos.min())
         recs = [pack_light(li) for li in used]
@@ -243,7 +279,10 @@ def tail(fog: Medium, lights: List[Light], origins, dirs, s0, s1, nodes: int = T
             inc += hg(cos, float(fog.g))[:, None] * e * np.exp(-optical_depth(st, dc))
         att = np.exp(-st[None, None, :] * s[..., None])      # (M, K, 3) fog from s0 to the node
         single[live] = ss * np.sum(att * inc.reshape(len(live), nodes, 3) * w[..., None], axis=1)
-    return single, emitted, trans
+        if far is not None:
+            m = far.read(x).reshape(len(live), nodes, 3)
+            multiple[live] = ss * np.sum(att * m * w[..., None], axis=1)
+    return single, emitted, trans, multiple
 
 
 def infinite_emission(fog: Medium) -> bool:

@@ -84,7 +84,7 @@ def test_tail_matches_a_brute_force_integral():
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     s0 = np.array([12.0, 12.0])
     s1 = np.array([40.0, np.inf])
-    single, emitted, trans = worldfog.tail(f, [light], o, d, s0, s1)
+    single, emitted, trans, _ = worldfog.tail(f, [light], o, d, s0, s1)
     st = f.sigma_s + f.sigma_a
     ref0 = brute_force_tail(f, light, o[0], d[0], 12.0, 40.0)
     ref1 = brute_force_tail(f, light, o[1], d[1], 12.0, 12.0 + 60.0 / st.min())
@@ -95,8 +95,56 @@ def test_tail_matches_a_brute_force_integral():
     np.testing.assert_allclose(trans[0], np.exp(-st * 28.0))
     assert np.all(trans[1] == 0)
     # nothing where the stretch is empty
-    single, emitted, trans = worldfog.tail(f, [light], o, d, s0, s0 - 1.0)
+    single, emitted, trans, _ = worldfog.tail(f, [light], o, d, s0, s0 - 1.0)
     assert np.all(single == 0) and np.all(emitted == 0) and np.all(trans == 1)
+
+
+def test_tail_reads_the_far_multiple_scattering():
+    """With a far field of constant M, the tail's multiple scattering is sigma_s M (1 -
+    e^(-sigma_t L)) / sigma_t over a stretch of length L (and sigma_s M / sigma_t to
+    infinity, where the box holds the whole stretch); without one it is 0."""
+    f = fog(sigma_s=(0.08, 0.08, 0.04), sigma_a=(0.02, 0.05, 0.02))
+    m = np.array([0.5, 1.0, 2.0])
+    i2w = np.eye(4) * 2.0
+    i2w[:3, 3] = -400.0
+    i2w[3, 3] = 1.0
+    far = worldfog.FarField(np.linalg.inv(i2w)[:3], np.broadcast_to(m, (401, 401, 401, 3)))
+    o = np.array([[0.0, -8.0, 0.0], [0.0, -8.0, 0.0]])
+    d = np.array([[0.0, 1.0, 0.0], [0.3, 0.95, 0.05]])
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    s0 = np.array([12.0, 12.0])
+    s1 = np.array([40.0, np.inf])
+    st = f.sigma_s + f.sigma_a
+    multi = worldfog.tail(f, [], o, d, s0, s1, far=far)[3]
+    np.testing.assert_allclose(multi[0], f.sigma_s * m * -np.expm1(-st * 28.0) / st, rtol=1e-3)
+    np.testing.assert_allclose(multi[1], f.sigma_s * m / st, rtol=2e-3)
+    assert np.all(worldfog.tail(f, [point()], o, d, s0, s1)[3] == 0)
+
+
+def test_a_lamp_in_fog_lights_the_fog_beyond_its_grid():
+    """The traced paths of a lamp in the fog leave a far field (worldfog.FarField) on a
+    frustum box to the fog's view depth: its M is positive beyond the fog's grid, falls with
+    the distance from the lamp, and the tail of a ray through it gains multiple scattering."""
+    from mpp_render.cache import precompute_cached, Cache
+    from mpp_render.render import with_world_fog
+    f = fog(sigma_s=(0.1, 0.1, 0.1), sigma_a=(0.01, 0.01, 0.01))
+    desc = SceneDescription(camera(16, 12), lights=[point((0.0, 0.0, 0.5), 800.0)],
+                            world=World(volume=f),
+                            settings=Settings(samples=1, voxel_resolution=24))
+    media = []
+    world, lights, fog_pm = with_world_fog(desc, f, media, [])
+    pre = precompute_cached(media, lights, world, desc.camera, n_dirs=4, seed=0, multiple=True,
+                            multiple_resolution=12, multiple_paths=20000, cache=Cache(0))
+    far = worldfog.far_field(pre.multiple[0])
+    assert far is not None
+    o = np.array([[0.0, -8.0, 0.5]] * 3)
+    d = np.array([[0.0, 1.0, 0.0]] * 3)
+    x = o + d * np.array([[14.0], [30.0], [60.0]])     # beyond the grid (12.5 m deep)
+    m = far.read(x)
+    assert np.all(m[0] > 0) and np.all(m[0] > m[1]) and np.all(m[1] > m[2])
+    s0 = worldfog.tail_start(fog_pm, o[:1], d[:1])
+    multi = worldfog.tail(f, lights, o[:1], d[:1], s0, np.array([np.inf]), far=far)[3]
+    assert np.all(multi > 0)
 
 
 def wall(y=0.0, half=1.0, emission=(1.0, 1.0, 1.0), albedo=(0.0, 0.0, 0.0)):
@@ -135,7 +183,7 @@ def test_point_light_in_fog_is_continuous_across_the_grid_end():
     import mpp_render.worldfog as wf
     orig = wf.tail
     try:
-        wf.tail = lambda *a, **k: (lambda r: (0 * r[0], r[1], r[2]))(orig(*a, **k))
+        wf.tail = lambda *a, **k: (lambda r: (0 * r[0], r[1], r[2], r[3]))(orig(*a, **k))
         without = render(desc).passes["Volume Single"][..., 0]
     finally:
         wf.tail = orig

@@ -21,12 +21,14 @@ from .source import light_direction, source_and_density, tent_restrict
 # paths per lattice point the medium fills, at most (the Paths setting caps the total): a
 # 64-point lattice of a mesh cube holds 85 000 such points, past the default 1 000 000 paths
 PATHS_PER_POINT = 32
+FAR_RESOLUTION = 32  # voxels along the longest side of the world fog's far box (worldfog.FarField)
+FAR_PATHS = 0.25     # the far box's paths, a fraction of the grid's
 
 
 def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: int,
                     resolution: int, seed: int = 0, threads: int = 0, should_cancel=None,
                     around: Optional[Surroundings] = None):
-    """(stride, h, M) for ``light`` on medium ``pm`` (its field ``fld``, the light's optical
+    """(stride, h, M, far) for ``light`` on medium ``pm`` (its field ``fld``, the light's optical
     depth at ``channel``): M float32 (LX,LY,LZ,3) W/(m^2 sr) on the light pyramid's lattice
     (lattice.walk_lattice at ``resolution``), from ``n_paths`` paths (paths.py; at most
     ``PATHS_PER_POINT`` per lattice point the medium fills) seen from ``camera``; ``threads``
@@ -37,8 +39,9 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     reflect off the surfaces, and in the world fog they fly on beyond its grid.  Each kind
     of start gets paths in proportion to its power.  ``pm`` is the medium itself, not
     delta-scaled: the paths carry the forward peak (the split was measured worse,
-    docs/history.md).  None where the medium is too dense for paths
-    (paths.PATHS_MAX_SPAN): the caller keeps the walk."""
+    docs/history.md).  ``far``: for the world fog, its M beyond the grid (``_far_multiple``),
+    else None.  None where the medium is too dense for paths (paths.PATHS_MAX_SPAN): the
+    caller keeps the walk."""
     stride, shape, h = walk_lattice(pm, resolution)
     base, _, pts = source_and_density(pm, fld, light, channel, stride)
     i2w = np.asarray(pm.i2w[:3, :3], np.float64)
@@ -64,7 +67,7 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
             if got is not None:
                 sets.append(got[:3] + (got[3], 1))
     if not sets:
-        return stride, h, np.zeros(tuple(shape) + (3,), np.float32)
+        return stride, h, np.zeros(tuple(shape) + (3,), np.float32), None
     _, lpts = lattice_points(pm, shape, stride)
     towards = np.ascontiguousarray(towards_camera(camera, lpts).reshape(tuple(shape) + (3,)))
     st = np.asarray(pm.sigma_t, np.float64)
@@ -76,27 +79,67 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
         mean_rho = tent_restrict(mean_rho, axis, stride, shape[axis])
     # a small medium needs no more paths than PATHS_PER_POINT per lattice point it fills
     n_paths = min(int(n_paths), PATHS_PER_POINT * int(np.count_nonzero(mean_rho > 0.0)))
-    centre, radius = reach(pm)
-    extra = dict(outside=1.0 if fog else 0.0, reach_centre=centre, reach_radius=radius)
-    if surf is not None:
-        albedo = surface_albedo(surf) if around.bounce else np.zeros((len(surf.v0), 3))
-        extra.update(triangles=np.stack([surf.v0, surf.e1, surf.e2], axis=1), albedo=albedo)
-    totals = np.array([float(p.sum()) for _, p, _, _, _ in sets])
-    acc = None
-    for k, (starts, pw, dirs, jitter, lobe) in enumerate(sets):
-        n_k = max(1, int(round(n_paths * totals[k] / totals.sum())))
-        weights, cdf = from_power(pw)
-        inp = PathInputs(density, np.asarray(pm.w2i, np.float64), i2w,
-                         np.asarray(pm.sigma_s, np.float64), st, float(pm.g), stride, towards,
-                         np.ascontiguousarray(starts), weights, np.ascontiguousarray(dirs), cdf,
-                         rate, n_k, int(seed) + 104729 * k, jitter=jitter, lobe=lobe, **extra)
-        got = kernels.trace_paths(inp, threads=worker_count(threads), should_cancel=should_cancel)
-        if got is None:
-            raise Cancelled()
-        acc = got if acc is None else acc + got
+    acc = _trace(sets, n_paths, seed, threads, should_cancel, density,
+                 np.asarray(pm.w2i, np.float64), i2w, pm, stride, towards, rate, around, fog)
     # the deposits are density-weighted: divide by the density under each point's tent
     # (the lattice cell's mean), so that M is the medium's own average there and a point
     # beside the medium's surface is not diluted by the empty side
     mean_rho = mean_rho[..., None] * vol
     m = np.divide(acc, mean_rho, out=np.zeros_like(acc), where=mean_rho > 0.0)
-    return stride, h, np.ascontiguousarray(m, np.float32)
+    far = None
+    if fog and camera is not None:
+        far = _far_multiple(pm, sets, camera, n_paths, seed, threads, should_cancel, around)
+    return stride, h, np.ascontiguousarray(m, np.float32), far
+
+
+def _trace(sets, n_paths, seed, threads, should_cancel, density, w2i, i2w, pm, stride, towards,
+           rate, around, fog) -> np.ndarray:
+    """The deposits (LX,LY,LZ,3) of ``n_paths`` paths shared among the start ``sets`` in
+    proportion to their power, on the grid ``density`` / ``w2i`` / ``i2w`` with lattice
+    ``stride``; raises parallel.Cancelled on Esc."""
+    surf = around.surfaces if around is not None and around.surfaces is not None \
+        and not around.surfaces.empty else None
+    centre, radius = reach(pm, (w2i, density.shape))
+    extra = dict(outside=1.0 if fog else 0.0, reach_centre=centre, reach_radius=radius)
+    if surf is not None:
+        albedo = surface_albedo(surf) if around.bounce else np.zeros((len(surf.v0), 3))
+        extra.update(triangles=np.stack([surf.v0, surf.e1, surf.e2], axis=1), albedo=albedo)
+    st = np.asarray(pm.sigma_t, np.float64)
+    totals = np.array([float(p.sum()) for _, p, _, _, _ in sets])
+    acc = None
+    for k, (starts, pw, dirs, jitter, lobe) in enumerate(sets):
+        n_k = max(1, int(round(n_paths * totals[k] / totals.sum())))
+        weights, cdf = from_power(pw)
+        inp = PathInputs(density, w2i, i2w, np.asarray(pm.sigma_s, np.float64), st, float(pm.g),
+                         stride, towards, np.ascontiguousarray(starts), weights,
+                         np.ascontiguousarray(dirs), cdf, rate, n_k, int(seed) + 104729 * k,
+                         jitter=jitter, lobe=lobe, **extra)
+        got = kernels.trace_paths(inp, threads=worker_count(threads), should_cancel=should_cancel)
+        if got is None:
+            raise Cancelled()
+        acc = got if acc is None else acc + got
+    return acc
+
+
+def _far_multiple(pm, sets, camera, n_paths, seed, threads, should_cancel, around):
+    """worldfog.FarField of the fog ``pm`` for one light: ``FAR_PATHS`` of ``n_paths`` paths
+    from the same ``sets`` of starts, their M on the voxels of a coarse frustum box
+    (``FAR_RESOLUTION`` along its longest side) to the depth where the camera's transmittance
+    through the fog is e^-TAU_VIEW, for the tail beyond the fog's grid (worldfog.tail).  None
+    where the fog has no extinction (no such depth)."""
+    from ..worldfog import FarField, frustum_box, view_depth
+    depth = view_depth(None, pm.medium)
+    if not np.isfinite(depth):
+        return None
+    near = max(float(camera.clip_start), 0.0)
+    shape, i2w4, voxel = frustum_box(camera, near, max(depth, near + 1e-3), FAR_RESOLUTION)
+    w2i = np.linalg.inv(i2w4)[:3]
+    density = np.ones(shape, np.float32)
+    lidx = np.stack(np.meshgrid(*[np.arange(s) for s in shape], indexing="ij"), -1).reshape(-1, 3)
+    pts = lidx @ i2w4[:3, :3].T + i2w4[:3, 3]
+    towards = np.ascontiguousarray(towards_camera(camera, pts).reshape(tuple(shape) + (3,)))
+    rate = max(float(np.max(pm.sigma_t)), 1.0 / voxel)
+    acc = _trace(sets, max(1, int(n_paths * FAR_PATHS)), int(seed) + 7, threads, should_cancel,
+                 density, w2i, np.ascontiguousarray(i2w4[:3, :3]), pm, 1, towards, rate, around,
+                 True)
+    return FarField(w2i, np.ascontiguousarray(acc / voxel ** 3, np.float32))

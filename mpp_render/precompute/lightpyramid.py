@@ -34,7 +34,9 @@ class MultipleField:
     None, or for a mesh volume whose first flights mostly leave it the exact first two
     flights (firstflight.FirstFlight on the finest lattice) that replace the walk's, by their
     weight (march.flatten_levels).  ``flat``: the march sums the levels once (``flattens``).
-    ``traced``: ``levels`` is one level, the traced paths' M (paths.py), read as it is."""
+    ``traced``: ``levels`` is one level, the traced paths' M (paths.py), read as it is.
+    ``far``: for the world fog's traced paths, their M beyond its grid (worldfog.FarField,
+    read by worldfog.tail), else None."""
 
     stride: int
     h: float
@@ -42,6 +44,7 @@ class MultipleField:
     first: Optional[FirstFlight] = None
     flat: bool = False
     traced: bool = False
+    far: Optional[object] = None
 
 
 def flattens(pm: PreparedMedium, camera: Optional[Camera], tuning: Tuning = Tuning()) -> bool:

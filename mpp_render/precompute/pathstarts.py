@@ -51,13 +51,16 @@ class Surroundings:
     bounce: bool = True
 
 
-def reach(pm) -> tuple:
+def reach(pm, grid=None) -> tuple:
     """(centre (3,) m, radius m) of the sphere within which paths of medium ``pm`` may return
-    to it: for the world fog its grid's half-diagonal plus ``REACH_MFP`` mean free paths, for
-    another medium twice its grid's half-diagonal (surfaces within it send light in)."""
-    n = np.array(pm.grid.shape, np.float64) - 1.0
+    to its grid (or ``grid``: (w2i (3,4), shape) of another grid the paths deposit on): for
+    the world fog the grid's half-diagonal plus ``REACH_MFP`` mean free paths, for another
+    medium twice its grid's half-diagonal (surfaces within it send light in)."""
+    w2i, shape = (pm.w2i, pm.grid.shape) if grid is None else grid
+    m = np.linalg.inv(np.vstack([np.asarray(w2i, np.float64), [0.0, 0.0, 0.0, 1.0]]))
+    n = np.array(shape, np.float64) - 1.0
     corners = np.stack(np.meshgrid(*[[0.0, x] for x in n], indexing="ij"), -1).reshape(-1, 3)
-    world = corners @ pm.i2w[:3, :3].T + pm.i2w[:3, 3]
+    world = corners @ m[:3, :3].T + m[:3, 3]
     centre = world.mean(axis=0)
     half = float(np.max(np.linalg.norm(world - centre, axis=1)))
     if pm.kind == "fog":

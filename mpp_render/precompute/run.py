@@ -146,7 +146,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                              threads=threads, should_cancel=should_cancel,
                                              around=around)
                 if traced is not None:
-                    ms[li] = MultipleField(traced[0], traced[1], [traced[2]], traced=True)
+                    ms[li] = MultipleField(traced[0], traced[1], [traced[2]], traced=True,
+                                           far=traced[3])
                     check(should_cancel)
                     continue
                 # the walk starts where the beam of unscattered and forward-scattered light
