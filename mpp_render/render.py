@@ -188,9 +188,13 @@ def render(desc: SceneDescription,
                  "multiple": np.zeros((n, 3)), "steps": np.zeros(n), "emission": np.zeros((n, 3))}
         behind = np.broadcast_to(bg, (n, 3)).copy()
         if hit.any():
+            # each pixel's samples gather through a Latin hypercube of directions
+            bands = np.argsort(rng.random((2, n // spp, spp)), axis=2).reshape(2, n)
             ph = o[hit] + d[hit] * t_hit[hit, None]
             behind[hit] = shade(surf, tri[hit], ph, d[hit], lights, bg,
-                                media_optical_depth, rng, media_radiance(index))
+                                media_optical_depth, rng, media_radiance(index),
+                                gathers=st.tuning.surface_gathers,
+                                strata=(bands[0][hit], bands[1][hit], spp))
             dh = t_hit[hit] * axial[hit]
             r["depth"][hit] = np.minimum(r["depth"][hit], dh)
         if fog_pm is not None:  # the homogeneous fog beyond its grid, seen through the march

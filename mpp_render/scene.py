@@ -191,7 +191,11 @@ class Tuning:
     level).  ``skip_empty``: the march skips super-steps where every medium is empty (the
     same result, faster).  ``adapt_tau``: the march's longer steps in thin media (the
     density majorant's optical depth per step within it; 0: off).  ``tile``: the largest
-    tile side in pixels."""
+    tile side in pixels.  ``surface_gathers``: directions per camera sample through which a
+    surface gathers the sky, the volumes' light and the other surfaces' (surfaces.shade); 4
+    took p_fog_spot_shafts' single scattering from 0.194 to 0.079 at 16 spp (its pillars are
+    lit by the spot-lit ground, its ground by the beam's fog) for 25-40 % more render time in
+    scenes with a ground."""
 
     skip_min_voxels: int = 1 << 20
     spot_cull: bool = True
@@ -202,6 +206,7 @@ class Tuning:
     skip_empty: bool = True
     adapt_tau: float = 0.1
     tile: int = 64
+    surface_gathers: int = 4
 
 
 # light paths per light and medium at the default quality (docs/method.md, "Traced paths")

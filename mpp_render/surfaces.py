@@ -230,7 +230,7 @@ def facing_normals(ss: SurfaceSet, tri, d):
 
 
 def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, rng,
-          media_radiance=None, bounces: int = 1):
+          media_radiance=None, bounces: int = 1, gathers: int = 1, strata=None):
     """Outgoing radiance (N,3) W/(m^2 sr) of surface points ``p`` hit by rays ``d``.
 
     ``media_optical_depth(points, dirs, t_max)`` -> (N,3) optical depth through the media
@@ -247,7 +247,15 @@ def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, r
     hits a surface, that point's own light (``shade`` of it with ``bounces - 1``, without the
     volumes' light, ``media_radiance``) seen through the media is reflected the same way: a lit
     ground brightens the pillars that stand on it, as Cycles' diffuse bounces do (they count
-    no volume bounce, so they are in its single-scattering images)."""
+    no volume bounce, so they are in its single-scattering images).
+
+    ``gathers``: cosine-weighted directions per point (their mean), stratified in the radial
+    coordinate (``gathers`` equal bands of cos^2); the bounces' own points gather one.
+    ``strata``: (band_r (N,) int, band_phi (N,) int, count) -- bands of r^2 and phi, each
+    one of ``count``, given by the caller as two random permutations per pixel over its
+    samples: a pixel's gathers are then a Latin hypercube over (r^2, phi) that shares out
+    the hemisphere instead of drawing it independently, and each sample's band is uniform,
+    so the estimate stays unbiased where only some of a pixel's samples hit the surface."""
     from .lights import incident, is_dark, towards_light
     from .phase import orthonormal_basis
 
@@ -274,31 +282,40 @@ def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, r
         out[lit] += bsdf.eval(to_l[lit], lit) * e[lit] * np.exp(-tau)
     wc = np.asarray(world_color, np.float64)
     if np.any(wc > 0) or media_radiance is not None or bounces > 0:
-        u = rng.random((n_pts, 2))
-        r = np.sqrt(u[:, 0])
-        phi = 2 * np.pi * u[:, 1]
-        t1, t2 = orthonormal_basis(nrm)
+        k = max(int(gathers), 1)
+        u = rng.random((n_pts, k, 2))
+        if strata is not None:   # the pixel's samples share out (r^2, phi)
+            count = max(int(strata[2]), 1)
+            u[..., 0] = (np.asarray(strata[0])[:, None] + u[..., 0]) / count
+            u[..., 1] = (np.asarray(strata[1])[:, None] + u[..., 1]) / count
+        u[..., 0] = (np.arange(k)[None, :] + u[..., 0]) / k    # stratified in r^2
+        r = np.sqrt(u[..., 0]).reshape(-1)
+        phi = 2 * np.pi * u[..., 1].reshape(-1)
+        nk, pk = np.repeat(nrm, k, axis=0), np.repeat(po, k, axis=0)
+        t1, t2 = orthonormal_basis(nk)
         w = (t1 * (r * np.cos(phi))[:, None] + t2 * (r * np.sin(phi))[:, None]
-             + nrm * np.sqrt(np.maximum(0.0, 1 - r * r))[:, None])
-        t_hit, tri_hit = intersect(ss, po, w, np.full(n_pts, np.inf))
-        albedo = bsdf.albedo()
+             + nk * np.sqrt(np.maximum(0.0, 1 - r * r))[:, None])
+        t_hit, tri_hit = intersect(ss, pk, w, np.full(len(pk), np.inf))
+        albedo = np.repeat(bsdf.albedo(), k, axis=0) / k
+        acc = np.zeros((len(pk), 3))
         if bounces > 0:
             hit = np.flatnonzero(tri_hit >= 0)
             if hit.size:
-                ph = po[hit] + w[hit] * t_hit[hit, None]
+                ph = pk[hit] + w[hit] * t_hit[hit, None]
                 seen = shade(ss, tri_hit[hit], ph, w[hit], lights, world_color,
                              media_optical_depth, rng, None, bounces - 1)
-                tau = media_optical_depth(po[hit], w[hit], t_hit[hit])
-                out[hit] += albedo[hit] * seen * np.exp(-tau)
+                tau = media_optical_depth(pk[hit], w[hit], t_hit[hit])
+                acc[hit] += albedo[hit] * seen * np.exp(-tau)
         if np.any(wc > 0):
-            # the uniform sky seen through one cosine-distributed direction, reflected by
-            # every layer with its directional albedo (where no surface hides it)
+            # the uniform sky seen through cosine-distributed directions, reflected by every
+            # layer with its directional albedo (where no surface hides it)
             sky = np.flatnonzero(~np.isfinite(t_hit))
             if sky.size:
-                tau = media_optical_depth(po[sky], w[sky], np.full(sky.size, np.inf))
-                out[sky] += albedo[sky] * wc * np.exp(-tau)
+                tau = media_optical_depth(pk[sky], w[sky], np.full(sky.size, np.inf))
+                acc[sky] += albedo[sky] * wc * np.exp(-tau)
         if media_radiance is not None:
-            out += albedo * media_radiance(po, w, t_hit)
+            acc += albedo * media_radiance(pk, w, t_hit)
+        out += acc.reshape(n_pts, k, 3).sum(axis=1)
     return out
 
 

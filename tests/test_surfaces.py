@@ -337,3 +337,34 @@ def test_volume_light_reaches_the_ground():
     want = albedo / math.pi * irradiance
     print("ground / quadrature:", ground / want)
     assert abs(ground / want - 1.0) < 0.05, (ground, want)
+
+
+def test_gathers_and_the_pixels_latin_hypercube_keep_the_mean_and_cut_the_noise():
+    """A grey ground at the foot of a black wall under a uniform sky gathers half the sky
+    (the wall hides the half of the cosine-weighted hemisphere beyond it): its radiance is
+    albedo x 0.5 x sky.  More gathers per sample and the Latin hypercube of a pixel's 16
+    samples keep that mean and shrink the spread of the pixel means."""
+    ground = quad(0.0, 50.0, albedo=0.5, name="ground")
+    wall = Surface("wall", np.array([[0, -50, 0], [0, 50, 0], [0, 50, 50], [0, -50, 50]], float),
+                   np.array([[0, 1, 2], [0, 2, 3]]), np.zeros(3))
+    ss = prepare_surfaces([ground, wall])
+    spp, pixels = 16, 400
+    n = spp * pixels
+    p = np.tile([[0.01, 0.0, 0.0]], (n, 1))
+    d = np.tile([[0.0, 0.3, -1.0]], (n, 1)) / np.hypot(0.3, 1.0)
+    _, tri = intersect(ss, p - 5 * d, d, np.full(n, 10.0))
+    no_media = lambda pts, dirs, t: np.zeros((len(pts), 3))
+    rng = np.random.default_rng(5)
+    expect = 0.5 * 0.5 * 1.0
+    spreads = []
+    for gathers, strata in ((1, None), (4, None), (1, "lhs")):
+        st = None
+        if strata:
+            bands = np.argsort(rng.random((2, pixels, spp)), axis=2).reshape(2, n)
+            st = (bands[0], bands[1], spp)
+        out = S.shade(ss, tri, p, d, [], np.ones(3), no_media, rng, None, bounces=1,
+                      gathers=gathers, strata=st)[:, 0]
+        per_pixel = out.reshape(pixels, spp).mean(axis=1)
+        assert per_pixel.mean() == pytest.approx(expect, rel=0.03), (gathers, strata)
+        spreads.append(per_pixel.std())
+    assert spreads[1] < 0.6 * spreads[0] and spreads[2] < 0.6 * spreads[0], spreads
