@@ -94,17 +94,25 @@ def render_frame(engine, depsgraph) -> Optional[FrameRecord]:
     should_cancel = cancel_check(engine.test_break, start)
     scene = depsgraph.scene_eval
     width, height = int(engine.resolution_x), int(engine.resolution_y)
+    told = []
+
+    def tell(warnings):   # what the engine leaves out, said before the render runs
+        for msg in warnings:
+            engine.report({'WARNING'}, msg)
+            told.append(msg)
+
     try:
         rec = frame.render_depsgraph(depsgraph, width, height,
                                      camera_override=engine.camera_override,
                                      progress=progress_reporter(engine),
-                                     should_cancel=should_cancel)
+                                     should_cancel=should_cancel, on_translated=tell)
     except TranslationError as e:  # say why instead of a black frame
         engine.report({'ERROR'}, f"MPP: cannot translate the scene: {e}")
         return None
     out = rec.output
     for msg in out.warnings:
-        engine.report({'WARNING'}, msg)
+        if msg not in told:
+            engine.report({'WARNING'}, msg)
 
     t_write = time.perf_counter()
     write_result(engine, out.passes, rec.view_layer, width, height)
@@ -121,11 +129,13 @@ def render_frame(engine, depsgraph) -> Optional[FrameRecord]:
 
 class MPPRenderEngine(bpy.types.RenderEngine):
     """Volumes (smoke, clouds, fog) by ray marching with most-probable-path multiple
-    scattering.  Final renders only; no viewport or material preview."""
+    scattering.  Final renders; the viewport's Material Preview uses EEVEE
+    (``bl_use_eevee_viewport``); no Rendered viewport yet."""
 
     bl_idname = "MPP_RENDER"
     bl_label = "MPP"
     bl_use_preview = False
+    bl_use_eevee_viewport = True   # Material Preview shading draws with EEVEE
     bl_use_postprocess = True
     bl_use_shading_nodes_custom = False
 

@@ -48,10 +48,13 @@ class TranslationError(Exception):
 
 def render_depsgraph(depsgraph, width: int, height: int, camera_override=None,
                      progress: Optional[Callable[[float, str], None]] = None,
-                     should_cancel: Optional[Callable[[], bool]] = None) -> FrameRecord:
+                     should_cancel: Optional[Callable[[], bool]] = None,
+                     on_translated: Optional[Callable[[List[str]], None]] = None) -> FrameRecord:
     """Render the current frame of ``depsgraph``'s view layer (``width`` x ``height`` pixels,
     the camera ``camera_override`` or the scene's) with the MPP core and return its record.
-    A scene without volumes gets ``NO_MEDIA_MESSAGE`` among its warnings.  Raises
+    A scene without volumes gets ``NO_MEDIA_MESSAGE`` among its warnings.
+    ``on_translated(warnings)`` is called with what the translation left out or changed before
+    the render starts (the engine reports it then, not after the render).  Raises
     ``TranslationError`` when the scene cannot be translated."""
     from ..render import render
     from .properties import settings_from_scene
@@ -70,6 +73,8 @@ def render_depsgraph(depsgraph, width: int, height: int, camera_override=None,
     translate_s = time.perf_counter() - start
     if not desc.media and desc.world.volume is None:
         desc.warnings.append(NO_MEDIA_MESSAGE)
+    if on_translated is not None:
+        on_translated(list(desc.warnings))
     out = render(desc, progress=progress, should_cancel=should_cancel)
     return FrameRecord(out, translate_s, 0.0, depsgraph.view_layer.name,
                        int(scene.frame_current))

@@ -256,3 +256,37 @@ def test_extension_builds_installs_and_unregisters(tmp_path):
                        env=env, capture_output=True, text=True, timeout=120)
     assert p.returncode == 0, p.stderr[-2000:]
     assert "UNREGISTERED" in p.stdout
+
+
+def test_what_is_left_out_is_reported_before_the_render_runs(empty_scene, monkeypatch, capfd):
+    """Motion blur, an unsupported node: the translation hands them to the engine before the
+    render runs (frame.render_depsgraph's on_translated), and the engine reports each once."""
+    from mpp_render import render as render_mod
+    sc = small_scene(empty_scene)
+    sc.render.use_motion_blur = True
+    nt = bpy.data.materials["Vol0"].node_tree
+    noise = nt.nodes.new("ShaderNodeTexNoise")
+    nt.links.new(noise.outputs["Fac"], nt.nodes["Principled Volume"].inputs["Density"])
+    events = []
+    real_render = render_mod.render
+
+    def spy_render(*a, **kw):
+        events.append(("render", None))
+        return real_render(*a, **kw)
+
+    monkeypatch.setattr(render_mod, "render", spy_render)
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    frame.render_depsgraph(depsgraph, W, H, on_translated=lambda w: events.append(("told", w)))
+    assert [k for k, _ in events] == ["told", "render"]
+    told = events[0][1]
+    assert any("motion blur" in m for m in told) and any("Noise Texture" in m for m in told)
+    capfd.readouterr()
+    frame.render_mpp()
+    printed = capfd.readouterr()
+    text = printed.out + printed.err
+    for key in ("motion blur is not supported", "Noise Texture"):
+        assert text.count(key) == 1, (key, text[-3000:])
+
+
+def test_material_preview_shading_uses_eevee():
+    assert engine.MPPRenderEngine.bl_use_eevee_viewport is True

@@ -62,6 +62,8 @@ def scene_from_depsgraph(depsgraph, settings: Settings, camera_override=None,
     else:
         camera = camera_from_object(cam_ob, scene, width, height, warnings)
     desc = SceneDescription(camera=camera, settings=settings, warnings=warnings)
+    if getattr(scene.render, "use_motion_blur", False):
+        warnings.append("motion blur is not supported yet; the frame is rendered without it")
     try:
         desc.world = world_from_scene(scene, warnings)
     except Exception as e:  # safety net, as for objects
