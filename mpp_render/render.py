@@ -174,12 +174,15 @@ def render(desc: SceneDescription,
         yy, xx = np.mgrid[y0:y0 + th, x0:x0 + tw]
         px = (xx.reshape(-1, 1) + offs[None, :, 0]).ravel()
         py = (yy.reshape(-1, 1) + offs[None, :, 1]).ravel()
-        o, d, tmin, tmax, axial = primary_rays(cam, px, py)
+        lens = rng.random((len(px), 2)) if cam.aperture > 0.0 else None
+        o, d, tmin, tmax, axial = primary_rays(cam, px, py, lens)
         n = len(o)
         t_hit, tri = intersect(surf, o, d, tmax)
         hit = tri >= 0
         # the world's fog reaches beyond the clip end on rays that hit nothing, as in Cycles
         t_end = np.where(hit, t_hit, np.inf) if fog_pm is not None else t_hit
+        void = tmax < tmin   # a panoramic lens's points outside its circle: black
+        t_end = np.where(void, tmin, t_end)
         if ctx is not None:
             t0, t1 = union_interval(media, o, d, tmin, t_end)
             r = march_rays(ctx, o, d, t0, t1, axial, ray_keys(st.seed, index, n))
@@ -187,6 +190,7 @@ def render(desc: SceneDescription,
             r = {"single": np.zeros((n, 3)), "T": np.ones((n, 3)), "depth": np.full(n, DEPTH_MISS),
                  "multiple": np.zeros((n, 3)), "steps": np.zeros(n), "emission": np.zeros((n, 3))}
         behind = np.broadcast_to(bg, (n, 3)).copy()
+        behind[void] = 0.0
         if hit.any():
             # each pixel's samples gather through a Latin hypercube of directions
             bands = np.argsort(rng.random((2, n // spp, spp)), axis=2).reshape(2, n)

@@ -29,6 +29,17 @@ class Camera:
     bounds the image in camera space: for PERSP on the plane z = -1 (dimensionless, so
     tangents of the half angles), for ORTHO in metres.  ``clip_start``/``clip_end`` are planar
     distances along the view axis in metres, as in Cycles.
+
+    Depth of field (Cycles' thin lens): ``aperture`` the lens radius in metres (0: a pinhole),
+    ``focus_distance`` the distance of the plane in focus along the view axis (m),
+    ``blades`` the aperture's sides (below 3: a disc), ``blade_rotation`` (radians),
+    ``aperture_ratio`` the anamorphic squeeze (the aperture's x divided by it).
+
+    ``projection`` 'PANO': a panoramic camera as Cycles' (camera.panorama_directions), its
+    ``panorama`` a dict: ``type`` ('EQUIRECTANGULAR', 'FISHEYE_EQUIDISTANT',
+    'FISHEYE_EQUISOLID', 'FISHEYE_LENS_POLYNOMIAL' or 'MIRRORBALL'), ``fov`` (radians),
+    ``lens`` and ``sensor`` (width, height) in mm, ``longitude``/``latitude`` (min, max)
+    radians, ``polynomial`` (k0..k4); its clipping is spherical (distance from the camera).
     """
 
     projection: str
@@ -38,6 +49,12 @@ class Camera:
     plane: tuple
     clip_start: float = 0.1
     clip_end: float = 1000.0
+    aperture: float = 0.0
+    focus_distance: float = 10.0
+    blades: int = 0
+    blade_rotation: float = 0.0
+    aperture_ratio: float = 1.0
+    panorama: Optional[dict] = None
 
 
 @dataclass

@@ -130,7 +130,9 @@ def content_depth(desc: SceneDescription, media) -> float:
             continue
         pos = (np.asarray(light.matrix, np.float64)[:3, 3] if light.kind == "AREA"
                else np.asarray(light.position, np.float64))
-        depth = max(depth, float(np.dot(pos - c2w[:3, 3], fwd)))
+        reach = float(np.linalg.norm(pos - c2w[:3, 3])) if str(cam.projection).upper() == "PANO" \
+            else float(np.dot(pos - c2w[:3, 3], fwd))
+        depth = max(depth, reach)
     return depth
 
 
@@ -169,7 +171,10 @@ def frustum_box(cam, near: float, depth: float, resolution: int):
     its longest side (at least 8), on the camera-aligned box round the view frustum from
     axial depth ``near`` to ``depth`` (m), ``MARGIN_VOXELS`` wider on every side."""
     xmin, xmax, ymin, ymax = (float(v) for v in cam.plane)
-    if str(cam.projection).upper() == "ORTHO":
+    if str(cam.projection).upper() == "PANO":   # it sees all round: a cube round the camera
+        lo = np.full(3, -depth)
+        hi = np.full(3, depth)
+    elif str(cam.projection).upper() == "ORTHO":
         lo = np.array([xmin, ymin, -depth])
         hi = np.array([xmax, ymax, -near])
     else:

@@ -118,4 +118,27 @@ def test_bad_arguments():
     with pytest.raises(ValueError):
         _plane(sensor_fit="DIAGONAL")
     with pytest.raises(ValueError):
-        _plane(projection="PANO")
+        _plane(projection="SPHERICAL")
+
+
+def test_thin_lens_rays_of_a_pixel_meet_on_the_plane_in_focus():
+    """Every ray through one pixel, whatever its point on the aperture, crosses the plane in
+    focus where the pinhole ray does; their origins spread over the aperture."""
+    from mpp_render.camera import primary_rays
+    from mpp_render.scene import Camera
+    c2w = np.eye(4)
+    c2w[:3, 3] = (0.5, -2.0, 1.0)
+    cam = Camera("PERSP", c2w, 40, 30, (-0.4, 0.4, -0.3, 0.3), aperture=0.2,
+                 focus_distance=3.0, blades=5, blade_rotation=0.2, aperture_ratio=1.5)
+    n = 500
+    px, py = np.full(n, 12.3), np.full(n, 20.7)
+    o, d, tmin, tmax, axial = primary_rays(cam, px, py, np.random.default_rng(1).random((n, 2)))
+    o0, d0 = primary_rays(cam, px[:1], py[:1])[:2]
+    fwd = -c2w[:3, 2]
+    hit = o + d * (3.0 / (d @ fwd))[:, None]            # planar distance 3 m along the axis
+    target = o0[0] + d0[0] * 3.0 / (d0[0] @ fwd)
+    assert np.allclose(hit, target, atol=1e-9)
+    spread = o - c2w[:3, 3]
+    assert np.abs(spread @ fwd).max() < 1e-12          # on the lens plane
+    assert 0.05 < np.abs(spread[:, 0]).max() <= 0.2 / 1.5 + 1e-9   # squeezed in x
+    assert np.allclose(axial, d @ fwd)

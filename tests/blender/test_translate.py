@@ -607,14 +607,21 @@ def test_camera_plane_matches_view_frame(empty_scene, projection, props, res):
 def test_camera_override_size_and_unsupported_types(empty_scene):
     add_camera(empty_scene)
     other = add_camera(empty_scene, type="PANO")
-    other.name = "fisheye"
+    other.name = "cylinder"
+    other.data.panorama_type = "CENTRAL_CYLINDRICAL"   # the one kind not rendered
     empty_scene.camera = bpy.data.objects["cam"]
     dg = bpy.context.evaluated_depsgraph_get()
     desc = scene_from_depsgraph(dg, Settings(), camera_override=other.evaluated_get(dg),
                                 width=64, height=32)
     assert (desc.camera.width, desc.camera.height) == (64, 32)
     assert desc.camera.projection == "PERSP"
-    assert any("'fisheye'" in w and "PANO" in w for w in desc.warnings)
+    assert any("'cylinder'" in w and "CENTRAL_CYLINDRICAL" in w for w in desc.warnings)
+    other.data.panorama_type = "FISHEYE_EQUISOLID"
+    dg = bpy.context.evaluated_depsgraph_get()
+    desc = scene_from_depsgraph(dg, Settings(), camera_override=other.evaluated_get(dg),
+                                width=64, height=32)
+    assert desc.camera.projection == "PANO" and not desc.warnings
+    assert desc.camera.panorama["type"] == "FISHEYE_EQUISOLID"
 
 
 # -- whole scenes -------------------------------------------------------------------------
