@@ -53,6 +53,30 @@ class PreparedMedium:
         """Whether the medium has a sharp surface (a mesh volume's threshold)."""
         return self.threshold >= 0.0
 
+    @property
+    def endless(self) -> bool:
+        """Whether the medium fills all space (the world's fog): its grid is only a window
+        onto it, and beyond the grid it goes on with density ``outside_density``."""
+        return self.medium.source == "WORLD"
+
+    @property
+    def uniform(self) -> bool:
+        """Whether the medium has one density wherever it has any (a mesh volume)."""
+        return self.sharp and not self.endless
+
+    @property
+    def outside_density(self) -> float:
+        """The density beyond the grid: 1 for the endless fog, 0 for any other medium."""
+        return 1.0 if self.endless else 0.0
+
+    def path_density(self) -> np.ndarray:
+        """float32 (X,Y,Z) density the light paths fly through (paths.py): the endless fog's
+        is 1 everywhere (its grid's padding ramp is the march's, not the fog's), any other
+        medium's is density_from(grid)."""
+        if self.endless:
+            return np.ones(self.grid.shape, np.float32)
+        return np.ascontiguousarray(density_from(self.grid, self.threshold), np.float32)
+
     def to_world(self, ijk) -> np.ndarray:
         """World positions (N,3, m) of padded index coordinates ``ijk`` (N,3)."""
         return ijk @ self.i2w[:3, :3].T + self.i2w[:3, 3]

@@ -257,3 +257,23 @@ def test_without_the_compiled_kernels_the_render_says_so_once(monkeypatch):
     assert first.stats["backend"] == "numpy"
     assert first.passes["Transmittance"].min() < 0.9
     np.testing.assert_array_equal(first.passes["Combined"], second.passes["Combined"])
+
+
+def test_each_medium_kind_answers_for_itself():
+    """A density grid, a mesh volume (a threshold) and the world's fog: what the stages ask
+    of a medium (does it fill all space, is it of one density, what lies beyond its grid,
+    what density the light paths see) each kind answers itself."""
+    grid = np.zeros((6, 6, 6), np.float32)
+    grid[1:5, 1:5, 1:5] = 0.5
+    vdb = prepare(Medium("vdb", grid, np.eye(4), np.ones(3), np.zeros(3), 0.0))
+    mesh = prepare(Medium("mesh", grid, np.eye(4), np.ones(3), np.zeros(3), 0.0, source="MESH"))
+    fog = prepare(Medium("world", np.ones((4, 4, 4), np.float32), np.eye(4), np.ones(3),
+                         np.zeros(3), 0.0, source="WORLD"))
+    assert [m.kind for m in (vdb, mesh, fog)] == ["grid", "mesh", "fog"]
+    assert [m.endless for m in (vdb, mesh, fog)] == [False, False, True]
+    assert [m.uniform for m in (vdb, mesh, fog)] == [False, True, False]
+    assert [m.outside_density for m in (vdb, mesh, fog)] == [0.0, 0.0, 1.0]
+    assert np.all(fog.path_density() == 1.0)           # no padding ramp for the paths
+    assert fog.grid.min() == 0.0                        # the march's grid has one
+    assert set(np.unique(mesh.path_density())) <= {0.0, 1.0}
+    assert vdb.path_density().max() == pytest.approx(0.5)

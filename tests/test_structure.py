@@ -10,11 +10,11 @@ ROOT = pathlib.Path(__file__).resolve().parents[1] / "mpp_render"
 # top to bottom; a module not named here is a failure (name it in docs/structure.md first)
 LAYERS = [
     {"cli", "__main__", "package", "blender"},                          # entry points, glue
-    {"render", "cache", "bounce", "budget", "metrics", "exr"},          # the frame; I/O
+    {"render", "tiles", "cache", "bounce", "budget", "metrics", "exr"},  # the frame; I/O
     {"precompute", "march", "firstflight", "pyramid", "parallel"},      # the two stages
     {"kernels", "kernels_np", "_kernels", "paths"},                     # C kernels, numpy twins
-    {"lights", "surfaces", "worldfog", "media", "phase", "mpp", "lightrecord", "camera",
-     "blackbody", "passes"},                                            # physics, media, model
+    {"lights", "surfaces", "principled", "worldfog", "media", "phase", "mpp", "lightrecord",
+     "camera", "blackbody", "passes"},                                            # physics, media, model
     {"scene"},                                                          # the description
 ]
 

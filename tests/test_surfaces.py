@@ -7,8 +7,10 @@ import pytest
 
 from mpp_render.render import render
 from mpp_render.scene import Camera, Light, Medium, SceneDescription, Settings, Surface, World
-from mpp_render import surfaces as S
-from mpp_render.surfaces import Principled, intersect, prepare_surfaces, surface_params
+from mpp_render import principled as S
+from mpp_render import surfaces
+from mpp_render.principled import Principled
+from mpp_render.surfaces import intersect, prepare_surfaces, surface_params
 
 
 def quad(z, half, albedo=0.5, name="plane", centre=(0.0, 0.0)):
@@ -362,7 +364,7 @@ def test_gathers_and_the_pixels_latin_hypercube_keep_the_mean_and_cut_the_noise(
         if strata:
             bands = np.argsort(rng.random((2, pixels, spp)), axis=2).reshape(2, n)
             st = (bands[0], bands[1], spp)
-        out = S.shade(ss, tri, p, d, [], np.ones(3), no_media, rng, None, bounces=1,
+        out = surfaces.shade(ss, tri, p, d, [], np.ones(3), no_media, rng, None, bounces=1,
                       gathers=gathers, strata=st)[:, 0]
         per_pixel = out.reshape(pixels, spp).mean(axis=1)
         assert per_pixel.mean() == pytest.approx(expect, rel=0.03), (gathers, strata)

@@ -89,7 +89,7 @@ def density_lengths(media: List[PreparedMedium], points, dirs, t_max, step,
 
 def split_fog(media: List[PreparedMedium]):
     """(the media other than the world's fog, the fog's PreparedMedium or None)."""
-    fog = next((pm for pm in media if pm.kind == "fog"), None)
+    fog = next((pm for pm in media if pm.endless), None)
     return [pm for pm in media if pm is not fog], fog
 
 

@@ -10,7 +10,6 @@ import numpy as np
 
 from .. import kernels
 from ..camera import towards_camera
-from ..media import density_from
 from ..parallel import Cancelled, worker_count
 from ..paths import PATHS_MAX_SPAN, PathInputs, from_power, rate_span
 from .lattice import lattice_points, walk_lattice
@@ -48,10 +47,8 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     vol = float(abs(np.linalg.det(i2w))) * stride ** 3
     power = base * vol
     live = power.sum(axis=1) > 0.0
-    fog = pm.kind == "fog"
-    # the fog is the same everywhere: its paths see no padding ramp at the grid's faces
-    density = np.ones(pm.grid.shape, np.float32) if fog else \
-        np.ascontiguousarray(density_from(pm.grid, pm.threshold), np.float32)
+    fog = pm.endless
+    density = pm.path_density()
     sets = []   # (points, power W, directions, jitter, lobe)
     if np.any(live):
         sets.append((pts[live], power[live], light_direction(light, pts[live]), 1.0, 0))
@@ -80,7 +77,7 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     # a small medium needs no more paths than PATHS_PER_POINT per lattice point it fills
     n_paths = min(int(n_paths), PATHS_PER_POINT * int(np.count_nonzero(mean_rho > 0.0)))
     acc = _trace(sets, n_paths, seed, threads, should_cancel, density,
-                 np.asarray(pm.w2i, np.float64), i2w, pm, stride, towards, rate, around, fog)
+                 np.asarray(pm.w2i, np.float64), i2w, pm, stride, towards, rate, around)
     # the deposits are density-weighted: divide by the density under each point's tent
     # (the lattice cell's mean), so that M is the medium's own average there and a point
     # beside the medium's surface is not diluted by the empty side
@@ -93,14 +90,14 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
 
 
 def _trace(sets, n_paths, seed, threads, should_cancel, density, w2i, i2w, pm, stride, towards,
-           rate, around, fog) -> np.ndarray:
+           rate, around) -> np.ndarray:
     """The deposits (LX,LY,LZ,3) of ``n_paths`` paths shared among the start ``sets`` in
     proportion to their power, on the grid ``density`` / ``w2i`` / ``i2w`` with lattice
     ``stride``; raises parallel.Cancelled on Esc."""
     surf = around.surfaces if around is not None and around.surfaces is not None \
         and not around.surfaces.empty else None
     centre, radius = reach(pm, (w2i, density.shape))
-    extra = dict(outside=1.0 if fog else 0.0, reach_centre=centre, reach_radius=radius)
+    extra = dict(outside=pm.outside_density, reach_centre=centre, reach_radius=radius)
     if surf is not None:
         albedo = surface_albedo(surf) if around.bounce else np.zeros((len(surf.v0), 3))
         extra.update(triangles=np.stack([surf.v0, surf.e1, surf.e2], axis=1), albedo=albedo)
@@ -140,6 +137,5 @@ def _far_multiple(pm, sets, camera, n_paths, seed, threads, should_cancel, aroun
     towards = np.ascontiguousarray(towards_camera(camera, pts).reshape(tuple(shape) + (3,)))
     rate = max(float(np.max(pm.sigma_t)), 1.0 / voxel)
     acc = _trace(sets, max(1, int(n_paths * FAR_PATHS)), int(seed) + 7, threads, should_cancel,
-                 density, w2i, np.ascontiguousarray(i2w4[:3, :3]), pm, 1, towards, rate, around,
-                 True)
+                 density, w2i, np.ascontiguousarray(i2w4[:3, :3]), pm, 1, towards, rate, around)
     return FarField(w2i, np.ascontiguousarray(acc / voxel ** 3, np.float32))

@@ -53,7 +53,7 @@ def flattens(pm: PreparedMedium, camera: Optional[Camera], tuning: Tuning = Tuni
     has any) seen by a perspective or orthographic camera, the direction from a sample to
     the camera then that of the camera ray through it.  Only such a medium gets the exact
     first flights, which join the flattened level."""
-    return bool(tuning.flatten) and pm.kind == "mesh" and camera is not None and \
+    return bool(tuning.flatten) and pm.uniform and camera is not None and \
         str(camera.projection).upper() in ("PERSP", "ORTHO")
 
 

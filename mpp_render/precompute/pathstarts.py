@@ -63,7 +63,7 @@ def reach(pm, grid=None) -> tuple:
     world = corners @ m[:3, :3].T + m[:3, 3]
     centre = world.mean(axis=0)
     half = float(np.max(np.linalg.norm(world - centre, axis=1)))
-    if pm.kind == "fog":
+    if pm.endless:
         st = np.asarray(pm.sigma_t, np.float64)
         return centre, half + REACH_MFP / float(st[st > 0].min())
     return centre, 2.0 * half
