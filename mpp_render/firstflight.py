@@ -391,7 +391,8 @@ def flight_weight(q, inside, axes, source_dirs, g: float, sigma_t):
 
 def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=None,
                  should_cancel: Optional[Callable[[], bool]] = None,
-                 threads: int = 0, exact_flights: int = 2) -> Optional[FirstFlight]:
+                 threads: int = 0, exact_flights: int = 2,
+                 fft_memory: int = FFT_MEMORY) -> Optional[FirstFlight]:
     """The exact first flights of one light on one medium, or None where the walk alone
     serves (every channel's escape fraction at or below ESCAPE_LOW, no power); raises
     parallel.Cancelled on Esc.  The first flight out of the beam and, where ``sigma_s`` is
@@ -407,8 +408,8 @@ def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=Non
     outside its forward peak, ``first_phase``, and the last one's towards the camera);
     ``sigma_t``, ``sigma_s`` (3,) the delta-scaled medium's mean extinction and scattering
     where it has density (1/m).  The camera directions' convolutions run on ``threads``
-    threads (<= 0: one per core; numpy's FFTs release the GIL), fewer where FFT_MEMORY
-    would not hold them.
+    threads (<= 0: one per core; numpy's FFTs release the GIL), fewer where ``fft_memory``
+    bytes (default FFT_MEMORY) would not hold them.
 
     d is the sources' power-weighted mean direction, and the length of that mean spreads the
     flights' directions (``first_phase``): round a point light inside the medium they are
@@ -440,11 +441,11 @@ def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=Non
             same[ch] = [ch]
     orders = {r: [1, 2] if second and sigma_s[r] > 0.0 else [1] for r in same}
     # per (sigma_t, order): the kernel's parts that no camera direction changes, built once
-    # where they fit in half of FFT_MEMORY (else per use, as flight_kernel does)
+    # where they fit in half of fft_memory (else per use, as flight_kernel does)
     keys = sorted({(float(sigma_t[r]), order) for r in same for order in orders[r]})
     base_bytes = 20 * int(np.prod([2 * n - 1 for n in shape]))
     bases = {}
-    if len(keys) * base_bytes <= FFT_MEMORY // 2:
+    if len(keys) * base_bytes <= fft_memory // 2:
         for key in keys:
             check(should_cancel)
             bases[key] = KernelBase(axes, shape, d, (float(g), spread, key[1]), key[0])
@@ -500,7 +501,7 @@ def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=Non
     per_thread = 4 * 8 * int(np.prod(fft_shape(shape)))
     held = sum(b.bare.nbytes + b.u.nbytes for b in bases.values())
     n_threads = worker_count(threads)
-    n_threads = max(1, min(n_threads, (FFT_MEMORY - held) // per_thread))
+    n_threads = max(1, min(n_threads, (fft_memory - held) // per_thread))
     run_chunks(len(dirs), 1, directions, n_threads, should_cancel)
     check(should_cancel)   # a direction that saw Esc left its part out
     return FirstFlight(np.ascontiguousarray(np.maximum(out, 0.0), np.float32), weight)

@@ -305,13 +305,8 @@ def test_the_flights_are_the_same_on_any_number_of_threads_and_stop_on_esc():
     three = ff.first_flight(*args, threads=3)
     assert len(ff.camera_directions(v, v)[0]) > 3
     assert np.array_equal(one.field, three.field)
-    # the kernels' bases beyond half of FFT_MEMORY: built per direction, the same flights
-    monkey = pytest.MonkeyPatch()
-    monkey.setattr(ff, "FFT_MEMORY", 1 << 16)
-    try:
-        apart = ff.first_flight(*args, threads=3)
-    finally:
-        monkey.undo()
+    # the kernels' bases beyond half of the FFT memory: built per direction, the same flights
+    apart = ff.first_flight(*args, threads=3, fft_memory=1 << 16)
     assert np.array_equal(one.field, apart.field)
     for k in (1, 2, 4, 8):
         calls = [0]
