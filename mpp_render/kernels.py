@@ -110,22 +110,54 @@ def optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, 
     return np.frombuffer(buf, np.float64).reshape(n, 3)
 
 
-def light_sweep(out, channel, a2w, axis, sign, i_first, i_last, coef, light_index, cone, init,
-                p_lo, p_hi, n_sub, grids, w2is, sigma_ts, thresholds, *, backend=None):
-    """Optical depth towards a light, written into ``out`` (kernels_np.light_sweep)."""
+@dataclasses.dataclass
+class SweepJob:
+    """One job of the light sweep: the slabs ``p_lo``..``p_hi`` of one pyramid of light
+    columns (precompute.lightdepth.sweep_pyramids) over a medium whose padded index maps to
+    world by ``a2w`` (3,4).  ``axis``, ``sign``, ``i_first``, ``i_last``, ``coef`` (6,),
+    ``cone``: the pyramid; ``light_index`` (3,): the light in index coordinates; ``init``
+    (P,Q,3): the optical depth at the pyramid's first slab; ``n_sub``: sub-steps per slab;
+    ``grids``, ``w2is``, ``sigma_ts``, ``thresholds``: the media it crosses
+    (lightdepth.kernel_arrays).  kernels_np.light_sweep documents the sweep itself."""
+
+    a2w: np.ndarray
+    axis: int
+    sign: int
+    i_first: int
+    i_last: int
+    coef: np.ndarray
+    light_index: np.ndarray
+    cone: bool
+    init: np.ndarray
+    p_lo: int
+    p_hi: int
+    n_sub: int
+    grids: list
+    w2is: list
+    sigma_ts: list
+    thresholds: list
+
+    def args(self) -> tuple:
+        """The fields in the kernels' order."""
+        return (self.a2w, self.axis, self.sign, self.i_first, self.i_last, self.coef,
+                self.light_index, self.cone, self.init, self.p_lo, self.p_hi, self.n_sub,
+                self.grids, self.w2is, self.sigma_ts, self.thresholds)
+
+
+def light_sweep(out, channel: int, job: SweepJob, *, backend=None):
+    """Optical depth towards a light, written into channels ``channel``..+2 of ``out``
+    (X,Y,Z,C) float32 for ``job`` (a SweepJob; the numpy twin is kernels_np.light_sweep)."""
     if not _on_c(backend):
-        return kernels_np.light_sweep(out, channel, a2w, axis, sign, i_first, i_last, coef,
-                                      light_index, cone, init, p_lo, p_hi, n_sub, grids, w2is,
-                                      sigma_ts, thresholds)
+        return kernels_np.light_sweep(out, channel, *job.args())
     if not (isinstance(out, np.ndarray) and out.dtype == np.float32 and out.flags.c_contiguous
             and out.flags.writeable and out.ndim == 4):
         raise ValueError("light_sweep: out must be a writable C-contiguous (X,Y,Z,C) float32 array")
-    init = _f64(init)
-    _c.light_sweep(out, int(channel), _f64(a2w).reshape(3, 4), int(axis), int(sign), int(i_first),
-                   int(i_last), _f64(coef).reshape(6), _f64(light_index).reshape(3), int(bool(cone)),
-                   init, int(p_lo), int(p_hi), int(n_sub), [_f32(g) for g in grids],
-                   [_f64(w) for w in w2is], [_f64(s).reshape(3) for s in sigma_ts],
-                   [float(t) for t in thresholds])
+    _c.light_sweep(out, int(channel), _f64(job.a2w).reshape(3, 4), int(job.axis), int(job.sign),
+                   int(job.i_first), int(job.i_last), _f64(job.coef).reshape(6),
+                   _f64(job.light_index).reshape(3), int(bool(job.cone)), _f64(job.init),
+                   int(job.p_lo), int(job.p_hi), int(job.n_sub), [_f32(g) for g in job.grids],
+                   [_f64(w) for w in job.w2is], [_f64(s).reshape(3) for s in job.sigma_ts],
+                   [float(t) for t in job.thresholds])
 
 
 def upsample_into(field, channel, lattice, stride, flat, *, backend=None):

@@ -75,10 +75,12 @@ def test_twins_agree_and_chunks_partition_the_voxels(li):
             init = rng.uniform(0, 2, (pyr.n_p, pyr.n_q, 3))
             a = whole.copy()
             kernels_np.light_sweep(*sweep_args(media, pm, light, pyr, L, init, 0, pyr.n_p - 1, a, step))
+            # (the twin takes the job's fields in the kernel's order; kernels.light_sweep a SweepJob)
             b = whole.copy()
             cuts = sorted(set([0, pyr.n_p - 1] + list(rng.integers(1, pyr.n_p - 1, 3))))
             for lo, hi in zip(cuts, cuts[1:]):
-                kernels.light_sweep(*sweep_args(media, pm, light, pyr, L, init, lo, hi, b, step), backend="c")
+                args = sweep_args(media, pm, light, pyr, L, init, lo, hi, b, step)
+                kernels.light_sweep(b, 1, kernels.SweepJob(*args[2:]), backend="c")
             mine = ~np.isnan(a[..., 1])
             assert np.array_equal(mine, ~np.isnan(b[..., 1]))  # the same voxels, once each
             assert np.allclose(a[mine][:, 1:4], b[mine][:, 1:4], rtol=1e-4, atol=1e-5)
@@ -211,13 +213,13 @@ def test_light_sweep_rejects_bad_input():
     ro = out.copy()
     ro.flags.writeable = False
     with pytest.raises(ValueError):
-        kernels.light_sweep(ro, *good[1:], backend="c")
+        kernels.light_sweep(ro, 1, kernels.SweepJob(*good[2:]), backend="c")
     nan_init = init.copy()
     nan_init[0, 0, 0] = np.nan
     args = list(good)
     args[10] = nan_init
     with pytest.raises(ValueError):
-        kernels.light_sweep(*args, backend="c")
+        kernels.light_sweep(args[0], 1, kernels.SweepJob(*args[2:]), backend="c")
 
 
 def test_lights_that_cannot_be_swept_fall_back_to_the_exact_march():

@@ -356,8 +356,10 @@ def sweep_light(media: List[PreparedMedium], pm: PreparedMedium, light: Light, f
 
     def work(a, b):
         for pyr, init, p_lo, p_hi, n_sub in jobs[a:b]:
-            sweep(field, channel, a2w, pyr.axis, pyr.sign, pyr.i_first, pyr.i_last, pyr.coef, L,
-                  pyr.cone, init, p_lo, p_hi, n_sub, grids, w2is, sigmas, thrs)
+            sweep(field, channel, kernels.SweepJob(a2w, pyr.axis, pyr.sign, pyr.i_first,
+                                                   pyr.i_last, pyr.coef, L, pyr.cone, init,
+                                                   p_lo, p_hi, n_sub, grids, w2is, sigmas,
+                                                   thrs))
 
     run_chunks(len(jobs), 1, work, threads, should_cancel)
     if pm.sharp or any(m.sharp for m in media):
