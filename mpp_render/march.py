@@ -103,24 +103,12 @@ class MarchContext:
                 ref = next((m for m in mfs if m is not None), None)
                 table = np.zeros((1, len(RHO_TABLE), 6)) if ref is None else \
                     level_table(pm.g, pm.sigma_s, pm.sigma_a, ref.h, len(ref.levels))
-                if ref is not None and ref.traced:
-                    # the traced paths' M of every light, summed (paths.py)
+                if ref is not None and (ref.traced or ref.flat):
+                    # one level a light: the traced paths' M (paths.py), or a mesh volume's
+                    # pyramids flattened by the precompute (precompute.flatten): summed
                     total = sum(m.levels[0] for m in mfs if m is not None)
                     per_medium.append([LevelField([np.ascontiguousarray(total, np.float32)],
                                                   ref.stride, ref.h)] + [None] * (len(mfs) - 1))
-                    tables.append(FLAT_TABLE)
-                    continue
-                # flattened as the precompute decided (MultipleField.flat)
-                if ref is not None and ref.flat and self.camera is not None:
-                    after = None
-                    if any(m is not None and m.first is not None for m in mfs):
-                        after = level_table(pm.g, pm.sigma_s, pm.sigma_a, ref.h,
-                                            len(ref.levels),
-                                            exact_flights=self.tuning.exact_flights)
-                    flat = flatten_levels(pm, mfs, self.lights, table, self.camera, after)
-                    stride = flat_stride(mfs)
-                    per_medium.append([LevelField([flat], stride, ref.h * stride / ref.stride)]
-                                      + [None] * (len(mfs) - 1))
                     tables.append(FLAT_TABLE)
                     continue
                 per_medium.append([None if m is None else LevelField(m.levels, m.stride, m.h)
@@ -138,70 +126,6 @@ class MarchContext:
 # Tuning.flatten says so (precompute.lightpyramid.flattens).
 FLAT_TABLE = np.concatenate([np.full((1, len(RHO_TABLE), 3), 4.0 * np.pi),
                              np.zeros((1, len(RHO_TABLE), 3))], axis=2)
-
-
-def flat_stride(mfs) -> int:
-    """The stride (voxels) of a medium's flattened level: the finest of its light pyramids'
-    lattice and its exact first flights' (precompute.source.fine_stride divides the
-    pyramid's stride)."""
-    ref = next(m for m in mfs if m is not None)
-    return min([ref.stride] + [m.first.stride for m in mfs
-                               if m is not None and m.first is not None and m.first.stride])
-
-
-def flatten_levels(pm: PreparedMedium, mfs, lights: List[Light], table: np.ndarray,
-                   camera: Camera, table_after: Optional[np.ndarray] = None) -> np.ndarray:
-    """One level (X,Y,Z,3) float32 on the lattice ``flat_stride(mfs)`` voxels apart: at
-    each point y, sum over lights l and levels k of the level read at y times the level's
-    weight and HG(cos_l(y); g_k) at density 1 (``table``: mpp.level_table), cos_l(y)
-    the cosine between the light's propagation at y and the direction from y to the
-    ``camera``: what kernels_np.multiple_source computes at a march sample of a density-1
-    medium, with the phase factor interpolated between lattice points instead of taken at
-    the sample (it varies over metres, the lattice is centimetres).  An area light's
-    direction is its centre's (the march jitters it over the area).
-
-    A light whose MultipleField carries exact first flights (``first``, firstflight.py)
-    adds, by their weight w per channel, those flights plus the levels read through
-    ``table_after`` (level_table(..., exact_flights=2): the paths that scattered twice more),
-    and 1 - w of the levels through ``table``."""
-    from .camera import towards_camera
-    from .kernels_np import hg, upsample
-    from .lights import light_sample
-    from .mpp import table_lookup
-    from .precompute.lattice import lattice_points, lattice_shape
-    ref = next(m for m in mfs if m is not None)
-    stride = flat_stride(mfs)
-    shape = lattice_shape(pm.grid.shape, stride)
-    _, x = lattice_points(pm, shape, stride)
-    v = towards_camera(camera, x)
-    tab = table_lookup(table, np.ones(1))[:, 0, :]   # (levels, 6) at density 1
-    tab_after = None if table_after is None else table_lookup(table_after, np.ones(1))[:, 0, :]
-    out = np.zeros(tuple(shape) + (3,), np.float64)
-    for light, msf in zip(lights, mfs):
-        if msf is None:
-            continue
-        half = np.full(len(x), 0.5)
-        wi = light_sample(pack_light(light), x, half, half)[0]
-        cos = np.einsum("ij,ij->i", wi, v)   # the kernels' -(wi . d): d = -v
-        first = msf.first if tab_after is not None else None
-        w = None if first is None else np.asarray(first.weight, np.float64)
-        # each level upsampled once, read through ``table`` by 1 - w, ``table_after`` by w
-        for k, lev in enumerate(msf.levels[:len(tab)]):
-            up = upsample(lev, 2 ** k * msf.stride // stride, shape).reshape(-1, 3)
-
-            def read(t):
-                return (up * (t[k, :3] * hg(cos[:, None], t[k, 3:]))).reshape(out.shape)
-
-            if w is None:
-                out += read(tab)
-                continue
-            if np.any(w < 1.0):
-                out += (1.0 - w) * read(tab)
-            out += w * read(tab_after)
-        if first is not None:
-            fstride = first.stride or msf.stride
-            out += w * upsample(first.field, fstride // stride, shape)
-    return np.ascontiguousarray(out, np.float32)
 
 
 def march_rays(ctx: MarchContext, origins, dirs, t0, t1, axial, keys):

@@ -204,7 +204,7 @@ class Tuning:
     (precompute.source.fine_stride; 1: the walk's).  ``first_flights``: a mesh volume's first
     flights computed exactly where they mostly leave it (firstflight.py); ``exact_flights``
     how many (1 or 2).  ``flatten``: a mesh volume's light pyramids summed over levels and
-    lights once for the march (march.flatten_levels; the exact first flights join only that
+    lights once for the march (precompute.flatten.flatten_levels; the exact first flights join only that
     level).  ``skip_empty``: the march skips super-steps where every medium is empty (the
     same result, faster).  ``adapt_tau``: the march's longer steps in thin media (the
     density majorant's optical depth per step within it; 0: off).  ``tile``: the largest

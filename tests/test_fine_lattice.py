@@ -6,7 +6,6 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from mpp_render import march
 from mpp_render.lights import incident, outside_spot
 from mpp_render.precompute import precompute
 from mpp_render.precompute.lattice import lattice_shape
@@ -64,21 +63,20 @@ def test_the_first_flights_and_the_flattened_level_take_the_finer_lattice():
     from mpp_render.media import prepare
     desc = beam_scene()
     pm = prepare(desc.media[0])
-    pre = precompute([pm], desc.lights, desc.world, desc.camera, multiple=True,
-                     multiple_resolution=25)
-    msf = pre.multiple[0][0]
+    from mpp_render.precompute.flatten import flattened
+    from test_flatten import pre_light_fields
+    mfs = pre_light_fields(pm, desc, multiple_resolution=25)   # before the flattening
+    msf = mfs[0]
     assert msf.stride == 2 and msf.first is not None and msf.first.stride == 1
     assert msf.first.field.shape[:3] == lattice_shape(pm.grid.shape, 1)
     assert np.all(np.isfinite(msf.first.field)) and msf.first.field.max() > 0.0
-    ctx = march.MarchContext([pm], pre.fields, pre.layout, desc.lights, 0.05, pre.multiple,
-                             desc.camera)
-    (flat,), stride, _ = ctx.multiple.per_medium[0][0]
+    one = flattened(pm, mfs, desc.lights, desc.camera)[0]
+    flat, stride = one.levels[0], one.stride
     assert stride == 1 and flat.shape[:3] == lattice_shape(pm.grid.shape, 1)
     msf.first.field = np.ascontiguousarray(msf.first.field[::2, ::2, ::2])
     msf.first.stride = 2
-    ctx = march.MarchContext([pm], pre.fields, pre.layout, desc.lights, 0.05, pre.multiple,
-                             desc.camera)
-    (coarse,), stride, _ = ctx.multiple.per_medium[0][0]
+    one = flattened(pm, mfs, desc.lights, desc.camera)[0]
+    coarse, stride = one.levels[0], one.stride
     assert stride == 2
     sub = flat[::2, ::2, ::2]   # the walk's lattice has a point beyond the grid's last voxel
     coarse = coarse[:sub.shape[0], :sub.shape[1], :sub.shape[2]]

@@ -7,6 +7,7 @@ import pytest
 from mpp_render import firstflight as ff
 from mpp_render.mpp import level_paths, level_table, table_lookup
 from mpp_render.parallel import Cancelled
+from mpp_render.precompute.flatten import flatten_levels
 from mpp_render.phase import delta_fraction, delta_g, hg, outside_peak, peak_cone_cos
 
 
@@ -263,12 +264,12 @@ def test_the_flattened_level_takes_the_first_flight_by_its_weight():
     table = level_table(0.5, pm.sigma_s, pm.sigma_a, 0.1, 2)
     after = level_table(0.5, pm.sigma_s, pm.sigma_a, 0.1, 2, exact_flights=2)
     mf = MultipleField(2, 0.2, levels, ff.FirstFlight(field, np.array([1.0, 0.5, 0.0])))
-    out = march.flatten_levels(pm, [mf], [light], table, cam, after)
+    out = flatten_levels(pm, [mf], [light], table, cam, after)
     assert np.allclose(out, field * np.array([1.0, 0.5, 0.0], np.float32))
     levels[0][:] = 1.0
     mf0 = MultipleField(2, 0.2, levels, ff.FirstFlight(field, np.zeros(3)))
-    walk = march.flatten_levels(pm, [MultipleField(2, 0.2, levels)], [light], table, cam)
-    assert np.array_equal(march.flatten_levels(pm, [mf0], [light], table, cam, after), walk)
+    walk = flatten_levels(pm, [MultipleField(2, 0.2, levels)], [light], table, cam)
+    assert np.array_equal(flatten_levels(pm, [mf0], [light], table, cam, after), walk)
 
 
 @pytest.mark.parametrize("g", [-0.99, 0.0, 0.5, 0.99])

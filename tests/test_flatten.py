@@ -1,4 +1,4 @@
-"""A mesh volume's light pyramids summed once over levels and lights (march.flatten_levels):
+"""A mesh volume's light pyramids summed once over levels and lights (precompute.flatten.flatten_levels):
 the march reads one level instead of every level of every light, and renders what it did."""
 from dataclasses import replace
 
@@ -64,6 +64,21 @@ def test_only_mesh_volumes_are_flattened():
     assert all(m is not None and len(m.levels) > 1 for m in ctx.multiple.per_medium[0])
 
 
+def pre_light_fields(pm, desc, **kw):
+    """The per-light MultipleFields of ``pm`` before the flattening: the precompute's own
+    stage (precompute.lightpyramid.multiple_field) with the flattening switched off at the
+    end, i.e. the precompute run without a camera for the flattening step."""
+    from mpp_render.precompute import run
+    real = run.flattened
+    got = []
+    run.flattened = lambda pm_, ms, *a, **k: (got.append(ms), real(pm_, ms, *a, **k))[1]
+    try:
+        run.precompute([pm], desc.lights, desc.world, desc.camera, multiple=True, **kw)
+    finally:
+        run.flattened = real
+    return got[0]
+
+
 def test_the_first_flight_joins_the_flattened_level():
     """This box's blue channel flies far (sigma_t* 1.9 / m in a 1.6 m box): its first flights
     mostly leave, and the exact flight changes the flattened level there, not elsewhere."""
@@ -72,19 +87,20 @@ def test_the_first_flight_joins_the_flattened_level():
     from mpp_render.precompute import precompute
     desc = scene()
     pm = prepare(desc.media[0])
+    from mpp_render.precompute.flatten import flattened
     pre = precompute([pm], desc.lights, desc.world, desc.camera, multiple=True)
-    firsts = [m.first for m in pre.multiple[0]]
+    assert len(pre.multiple[0][0].levels) == 1 and pre.multiple[0][1] is None  # flattened
+    # the per-light pyramids and flights, as the precompute hands them to the flattening
+    mfs = [multiple for multiple in pre_light_fields(pm, desc)]
+    firsts = [m.first for m in mfs]
     assert all(f is not None for f in firsts)
     for f in firsts:
         assert f.weight[2] > 0.0 and np.all(np.isfinite(f.field)) and f.field[..., 2].max() > 0
-    ctx = march.MarchContext([pm], pre.fields, pre.layout, desc.lights, 0.05, pre.multiple,
-                             desc.camera)
-    with_first = ctx.multiple.per_medium[0][0].levels[0]
-    for m in pre.multiple[0]:
+    with_first = flattened(pm, mfs, desc.lights, desc.camera)[0].levels[0]
+    assert np.array_equal(with_first, pre.multiple[0][0].levels[0])
+    for m in mfs:
         m.first = None
-    ctx = march.MarchContext([pm], pre.fields, pre.layout, desc.lights, 0.05, pre.multiple,
-                             desc.camera)
-    walk = ctx.multiple.per_medium[0][0].levels[0]
+    walk = flattened(pm, mfs, desc.lights, desc.camera)[0].levels[0]
     weight = np.max([f.weight for f in firsts], axis=0)
     for c in range(3):
         changed = not np.allclose(with_first[..., c], walk[..., c], rtol=1e-6, atol=0.0)

@@ -33,7 +33,7 @@ class MultipleField:
     scattered path), each level moved by its paths' drift (``drift_levels``).  ``first``:
     None, or for a mesh volume whose first flights mostly leave it the exact first two
     flights (firstflight.FirstFlight on the finest lattice) that replace the walk's, by their
-    weight (march.flatten_levels).  ``flat``: the march sums the levels once (``flattens``).
+    weight (precompute.flatten.flatten_levels).  ``flat``: the levels are summed once towards the camera (``flattens``; precompute.flatten).
     ``traced``: ``levels`` is one level, the traced paths' M (paths.py), read as it is.
     ``far``: for the world fog's traced paths, their M beyond its grid (worldfog.FarField,
     read by worldfog.tail), else None."""
@@ -49,7 +49,7 @@ class MultipleField:
 
 def flattens(pm: PreparedMedium, camera: Optional[Camera], tuning: Tuning = Tuning()) -> bool:
     """Whether the march sums ``pm``'s light pyramids over levels and lights once
-    (march.flatten_levels, with ``tuning.flatten``): a mesh volume (one density wherever it
+    (precompute.flatten.flatten_levels, with ``tuning.flatten``): a mesh volume (one density wherever it
     has any) seen by a perspective or orthographic camera, the direction from a sample to
     the camera then that of the camera ray through it.  Only such a medium gets the exact
     first flights, which join the flattened level."""
@@ -97,7 +97,7 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
     first = None
     flat = flattens(pm, camera, tuning)
     if flat and tuning.first_flights:
-        # a mesh volume, whose levels the march sums once (march.flatten_levels): the first
+        # a mesh volume, whose levels the march sums once (precompute.flatten.flatten_levels): the first
         # flight exact where the first flights mostly leave the medium (firstflight.py)
         fine = fine_stride(pm, stride, tuning)
         sigma_t = np.asarray(pm.sigma_t, np.float64) * mean_rho

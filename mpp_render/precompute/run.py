@@ -16,6 +16,7 @@ from .lattice import MULTIPLE_RESOLUTION, grid_points, needed_flat
 from .layout import FieldLayout, field_layout
 from .lightdepth import (SHADOW_TAU, light_optical_depth, near_sharp_surfaces, soft_visibility,
                          split_fog, sweep_light)
+from .flatten import flattened
 from .lightpaths import traced_multiple
 from .pathstarts import Surroundings
 from .lightpyramid import MultipleField, multiple_field
@@ -160,6 +161,10 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                         should_cancel=should_cancel, g_last=float(pm.g),
                                         threads=threads, tuning=tuning)
                 check(should_cancel)
+        if camera is not None and any(m is not None and m.flat for m in ms) \
+                and not any(m is not None and m.traced for m in ms):
+            # a mesh volume's pyramids summed towards the camera, once (precompute.flatten)
+            ms = flattened(pm, ms, lights, camera, tuning)
         ms_all.append(ms)
         fields.append(f)
     return Precomputed(fields, layout, ms_all, time.perf_counter() - t_start,

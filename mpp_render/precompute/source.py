@@ -296,7 +296,7 @@ def fine_stride(pm: PreparedMedium, stride: int, tuning: Tuning = Tuning()) -> i
     """The stride (voxels) of the lattice for the forward peak's light and the exact first
     flights, for a walk on ``stride``: the largest divisor of ``stride`` at most
     stride / ``tuning.refine`` (the walk's lattice points are then among its points,
-    march.flatten_levels), or ``stride`` itself where that is 1, the medium is not a mesh
+    precompute.flatten.flatten_levels), or ``stride`` itself where that is 1, the medium is not a mesh
     volume (``pm.sharp``) or the finer lattice's FFT would exceed FINE_POINTS."""
     if not pm.sharp:
         return stride
