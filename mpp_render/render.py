@@ -25,7 +25,7 @@ from .parallel import Cancelled, worker_count
 from .passes import DEPTH_MISS, enabled_passes
 from .scene import SceneDescription
 from .surfaces import prepare_surfaces
-from .tiles import TILE_RAYS, FrameMarch  # noqa: F401 (TILE_RAYS: benchmarks read it here)
+from .tiles import FrameMarch
 
 @dataclass
 class RenderOutput:

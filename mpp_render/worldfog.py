@@ -205,7 +205,7 @@ class FarField:
         """M (N,3) at world points ``x`` (N,3), trilinear; 0 outside the box."""
         from .media import trilinear
         idx = np.asarray(x, np.float64) @ self.w2i[:, :3].T + self.w2i[:, 3]
-        return trilinear(self.M.astype(np.float64), idx)
+        return trilinear(self.M, idx)   # float32 values, float64 weights: a float64 sum
 
 
 def tail_start(pm, origins, dirs) -> np.ndarray:

@@ -52,14 +52,12 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     sets = []   # (points, power W, directions, jitter, lobe)
     if np.any(live):
         sets.append((pts[live], power[live], light_direction(light, pts[live]), 1.0, 0))
-    surf = around.surfaces if around is not None and around.surfaces is not None \
-        and not around.surfaces.empty else None
     if around is not None:
         if fog:
             got = fog_starts(pm, light, around, seed + 1)
             if got is not None:
                 sets.append(got + (0.0, 0))
-        if surf is not None:
+        if around.surfaces is not None:
             got = surface_starts(pm, light, around, seed + 2)
             if got is not None:
                 sets.append(got[:3] + (got[3], 1))
@@ -94,8 +92,7 @@ def _trace(sets, n_paths, seed, threads, should_cancel, density, w2i, i2w, pm, s
     """The deposits (LX,LY,LZ,3) of ``n_paths`` paths shared among the start ``sets`` in
     proportion to their power, on the grid ``density`` / ``w2i`` / ``i2w`` with lattice
     ``stride``; raises parallel.Cancelled on Esc."""
-    surf = around.surfaces if around is not None and around.surfaces is not None \
-        and not around.surfaces.empty else None
+    surf = around.surfaces if around is not None else None
     centre, radius = reach(pm, (w2i, density.shape))
     extra = dict(outside=pm.outside_density, reach_centre=centre, reach_radius=radius)
     if surf is not None:

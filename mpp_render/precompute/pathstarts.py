@@ -40,7 +40,8 @@ LIFT = 1e-6              # surface points are lifted this fraction of the scene'
 class Surroundings:
     """What lies round the medium whose paths are traced: ``solid`` the media other than the
     world fog (prepared; they attenuate the light), ``fog_sigma_t`` the fog's RGB extinction
-    (1/m, None without one), ``surfaces`` a surfaces.SurfaceSet or None, ``step`` the march
+    (1/m, None without one), ``surfaces`` a surfaces.SurfaceSet or None (an empty set becomes
+    None), ``step`` the march
     step (m) of the light's optical depth, ``bounce`` whether the surfaces reflect light
     (Settings.surface_bounce; else they only absorb it)."""
 
@@ -49,6 +50,10 @@ class Surroundings:
     surfaces: object
     step: float
     bounce: bool = True
+
+    def __post_init__(self):
+        if self.surfaces is not None and self.surfaces.empty:
+            self.surfaces = None
 
 
 def reach(pm, grid=None) -> tuple:
@@ -130,7 +135,7 @@ def surface_starts(pm, light: Light, around: Surroundings, seed: int):
     """(points, power, normals, jitter m) of the light ``light`` reflects off the surfaces
     within ``reach(pm)`` (module docstring), or None when they reflect none."""
     ss = around.surfaces
-    if ss is None or ss.empty or not around.bounce:
+    if ss is None or not around.bounce:
         return None
     centre, radius = reach(pm)
     corners = np.stack([ss.v0, ss.v0 + ss.e1, ss.v0 + ss.e2], axis=1)

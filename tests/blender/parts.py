@@ -79,3 +79,18 @@ def mpp_output(scene, width, height, samples=4, voxels=16):
     scene.mpp.samples = samples
     scene.mpp.voxel_resolution = voxels
     return scene
+
+
+def render_cycles(scene, tmp_path, spp=16, seed=0):
+    """Cycles' single scattering (Volume Bounces 0, the reference settings, 2 threads) of
+    ``scene``: the Combined RGB (H,W,3), written through ``tmp_path/cycles_<seed>.exr``."""
+    from mpp_render import exr
+    from mpp_render.blender import batch
+    batch.set_cycles_reference(scene, spp, multiple=False, seed=seed)
+    scene.render.threads_mode = 'FIXED'
+    scene.render.threads = 2
+    path = str(tmp_path / f"cycles_{seed}.exr")
+    batch.set_multilayer_exr(scene)
+    bpy.ops.render.render()
+    bpy.data.images["Render Result"].save_render(filepath=path, scene=scene)
+    return exr.read_passes(path, layer=bpy.context.view_layer.name)["Combined"][..., :3]

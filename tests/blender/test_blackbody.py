@@ -7,12 +7,12 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from mpp_render import blackbody, exr  # noqa: E402
+from mpp_render import blackbody  # noqa: E402
 from mpp_render.blender import batch, frame  # noqa: E402
 from mpp_render.blender.translate import scene_from_depsgraph  # noqa: E402
 from mpp_render.blender.translate.vdb import openvdb_module  # noqa: E402
 from mpp_render.scene import Settings  # noqa: E402
-from parts import node_material  # noqa: E402
+from parts import node_material, render_cycles  # noqa: E402
 
 SIGMA = 5.670373e-8 * 1e-6 / np.pi  # Cycles' Stefan-Boltzmann factor (W/(m^2 K^4) / pi, 1e-6)
 
@@ -32,17 +32,6 @@ def camera(sc, res=(24, 16)):
 
 def volume_material(kind="ShaderNodeVolumePrincipled", **inputs):
     return node_material("fire", kind, "Volume", **inputs)
-
-
-def render_cycles(sc, tmp_path, spp=16):
-    batch.set_cycles_reference(sc, spp, multiple=False)
-    sc.render.threads_mode = 'FIXED'
-    sc.render.threads = 2
-    path = str(tmp_path / "cycles.exr")
-    batch.set_multilayer_exr(sc)
-    bpy.ops.render.render()
-    bpy.data.images["Render Result"].save_render(filepath=path, scene=sc)
-    return exr.read_passes(path, layer=bpy.context.view_layer.name)["Combined"][..., :3]
 
 
 def render_mpp(sc, spp=4):

@@ -9,11 +9,11 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from mpp_render import exr, metrics  # noqa: E402
+from mpp_render import metrics  # noqa: E402
 from mpp_render.blender import batch, frame  # noqa: E402
 from mpp_render.camera import aperture_points  # noqa: E402
 from mpp_render.scene import Camera  # noqa: E402
-from parts import add_cube, add_light, volume_material  # noqa: E402
+from parts import add_cube, add_light, render_cycles, volume_material  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("registered")
 
@@ -43,17 +43,6 @@ def lens_scene(sc, res=(48, 36)):
     return cam
 
 
-def render_cycles(sc, tmp_path, spp):
-    batch.set_cycles_reference(sc, spp, multiple=False, seed=2)
-    sc.render.threads_mode = 'FIXED'
-    sc.render.threads = 2
-    path = str(tmp_path / "cycles.exr")
-    batch.set_multilayer_exr(sc)
-    bpy.ops.render.render()
-    bpy.data.images["Render Result"].save_render(filepath=path, scene=sc)
-    return exr.read_passes(path, layer=bpy.context.view_layer.name)["Combined"][..., :3]
-
-
 def render_mpp(sc, spp):
     batch.set_mpp(sc, spp, multiple=False)
     sc.mpp.voxel_resolution = 48
@@ -62,7 +51,7 @@ def render_mpp(sc, spp):
 
 def test_depth_of_field_matches_cycles(empty_scene, tmp_path):
     cam = lens_scene(empty_scene)
-    ref = render_cycles(empty_scene, tmp_path, 512)
+    ref = render_cycles(empty_scene, tmp_path, 512, seed=2)
     out = render_mpp(empty_scene, 128)   # 0.026 at 64 spp, 0.011 at 256: our noise
     assert not any("depth of field" in w for w in out.warnings)
     got = metrics.compare(out.passes["Combined"][..., :3], [ref])
@@ -111,7 +100,7 @@ def test_panoramic_cameras_match_cycles(empty_scene, tmp_path, kind, res):
     cam.rotation_euler = (np.pi / 2 - 0.2, 0.0, 0.35)
     if kind == "EQUIRECTANGULAR":
         cam.data.longitude_min, cam.data.longitude_max = -2.0, 2.5
-    ref = render_cycles(sc, tmp_path, 512)
+    ref = render_cycles(sc, tmp_path, 512, seed=2)
     out = render_mpp(sc, 128)
     assert not any("not supported" in w for w in out.warnings), out.warnings
     assert float(ref.mean()) > 0.001          # the cube is in view (black: 0)

@@ -5,12 +5,11 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from mpp_render import exr  # noqa: E402
 from mpp_render.blender import batch, frame  # noqa: E402
 from mpp_render.blender.translate import scene_from_depsgraph  # noqa: E402
 from mpp_render.metrics import compare  # noqa: E402
 from mpp_render.scene import Settings  # noqa: E402
-from parts import node_material  # noqa: E402
+from parts import node_material, render_cycles  # noqa: E402
 
 
 def new_scene(sc, res, location=(0, -9, 2.0), tilt=85.0):
@@ -40,17 +39,6 @@ def world(sc, background=(0, 0, 0), kind="ShaderNodeVolumeScatter", **inputs):
 
 def surface_material(name, node="ShaderNodeBsdfDiffuse", **inputs):
     return node_material(name, node, "Surface", **inputs)[0]
-
-
-def render_cycles(sc, tmp_path, spp, seed):
-    batch.set_cycles_reference(sc, spp, multiple=False, seed=seed)
-    sc.render.threads_mode = 'FIXED'
-    sc.render.threads = 2
-    path = str(tmp_path / f"cycles_{seed}.exr")
-    batch.set_multilayer_exr(sc)
-    bpy.ops.render.render()
-    bpy.data.images["Render Result"].save_render(filepath=path, scene=sc)
-    return exr.read_passes(path, layer=bpy.context.view_layer.name)["Combined"][..., :3]
 
 
 def render_mpp(sc, spp, voxels, seed=0):
