@@ -242,7 +242,7 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
                       threads: int = 0, multiple: bool = False, multiple_resolution=None,
                       multiple_paths: int = 0, should_cancel: Optional[Callable[[], bool]] = None,
                       progress=None, cache: Optional[Cache] = None, tuning=None,
-                      surface_bounce: bool = True):
+                      surface_bounce: bool = True, any_camera: bool = False):
     """``precompute.precompute`` reusing earlier results kept in ``cache`` (default ``CACHE``).
 
     One entry (kind 'precompute') per *light key* -- the media, lights, surfaces, multiple
@@ -262,7 +262,15 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
 
     The result equals a cold ``precompute`` call's: in it the light channels, the pyramids and
     the world channels are computed independently.  ``stats["reused"]`` lists the parts
-    taken from the cache ('lights', 'world').  A cancelled precompute changes nothing (it
+    taken from the cache ('lights', 'world').
+
+    ``any_camera``: when nothing is kept for this camera, the entry last kept for the same
+    scene seen from another camera position (the same light key but for the camera) is
+    returned as it is, with ``stats["stale_camera"]`` True: its world light and its pyramids'
+    phase towards the camera are the other position's; and when a light changed, the world
+    channels may come from an entry of another camera position (then the new entry is kept
+    under that position's world key, so an exact lookup never takes them).  The viewport's first, coarse picture
+    while the view orbits uses it (viewport.py); nothing else does.  A cancelled precompute changes nothing (it
     raises parallel.Cancelled).  Callers must not modify the returned arrays."""
     from . import precompute as pre_mod
     from .precompute.lattice import MULTIPLE_RESOLUTION
@@ -281,11 +289,14 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
               int(multiple_paths) if multiple else 0, int(threads), tuning,
               bool(surface_bounce) if multiple else None)
     # the light pyramids are moved towards what the camera sees (precompute.lightpyramid.drift_levels)
+    seeded = int(seed) if multiple and multiple_paths > 0 else None
     light_key = digest("lights", common, list(lights), has_world,
-                       camera_key(camera) if multiple else None,
-                       int(seed) if multiple and multiple_paths > 0 else None)
+                       camera_key(camera) if multiple else None, seeded)
+    scene_key = digest("scene", common, list(lights), has_world, seeded)
     world_key = digest("world", common, np.asarray(world.color, np.float64), camera_key(camera),
                        int(n_dirs), int(seed)) if has_world else None
+    world_any_key = digest("world", common, np.asarray(world.color, np.float64),
+                           int(n_dirs), int(seed)) if has_world else None
     kw = dict(n_dirs=n_dirs, seed=seed, should_cancel=should_cancel, progress=progress,
               surfaces=surfaces, threads=threads, multiple=multiple,
               multiple_resolution=multiple_resolution, multiple_paths=multiple_paths,
@@ -300,18 +311,32 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
         pre = entry["pre"]
         if entry["world"] == world_key:
             return result(pre, ["lights", "world"] if has_world else ["lights"])
+        if any_camera:      # the world light of another camera position will do
+            out = result(pre, ["lights", "world"])
+            out.stats["stale_camera"] = True
+            return out
         part = pre_mod.precompute(media, [], world, camera, **kw)  # the camera moved
         first = pre.layout.world_first
         for f, w in zip(pre.fields, part.fields):
             f[..., first:] = w[..., 1:]
         entry["world"] = world_key
         return result(pre, ["lights"])
+    if any_camera:
+        other = cache.get("scene_index", scene_key)
+        entry = cache.get("precompute", other) if other is not None else None
+        if entry is not None:
+            pre = entry["pre"]
+            return pre_mod.Precomputed(pre.fields, pre.layout, pre.multiple, pre.seconds,
+                                       dict(pre.stats, reused=["lights", "world"],
+                                            stale_camera=True))
 
     donor = None
     if has_world:
         donor_key = cache.get("world_index", world_key)
+        if donor_key is None and any_camera:   # the world light of another camera position
+            donor_key = cache.get("world_index", world_any_key)
         donor = cache.get("precompute", donor_key) if donor_key is not None else None
-    if donor is not None and donor["world"] == world_key and \
+    if donor is not None and (donor["world"] == world_key or any_camera) and \
             donor["pre"].layout.light_channels == light_channels(lights):
         part = pre_mod.precompute(media, lights, World(), camera, **kw)  # a light changed
         old = donor["pre"]
@@ -325,14 +350,21 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
         pre = pre_mod.Precomputed(fields, old.layout, part.multiple, part.seconds,
                                   dict(part.stats,
                                        ambient_points=old.stats.get("ambient_points", 0)))
-        _keep(cache, light_key, world_key, pre)
-        return result(pre, ["world"])
+        _keep(cache, light_key, donor["world"], scene_key, pre, world_any_key)
+        out = result(pre, ["world"])
+        if donor["world"] != world_key:
+            out.stats["stale_camera"] = True
+        return out
     pre = pre_mod.precompute(media, lights, world, camera, **kw)
-    _keep(cache, light_key, world_key, pre)
+    _keep(cache, light_key, world_key, scene_key, pre, world_any_key)
     return result(pre, [])
 
 
-def _keep(cache: Cache, light_key, world_key, pre) -> None:
+def _keep(cache: Cache, light_key, world_key, scene_key, pre, world_any_key) -> None:
+    """Store ``pre`` under ``light_key`` with the world key its world channels hold, and
+    index it by its scene (any camera) and by its world light (this camera, any camera)."""
     cache.put("precompute", light_key, {"pre": pre, "world": world_key})
+    cache.put("scene_index", scene_key, light_key)
     if world_key is not None:
         cache.put("world_index", world_key, light_key)
+        cache.put("world_index", world_any_key, light_key)

@@ -50,9 +50,12 @@ def auto_step(desc: SceneDescription, media) -> float:
 
 def render(desc: SceneDescription,
            progress: Optional[Callable[[float, str], None]] = None,
-           should_cancel: Optional[Callable[[], bool]] = None) -> RenderOutput:
+           should_cancel: Optional[Callable[[], bool]] = None,
+           any_camera: bool = False) -> RenderOutput:
     """Render one frame.  ``progress(fraction, message)`` is called between tiles;
-    ``should_cancel()`` is polled between tiles and precompute chunks (Esc)."""
+    ``should_cancel()`` is polled between tiles and precompute chunks (Esc).  ``any_camera``:
+    the precompute may be one kept for another camera position of the same scene
+    (cache.precompute_cached; the viewport's coarse picture while orbiting)."""
     st = desc.settings
     cam = desc.camera
     W, H = int(cam.width), int(cam.height)
@@ -77,7 +80,7 @@ def render(desc: SceneDescription,
     step = auto_step(desc, media)
     try:
         pre, media_lights = precompute_frame(desc, media, lights, world, surf, fog_pm, step,
-                                             cancel, progress)
+                                             cancel, progress, any_camera)
     except Cancelled:
         return RenderOutput(out, {"precompute": time.perf_counter() - t_pre}, warnings, True)
     timings["precompute"] = time.perf_counter() - t_pre
@@ -116,7 +119,7 @@ def prepare_media(media, warnings: List[str]) -> list:
 
 
 def precompute_frame(desc: SceneDescription, media, lights, world, surf, fog_pm, step, cancel,
-                     progress):
+                     progress, any_camera: bool = False):
     """(Precomputed or None without media, the lights the media see): the precompute of the
     frame, reused from earlier renders where its inputs did not change (cache.py); with the
     walk the flat surfaces' bounce lights join the lights (bounce.py).  Raises Cancelled."""
@@ -139,7 +142,8 @@ def precompute_frame(desc: SceneDescription, media, lights, world, surf, fog_pm,
                                   threads=st.threads, multiple=st.multiple,
                                   multiple_resolution=st.multiple_resolution,
                                   multiple_paths=st.multiple_paths,
-                                  surface_bounce=st.surface_bounce, tuning=st.tuning)
+                                  surface_bounce=st.surface_bounce, tuning=st.tuning,
+                                  any_camera=any_camera)
     return pre, media_lights
 
 

@@ -48,7 +48,8 @@ class MPP_PT_sampling(MPPPanel, bpy.types.Panel):
         mpp = context.scene.mpp
         col = layout.column()
         col.prop(mpp, "quality")
-        col.prop(mpp, "samples")
+        col.prop(mpp, "samples", text="Render")
+        col.prop(mpp, "viewport_samples")
         col.prop(mpp, "seed")
 
 

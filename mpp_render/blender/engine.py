@@ -129,8 +129,9 @@ def render_frame(engine, depsgraph) -> Optional[FrameRecord]:
 
 class MPPRenderEngine(bpy.types.RenderEngine):
     """Volumes (smoke, clouds, fog) by ray marching with most-probable-path multiple
-    scattering.  Final renders; the viewport's Material Preview uses EEVEE
-    (``bl_use_eevee_viewport``); no Rendered viewport yet."""
+    scattering.  Final renders (``render``); the Rendered viewport (``view_update`` /
+    ``view_draw``, blender/viewport.py: a progressive picture rendered off the UI thread);
+    Material Preview draws with EEVEE (``bl_use_eevee_viewport``)."""
 
     bl_idname = "MPP_RENDER"
     bl_label = "MPP"
@@ -144,6 +145,46 @@ class MPPRenderEngine(bpy.types.RenderEngine):
 
     def update_render_passes(self, scene=None, renderlayer=None):
         register_passes(self, scene, renderlayer)
+
+    # -- the Rendered viewport ------------------------------------------------------------
+
+    def view_update(self, context, depsgraph):
+        from . import viewport
+        session = getattr(self, "_view", None)
+        if session is None:
+            session = self._view = viewport.ViewSession()
+            parts = {"all"}
+        else:
+            parts = viewport.changed_parts(depsgraph.updates)
+        session.update(depsgraph, parts, region_camera(context))
+
+    def view_draw(self, context, depsgraph):
+        from . import viewport
+        session = getattr(self, "_view", None)
+        if session is None:
+            return
+        session.look(region_camera(context))
+        img = session.latest()
+        if img is not None:
+            if getattr(self, "_drawer", None) is None:
+                self._drawer = viewport.Drawer()
+            self._drawer.draw(self, depsgraph.scene, img, context.region.width,
+                              context.region.height)
+        self.update_stats("", session.status())
+        if session.progressive.busy:
+            self.tag_redraw()   # poll for the next picture
+
+    def __del__(self):
+        session = getattr(self, "_view", None)
+        if session is not None:
+            session.close()
+
+
+def region_camera(context):
+    """The viewport's own view as a camera (translate/view.py), the region's size in pixels."""
+    from .translate.view import camera_from_region
+    region = context.region
+    return camera_from_region(context.region_data, int(region.width), int(region.height))
 
 
 def register():

@@ -44,6 +44,13 @@ class MPPRenderSettings(bpy.types.PropertyGroup):
         name="Samples", default=16, min=1, soft_max=1024,
         description="Camera rays per pixel, jittered over the pixel square (1 px box filter). "
                     "More samples: less noise and aliasing, proportionally longer march")
+    viewport_samples: IntProperty(
+        name="Viewport", default=16, min=1, soft_max=1024,
+        description="Camera rays per pixel of the Rendered viewport's last picture. The "
+                    "viewport first shows a coarse picture (a quarter of the resolution, 1 "
+                    "sample), then the full resolution at 1, 4, 16, ... samples up to this "
+                    "count: with the render's samples, the last picture is the F12 render "
+                    "of that view")
     step_size: FloatProperty(
         name="Step Size", default=0.0, min=0.0, soft_max=1.0, precision=4, subtype='DISTANCE',
         unit='LENGTH',

@@ -16,13 +16,14 @@ unchanged .vdb files ('vdb') and fluid cache frames ('fluid').
 """
 from __future__ import annotations
 
-from typing import Optional
+import dataclasses
+from typing import Optional, Set
 
 import numpy as np
 
 from ...cache import CACHE, digest
 from ...lights import is_dark
-from ...scene import SceneDescription, Settings
+from ...scene import Camera, SceneDescription, Settings
 from .camera import camera_from_object, default_camera, render_size
 from .convert import matrix
 from .fluid import FluidTranslator, fluid_domain
@@ -32,7 +33,7 @@ from .meshes import MeshTranslator, mesh_arrays, slot_materials
 from .vdb import VolumeTranslator
 from .world import world_from_scene
 
-__all__ = ["scene_from_depsgraph"]
+__all__ = ["scene_from_depsgraph", "retranslate"]
 
 # Object types Cycles renders as geometry but this engine does not (yet).
 UNSUPPORTED_GEOMETRY = {"CURVES": "hair curves", "POINTCLOUD": "point clouds"}
@@ -41,25 +42,26 @@ MESH_LIKE = ("CURVE", "SURFACE", "META", "FONT")
 
 
 def scene_from_depsgraph(depsgraph, settings: Settings, camera_override=None,
-                         width: Optional[int] = None, height: Optional[int] = None
-                         ) -> SceneDescription:
+                         width: Optional[int] = None, height: Optional[int] = None,
+                         camera: Optional[Camera] = None) -> SceneDescription:
     """The :class:`~mpp_render.scene.SceneDescription` of one frame of ``depsgraph``'s view
     layer.
 
     ``settings``: already filled by the caller (``voxel_resolution`` is used here).
     ``camera_override``: the evaluated camera object to render from (the RenderEngine's), else
     ``depsgraph.scene_eval.camera``.  ``width``/``height``: image size in pixels, by default
-    the scene's render resolution x percentage."""
+    the scene's render resolution x percentage.  ``camera``: a camera already made (the
+    viewport's view, blender/viewport.py), used as it is instead of a camera object."""
     scene = depsgraph.scene_eval
     warnings = []
     if width is None or height is None:
         w, h = render_size(scene)
         width, height = width or w, height or h
     cam_ob = camera_override if camera_override is not None else scene.camera
-    if cam_ob is None:
+    if camera is None and cam_ob is None:
         warnings.append("the scene has no camera; rendering from the origin looking down -Z")
         camera = default_camera(width, height)
-    else:
+    elif camera is None:
         camera = camera_from_object(cam_ob, scene, width, height, warnings)
     desc = SceneDescription(camera=camera, settings=settings, warnings=warnings)
     if getattr(scene.render, "use_motion_blur", False):
@@ -77,10 +79,41 @@ def scene_from_depsgraph(depsgraph, settings: Settings, camera_override=None,
     return desc
 
 
-def _objects(depsgraph, desc: SceneDescription, settings: Settings) -> None:
-    """Lights, media and surfaces of every render-visible object instance.  An instance that
-    fails to translate is skipped with a warning naming it, so one bad object never costs the
-    whole frame."""
+# What a depsgraph update can touch (retranslate): the lights, the geometry (media and
+# surfaces), the world; 'all' for anything else (the scene's settings, a new frame).
+PARTS = ("lights", "geometry", "world")
+
+
+def retranslate(depsgraph, settings: Settings, previous: Optional[SceneDescription],
+                parts: Set[str], camera: Camera) -> SceneDescription:
+    """``previous`` with the ``parts`` (of ``PARTS``, or 'all') translated again from
+    ``depsgraph`` and ``camera`` and ``settings`` put in; the rest is kept as it was (the same
+    objects, so the precompute's cache keys match).  No ``previous`` or 'all' translates the
+    whole scene.  The warnings of the parts translated again are added to the earlier ones."""
+    if previous is None or "all" in parts:
+        return scene_from_depsgraph(depsgraph, settings, camera=camera)
+    desc = dataclasses.replace(previous, camera=camera, settings=settings,
+                               warnings=list(previous.warnings))
+    if "world" in parts:
+        desc.world = world_from_scene(depsgraph.scene_eval, desc.warnings)
+    objects = {"lights", "geometry"} & set(parts)
+    if objects:
+        fresh = SceneDescription(camera=camera, settings=settings, warnings=desc.warnings)
+        _objects(depsgraph, fresh, settings, only=None if len(objects) == 2 else objects.pop())
+        if "lights" in parts:
+            desc.lights = fresh.lights
+        if "geometry" in parts:
+            desc.media, desc.surfaces = fresh.media, fresh.surfaces
+    desc.warnings = list(dict.fromkeys(desc.warnings))
+    return desc
+
+
+def _objects(depsgraph, desc: SceneDescription, settings: Settings,
+             only: Optional[str] = None) -> None:
+    """Lights, media and surfaces of every render-visible object instance (``only``
+    'lights': the lights alone; 'geometry': all but the lights).  An instance that fails to
+    translate is skipped with a warning naming it, so one bad object never costs the whole
+    frame."""
     meshes = MeshTranslator(settings.voxel_resolution, desc.warnings)
     meshes._cache = CACHE.store("voxels")  # keyed by mesh content (_mesh_key): kept across frames
     volumes = VolumeTranslator(desc.warnings)
@@ -89,6 +122,8 @@ def _objects(depsgraph, desc: SceneDescription, settings: Settings) -> None:
         if not getattr(inst, "show_self", True):
             continue
         ob = inst.object
+        if only is not None and (ob.type == "LIGHT") != (only == "lights"):
+            continue
         try:
             _instance(ob, matrix(inst.matrix_world), meshes, volumes, fluids, desc)
         except Exception as e:  # safety net: report, keep the rest of the scene

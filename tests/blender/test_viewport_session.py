@@ -1,0 +1,138 @@
+"""The Rendered viewport's Blender side (mpp_render/blender/viewport.py) without a window:
+what a depsgraph update touches, read from Blender's own updates; a ViewSession that
+translates again only what changed, restarts on a new view, and ends on the F12 render of
+the same view.  (view_draw's GPU drawing needs a window: not here.)"""
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+from mpp_render import cache  # noqa: E402
+from mpp_render.blender import frame, viewport  # noqa: E402
+from mpp_render.blender.translate.view import camera_from_matrices  # noqa: E402
+
+from parts import add_camera, add_cube, add_light, mpp_output  # noqa: E402
+
+pytestmark = pytest.mark.usefixtures("registered")
+
+W, H = 48, 27
+
+
+@pytest.fixture
+def small(empty_scene):
+    sc = mpp_output(empty_scene, W, H, samples=2, voxels=16)
+    sc.mpp.viewport_samples = 2
+    sc.mpp.multiple_paths = 20000
+    cube = add_cube(sc, "Cube", scale=(0.8, 0.8, 0.8))
+    light = add_light(sc, "Lamp", "POINT", energy=200.0, location=(1.5, -2.0, 2.0))
+    cam = add_camera(sc, distance=6.0)
+    bpy.context.view_layer.update()
+    return sc, cube, light, cam
+
+
+@pytest.fixture
+def warm(monkeypatch):
+    monkeypatch.setenv(cache.LIMIT_ENV, "256")
+    cache.clear()
+    yield
+    cache.clear()
+
+
+def view_of(sc, cam):
+    """The Camera a viewport looking through ``cam`` would give (translate.view)."""
+    dg = bpy.context.evaluated_depsgraph_get()
+    window = cam.calc_matrix_camera(dg, x=W, y=H)
+    return camera_from_matrices(cam.matrix_world.inverted(), window, W, H)
+
+
+def updates_after(change):
+    """changed_parts of the depsgraph updates Blender sends after ``change()``."""
+    seen = []
+
+    def handler(scene, depsgraph):
+        seen.append(viewport.changed_parts(depsgraph.updates))
+
+    bpy.app.handlers.depsgraph_update_post.append(handler)
+    try:
+        change()
+        bpy.context.view_layer.update()
+    finally:
+        bpy.app.handlers.depsgraph_update_post.remove(handler)
+    return set().union(*seen) if seen else set()
+
+
+def test_changed_parts_read_blenders_updates(small):
+    sc, cube, light, cam = small
+
+    def move_light():
+        light.location.x += 0.2
+
+    def more_energy():
+        light.data.energy *= 2
+
+    def denser():
+        mat = cube.data.materials[0]
+        node = next(n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeVolumePrincipled")
+        node.inputs["Density"].default_value *= 2
+
+    def move_cube():
+        cube.location.z += 0.1
+
+    def move_camera():
+        cam.location.x += 0.1
+
+    assert updates_after(move_light) == {"lights"}
+    assert updates_after(more_energy) == {"lights"}
+    assert "geometry" in updates_after(denser) and "lights" not in updates_after(denser)
+    assert updates_after(move_cube) == {"geometry"}
+    assert updates_after(move_camera) == set()
+
+
+def test_a_session_translates_only_what_changed_and_ends_on_the_f12_render(small, warm):
+    sc, cube, light, cam = small
+    session = viewport.ViewSession()
+    try:
+        dg = bpy.context.evaluated_depsgraph_get()
+        view = view_of(sc, cam)
+        assert session.update(dg, {"all"}, view)
+        first = session.progressive.wait(1, timeout=120)
+        assert first is not None and first.rgba.shape == (H, W, 4)
+        f12 = frame.render_depsgraph(dg, W, H).output.passes["Combined"]
+        assert f12[..., :3].max() > 0
+        np.testing.assert_allclose(first.rgba, f12, rtol=0, atol=1e-4 * f12.max())
+        medium = session.desc.media[0]
+
+        light.location.x += 0.5                    # a moved light: the lights alone again
+        bpy.context.view_layer.update()
+        assert session.update(dg, {"lights"}, view)
+        assert session.desc.media[0] is medium
+        assert not np.allclose(session.desc.lights[0].position, [1.5, -2.0, 2.0])
+        moved = session.progressive.wait(2, timeout=120)
+        assert moved is not None and not np.array_equal(moved.rgba, first.rgba)
+
+        assert not session.update(dg, set(), view)  # nothing changed: nothing restarts
+        assert not session.look(view)
+        cam.location.x += 0.3                      # the view moves: the camera alone
+        bpy.context.view_layer.update()
+        assert session.look(view_of(sc, cam))
+        assert session.desc.media[0] is medium
+        orbit = session.progressive.wait(3, timeout=120)
+        assert orbit is not None and not np.array_equal(orbit.rgba, moved.rgba)
+
+        sc.frame_set(sc.frame_current + 1)         # a new frame: everything again
+        assert session.update(dg, set(), view_of(sc, cam))
+        assert session.desc.media[0] is not medium
+        assert session.progressive.wait(4, timeout=120) is not None
+        assert "done" in session.status() and not session.progressive.errors
+    finally:
+        session.close()
+
+
+def test_display_pixels_put_row_0_at_the_bottom():
+    from mpp_render.viewport import ViewImage
+    rgba = np.zeros((3, 2, 4), np.float32)
+    rgba[0, :, 0] = 1.0                            # the top row is red
+    flat = viewport.display_pixels(ViewImage(rgba, 0, True, 0.0, 1))
+    assert flat.dtype == np.float32 and flat.shape == (24,)
+    assert flat.reshape(3, 2, 4)[2, :, 0].tolist() == [1.0, 1.0]
+    assert flat.reshape(3, 2, 4)[0, :, 0].tolist() == [0.0, 0.0]
