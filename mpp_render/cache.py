@@ -271,7 +271,7 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
     channels may come from an entry of another camera position (then the new entry is kept
     under that position's world key, so an exact lookup never takes them).  The viewport's first, coarse picture
     while the view orbits uses it (viewport.py); nothing else does.  A cancelled precompute changes nothing (it
-    raises parallel.Cancelled).  Callers must not modify the returned arrays."""
+    raises cancel.Cancelled).  Callers must not modify the returned arrays."""
     from . import precompute as pre_mod
     from .precompute.lattice import MULTIPLE_RESOLUTION
     from .precompute.layout import light_channels

@@ -22,7 +22,7 @@ with p1 composed with itself as its direction (``peak_free_twice``).  They are e
 FFT on the lattice, one kernel per colour channel, flight and camera direction (a few
 directions spread over what the camera sees of the medium, interpolated between); the walk
 then carries only the paths with at least two more scatterings
-(``mpp.level_table(..., exact_flights=2)``; scene.Tuning.exact_flights).  See docs/method.md, "The
+(``walk.level_table(..., exact_flights=2)``; scene.Tuning.exact_flights).  See docs/method.md, "The
 first flight, exact".
 
 Where the first flights mostly stay in the medium the walk's calibration (its escape through
@@ -395,7 +395,7 @@ def first_flight(q, inside, axes, source_dirs, v, g: float, sigma_t, sigma_s=Non
                  fft_memory: int = FFT_MEMORY) -> Optional[FirstFlight]:
     """The exact first flights of one light on one medium, or None where the walk alone
     serves (every channel's escape fraction at or below ESCAPE_LOW, no power); raises
-    parallel.Cancelled on Esc.  The first flight out of the beam and, where ``sigma_s`` is
+    cancel.Cancelled on Esc.  The first flight out of the beam and, where ``sigma_s`` is
     given, the second (``exact_flights`` 2; scene.Tuning.exact_flights), from the
     second-scattering source sigma_s* phi1 (phi1 the first flights' fluence in the medium)
     with the direction ``first_phase(..., order=2)``.

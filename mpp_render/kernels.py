@@ -23,9 +23,10 @@ from typing import List, NamedTuple, Optional
 import numpy as np
 
 from . import kernels_np
+from .cancel import Cancelled
 from .lightrecord import LIGHT_FIELDS
 from .media import BRICK
-from .mpp import DLOG_RHO, LOG_RHO0
+from .walk import DLOG_RHO, LOG_RHO0
 
 try:  # pragma: no cover - depends on the build
     from . import _kernels as _c  # built in place (setup.py build_ext --inplace)
@@ -196,7 +197,7 @@ class MultipleInputs(NamedTuple):
     """The march's multiple scattering."""
     ambient: int                                    # the world light's multiple channel, or -1
     per_medium: List[List[Optional[LevelField]]]    # per medium, per light (None: no pyramid)
-    tables: List[np.ndarray]                        # per medium its mpp.level_table (K, R, 6)
+    tables: List[np.ndarray]                        # per medium its walk.level_table (K, R, 6)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -304,7 +305,7 @@ def trace_paths(inp, *, threads: int = 1, should_cancel=None, backend=None):
     them: parallel.worker_count):
     the result is the same bits for any thread count (frames match across farm machines).
     Each block runs ``PATH_CHUNK`` paths a call, asking ``should_cancel`` between calls:
-    None when it says so."""
+    raises cancel.Cancelled when it says so."""
     from .paths import ROULETTE, trace_paths_np
     if not _on_c(backend) or not hasattr(_c, "trace_paths"):
         return trace_paths_np(inp)
@@ -346,7 +347,7 @@ def trace_paths(inp, *, threads: int = 1, should_cancel=None, backend=None):
         with ThreadPoolExecutor(workers) as ex:
             list(ex.map(work, range(blocks)))
     if cancelled:
-        return None
+        raise Cancelled
     total = outs[0]
     for o in outs[1:]:
         total += o

@@ -3,8 +3,8 @@
 Each kernel here has a compiled twin of the same name in ``mpp_render._kernels``
 (``mpp_render/csrc/``, C, releases the GIL); ``mpp_render.kernels`` picks one.  Both must agree
 to 1e-4 relative.  The helpers beside them are the twins of the C file's static helpers.  The
-light record's layout is mpp_render.lightrecord's; the walk model whose tables the march reads
-(level_table, table_lookup) is mpp_render.mpp's.
+light record's layout is mpp_render.lightrecord's; the walk model whose tables the march
+reads (level_table, table_lookup) is mpp_render.walk's.
 """
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from .lightrecord import (KIND_AREA, KIND_POINT, KIND_SPOT, KIND_SUN, L_AREA, L_
                           L_BLEND, L_CHANNEL, L_COND, L_COSHALF, L_DIR, L_INDIRECT, L_INV, L_KIND,
                           L_NORMAL, L_NORMALIZE, L_POS, L_RADIUS, L_ROUND, L_STRENGTH, LIGHT_FIELDS)
 from .media import BRICK, density_from, trilinear
-from .mpp import table_lookup
+from .walk import table_lookup
 from .lights import light_sample, path_stretch
 from .phase import hg
 
@@ -335,7 +335,7 @@ def multiple_source(ms_fields, table, rho, x, w2i, cos):
     pyramid.
 
     ``ms_fields``: per light None or (levels, stride, h) of precompute.MultipleField;
-    ``table``: the medium's mpp.level_table; ``w2i`` world -> padded index map; ``cos`` (L,N)
+    ``table``: the medium's walk.level_table; ``w2i`` world -> padded index map; ``cos`` (L,N)
     the cosine between each light's propagation direction and the direction to the camera.
     Level k adds pyramid_k(x) weight_k HG(cos; g_k), by colour channel.  The levels come
     moved by their paths' drift towards what the camera sees (precompute.drift_levels), having
@@ -432,7 +432,7 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
     packed records; ``ambient`` the world-light channel or -1.  ``step`` metres.
     ``multiple``: None, or a kernels.MultipleInputs (ambient_ms channel or -1, per medium a
     list with, per light, None or the kernels.LevelField (levels, stride, h) of its
-    MultipleField, per medium its mpp.level_table) to accumulate multiple scattering too.
+    MultipleField, per medium its walk.level_table) to accumulate multiple scattering too.
     (kernels.MarchInputs holds these arguments as one record; kernels.march takes it.)
 
     ``emissions``: None or per medium the RGB emitted radiance per metre (W/(m^3 sr)), given

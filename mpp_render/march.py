@@ -45,7 +45,7 @@ from .kernels_np import REFINE_STEPS, T_MIN, hash32
 from .lightrecord import LIGHT_FIELDS
 from .lights import pack_light
 from .media import PreparedMedium
-from .mpp import RHO_TABLE
+from .walk import RHO_TABLE
 from .passes import DEPTH_MISS, DEPTH_OPACITY
 from .precompute.layout import FieldLayout
 from .scene import Camera, Light, Tuning
@@ -97,7 +97,7 @@ class MarchContext:
         self.multiple = None
         if self.multiple_fields is not None:
             amb = self.layout.ambient_multiple_channel
-            from .mpp import level_table
+            from .walk import level_table
             per_medium, tables = [], []
             for pm, mfs in zip(self.media, self.multiple_fields):
                 ref = next((m for m in mfs if m is not None), None)

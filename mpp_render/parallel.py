@@ -10,16 +10,7 @@ import os
 from concurrent.futures import ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FuturesTimeout
 
-
-class Cancelled(Exception):
-    """Esc: ``should_cancel()`` turned true.  Raised where it is polled (``check``,
-    ``run_chunks``) and caught by the render, which then returns what it has."""
-
-
-def check(should_cancel) -> None:
-    """Raise Cancelled when ``should_cancel`` (None: never) says so."""
-    if should_cancel is not None and should_cancel():
-        raise Cancelled
+from .cancel import check
 
 
 def worker_count(threads: int = 0) -> int:

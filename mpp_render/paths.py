@@ -1,6 +1,6 @@
 """Multiple scattering by light paths traced through the medium (the converging estimate).
 
-The walk of the light pyramid (mpp.py, precompute/lightpyramid.py) is a model: smooth and
+The walk of the light pyramid (walk.py, precompute/lightpyramid.py) is a model: smooth and
 cheap, but with errors no setting removes.  This module estimates the same quantity by Monte
 Carlo, so that it converges as paths are added and the lattice is refined:
 

@@ -21,7 +21,8 @@ import numpy as np
 from . import cache, kernels, worldfog
 from .march import MarchContext
 from .media import prepare
-from .parallel import Cancelled, worker_count
+from .cancel import Cancelled
+from .parallel import worker_count
 from .passes import DEPTH_MISS, enabled_passes
 from .scene import SceneDescription
 from .surfaces import prepare_surfaces

@@ -98,7 +98,7 @@ def stage_scene(desc: SceneDescription, stage: Stage) -> SceneDescription:
     h = max(1, -(-int(cam.height) // stage.scale))
     paths = st.multiple_paths
     if stage.paths < 1.0 and paths > 0:
-        paths = int(round(paths * stage.paths))   # 0: the walk (mpp.py) instead of paths
+        paths = int(round(paths * stage.paths))   # 0: the walk (walk.py) instead of paths
     return dataclasses.replace(
         desc, camera=dataclasses.replace(cam, width=w, height=h),
         settings=dataclasses.replace(

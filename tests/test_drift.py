@@ -6,7 +6,7 @@ import pytest
 
 from mpp_render import pyramid
 from mpp_render.precompute import lattice, lightpyramid, source
-from mpp_render.mpp import level_paths, walk_displacement
+from mpp_render.walk import level_paths, walk_displacement
 from mpp_render.media import PreparedMedium, trilinear
 from mpp_render.phase import sample_hg
 from mpp_render.scene import Camera, Light

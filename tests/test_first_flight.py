@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from mpp_render import firstflight as ff
-from mpp_render.mpp import level_paths, level_table, table_lookup
-from mpp_render.parallel import Cancelled
+from mpp_render.walk import level_paths, level_table, table_lookup
+from mpp_render.cancel import Cancelled
 from mpp_render.precompute.flatten import flatten_levels
 from mpp_render.phase import delta_fraction, delta_g, hg, outside_peak, peak_cone_cos
 

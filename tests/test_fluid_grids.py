@@ -5,7 +5,7 @@ colour grids and Blender's cache file names."""
 import numpy as np
 import pytest
 
-from mpp_render.blender.translate import fluid
+from mpp_render.blender.translate import fluid, fluidcache
 
 
 class RNAArray:
@@ -109,9 +109,9 @@ def test_cache_frame_and_file_names(kind, offset, frame, want):
     class D:
         cache_type, cache_frame_offset = kind, offset
 
-    assert fluid.cache_frame(D, frame) == want
-    assert fluid.cache_file("/c", 7).replace("\\", "/") == "/c/data/fluid_data_0007.vdb"
-    assert fluid.cache_file("/c", 12, noise=True).replace("\\", "/") == "/c/noise/fluid_noise_0012.vdb"
+    assert fluidcache.cache_frame(D, frame) == want
+    assert fluidcache.cache_file("/c", 7).replace("\\", "/") == "/c/data/fluid_data_0007.vdb"
+    assert fluidcache.cache_file("/c", 12, noise=True).replace("\\", "/") == "/c/noise/fluid_noise_0012.vdb"
 
 
 # -- emission that grids drive, on the domain's lattices (vdb.lattice_emission, shared) ------

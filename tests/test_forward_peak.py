@@ -8,7 +8,7 @@ import pytest
 from mpp_render import kernels
 from mpp_render.kernels import MarchInputs, MultipleInputs
 from mpp_render.media import delta_scaled, prepare
-from mpp_render.mpp import RHO_TABLE
+from mpp_render.walk import RHO_TABLE
 from mpp_render.phase import delta_fraction, delta_g, hg
 from mpp_render.precompute import precompute
 from mpp_render.march import pack_lights

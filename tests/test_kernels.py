@@ -200,12 +200,13 @@ def test_the_compiled_light_record_is_lightrecords():
 
 
 def test_the_layout_and_the_model_import_no_kernel():
-    """lightrecord (the light record) and mpp (the walk model) import no kernel module: the
+    """lightrecord (the light record), walk (the walk model) and mpp (its closed forms)
+    import no kernel module: the
     build, the tests and every stage can read them."""
     import subprocess
     import sys
     from pathlib import Path
-    code = ("import sys, mpp_render.lightrecord, mpp_render.mpp; "
+    code = ("import sys, mpp_render.lightrecord, mpp_render.walk, mpp_render.mpp; "
             "bad = [m for m in sys.modules if m.startswith('mpp_render.kernels') or "
             "m.startswith('mpp_render._kernels')]; assert not bad, bad")
     subprocess.run([sys.executable, "-c", code], check=True, cwd=Path(__file__).resolve().parents[1])

@@ -8,6 +8,8 @@ import pytest
 from mpp_render import mpp
 from mpp_render.phase import hg
 
+from pencil_beam import mc_width_sq, pencil_beam_mc
+
 CATALAN = 0.915965594177219015
 
 # mpp-math.md section 2 (400k-point trapezoid)
@@ -23,7 +25,7 @@ W_TOL = 0.04                     # measured worst |MC/exact - 1| over 6 seeds: 1
 @pytest.fixture(scope="module")
 def beams():
     """One pencil beam per g, recorded at 1, 3 and 10 mean free paths (fixed seeds)."""
-    return {g: mpp.pencil_beam_mc(g, 1.0, 0.0, MC_S, MC_PHOTONS, np.random.default_rng(17 + i))
+    return {g: pencil_beam_mc(g, 1.0, 0.0, MC_S, MC_PHOTONS, np.random.default_rng(17 + i))
             for i, g in enumerate(MC_GS)}
 
 
@@ -115,7 +117,7 @@ def test_spread_width_matches_pencil_beam_mc(beams, g):
     r = beams[g]
     for k, s in enumerate(r["s"]):
         for mo in (0, 1, 2):
-            mc = mpp.mc_width_sq(r["position"][k], r["direction"][k], r["order"][k] >= mo)
+            mc = mc_width_sq(r["position"][k], r["direction"][k], r["order"][k] >= mo)
             ex = mpp.spread_width_sq(s, 1.0, 0.0, g=g, min_order=mo)
             assert mc == pytest.approx(ex, rel=W_TOL), (g, s, mo, mc, ex)
         # the paper's small-angle width with HG's <theta^2> is far off (heavy tail): >= 1.5x
@@ -146,7 +148,7 @@ def test_angular_spread_matches_pencil_beam_mc(beams, g):
 
 
 def test_mc_without_scattering_is_a_straight_line():
-    r = mpp.pencil_beam_mc(0.9, 0.0, 0.5, [0.0, 2.0], 100, np.random.default_rng(0))
+    r = pencil_beam_mc(0.9, 0.0, 0.5, [0.0, 2.0], 100, np.random.default_rng(0))
     assert np.allclose(r["position"][1], [0.0, 0.0, 2.0])
     assert np.all(r["order"] == 0)
     assert np.allclose(r["weight"], np.exp(-0.5 * np.array([0.0, 2.0])))

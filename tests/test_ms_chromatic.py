@@ -1,8 +1,8 @@
 """Chromatic media stay chromatic in multiple scattering: the paths of each colour channel
-are absorbed, and spread, with that channel's coefficients (mpp.level_table)."""
+are absorbed, and spread, with that channel's coefficients (walk.level_table)."""
 import numpy as np
 
-from mpp_render.mpp import RHO_TABLE, level_paths, level_table
+from mpp_render.walk import RHO_TABLE, level_paths, level_table
 from mpp_render.render import render
 
 from test_stiff import cube, scene

@@ -71,7 +71,7 @@ def test_infinite_medium_point_light_follows_diffusion_theory():
     (precompute.cell_mean_source), a light on a lattice point gave 1e6 times too much
     multiple scattering (its 1/r^2 read at r ~ 0)."""
     from mpp_render.kernels_np import multiple_source
-    from mpp_render.mpp import level_table
+    from mpp_render.walk import level_table
     from mpp_render.media import prepare
     from mpp_render.precompute import precompute
     from mpp_render.scene import Camera, Medium, World

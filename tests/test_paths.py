@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from mpp_render import kernels
+from mpp_render.cancel import Cancelled
 from mpp_render.paths import MAX_RATE_SPAN, PathInputs, from_power, rate_span, trace_paths_np
 from mpp_render.phase import hg
 from mpp_render.precompute.lattice import lattice_shape
@@ -149,8 +150,10 @@ def test_esc_stops_the_paths_between_chunks():
     def esc():
         calls.append(1)
         return len(calls) > 2
-    assert kernels.trace_paths(inp, threads=2, should_cancel=esc) is None
-    assert kernels.trace_paths(inp, threads=2, should_cancel=lambda: False) is not None
+    with pytest.raises(Cancelled):
+        kernels.trace_paths(inp, threads=2, should_cancel=esc)
+    assert len(calls) == 3                  # stopped at the first yes
+    assert kernels.trace_paths(inp, threads=2, should_cancel=lambda: False).shape[-1] == 3
 
 
 def test_a_medium_too_dense_for_paths_keeps_the_walk():

@@ -13,9 +13,9 @@ LAYERS = [
     {"render", "tiles", "cache", "bounce", "budget", "metrics", "exr"},  # the frame; I/O
     {"precompute", "march", "firstflight", "pyramid", "parallel"},      # the two stages
     {"kernels", "kernels_np", "_kernels", "paths"},                     # C kernels, numpy twins
-    {"lights", "surfaces", "principled", "worldfog", "media", "phase", "mpp", "lightrecord",
+    {"lights", "surfaces", "principled", "worldfog", "media", "phase", "mpp", "walk", "lightrecord",
      "camera", "blackbody", "passes"},                                            # physics, media, model
-    {"scene"},                                                          # the description
+    {"scene", "cancel"},                                                # the description; Esc
 ]
 
 

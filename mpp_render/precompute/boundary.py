@@ -17,7 +17,7 @@ keep the fraction
 of their light: 1 inside the medium, falling linearly to 0 at z_b outside it, read where the
 level's paths have drifted to.  dist (m) is the distance to the nearest point of the medium
 on the lattice; D_k = g (1 - exp(-l_k / l_tr)) l_tr the mean progress along the light's
-direction d of the paths of level k (``mpp.walk_displacement``): forward-scattering
+direction d of the paths of level k (``walk.walk_displacement``): forward-scattering
 light that enters through a face heads inwards, and is lost less than its symmetric blur
 around the face says.  Level 0 (the unblurred source) loses nothing.
 

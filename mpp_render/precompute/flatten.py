@@ -23,7 +23,7 @@ def flattened(pm: PreparedMedium, mfs, lights: List[Light], camera: Camera,
     """``mfs`` (one MultipleField or None a light, ``flat`` set by the precompute) as one
     MultipleField holding the flattened level (``flatten_levels``) and None for the other
     lights: what the march reads."""
-    from ..mpp import level_table
+    from ..walk import level_table
     from .lightpyramid import MultipleField
     ref = next(m for m in mfs if m is not None)
     table = level_table(pm.g, pm.sigma_s, pm.sigma_a, ref.h, len(ref.levels))
@@ -50,7 +50,7 @@ def flatten_levels(pm: PreparedMedium, mfs, lights: List[Light], table: np.ndarr
                    camera: Camera, table_after: Optional[np.ndarray] = None) -> np.ndarray:
     """One level (X,Y,Z,3) float32 on the lattice ``flat_stride(mfs)`` voxels apart: at
     each point y, sum over lights l and levels k of the level read at y times the level's
-    weight and HG(cos_l(y); g_k) at density 1 (``table``: mpp.level_table), cos_l(y)
+    weight and HG(cos_l(y); g_k) at density 1 (``table``: walk.level_table), cos_l(y)
     the cosine between the light's propagation at y and the direction from y to the
     ``camera``: what kernels_np.multiple_source computes at a march sample of a density-1
     medium, with the phase factor interpolated between lattice points instead of taken at
@@ -64,7 +64,7 @@ def flatten_levels(pm: PreparedMedium, mfs, lights: List[Light], table: np.ndarr
     from ..camera import towards_camera
     from ..kernels_np import hg, upsample
     from ..lights import light_sample
-    from ..mpp import table_lookup
+    from ..walk import table_lookup
     from .lattice import lattice_points, lattice_shape
     ref = next(m for m in mfs if m is not None)
     stride = flat_stride(mfs)

@@ -101,7 +101,7 @@ def light_optical_depth(media: List[PreparedMedium], light: Light, points, step,
     way, so surfaces cast volumetric shadows, and with ``fog_sigma_t`` (RGB 1/m) the world
     fog's sigma_t x distance (worldfog.optical_depth).  ``media`` must not hold the fog.
     ``coefficient`` (see _media_arrays_for) picks what is integrated; shadows and fog are
-    added to 'sigma_t' only.  Raises parallel.Cancelled on Esc."""
+    added to 'sigma_t' only.  Raises cancel.Cancelled on Esc."""
     od = kernels.optical_depth
     arrays = _media_arrays_for(media, coefficient) if media else None
     # the bricks bound density_from(grid), which 'length' does not integrate
@@ -141,7 +141,7 @@ def soft_visibility(surfaces, light: Light, pm: PreparedMedium, flat, points, ch
     of a point do not shadow it: the voxels just behind a lit floor or wall (which camera
     rays never reach) then do not darken the lit fog in front of it through the
     interpolation; a shadow starts that far behind its caster instead.  Raises
-    parallel.Cancelled on Esc."""
+    cancel.Cancelled on Esc."""
     vis = np.ones(len(points))
     if surfaces is None or surfaces.empty or not len(points):
         return vis
@@ -332,7 +332,7 @@ def sweep_light(media: List[PreparedMedium], pm: PreparedMedium, light: Light, f
     flat indices ``near_sharp_surfaces(pm, media)`` gives, where the caller has them (they
     depend on the media's grids only, not on the light).  Returns True when done, False
     when the light cannot be swept (the caller then marches every voxel); raises
-    parallel.Cancelled on Esc."""
+    cancel.Cancelled on Esc."""
     plan = sweep_pyramids(pm, light)
     if plan is None:
         return False

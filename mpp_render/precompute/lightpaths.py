@@ -10,7 +10,7 @@ import numpy as np
 
 from .. import kernels
 from ..camera import towards_camera
-from ..parallel import Cancelled, worker_count
+from ..parallel import worker_count
 from ..paths import PATHS_MAX_SPAN, PathInputs, from_power, rate_span
 from .lattice import lattice_points, walk_lattice
 from .pathstarts import Surroundings, fog_starts, reach, surface_albedo, surface_starts
@@ -31,7 +31,7 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     depth at ``channel``): M float32 (LX,LY,LZ,3) W/(m^2 sr) on the light pyramid's lattice
     (lattice.walk_lattice at ``resolution``), from ``n_paths`` paths (paths.py; at most
     ``PATHS_PER_POINT`` per lattice point the medium fills) seen from ``camera``; ``threads``
-    share them; raises parallel.Cancelled when ``should_cancel`` says so.  The paths start
+    share them; raises cancel.Cancelled when ``should_cancel`` says so.  The paths start
     where the light's unscattered beam first scatters in the medium (source.source_and_density),
     and with ``around`` (pathstarts.Surroundings) also where it first scatters in the world
     fog beyond the fog's grid and where the lit surfaces reflect it (pathstarts.py); they
@@ -91,7 +91,7 @@ def _trace(sets, n_paths, seed, threads, should_cancel, density, w2i, i2w, pm, s
            rate, around) -> np.ndarray:
     """The deposits (LX,LY,LZ,3) of ``n_paths`` paths shared among the start ``sets`` in
     proportion to their power, on the grid ``density`` / ``w2i`` / ``i2w`` with lattice
-    ``stride``; raises parallel.Cancelled on Esc."""
+    ``stride``; raises cancel.Cancelled on Esc."""
     surf = around.surfaces if around is not None else None
     centre, radius = reach(pm, (w2i, density.shape))
     extra = dict(outside=pm.outside_density, reach_centre=centre, reach_radius=radius)
@@ -109,8 +109,6 @@ def _trace(sets, n_paths, seed, threads, should_cancel, density, w2i, i2w, pm, s
                          np.ascontiguousarray(dirs), cdf, rate, n_k, int(seed) + 104729 * k,
                          jitter=jitter, lobe=lobe, **extra)
         got = kernels.trace_paths(inp, threads=worker_count(threads), should_cancel=should_cancel)
-        if got is None:
-            raise Cancelled()
         acc = got if acc is None else acc + got
     return acc
 

@@ -15,7 +15,7 @@ import numpy as np
 from .. import kernels, pyramid
 from ..camera import towards_camera
 from ..firstflight import FirstFlight, first_flight, flight_weight
-from ..mpp import level_paths, walk_displacement
+from ..walk import level_paths, walk_displacement
 from ..media import PreparedMedium
 from ..parallel import check
 from ..scene import Camera, Light, Tuning
@@ -69,7 +69,7 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
     (``restricted_source``) spread level by level, each level losing what leaves through the
     medium's surface (boundary.py) and then moved along the light by the mean displacement
     of its paths (``drift_levels``), for the light that ``camera`` sees.  Raises
-    parallel.Cancelled when ``should_cancel`` says so.  ``pm`` is the medium as the walk
+    cancel.Cancelled when ``should_cancel`` says so.  ``pm`` is the medium as the walk
     sees it: precompute hands the delta-scaled medium (media.delta_scaled) and the optical
     depth of its beam, and ``g_last`` the medium's own g, that of the last scattering
     towards the camera.
@@ -149,7 +149,7 @@ def drift_levels(levels, pm: PreparedMedium, light: Light, camera: Camera, strid
     representative length l_k) start from a first scattering of the light travelling along d
     and drift forward along it; of the light that leaves x towards the camera (v, unit,
     towards the camera's position; its axis for an orthographic camera), those that arrive
-    heading towards v came further along v (``mpp.walk_displacement``).
+    heading towards v came further along v (``walk.walk_displacement``).
 
     d belongs to the first scatterings read, not to x: ``directions`` (one (X,Y,Z,4) array
     per level, blurred with it) holds the power-weighted sum of the light's direction at the

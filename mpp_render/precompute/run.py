@@ -44,7 +44,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                multiple_resolution: int = MULTIPLE_RESOLUTION, multiple_paths: int = 0,
                tuning: Tuning = Tuning(), surface_bounce: bool = True) -> Precomputed:
     """Field arrays for every medium, and with ``multiple`` the light pyramids; raises
-    parallel.Cancelled when ``should_cancel`` says so.  ``surfaces`` (a SurfaceSet or None)
+    cancel.Cancelled when ``should_cancel`` says so.  ``surfaces`` (a SurfaceSet or None)
     shadow the lights and the sky.  Media that cannot scatter (sigma_s = 0) get no
     multiple-scattering data.  ``multiple_paths``: light paths traced per light and medium
     for multiple scattering (precompute.lightpaths); 0: the walk of the light pyramid.  ``tuning``: the

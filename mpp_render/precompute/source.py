@@ -93,7 +93,7 @@ def peak_light(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int, 
     it (docs/method.md, "The forward peak spreads").  Returns (lattice (X,Y,Z,3) float32,
     stride): on a lattice ``stride`` voxels apart, about ``resolution`` points along the
     grid's longest side (finer where ``fine_stride`` says so), for
-    ``kernels.upsample_into``; raises parallel.Cancelled when ``should_cancel`` says so.
+    ``kernels.upsample_into``; raises cancel.Cancelled when ``should_cancel`` says so.
 
     Along a line from the light the beam's light beyond the unscattered light is
     B = E (exp(-tau*) - exp(-tau)) (``fld``'s ``beam`` and ``channel`` optical depths at the
@@ -233,7 +233,7 @@ def restricted_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel
     reading Q at the lattice points alone missed (or doubled) the thin layer a light lights
     inside a dense medium's face as the lattice fell against it (docs/ms_resolution.md).
     Stride 1 reads the voxels themselves.  Made ``chunk`` voxel planes at a time; raises
-    parallel.Cancelled when ``should_cancel`` says so between them."""
+    cancel.Cancelled when ``should_cancel`` says so between them."""
     nx = pm.grid.shape[0]
     rows = np.zeros((nx, shape[1], shape[2], 3))
     flat_fld = fld.reshape(nx, -1, fld.shape[-1])
@@ -268,7 +268,7 @@ def source_and_density(pm: PreparedMedium, fld: np.ndarray, light: Light, channe
     """(source (N,3) W/m^3, density (N,), points (N,3) m) on the lattice ``stride`` voxels
     apart (C order of ``lattice_shape``): the first-scattering source of ``restricted_source``,
     averaged over the cells round a point or spot light (``cell_mean_source``), and the
-    medium's density at the lattice points.  Raises parallel.Cancelled on Esc."""
+    medium's density at the lattice points.  Raises cancel.Cancelled on Esc."""
     shape = lattice_shape(pm.grid.shape, stride)
     idx, pts = lattice_points(pm, shape, stride)
     rho = density_from(lattice_values(fld[..., 0], idx, stride), pm.threshold)

@@ -61,7 +61,7 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
     pair is returned.  Points draw their jitter from streams seeded by (seed, block of
     ``WORLD_RNG_BLOCK`` points), so the result depends on neither the thread count nor the
     chunk size (by default ``world_chunk(n_dirs)``, short enough to serve Esc quickly).
-    Raises parallel.Cancelled on Esc."""
+    Raises cancel.Cancelled on Esc."""
     colour = np.asarray(world.color, np.float64)
     n = len(points)
     if n == 0 or not np.any(colour > 0):

@@ -1,7 +1,11 @@
 """The Rendered viewport's Blender side (mpp_render/blender/viewport.py) without a window:
 what a depsgraph update touches, read from Blender's own updates; a ViewSession that
 translates again only what changed, restarts on a new view, and ends on the F12 render of
-the same view.  (view_draw's GPU drawing needs a window: not here.)"""
+the same view; the engine's view_update / view_draw called as Blender calls them, with the
+GPU drawing recorded instead (it needs a window)."""
+import time
+import types
+
 import numpy as np
 import pytest
 
@@ -136,3 +140,58 @@ def test_display_pixels_put_row_0_at_the_bottom():
     assert flat.dtype == np.float32 and flat.shape == (24,)
     assert flat.reshape(3, 2, 4)[2, :, 0].tolist() == [1.0, 1.0]
     assert flat.reshape(3, 2, 4)[0, :, 0].tolist() == [0.0, 0.0]
+
+
+class FakeEngine:
+    """What view_update / view_draw use of a RenderEngine (Blender makes the real one only
+    for a window's viewport)."""
+
+    def __init__(self):
+        self.stats, self.redraws = [], 0
+
+    def update_stats(self, a, b):
+        self.stats.append(b)
+
+    def tag_redraw(self):
+        self.redraws += 1
+
+
+def test_the_engines_view_callbacks_draw_the_pictures_as_they_come(small, monkeypatch):
+    from mpp_render.blender.engine import MPPRenderEngine
+    sc, cube, light, cam = small
+    drawn = []
+
+    class Recorder:
+        def draw(self, engine, scene, img, width, height):
+            drawn.append((img.generation, img.stage, img.rgba.shape, width, height))
+
+    monkeypatch.setattr(viewport, "Drawer", Recorder)
+    dg = bpy.context.evaluated_depsgraph_get()
+    window = cam.calc_matrix_camera(dg, x=W, y=H)
+    region_data = types.SimpleNamespace(view_matrix=cam.matrix_world.inverted(),
+                                        window_matrix=window)
+    context = types.SimpleNamespace(region=types.SimpleNamespace(width=W, height=H),
+                                    region_data=region_data)
+    engine = FakeEngine()
+    MPPRenderEngine.view_draw(engine, context, dg)          # before any update: nothing
+    assert drawn == [] and engine.stats == []
+    MPPRenderEngine.view_update(engine, context, dg)
+    try:
+        session = engine._view
+        deadline = time.perf_counter() + 120
+        while time.perf_counter() < deadline:               # Blender redraws while asked to
+            MPPRenderEngine.view_draw(engine, context, dg)
+            if not session.progressive.busy and drawn and drawn[-1][1] == 2:
+                break
+            time.sleep(0.01)
+        MPPRenderEngine.view_draw(engine, context, dg)
+        stages_seen = sorted({d[1] for d in drawn})
+        assert stages_seen[-1] == 2 and drawn[-1][2] == (H, W, 4)
+        assert all(d[3:] == (W, H) for d in drawn)         # stretched over the region
+        assert engine.redraws >= 1 and "done" in engine.stats[-1]
+        redraws = engine.redraws
+        MPPRenderEngine.view_draw(engine, context, dg)      # finished: no more redraws asked
+        assert engine.redraws == redraws
+    finally:
+        MPPRenderEngine.__del__(engine)
+    assert not session.progressive._thread.is_alive()
