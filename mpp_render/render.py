@@ -96,12 +96,13 @@ def render(desc: SceneDescription,
                        fog_pm, far, ctx, step, out)
     t_march = time.perf_counter()
     threads = worker_count(st.threads)
-    march_samples, cancelled = march_tiles(frame.tile, len(frame.tiles), threads, cancel,
-                                           progress, out)
+    (march_samples, camera_samples), cancelled = march_tiles(frame.tile, len(frame.tiles),
+                                                             threads, cancel, progress, out)
     timings["march"] = time.perf_counter() - t_march
     stats = {"backend": kernels.backend(), "step": step, "tiles": len(frame.tiles),
              "passes": passes_on,
-             "march_samples": march_samples, "threads": threads}
+             "march_samples": march_samples, "threads": threads,
+             "pixel_samples": camera_samples / max(W * H, 1)}
     if pre is not None:
         stats.update(pre.stats)
     return RenderOutput(out, timings, warnings, cancelled, stats)
@@ -174,10 +175,10 @@ def with_world_fog(desc: SceneDescription, fog, media: list, warnings: List[str]
 def march_tiles(do_tile, n_tiles: int, threads: int, cancel, progress, out) -> tuple:
     """Run ``do_tile(index)`` for every tile on a pool of ``threads`` threads, at most two
     per thread queued, writing each result into the passes ``out`` as it comes; Esc
-    (``cancel()``) is polled and ``progress`` told between tiles.  Returns (march samples,
-    whether cancelled)."""
+    (``cancel()``) is polled and ``progress`` told between tiles.  Returns ((march samples,
+    camera samples), whether cancelled)."""
     done = 0
-    march_samples = 0.0
+    march_samples = camera_samples = 0.0
     cancelled = False
     with ThreadPoolExecutor(max_workers=threads) as pool:
         pending = set()
@@ -190,8 +191,9 @@ def march_tiles(do_tile, n_tiles: int, threads: int, cancel, progress, out) -> t
             # wait for whichever finishes first
             fin, pending = wait(pending, return_when=FIRST_COMPLETED)
             for f in fin:
-                index, (x0, y0, tw, th), res, n_steps = f.result()
+                index, (x0, y0, tw, th), res, (n_steps, n_rays) = f.result()
                 march_samples += n_steps
+                camera_samples += n_rays
                 for name, arr in res.items():
                     if name in out:
                         out[name][y0:y0 + th, x0:x0 + tw] = arr.reshape(th, tw, -1)
@@ -207,4 +209,4 @@ def march_tiles(do_tile, n_tiles: int, threads: int, cancel, progress, out) -> t
                     pending.add(pool.submit(do_tile, i))
             if progress:
                 progress(done / n_tiles, f"Tiles {done}/{n_tiles}")
-    return march_samples, cancelled
+    return (march_samples, camera_samples), cancelled

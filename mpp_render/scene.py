@@ -212,7 +212,8 @@ class Tuning:
     surface gathers the sky, the volumes' light and the other surfaces' (surfaces.shade); 4
     took p_fog_spot_shafts' single scattering from 0.194 to 0.079 at 16 spp (its pillars are
     lit by the spot-lit ground, its ground by the beam's fog) for 25-40 % more render time in
-    scenes with a ground."""
+    scenes with a ground.  ``adaptive_first``: with adaptive sampling, the samples every pixel
+    gets before its noise is judged (at least 2: a variance needs two)."""
 
     skip_min_voxels: int = 1 << 20
     spot_cull: bool = True
@@ -224,6 +225,7 @@ class Tuning:
     adapt_tau: float = 0.1
     tile: int = 64
     surface_gathers: int = 4
+    adaptive_first: int = 4
 
 
 # light paths per light and medium at the default quality (docs/method.md, "Traced paths")
@@ -231,12 +233,15 @@ MULTIPLE_PATHS = 1_000_000
 
 # What the Quality menu sets (blender/properties.py; docs/usage.md gives what each costs and
 # how close it comes on the public scenes).  Preview: the walk's smooth, biased multiple
-# scattering and few samples; Final (the defaults): traced paths; Reference: four times the
-# paths on a lattice twice as fine, for a converged look at 8x the memory per lattice.
+# scattering and few samples; Final (the defaults): traced paths, adaptive sampling;
+# Reference: every sample in every pixel, four times the paths on a lattice twice as fine,
+# for a converged look at 8x the memory per lattice.
 QUALITY_PRESETS = {
-    "PREVIEW": dict(samples=4, multiple_paths=0, multiple_resolution=64),
-    "FINAL": dict(samples=16, multiple_paths=MULTIPLE_PATHS, multiple_resolution=64),
-    "REFERENCE": dict(samples=16, multiple_paths=4 * MULTIPLE_PATHS, multiple_resolution=128),
+    "PREVIEW": dict(samples=4, noise_threshold=0.01, multiple_paths=0, multiple_resolution=64),
+    "FINAL": dict(samples=16, noise_threshold=0.01, multiple_paths=MULTIPLE_PATHS,
+                  multiple_resolution=64),
+    "REFERENCE": dict(samples=16, noise_threshold=0.0, multiple_paths=4 * MULTIPLE_PATHS,
+                      multiple_resolution=128),
 }
 
 
@@ -244,7 +249,10 @@ QUALITY_PRESETS = {
 class Settings:
     """Render quality settings.
 
-    ``samples``: jittered rays per pixel (box filter over the pixel square).
+    ``samples``: jittered rays per pixel (box filter over the pixel square), at most.
+    ``noise_threshold``: adaptive sampling (tiles.FrameMarch.tile): a pixel stops taking
+    samples once the standard error of its mean radiance is below this many times the square
+    root of that mean (W/(m^2 sr)); 0: every pixel takes ``samples``.
     ``step_size``: march step in metres; 0 picks half the finest voxel size.
     ``multiple``: compute multiple scattering (MPP).  ``film_transparent``: alpha from
     transmittance instead of 1.  ``seed``: jitter seed (same seed, same image).
@@ -253,7 +261,7 @@ class Settings:
     pyramids of multiple scattering (precompute.lightpyramid; never finer than the voxels).
     ``multiple_paths``: light paths traced per light and medium for multiple scattering
     (paths.py, precompute.lightpaths; more: less noise in it); 0: the walk of the light
-    pyramid instead (mpp.py).
+    pyramid instead (walk.py).
     ``passes``: names of the passes to fill; None means every pass the engine has.
     ``voxel_resolution``: voxels along the longest side when a mesh volume is voxelised.
     ``threads``: worker threads for the march; 0 means one per core.
@@ -267,6 +275,7 @@ class Settings:
     """
 
     samples: int = 16
+    noise_threshold: float = 0.01
     step_size: float = 0.0
     multiple: bool = True
     film_transparent: bool = False

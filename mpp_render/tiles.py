@@ -26,6 +26,7 @@ from .surfaces import SurfaceSet, intersect, shade
 
 GATHER_SEED = 0x5BD1E995  # offsets the seed of the rays that gather volume light onto surfaces
 TILE_RAYS = 4096     # rays per tile at most: Esc and progress are served between tiles
+ROUND_SEED = 0x9E3779B1  # offsets the seed of each adaptive round's gathering rays
 
 
 def tile_size(samples: int, largest: int = 64) -> int:
@@ -84,10 +85,11 @@ class FrameMarch:
             tau = tau + worldfog.optical_depth(self.fog_pm.sigma_t, t_max)
         return tau
 
-    def radiance_towards(self, index):
+    def radiance_towards(self, index, k=0):
         """``(points, dirs, t_max) -> (N,3)``: the radiance the volumes scatter and emit
-        towards ``points`` along ``dirs`` (a march of tile ``index``'s own random stream):
-        the light they throw onto a surface (surfaces.shade); None without media."""
+        towards ``points`` along ``dirs`` (a march of tile ``index``'s own random stream, of
+        its round ``k``): the light they throw onto a surface (surfaces.shade); None without
+        media."""
         if self.ctx is None:
             return None
 
@@ -95,27 +97,66 @@ class FrameMarch:
             n = len(p)
             t0, t1 = union_interval(self.media, p, d, np.zeros(n), t_max)
             r = march_rays(self.ctx, p, d, t0, t1, np.ones(n),
-                           ray_keys(self.st.seed + GATHER_SEED, index, n))
+                           ray_keys(self.st.seed + GATHER_SEED + ROUND_SEED * k, index, n))
             return r["single"] + r["multiple"] + r["emission"]
         return radiance
 
-    def rays(self, index, rng):
-        """The tile's camera rays: (o, d, t_min, t_max, axial, (x0, y0, width, height))."""
+    def tile(self, index):
+        """(index, (x0, y0, width, height), passes of the tile (pixels, C), (march samples,
+        camera samples)).
+
+        Each pixel has ``samples`` samples drawn up front (their offsets in the pixel, lens
+        points, random keys and surface-gather bands), so a sample is the same whichever
+        round takes it.  Adaptive sampling (``Settings.noise_threshold`` > 0): every pixel
+        first takes ``Tuning.adaptive_first`` of them (``sample_order``: spread over the
+        pixel), then rounds each doubling a pixel's samples (up to ``samples``) go to the
+        pixels whose noise (``Accumulator.noise``) is above the threshold.  With the
+        threshold 0, one round of all the samples."""
+        st, spp = self.st, self.spp
+        rng = np.random.default_rng([st.seed, index])
         x0, y0 = self.tiles[index]
         tw = min(self.size, int(self.cam.width) - x0)
         th = min(self.size, int(self.cam.height) - y0)
-        offs = pixel_offsets(self.spp, rng)
+        npx = tw * th
         yy, xx = np.mgrid[y0:y0 + th, x0:x0 + tw]
-        px = (xx.reshape(-1, 1) + offs[None, :, 0]).ravel()
-        py = (yy.reshape(-1, 1) + offs[None, :, 1]).ravel()
-        lens = rng.random((len(px), 2)) if self.cam.aperture > 0.0 else None
-        return primary_rays(self.cam, px, py, lens) + ((x0, y0, tw, th),)
+        yy, xx = yy.ravel(), xx.ravel()
+        adaptive = st.noise_threshold > 0.0
+        order = sample_order(spp) if adaptive else np.arange(spp)
+        offs = scrambled_offsets(spp, npx, rng) if adaptive else \
+            np.broadcast_to(pixel_offsets(spp, rng)[None], (npx, spp, 2))
+        lens = rng.random((npx * spp, 2)).reshape(npx, spp, 2) if self.cam.aperture > 0.0 \
+            else None
+        bands = gather_bands(spp, npx, rng, order if adaptive else None)
+        keys = ray_keys(st.seed, index, npx * spp).reshape(npx, spp)
+        taken = min(spp, max(2, int(st.tuning.adaptive_first))) if adaptive else spp
+        acc = Accumulator(npx, self.out)
+        active, batch, k, steps = np.arange(npx), order[:taken], 0, 0.0
+        while True:
+            px = (xx[active, None] + offs[active][:, batch, 0]).ravel()
+            py = (yy[active, None] + offs[active][:, batch, 1]).ravel()
+            ln = None if lens is None else lens[active][:, batch].reshape(-1, 2)
+            o, d, tmin, tmax, axial = primary_rays(self.cam, px, py, ln)
+            strata = (bands[0][active][:, batch].ravel(), bands[1][active][:, batch].ravel(), spp)
+            r, hit, behind = self.march(index, k, rng, o, d, tmin, tmax, axial,
+                                        keys[active][:, batch].ravel(), strata)
+            acc.add(active, len(batch), r, hit, behind, st.film_transparent)
+            steps += float(r["steps"].sum())
+            if taken >= spp:
+                break
+            active = noisy_pixels(acc, active, st.noise_threshold, tw, th)
+            if not len(active):
+                break
+            batch = order[taken:min(spp, 2 * taken)]
+            taken += len(batch)
+            k += 1
+        return (index, (x0, y0, tw, th), acc.passes(st.film_transparent),
+                (steps, float(acc.count.sum())))
 
-    def tile(self, index):
-        """(index, (x0, y0, width, height), passes of the tile (pixels, C), march samples)."""
-        st, spp, fog_pm = self.st, self.spp, self.fog_pm
-        rng = np.random.default_rng([st.seed, index])
-        o, d, tmin, tmax, axial, box = self.rays(index, rng)
+    def march(self, index, k, rng, o, d, tmin, tmax, axial, keys, strata):
+        """Round ``k`` of tile ``index``: the rays' march through the media (random
+        ``keys``), their surface hits (gathering through the Latin hypercube ``strata``) and
+        what lies behind the media: (the march's per-ray results, hit, behind)."""
+        st, fog_pm = self.st, self.fog_pm
         n = len(o)
         t_hit, tri = intersect(self.surf, o, d, tmax)
         hit = tri >= 0
@@ -125,7 +166,7 @@ class FrameMarch:
         t_end = np.where(void, tmin, t_end)
         if self.ctx is not None:
             t0, t1 = union_interval(self.media, o, d, tmin, t_end)
-            r = march_rays(self.ctx, o, d, t0, t1, axial, ray_keys(st.seed, index, n))
+            r = march_rays(self.ctx, o, d, t0, t1, axial, keys)
         else:
             r = {"single": np.zeros((n, 3)), "T": np.ones((n, 3)), "depth": np.full(n, DEPTH_MISS),
                  "multiple": np.zeros((n, 3)), "steps": np.zeros(n), "emission": np.zeros((n, 3))}
@@ -133,12 +174,11 @@ class FrameMarch:
         behind[void] = 0.0
         if hit.any():
             # each pixel's samples gather through a Latin hypercube of directions
-            bands = np.argsort(rng.random((2, n // spp, spp)), axis=2).reshape(2, n)
             ph = o[hit] + d[hit] * t_hit[hit, None]
             behind[hit] = shade(self.surf, tri[hit], ph, d[hit], self.lights, self.bg,
-                                self.optical_depth, rng, self.radiance_towards(index),
+                                self.optical_depth, rng, self.radiance_towards(index, k),
                                 gathers=st.tuning.surface_gathers,
-                                strata=(bands[0][hit], bands[1][hit], spp))
+                                strata=(strata[0][hit], strata[1][hit], strata[2]))
             dh = t_hit[hit] * axial[hit]
             r["depth"][hit] = np.minimum(r["depth"][hit], dh)
         if fog_pm is not None:  # the homogeneous fog beyond its grid, seen through the march
@@ -148,37 +188,138 @@ class FrameMarch:
             r = dict(r, single=r["single"] + r["T"] * t_single,
                      multiple=r["multiple"] + r["T"] * t_multi,
                      emission=r["emission"] + r["T"] * t_emit, T=r["T"] * t_trans)
-        return index, box, self.pixels(r, hit, behind, box[2] * box[3]), float(r["steps"].sum())
+        return r, hit, behind
 
-    def pixels(self, r, hit, behind, npx):
-        """The passes of ``npx`` pixels from their rays' march ``r``, surface hits ``hit``
-        and what lies behind the media ``behind`` (the box filter over each pixel)."""
-        spp, out, st = self.spp, self.out, self.st
 
-        def pixel_mean(a):  # (n, C) per ray -> (pixels, C)
-            return a if spp == 1 else a.reshape(npx, spp, -1).mean(axis=1)
+def noisy_pixels(acc, active, threshold: float, tw: int, th: int) -> np.ndarray:
+    """The pixels of ``active`` (indices into a ``tw`` x ``th`` tile, row-major) that take
+    more samples: those whose noise is above ``threshold`` and their active neighbours
+    (3 x 3), as Cycles widens its adaptive sampling's active area: a pixel whose first
+    samples happen to agree does not stop beside noisy ones."""
+    noisy = np.zeros((th, tw), bool)
+    keep = np.zeros((th, tw), bool)
+    noisy.flat[active[acc.noise(active) > threshold]] = True
+    keep.flat[active] = True
+    grown = noisy.copy()
+    grown[1:, :] |= noisy[:-1, :]
+    grown[:-1, :] |= noisy[1:, :]
+    wide = grown.copy()
+    wide[:, 1:] |= grown[:, :-1]
+    wide[:, :-1] |= grown[:, 1:]
+    return np.flatnonzero(wide & keep)
 
+
+def scrambled_offsets(spp: int, npx: int, rng) -> np.ndarray:
+    """(npx, spp, 2) offsets in [0,1)^2 of each pixel's samples for adaptive rounds: on a
+    k x k grid of strata when ``spp`` = k^2 (k a power of two), sample s in stratum
+    (i, j) XOR a random mask per pixel (so that sample_order's first 4^m samples are one in
+    each cell of a 2^m x 2^m grid, each uniform in its cell), jittered in it; otherwise
+    uniform."""
+    k = int(round(math.sqrt(spp)))
+    u = rng.random((npx, spp, 2))
+    if k * k != spp or k & (k - 1):
+        return u
+    i, j = np.divmod(np.arange(spp), k)
+    masks = rng.integers(0, k, size=(npx, 1, 2))
+    cells = np.stack([np.broadcast_to(i, (npx, spp)), np.broadcast_to(j, (npx, spp))], -1) ^ masks
+    return (cells + u) / k
+
+
+def gather_bands(spp: int, npx: int, rng, order=None) -> np.ndarray:
+    """(2, npx, spp) the bands of r^2 and phi (surfaces.shade's strata) of each pixel's
+    samples: a random Latin hypercube per pixel.  With ``order`` (sample_order; adaptive
+    rounds) and ``spp`` a power of two, the sample taken p-th gets the bands bitreverse(p)
+    XOR a random mask per pixel and dimension, so that the first 2^m samples taken hold one
+    sample in each of 2^m equal bands as well."""
+    if order is None or spp & (spp - 1):
+        return np.argsort(rng.random((2, npx, spp)), axis=2)
+    bits = spp.bit_length() - 1
+    p = np.arange(spp)
+    rev = np.zeros(spp, np.int64)
+    for b in range(bits):
+        rev |= ((p >> b) & 1) << (bits - 1 - b)
+    masks = rng.integers(0, spp, size=(2, npx, 1))
+    bands = np.empty((2, npx, spp), np.int64)
+    bands[:, :, order] = rev[None, None, :] ^ masks
+    return bands
+
+
+def sample_order(spp: int) -> np.ndarray:
+    """The order in which adaptive rounds take a pixel's ``spp`` samples: for a k x k grid
+    of strata (pixel_offsets) with k a power of two, by the bit-reversed Morton code of the
+    stratum, so that the first 4^m samples hold one sample in each cell of a 2^m x 2^m grid
+    over the pixel; otherwise in their own order."""
+    k = int(round(math.sqrt(spp)))
+    if k * k != spp or k & (k - 1):
+        return np.arange(spp)
+    bits = k.bit_length() - 1
+    i, j = np.divmod(np.arange(spp), k)
+    code = np.zeros(spp, np.int64)
+    for b in range(bits):          # Morton: ... i_b j_b ... i_0 j_0, then reversed
+        code |= ((j >> b) & 1) << (2 * bits - 1 - 2 * b)
+        code |= ((i >> b) & 1) << (2 * bits - 2 - 2 * b)
+    return np.argsort(code, kind="stable")
+
+
+class Accumulator:
+    """A tile's per-pixel sums over the rounds of its samples (the box filter over each
+    pixel), the passes ``out`` names: radiance W/(m^2 sr), transmittance, depth (m)."""
+
+    def __init__(self, npx: int, out: dict):
+        self.out = out
+        self.count = np.zeros(npx)
+        z = lambda: np.zeros((npx, 3))   # noqa: E731
+        self.sums = {"single": z(), "multiple": z(), "emission": z(), "T": z(), "behind": z(),
+                     "open": np.zeros(npx)}
+        self.lum = np.zeros(npx)       # sums of each sample's mean RGB radiance and its square
+        self.lum2 = np.zeros(npx)
+        self.depth = np.full(npx, np.inf)
+
+    def add(self, pixels, spp, r, hit, behind, transparent: bool) -> None:
+        """Add ``spp`` samples of each of ``pixels`` (rays pixel-major): the march ``r``,
+        surface hits ``hit``, what lies behind the media ``behind``."""
+        n = len(pixels)
+
+        def total(a):   # (n * spp, C) -> (n, C) sums over each pixel's samples
+            return a.reshape(n, spp, -1).sum(axis=1)
+
+        seen = r["T"] * (np.where(hit[:, None], behind, 0.0) if transparent else behind)
+        for key, val in (("single", r["single"]), ("multiple", r["multiple"]),
+                         ("emission", r["emission"]), ("T", r["T"]), ("behind", seen)):
+            self.sums[key][pixels] += total(val)
+        if transparent:
+            self.sums["open"][pixels] += total(np.where(hit[:, None], 0.0, r["T"]).mean(axis=1))[:, 0]
+        lum = (r["single"] + r["multiple"] + r["emission"] + seen).mean(axis=1)
+        self.lum[pixels] += total(lum)[:, 0]
+        self.lum2[pixels] += total(lum * lum)[:, 0]
+        self.count[pixels] += spp
+        dep = np.where(r["depth"] < DEPTH_MISS, r["depth"], np.inf).reshape(n, spp).min(axis=1)
+        self.depth[pixels] = np.minimum(self.depth[pixels], dep)
+
+    def noise(self, pixels) -> np.ndarray:
+        """The standard error of each pixel's mean radiance over sqrt(mean + 1e-4): Cycles'
+        adaptive sampling's scale (an error relative to the square root of the intensity,
+        so dark pixels are not sampled forever)."""
+        n = self.count[pixels]
+        mean = self.lum[pixels] / n
+        var = np.maximum(self.lum2[pixels] / n - mean * mean, 0.0) * n / np.maximum(n - 1, 1)
+        return np.sqrt(var / n) / np.sqrt(np.maximum(mean, 0.0) + 1e-4)
+
+    def passes(self, transparent: bool) -> dict:
+        """The passes the frame holds, each pixel the mean of its samples."""
+        n = self.count[:, None]
+        single, multi, emitted = (self.sums[k] / n for k in ("single", "multiple", "emission"))
         res = {}
-        single, multi, emitted = pixel_mean(r["single"]), pixel_mean(r["multiple"]), \
-            pixel_mean(r["emission"])
         for name, val in (("Volume Single", single), ("Volume Multiple", multi),
                           ("Emission", emitted)):
-            if name in out:
+            if name in self.out:
                 res[name] = val
-        if "Transmittance" in out:
-            res["Transmittance"] = pixel_mean(r["T"])
-        comb = np.empty((npx, 4))
-        if st.film_transparent:
-            comb[:, :3] = single + multi + emitted + pixel_mean(
-                r["T"] * np.where(hit[:, None], behind, 0.0))
-            comb[:, 3] = 1.0 - pixel_mean(np.where(hit[:, None], 0.0, r["T"])).mean(axis=1)
-        else:
-            comb[:, :3] = single + multi + emitted + pixel_mean(r["T"] * behind)
-            comb[:, 3] = 1.0
+        if "Transmittance" in self.out:
+            res["Transmittance"] = self.sums["T"] / n
+        comb = np.empty((len(self.count), 4))
+        comb[:, :3] = single + multi + emitted + self.sums["behind"] / n
+        comb[:, 3] = 1.0 - self.sums["open"] / self.count if transparent else 1.0
         res["Combined"] = comb
-        if "Depth" in out:
-            dep = r["depth"].reshape(npx, spp)
-            hitd = dep < DEPTH_MISS
-            res["Depth"] = np.where(hitd.any(axis=1), np.where(hitd, dep, np.inf).min(axis=1),
-                                    DEPTH_MISS)[:, None]
+        if "Depth" in self.out:
+            res["Depth"] = np.where(np.isfinite(self.depth), self.depth, DEPTH_MISS)[:, None]
         return res

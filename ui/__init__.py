@@ -49,6 +49,7 @@ class MPP_PT_sampling(MPPPanel, bpy.types.Panel):
         col = layout.column()
         col.prop(mpp, "quality")
         col.prop(mpp, "samples", text="Render")
+        col.prop(mpp, "noise_threshold")
         col.prop(mpp, "viewport_samples")
         col.prop(mpp, "seed")
 

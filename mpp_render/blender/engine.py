@@ -150,20 +150,31 @@ class MPPRenderEngine(bpy.types.RenderEngine):
 
     def view_update(self, context, depsgraph):
         from . import viewport
+        if getattr(context, "region_data", None) is None:   # not a 3D viewport's region
+            return
         session = getattr(self, "_view", None)
         if session is None:
             session = self._view = viewport.ViewSession()
             parts = {"all"}
         else:
             parts = viewport.changed_parts(depsgraph.updates)
-        session.update(depsgraph, parts, region_camera(context))
+        try:
+            camera = region_camera(context)
+        except ValueError as e:   # a view the engine cannot render from: say so, draw nothing
+            self.update_stats("", f"MPP: {e}")
+            return
+        session.update(depsgraph, parts, camera)
 
     def view_draw(self, context, depsgraph):
         from . import viewport
         session = getattr(self, "_view", None)
-        if session is None:
+        if session is None or getattr(context, "region_data", None) is None:
             return
-        session.look(region_camera(context))
+        try:
+            session.look(region_camera(context))
+        except ValueError as e:
+            self.update_stats("", f"MPP: {e}")
+            return
         img = session.latest()
         if img is not None:
             if getattr(self, "_drawer", None) is None:

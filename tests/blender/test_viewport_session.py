@@ -195,3 +195,25 @@ def test_the_engines_view_callbacks_draw_the_pictures_as_they_come(small, monkey
     finally:
         MPPRenderEngine.__del__(engine)
     assert not session.progressive._thread.is_alive()
+
+
+def test_the_view_callbacks_pass_over_a_region_without_a_view_and_say_why_a_view_fails(small):
+    from mathutils import Matrix
+    from mpp_render.blender.engine import MPPRenderEngine
+    dg = bpy.context.evaluated_depsgraph_get()
+    engine = FakeEngine()
+    no_view = types.SimpleNamespace(region=types.SimpleNamespace(width=W, height=H),
+                                    region_data=None)
+    MPPRenderEngine.view_update(engine, no_view, dg)
+    MPPRenderEngine.view_draw(engine, no_view, dg)
+    assert getattr(engine, "_view", None) is None and engine.stats == []
+    skew = Matrix.Identity(4)
+    skew[3][2], skew[3][3], skew[0][1] = -1.0, 0.0, 0.5      # perspective with a skew term
+    bad = types.SimpleNamespace(region=no_view.region, region_data=types.SimpleNamespace(
+        view_matrix=Matrix.Identity(4), window_matrix=skew))
+    MPPRenderEngine.view_update(engine, bad, dg)
+    try:
+        assert engine.stats and engine.stats[-1].startswith("MPP: ")
+        assert engine._view.desc is None                   # nothing rendered from it
+    finally:
+        MPPRenderEngine.__del__(engine)
