@@ -61,22 +61,6 @@ def timed_stages(session, gen, t0, stages):
     return times, images
 
 
-def changed(bpy, viewport, change):
-    """The parts Blender's depsgraph updates name after ``change()`` (as view_update reads)."""
-    seen = []
-
-    def handler(scene, depsgraph):
-        seen.append(viewport.changed_parts(depsgraph.updates))
-
-    bpy.app.handlers.depsgraph_update_post.append(handler)
-    try:
-        change()
-        bpy.context.view_layer.update()
-    finally:
-        bpy.app.handlers.depsgraph_update_post.remove(handler)
-    return set().union(*seen) if seen else set()
-
-
 def orbit(bpy, cam, degrees, centre):
     from mathutils import Matrix
     rot = Matrix.Rotation(math.radians(degrees), 4, "Z")
@@ -164,7 +148,7 @@ def main(argv=None):
         case("orbit", lambda: session.look(view_camera(bpy, cam, w, h)))
 
         def light_moved():
-            parts = changed(bpy, viewport, lambda: move_light(light))
+            parts = viewport.parts_changed_by(lambda: move_light(light))
             rows["moved light parts"] = sorted(parts)
             session.update(dg, parts, view_camera(bpy, cam, w, h))
 

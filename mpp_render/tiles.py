@@ -111,7 +111,8 @@ class FrameMarch:
         first takes ``Tuning.adaptive_first`` of them (``sample_order``: spread over the
         pixel), then rounds each doubling a pixel's samples (up to ``samples``) go to the
         pixels whose noise (``Accumulator.noise``) is above the threshold.  With the
-        threshold 0, one round of all the samples."""
+        threshold 0, or no more samples than the first round takes, one round of all the
+        samples, drawn as without adaptive sampling."""
         st, spp = self.st, self.spp
         rng = np.random.default_rng([st.seed, index])
         x0, y0 = self.tiles[index]
@@ -120,7 +121,9 @@ class FrameMarch:
         npx = tw * th
         yy, xx = np.mgrid[y0:y0 + th, x0:x0 + tw]
         yy, xx = yy.ravel(), xx.ravel()
-        adaptive = st.noise_threshold > 0.0
+        first = max(2, int(st.tuning.adaptive_first))
+        # no round to add when the first holds every sample: the plain draw, as threshold 0
+        adaptive = st.noise_threshold > 0.0 and spp > first
         order = sample_order(spp) if adaptive else np.arange(spp)
         offs = scrambled_offsets(spp, npx, rng) if adaptive else \
             np.broadcast_to(pixel_offsets(spp, rng)[None], (npx, spp, 2))
@@ -128,7 +131,7 @@ class FrameMarch:
             else None
         bands = gather_bands(spp, npx, rng, order if adaptive else None)
         keys = ray_keys(st.seed, index, npx * spp).reshape(npx, spp)
-        taken = min(spp, max(2, int(st.tuning.adaptive_first))) if adaptive else spp
+        taken = first if adaptive else spp
         acc = Accumulator(npx, self.out)
         active, batch, k, steps = np.arange(npx), order[:taken], 0, 0.0
         while True:

@@ -16,3 +16,12 @@ def cold_cache(monkeypatch):
     cache.clear()
     yield
     cache.clear()
+
+
+@pytest.fixture
+def warm(monkeypatch):
+    """The cache switched on (256 MB) for the tests of reuse; yields the store."""
+    monkeypatch.setenv(cache.LIMIT_ENV, "256")
+    cache.clear()
+    yield cache.CACHE
+    cache.clear()

@@ -94,3 +94,12 @@ def test_every_round_prefix_is_stratified_over_the_pixel_and_the_gather_bands():
     big = scrambled_offsets(16, 20000, rng)[:, order[:4]]
     assert abs(big.mean() - 0.5) < 0.01
     assert np.histogram(big[..., 0], bins=8, range=(0, 1))[0].min() > 0.9 * 20000 * 4 / 8
+
+
+def test_no_more_samples_than_the_first_round_renders_as_without_adaptive_sampling():
+    desc = base()
+    for spp in (1, 4):
+        a = render(variant(desc, samples=spp, noise_threshold=0.01)).passes
+        b = render(variant(desc, samples=spp, noise_threshold=0.0)).passes
+        for k in a:
+            np.testing.assert_array_equal(a[k], b[k], err_msg=f"{spp} {k}")

@@ -11,24 +11,33 @@ from mpp_render.render import render
 from mpp_render.scene import Camera, Light, Medium, SceneDescription, Settings, Surface, World
 
 
-@pytest.fixture
-def warm(monkeypatch):
-    """The cache switched on (the suite runs with it off, see tests/conftest.py)."""
-    monkeypatch.setenv(cache.LIMIT_ENV, "256")
-    cache.clear()
-    yield cache.CACHE
-    cache.clear()
+class Calls(list):
+    """The kinds ('all', 'lights', 'world') of the cold precompute.precompute calls, and in
+    ``paths`` the multiple_paths each was called with."""
+
+    def __init__(self):
+        super().__init__()
+        self.paths = []
+
+    def clear(self):
+        super().clear()
+        self.paths.clear()
+
+    def since(self, n):
+        """(kind, multiple_paths) of the calls after the first ``n``."""
+        return list(zip(self, self.paths))[n:]
 
 
 @pytest.fixture
 def calls(monkeypatch):
     """Counts the calls of precompute.precompute (the cold computation)."""
-    seen = []
+    seen = Calls()
     real = pre_mod.precompute
 
     def counting(media, lights, world, *a, **kw):
         lit = bool(np.any(np.asarray(world.color) > 0))
         seen.append("all" if lights and lit else "lights" if lights else "world")
+        seen.paths.append(kw.get("multiple_paths"))
         return real(media, lights, world, *a, **kw)
 
     monkeypatch.setattr(pre_mod, "precompute", counting)

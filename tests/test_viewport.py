@@ -7,38 +7,13 @@ import threading
 import numpy as np
 import pytest
 
-from mpp_render import cache, precompute as pre_mod, viewport
+from mpp_render import viewport
 from mpp_render.render import render
 from mpp_render.viewport import Progressive, Stage, stage_scene, stages
 
-from test_cache import scene
+from test_cache import calls, scene  # noqa: F401 (calls: a fixture)
 
 COARSE = int(round(16000 * viewport.COARSE_PATHS))   # the coarse stage's paths
-
-
-@pytest.fixture
-def warm(monkeypatch):
-    """The cache switched on (the suite runs with it off, see tests/conftest.py)."""
-    monkeypatch.setenv(cache.LIMIT_ENV, "256")
-    cache.clear()
-    yield cache.CACHE
-    cache.clear()
-
-
-@pytest.fixture
-def calls(monkeypatch):
-    """(kind, multiple_paths) of every cold precompute.precompute call."""
-    seen = []
-    real = pre_mod.precompute
-
-    def counting(media, lights, world, *a, **kw):
-        lit = bool(np.any(np.asarray(world.color) > 0))
-        seen.append(("all" if lights and lit else "lights" if lights else "world",
-                     kw.get("multiple_paths")))
-        return real(media, lights, world, *a, **kw)
-
-    monkeypatch.setattr(pre_mod, "precompute", counting)
-    return seen
 
 
 def small_scene(**kw):
@@ -85,7 +60,7 @@ def test_coarse_first_then_refined_ending_on_the_f12_render(warm, calls, loop):
     assert images[0].seconds < images[-1].seconds
     # the coarse stage's precompute (COARSE_PATHS of the paths) serves the 1-sample stage
     # too; the last has the scene's paths
-    assert [c[1] for c in calls] == [COARSE, 16000]
+    assert calls.paths == [COARSE, 16000]
     np.testing.assert_array_equal(last.rgba, render(desc).passes["Combined"])
     # the coarse picture is the same scene: its mean is close to the final one's
     assert abs(images[0].rgba[..., :3].mean() / last.rgba[..., :3].mean() - 1) < 0.25
@@ -134,7 +109,7 @@ def test_a_moved_light_reuses_the_world_light(warm, calls, loop):
     assert last is not None
     # two precomputes again (coarse and refined paths), each of the lights alone: the
     # world light was taken from the cache
-    assert calls[before:] == [("lights", COARSE), ("lights", 16000)]
+    assert calls.since(before) == [("lights", COARSE), ("lights", 16000)]
     assert "world" in last.stats["reused"]
     np.testing.assert_array_equal(last.rgba, render(moved).passes["Combined"])
 
@@ -151,7 +126,7 @@ def test_an_orbit_shows_the_coarse_picture_without_a_precompute(warm, calls, loo
     last = p.wait(gen, timeout=120)
     assert last is not None and "stale_camera" not in last.stats
     # the coarse stage took the earlier position's precompute; the later ones their own
-    assert calls[before:] == [("all", COARSE), ("all", 16000)]
+    assert calls.since(before) == [("all", COARSE), ("all", 16000)]
     assert images[n_images].generation == gen and images[n_images].stage == 0
     np.testing.assert_array_equal(last.rgba, render(orbit).passes["Combined"])
 
@@ -187,6 +162,6 @@ def test_a_light_moved_after_an_orbit_takes_the_earlier_world_light_for_the_coar
     last = p.wait(gen, timeout=120)
     # coarse: the lights alone (the world light of the earlier position); then this
     # position's world light for the same paths; the last stage: all of it
-    assert calls[before:] == [("lights", COARSE), ("world", COARSE), ("all", 16000)]
+    assert calls.since(before) == [("lights", COARSE), ("world", COARSE), ("all", 16000)]
     assert "stale_camera" not in last.stats
     np.testing.assert_array_equal(last.rgba, render(both).passes["Combined"])

@@ -69,6 +69,27 @@ def changed_parts(updates) -> Set[str]:
     return parts
 
 
+def parts_changed_by(change) -> Set[str]:
+    """``changed_parts`` of the depsgraph updates Blender sends after ``change()`` (a callable
+    that edits Blender data), read through a ``depsgraph_update_post`` handler: how a script,
+    a test or benchmarks/viewport.py drives a ViewSession without a window, as view_update
+    would be driven."""
+    import bpy
+
+    seen = []
+
+    def handler(scene, depsgraph):
+        seen.append(changed_parts(depsgraph.updates))
+
+    bpy.app.handlers.depsgraph_update_post.append(handler)
+    try:
+        change()
+        bpy.context.view_layer.update()
+    finally:
+        bpy.app.handlers.depsgraph_update_post.remove(handler)
+    return set().union(*seen) if seen else set()
+
+
 def view_key(camera: Camera) -> tuple:
     """What makes two viewport cameras the same view (matrix, view plane, size, clipping)."""
     return (camera.projection, np.asarray(camera.cam_to_world, np.float64).tobytes(),

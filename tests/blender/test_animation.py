@@ -24,15 +24,6 @@ pytestmark = pytest.mark.usefixtures("registered")
 
 
 @pytest.fixture
-def warm(monkeypatch):
-    """The cache switched on (the suite runs with it off, see tests/conftest.py)."""
-    monkeypatch.setenv(cache.LIMIT_ENV, "256")
-    cache.clear()
-    yield
-    cache.clear()
-
-
-@pytest.fixture
 def frames(monkeypatch):
     """(frame, parts of the precompute reused, precompute calls so far) per rendered frame."""
     seen, calls = [], []

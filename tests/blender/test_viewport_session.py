@@ -11,7 +11,6 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from mpp_render import cache  # noqa: E402
 from mpp_render.blender import frame, viewport  # noqa: E402
 from mpp_render.blender.translate.view import camera_from_matrices  # noqa: E402
 
@@ -34,14 +33,6 @@ def small(empty_scene):
     return sc, cube, light, cam
 
 
-@pytest.fixture
-def warm(monkeypatch):
-    monkeypatch.setenv(cache.LIMIT_ENV, "256")
-    cache.clear()
-    yield
-    cache.clear()
-
-
 def view_of(sc, cam):
     """The Camera a viewport looking through ``cam`` would give (translate.view)."""
     dg = bpy.context.evaluated_depsgraph_get()
@@ -49,20 +40,7 @@ def view_of(sc, cam):
     return camera_from_matrices(cam.matrix_world.inverted(), window, W, H)
 
 
-def updates_after(change):
-    """changed_parts of the depsgraph updates Blender sends after ``change()``."""
-    seen = []
-
-    def handler(scene, depsgraph):
-        seen.append(viewport.changed_parts(depsgraph.updates))
-
-    bpy.app.handlers.depsgraph_update_post.append(handler)
-    try:
-        change()
-        bpy.context.view_layer.update()
-    finally:
-        bpy.app.handlers.depsgraph_update_post.remove(handler)
-    return set().union(*seen) if seen else set()
+updates_after = viewport.parts_changed_by
 
 
 def test_changed_parts_read_blenders_updates(small):
