@@ -269,9 +269,10 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
     returned as it is, with ``stats["stale_camera"]`` True: its world light and its pyramids'
     phase towards the camera are the other position's; and when a light changed, the world
     channels may come from an entry of another camera position (then the new entry is kept
-    under that position's world key, so an exact lookup never takes them).  The viewport's first, coarse picture
-    while the view orbits uses it (viewport.py); nothing else does.  A cancelled precompute changes nothing (it
-    raises cancel.Cancelled).  Callers must not modify the returned arrays."""
+    under that position's world key, so an exact lookup never takes them).  The viewport's
+    first, coarse picture while the view orbits uses it (viewport.py); nothing else does.
+    A cancelled precompute changes nothing (it raises cancel.Cancelled).  Callers must not
+    modify the returned arrays."""
     from . import precompute as pre_mod
     from .precompute.lattice import MULTIPLE_RESOLUTION
     from .precompute.layout import light_channels
@@ -302,9 +303,11 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
               multiple_resolution=multiple_resolution, multiple_paths=multiple_paths,
               tuning=tuning, surface_bounce=surface_bounce)
 
-    def result(pre, reused):
-        return pre_mod.Precomputed(pre.fields, pre.layout, pre.multiple, pre.seconds,
-                                   dict(pre.stats, reused=reused))
+    def result(pre, reused, stale=False):
+        stats = dict(pre.stats, reused=reused)
+        if stale:
+            stats["stale_camera"] = True
+        return pre_mod.Precomputed(pre.fields, pre.layout, pre.multiple, pre.seconds, stats)
 
     entry = cache.get("precompute", light_key)
     if entry is not None:
@@ -312,9 +315,7 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
         if entry["world"] == world_key:
             return result(pre, ["lights", "world"] if has_world else ["lights"])
         if any_camera:      # the world light of another camera position will do
-            out = result(pre, ["lights", "world"])
-            out.stats["stale_camera"] = True
-            return out
+            return result(pre, ["lights", "world"], stale=True)
         part = pre_mod.precompute(media, [], world, camera, **kw)  # the camera moved
         first = pre.layout.world_first
         for f, w in zip(pre.fields, part.fields):
@@ -325,10 +326,7 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
         other = cache.get("scene_index", scene_key)
         entry = cache.get("precompute", other) if other is not None else None
         if entry is not None:
-            pre = entry["pre"]
-            return pre_mod.Precomputed(pre.fields, pre.layout, pre.multiple, pre.seconds,
-                                       dict(pre.stats, reused=["lights", "world"],
-                                            stale_camera=True))
+            return result(entry["pre"], ["lights", "world"], stale=True)
 
     donor = None
     if has_world:
@@ -351,10 +349,7 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
                                   dict(part.stats,
                                        ambient_points=old.stats.get("ambient_points", 0)))
         _keep(cache, light_key, donor["world"], scene_key, pre, world_any_key)
-        out = result(pre, ["world"])
-        if donor["world"] != world_key:
-            out.stats["stale_camera"] = True
-        return out
+        return result(pre, ["world"], stale=donor["world"] != world_key)
     pre = pre_mod.precompute(media, lights, world, camera, **kw)
     _keep(cache, light_key, world_key, scene_key, pre, world_any_key)
     return result(pre, [])

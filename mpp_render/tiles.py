@@ -218,9 +218,9 @@ def scrambled_offsets(spp: int, npx: int, rng) -> np.ndarray:
     (i, j) XOR a random mask per pixel (so that sample_order's first 4^m samples are one in
     each cell of a 2^m x 2^m grid, each uniform in its cell), jittered in it; otherwise
     uniform."""
-    k = int(round(math.sqrt(spp)))
+    k = power_of_two_side(spp)
     u = rng.random((npx, spp, 2))
-    if k * k != spp or k & (k - 1):
+    if not k:
         return u
     i, j = np.divmod(np.arange(spp), k)
     masks = rng.integers(0, k, size=(npx, 1, 2))
@@ -236,11 +236,7 @@ def gather_bands(spp: int, npx: int, rng, order=None) -> np.ndarray:
     sample in each of 2^m equal bands as well."""
     if order is None or spp & (spp - 1):
         return np.argsort(rng.random((2, npx, spp)), axis=2)
-    bits = spp.bit_length() - 1
-    p = np.arange(spp)
-    rev = np.zeros(spp, np.int64)
-    for b in range(bits):
-        rev |= ((p >> b) & 1) << (bits - 1 - b)
+    rev = reverse_bits(np.arange(spp), spp.bit_length() - 1)
     masks = rng.integers(0, spp, size=(2, npx, 1))
     bands = np.empty((2, npx, spp), np.int64)
     bands[:, :, order] = rev[None, None, :] ^ masks
@@ -252,16 +248,30 @@ def sample_order(spp: int) -> np.ndarray:
     of strata (pixel_offsets) with k a power of two, by the bit-reversed Morton code of the
     stratum, so that the first 4^m samples hold one sample in each cell of a 2^m x 2^m grid
     over the pixel; otherwise in their own order."""
-    k = int(round(math.sqrt(spp)))
-    if k * k != spp or k & (k - 1):
+    k = power_of_two_side(spp)
+    if not k:
         return np.arange(spp)
     bits = k.bit_length() - 1
     i, j = np.divmod(np.arange(spp), k)
-    code = np.zeros(spp, np.int64)
-    for b in range(bits):          # Morton: ... i_b j_b ... i_0 j_0, then reversed
-        code |= ((j >> b) & 1) << (2 * bits - 1 - 2 * b)
-        code |= ((i >> b) & 1) << (2 * bits - 2 - 2 * b)
-    return np.argsort(code, kind="stable")
+    morton = np.zeros(spp, np.int64)          # ... i_b j_b ... i_0 j_0
+    for b in range(bits):
+        morton |= ((j >> b) & 1) << (2 * b)
+        morton |= ((i >> b) & 1) << (2 * b + 1)
+    return np.argsort(reverse_bits(morton, 2 * bits), kind="stable")
+
+
+def power_of_two_side(spp: int) -> int:
+    """k when ``spp`` = k^2 with k a power of two (the strata adaptive rounds spread), else 0."""
+    k = int(round(math.sqrt(spp)))
+    return k if k * k == spp and not k & (k - 1) else 0
+
+
+def reverse_bits(values: np.ndarray, bits: int) -> np.ndarray:
+    """``values`` (integers below 2^bits) with their ``bits`` low bits in reverse order."""
+    out = np.zeros(len(values), np.int64)
+    for b in range(bits):
+        out |= ((values >> b) & 1) << (bits - 1 - b)
+    return out
 
 
 class Accumulator:

@@ -158,23 +158,19 @@ class MPPRenderEngine(bpy.types.RenderEngine):
             parts = {"all"}
         else:
             parts = viewport.changed_parts(depsgraph.updates)
-        try:
-            camera = region_camera(context)
-        except ValueError as e:   # a view the engine cannot render from: say so, draw nothing
-            self.update_stats("", f"MPP: {e}")
-            return
-        session.update(depsgraph, parts, camera)
+        camera = region_camera(self, context)
+        if camera is not None:
+            session.update(depsgraph, parts, camera)
 
     def view_draw(self, context, depsgraph):
         from . import viewport
         session = getattr(self, "_view", None)
         if session is None or getattr(context, "region_data", None) is None:
             return
-        try:
-            session.look(region_camera(context))
-        except ValueError as e:
-            self.update_stats("", f"MPP: {e}")
+        camera = region_camera(self, context)
+        if camera is None:
             return
+        session.look(camera)
         img = session.latest()
         if img is not None:
             if getattr(self, "_drawer", None) is None:
@@ -191,11 +187,16 @@ class MPPRenderEngine(bpy.types.RenderEngine):
             session.close()
 
 
-def region_camera(context):
-    """The viewport's own view as a camera (translate/view.py), the region's size in pixels."""
+def region_camera(engine, context):
+    """The viewport's own view as a camera (translate/view.py), the region's size in pixels;
+    None, said on ``engine``'s stats line, for a view the engine cannot render from."""
     from .translate.view import camera_from_region
     region = context.region
-    return camera_from_region(context.region_data, int(region.width), int(region.height))
+    try:
+        return camera_from_region(context.region_data, int(region.width), int(region.height))
+    except ValueError as e:
+        engine.update_stats("", f"MPP: {e}")
+        return None
 
 
 def register():

@@ -15,7 +15,7 @@ Neither waits for a render:
   for while pictures are still to come.
 
 ``ViewSession`` holds one viewport's state and is driven without a window by the tests and
-``benchmarks/viewport.py``; ``draw_image`` is the only part that needs a GPU.
+``benchmarks/viewport.py``; ``Drawer.draw`` is the only part that needs a GPU.
 """
 from __future__ import annotations
 

@@ -79,14 +79,10 @@ def scene_from_depsgraph(depsgraph, settings: Settings, camera_override=None,
     return desc
 
 
-# What a depsgraph update can touch (retranslate): the lights, the geometry (media and
-# surfaces), the world; 'all' for anything else (the scene's settings, a new frame).
-PARTS = ("lights", "geometry", "world")
-
-
 def retranslate(depsgraph, settings: Settings, previous: Optional[SceneDescription],
                 parts: Set[str], camera: Camera) -> SceneDescription:
-    """``previous`` with the ``parts`` (of ``PARTS``, or 'all') translated again from
+    """``previous`` with the ``parts`` ('lights', 'geometry': media and surfaces, 'world',
+    or 'all': the scene's settings, a new frame) translated again from
     ``depsgraph`` and ``camera`` and ``settings`` put in; the rest is kept as it was (the same
     objects, so the precompute's cache keys match).  No ``previous`` or 'all' translates the
     whole scene.  The warnings of the parts translated again are added to the earlier ones."""
