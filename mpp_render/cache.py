@@ -216,17 +216,19 @@ def clear() -> int:
 
 def media_key(media) -> str:
     """Content key of prepared media (precompute reads their grids, maps, coefficients,
-    anisotropy and sharpness)."""
-    return digest([(pm.grid, pm.w2i, pm.sigma_s, pm.sigma_a, float(pm.g), float(pm.threshold))
+    anisotropy, sharpness and emission: the emission grid's channels and the glow's light)."""
+    return digest([(pm.grid, pm.w2i, pm.sigma_s, pm.sigma_a, float(pm.g), float(pm.threshold),
+                    np.asarray(pm.medium.emission, np.float64), pm.emission_grid)
                    for pm in media])
 
 
 def surfaces_key(surfaces) -> str:
-    """Content key of a SurfaceSet's geometry (the precompute uses surfaces as occluders
-    only), or of None."""
+    """Content key of a SurfaceSet's geometry and diffuse albedo (the precompute's
+    occluders, and what the traced paths reflect off), or of None."""
     if surfaces is None or surfaces.empty:
         return digest(None)
-    return digest(surfaces.v0, surfaces.e1, surfaces.e2)
+    from .precompute.pathstarts import surface_albedo
+    return digest(surfaces.v0, surfaces.e1, surfaces.e2, surface_albedo(surfaces))
 
 
 def camera_key(camera) -> tuple:
@@ -282,7 +284,10 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
     tuning = Tuning() if tuning is None else tuning
     if multiple_resolution is None:
         multiple_resolution = MULTIPLE_RESOLUTION
-    has_world = bool(np.any(np.asarray(world.color, np.float64) > 0))
+    # the media's glow scattered in them (precompute.emissionlight) sits in the world
+    # channels and, like the world light, is read towards the camera
+    has_world = bool(np.any(np.asarray(world.color, np.float64) > 0)) or \
+        any(pm.glows for pm in media)
     # the thread count does not change the numbers; it is keyed anyway so that a render with
     # other threads still runs (and checks) the precompute
     common = (media_key(media), surfaces_key(surfaces), bool(multiple),
@@ -336,7 +341,7 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
         donor = cache.get("precompute", donor_key) if donor_key is not None else None
     if donor is not None and (donor["world"] == world_key or any_camera) and \
             donor["pre"].layout.light_channels == light_channels(lights):
-        part = pre_mod.precompute(media, lights, World(), camera, **kw)  # a light changed
+        part = pre_mod.precompute(media, lights, World(), camera, glow=False, **kw)  # a light changed
         old = donor["pre"]
         first = old.layout.world_first
         fields = []

@@ -161,14 +161,75 @@ def light_sample(rec, x, u1, u2, disc_points: int = SPOT_DISC_POINTS):
         e = s[None, :] / (4.0 * np.pi) * esum[:, None]
         return d, e, wc, dc, ds
     # AREA
+    omega = np.full(n, -1.0)
     src = centre + rec[L_AX:L_AX + 3] * a[:, None] + rec[L_AY:L_AY + 3] * b[:, None]
+    if not rec[L_ROUND] > 0:
+        omega, rect = rect_solid_angle_sample(rec, x, dc, u1, u2)
+        src = np.where((omega >= 0.0)[:, None], rect, src)
     v = x - src
     dist2 = np.maximum(np.einsum("ij,ij->i", v, v), 1e-8)
     d = v / np.sqrt(dist2)[:, None]
     cos_l = np.maximum(d @ rec[L_NORMAL:L_NORMAL + 3], 0.0)
     area = rec[L_AREA]
     radiance = s / np.pi / (area if (rec[L_NORMALIZE] > 0 and area > 0) else 1.0)
-    return d, radiance[None, :] * (cos_l * area / dist2)[:, None], wc, dc, np.sqrt(dist2)
+    # the radiance times the solid angle per sample: omega (pdf 1 / omega) or cos A / r^2
+    w = np.where(omega >= 0.0, np.where(cos_l > 0.0, omega, 0.0), cos_l * area / dist2)
+    return d, radiance[None, :] * w[:, None], wc, dc, np.sqrt(dist2)
+
+
+RECT_FAR = 64.0   # beyond this many diagonals a rectangle light is sampled by area (C twin)
+
+
+def rect_solid_angle_sample(rec, x, dc, u, v):
+    """(solid angle (N,) sr, points (N,3) m): points of the rectangular area light ``rec``
+    uniform in the solid angle it subtends at ``x`` (Urena, Fajardo and King 2013, "An
+    Area-Preserving Parametrization for Spherical Rectangles"), from ``u``, ``v`` in [0, 1);
+    the solid angle is -1 (sample by area instead) where the rectangle is skewed, x lies in
+    its plane or behind it, or farther (``dc``) than RECT_FAR diagonals.  The twin of
+    csrc/light.h's rect_solid_angle_sample: the same steps in the same order."""
+    n = len(x)
+    ax, ay = rec[L_AX:L_AX + 3], rec[L_AY:L_AY + 3]
+    la, lb = float(np.sqrt(ax @ ax)), float(np.sqrt(ay @ ay))
+    out = np.full(n, -1.0), np.zeros((n, 3))
+    if not (la > 0.0 and lb > 0.0):
+        return out
+    ex, ey = ax / la, ay / lb
+    if abs(float(ex @ ey)) > 1e-6:
+        return out
+    ez = np.array([ex[1] * ey[2] - ex[2] * ey[1], ex[2] * ey[0] - ex[0] * ey[2],
+                   ex[0] * ey[1] - ex[1] * ey[0]])
+    centre = rec[L_POS:L_POS + 3]
+    front = (x - centre) @ rec[L_NORMAL:L_NORMAL + 3]
+    dd = (centre - ax - ay)[None, :] - x
+    x0, y0, z0 = dd @ ex, dd @ ey, dd @ ez
+    ok = (dc <= RECT_FAR * 2.0 * np.sqrt(la * la + lb * lb)) & (front > 1e-9 * (la + lb)) \
+        & (np.abs(z0) > 1e-9 * (la + lb))
+    flip = z0 > 0.0
+    z0 = np.where(flip, -z0, z0)
+    ezs = np.where(flip[:, None], -ez, ez)
+    x1, y1, z2 = x0 + 2.0 * la, y0 + 2.0 * lb, z0 * z0
+    n0z, n1z = -y0 / np.sqrt(z2 + y0 * y0), x1 / np.sqrt(z2 + x1 * x1)
+    n2z, n3z = y1 / np.sqrt(z2 + y1 * y1), -x0 / np.sqrt(z2 + x0 * x0)
+    g0 = np.arccos(np.clip(-n0z * n1z, -1.0, 1.0))
+    g1 = np.arccos(np.clip(-n1z * n2z, -1.0, 1.0))
+    g2 = np.arccos(np.clip(-n2z * n3z, -1.0, 1.0))
+    g3 = np.arccos(np.clip(-n3z * n0z, -1.0, 1.0))
+    k = 2.0 * np.pi - g2 - g3
+    S = g0 + g1 - k
+    ok &= S > 0.0
+    au = u * S + k
+    sa = np.sin(au)
+    fu = (np.cos(au) * n0z - n2z) / np.where(np.abs(sa) > 1e-300, sa, 1e-300)
+    cu = np.clip(np.where(fu > 0.0, 1.0, -1.0) / np.sqrt(fu * fu + n0z * n0z), -1.0, 1.0)
+    xu = np.clip(-(cu * z0) / np.sqrt(np.maximum(1.0 - cu * cu, 1e-300)), x0, x1)
+    dist = np.sqrt(xu * xu + z2)
+    h0, h1 = y0 / np.sqrt(dist * dist + y0 * y0), y1 / np.sqrt(dist * dist + y1 * y1)
+    hv = h0 + v * (h1 - h0)
+    hv2 = hv * hv
+    yv = np.where(hv2 < 1.0 - 1e-12, hv * dist / np.sqrt(np.maximum(1.0 - hv2, 1e-300)), y1)
+    yv = np.clip(yv, y0, y1)
+    pts = x + xu[:, None] * ex + yv[:, None] * ey + z0[:, None] * ezs
+    return np.where(ok, S, -1.0), np.where(ok[:, None], pts, 0.0)
 
 
 def path_stretch(ds, dc, voxel):

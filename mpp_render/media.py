@@ -77,6 +77,31 @@ class PreparedMedium:
             return np.ones(self.grid.shape, np.float32)
         return np.ascontiguousarray(density_from(self.grid, self.threshold), np.float32)
 
+    @property
+    def glows(self) -> bool:
+        """Whether the medium gives off light that it scatters (``emitted`` is not None):
+        emission somewhere, sigma_s > 0, and not the endless world fog (whose own emission
+        is the march's alone, precompute.emissionlight)."""
+        if self.endless or not np.any(np.asarray(self.sigma_s) > 0.0):
+            return False
+        if np.any(np.asarray(self.medium.emission) > 0.0):
+            return True
+        return self.emission_grid is not None and bool(np.any(self.emission_grid > 0.0))
+
+    def emitted(self) -> Optional[np.ndarray]:
+        """float64 (X,Y,Z,3) emitted radiance per metre of every voxel of the padded grid,
+        W/(m^3 sr): the constant ``emission`` where the density is > 0 plus the emission
+        grid (negative values as 0); None where the medium does not ``glow``."""
+        if not self.glows:
+            return None
+        const = np.maximum(np.asarray(self.medium.emission, np.float64).reshape(3), 0.0)
+        e = np.zeros(self.grid.shape + (3,))
+        if np.any(const > 0.0):
+            e += (density_from(self.grid, self.threshold) > 0.0)[..., None] * const
+        if self.emission_grid is not None:
+            e += np.maximum(self.emission_grid.astype(np.float64), 0.0)
+        return e
+
     def to_world(self, ijk) -> np.ndarray:
         """World positions (N,3, m) of padded index coordinates ``ijk`` (N,3)."""
         return ijk @ self.i2w[:3, :3].T + self.i2w[:3, 3]

@@ -54,7 +54,8 @@ and the cap.  Albedo 0 absorbs.
 offset by a tent of half-width ``jitter`` lattice steps per index axis (1: the lattice
 point's own tent; 0: the point itself).  ``lobe`` 1 (a surface): the direction is
 cosine-distributed about ``dirs`` (the lit side's normal), and the offset a tent of half-width
-``jitter`` metres in the plane across it.
+``jitter`` metres in the plane across it.  ``lobe`` 2 (an emitting voxel,
+precompute.emissionlight): the direction is uniform over the sphere, the offset as lobe 0's.
 
 Random numbers are the march's counter hash (kernels_np.uniform) of (path key, event,
 dimension), so the C kernel (csrc/paths.c) and this numpy twin draw the same numbers and
@@ -268,8 +269,9 @@ def trace_paths_np(inp: PathInputs) -> np.ndarray:
         pos = inp.starts[k] + np.stack([_dot(off, inp.i2w[a]) for a in range(3)], axis=1)
     if int(inp.lobe) == 1:
         d = _cosine(uniform(keys, 0, _D_DIR), uniform(keys, 0, _D_DIR + 1), inp.dirs[k])
-    else:
-        d = _turn(uniform(keys, 0, _D_DIR), uniform(keys, 0, _D_DIR + 1), g, inp.dirs[k])
+    else:                       # lobe 2, an emitting voxel: uniform (the phase of g 0)
+        d = _turn(uniform(keys, 0, _D_DIR), uniform(keys, 0, _D_DIR + 1),
+                  0.0 if int(inp.lobe) == 2 else g, inp.dirs[k])
     w = inp.weights[k] / n
     w0 = w.max(axis=1)
     event = np.zeros(n, np.int64)

@@ -109,7 +109,7 @@ def test_bad_surface_and_fog_input_raises():
     if kernels._c is None:
         pytest.skip("compiled kernels not built")
     inp = box(8, 2, 0.1, 1.0, 2.0, n_paths=10)
-    for bad in (dict(lobe=2), dict(jitter=-1.0), dict(outside=np.nan), dict(reach_radius=np.nan),
+    for bad in (dict(lobe=3), dict(lobe=-1), dict(jitter=-1.0), dict(outside=np.nan), dict(reach_radius=np.nan),
                 dict(triangles=np.zeros((2, 3, 3)), albedo=np.zeros((3, 3)))):
         with pytest.raises(ValueError):
             kernels.trace_paths(dataclasses.replace(inp, **bad))

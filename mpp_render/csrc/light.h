@@ -64,6 +64,63 @@ static inline double spot_cos(const double *L, const double v[3]) {
     return -loc[2] / (ln > 1e-30 ? ln : 1e-30);
 }
 
+/* A point of a rectangular area light uniform in the solid angle it subtends at x (Urena,
+ * Fajardo and King 2013, "An Area-Preserving Parametrization for Spherical Rectangles"):
+ * writes it to src and returns that solid angle (sr); -1 where the rectangle is skewed
+ * (edges not at right angles), x lies in its plane or behind it (it lights nothing there),
+ * or x is so far (dc over RECT_FAR times its diagonal) that a point uniform over the area
+ * has no noise to lose.  kernels_np / lights.rect_solid_angle_sample is the twin. */
+#define RECT_FAR 64.0
+static inline double rect_solid_angle_sample(const double *L, const double x[3], double dc,
+                                             double u, double v, double src[3]) {
+    const double *ax = L + L_AX, *ay = L + L_AY, *c = L + L_POS, *nl = L + L_NORMAL;
+    double la = sqrt(ax[0] * ax[0] + ax[1] * ax[1] + ax[2] * ax[2]);
+    double lb = sqrt(ay[0] * ay[0] + ay[1] * ay[1] + ay[2] * ay[2]);
+    if (!(la > 0.0 && lb > 0.0)) return -1.0;
+    if (dc > RECT_FAR * 2.0 * sqrt(la * la + lb * lb)) return -1.0;
+    double ex[3], ey[3], ez[3];
+    for (int a = 0; a < 3; a++) { ex[a] = ax[a] / la; ey[a] = ay[a] / lb; }
+    if (fabs(ex[0] * ey[0] + ex[1] * ey[1] + ex[2] * ey[2]) > 1e-6) return -1.0;
+    ez[0] = ex[1] * ey[2] - ex[2] * ey[1];
+    ez[1] = ex[2] * ey[0] - ex[0] * ey[2];
+    ez[2] = ex[0] * ey[1] - ex[1] * ey[0];
+    double rel[3], dd[3];
+    for (int a = 0; a < 3; a++) { rel[a] = x[a] - c[a]; dd[a] = c[a] - ax[a] - ay[a] - x[a]; }
+    double front = rel[0] * nl[0] + rel[1] * nl[1] + rel[2] * nl[2];
+    double x0 = dd[0] * ex[0] + dd[1] * ex[1] + dd[2] * ex[2];
+    double y0 = dd[0] * ey[0] + dd[1] * ey[1] + dd[2] * ey[2];
+    double z0 = dd[0] * ez[0] + dd[1] * ez[1] + dd[2] * ez[2];
+    if (!(front > 1e-9 * (la + lb)) || !(fabs(z0) > 1e-9 * (la + lb))) return -1.0;
+    if (z0 > 0.0) { z0 = -z0; for (int a = 0; a < 3; a++) ez[a] = -ez[a]; }
+    double x1 = x0 + 2.0 * la, y1 = y0 + 2.0 * lb, z2 = z0 * z0;
+    /* the z components of the unit normals of the planes through x and each edge (n0, n2
+     * have no x component, n1, n3 no y one, so neighbours' dot products are these alone),
+     * and the spherical rectangle's inner angles */
+    double n0z = -y0 / sqrt(z2 + y0 * y0), n1z = x1 / sqrt(z2 + x1 * x1);
+    double n2z = y1 / sqrt(z2 + y1 * y1), n3z = -x0 / sqrt(z2 + x0 * x0);
+    double g0 = acos(fmax(-1.0, fmin(1.0, -n0z * n1z)));
+    double g1 = acos(fmax(-1.0, fmin(1.0, -n1z * n2z)));
+    double g2 = acos(fmax(-1.0, fmin(1.0, -n2z * n3z)));
+    double g3 = acos(fmax(-1.0, fmin(1.0, -n3z * n0z)));
+    double b0 = n0z, b1 = n2z, k = 2.0 * M_PI - g2 - g3, S = g0 + g1 - k;
+    if (!(S > 0.0)) return -1.0;
+    /* u: the angle swept from the first edge; v: the height along the chosen column */
+    double au = u * S + k;
+    double sa = sin(au);
+    double fu = (cos(au) * b0 - b1) / (fabs(sa) > 1e-300 ? sa : 1e-300);
+    double cu = (fu > 0.0 ? 1.0 : -1.0) / sqrt(fu * fu + b0 * b0);
+    cu = fmax(-1.0, fmin(1.0, cu));
+    double xu = -(cu * z0) / sqrt(fmax(1.0 - cu * cu, 1e-300));
+    xu = fmax(x0, fmin(x1, xu));
+    double dist = sqrt(xu * xu + z2);
+    double h0 = y0 / sqrt(dist * dist + y0 * y0), h1 = y1 / sqrt(dist * dist + y1 * y1);
+    double hv = h0 + v * (h1 - h0), hv2 = hv * hv;
+    double yv = hv2 < 1.0 - 1e-12 ? hv * dist / sqrt(1.0 - hv2) : y1;
+    yv = fmax(y0, fmin(y1, yv));
+    for (int a = 0; a < 3; a++) src[a] = x[a] + xu * ex[a] + yv * ey[a] + z0 * ez[a];
+    return S;
+}
+
 /* Light record `L` at point x: propagation direction d, irradiance e, unit direction to the
  * centre wc and its distance dc (INFINITY for the sun), and ds, the distance to the emitting
  * point(s) sampled (their irradiance-weighted mean; dc for a point without radius). */
@@ -165,8 +222,11 @@ static inline void light_sample(const double *L, const double x[3], double u1, d
         return;
     }
     /* AREA */
-    double src[3], v[3];
-    for (int a = 0; a < 3; a++) src[a] = c[a] + L[L_AX + a] * pa + L[L_AY + a] * pb;
+    double src[3], v[3], omega = -1.0;
+    if (!(L[L_ROUND] > 0))
+        omega = rect_solid_angle_sample(L, x, dcc, u1, u2, src);
+    if (omega < 0.0)  /* round, far, skewed or in its plane: a point uniform over the area */
+        for (int a = 0; a < 3; a++) src[a] = c[a] + L[L_AX + a] * pa + L[L_AY + a] * pb;
     for (int a = 0; a < 3; a++) v[a] = x[a] - src[a];
     double dist2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
     if (!(dist2 > 1e-8)) dist2 = 1e-8;
@@ -177,7 +237,10 @@ static inline void light_sample(const double *L, const double x[3], double u1, d
     if (cos_l < 0.0) cos_l = 0.0;
     double area = L[L_AREA];
     double norm = (L[L_NORMALIZE] > 0 && area > 0) ? area : 1.0;
-    for (int a = 0; a < 3; a++) e[a] = L[L_STRENGTH + a] / M_PI / norm * (cos_l * area / dist2);
+    /* the radiance times the solid angle per sample: omega (the pdf 1 / omega), or
+     * cos A / r^2 (the pdf 1 / A) */
+    double w = omega >= 0.0 ? (cos_l > 0.0 ? omega : 0.0) : cos_l * area / dist2;
+    for (int a = 0; a < 3; a++) e[a] = L[L_STRENGTH + a] / M_PI / norm * w;
 }
 
 /* The optical depth to an emitting point at distance ds, from the field's depth to the light's

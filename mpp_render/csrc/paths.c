@@ -66,7 +66,8 @@ typedef struct {
     double w2i[12], i2w[9], ss[3], st[3], st_max, st_min, g, mu, roulette, jitter, outside;
     double reach[4];          /* centre (m) and radius (m) beyond which a path outside ends */
     long stride, max_hits;
-    int lobe;                 /* 0: the first direction by the phase function, 1: cosine */
+    int lobe;                 /* 0: the first direction by the phase function, 1: cosine,
+                                 2: uniform over the sphere */
     const double *tw;
     Py_ssize_t ls[3];
     double *out;
@@ -177,8 +178,9 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
     }
     if (T->lobe == 1)
         cosine_dir(uniform01(key, 0, D_DIR), uniform01(key, 0, D_DIR + 1), dir, d);
-    else
-        turn(uniform01(key, 0, D_DIR), uniform01(key, 0, D_DIR + 1), T->g, dir, d);
+    else  /* lobe 2, an emitting voxel: uniform over the sphere (the phase function of g 0) */
+        turn(uniform01(key, 0, D_DIR), uniform01(key, 0, D_DIR + 1), T->lobe == 2 ? 0.0 : T->g,
+             dir, d);
     for (int c = 0; c < 3; c++) {
         w[c] = w_start[c] * inv_n;
         if (w[c] > w0) w0 = w[c];
@@ -352,7 +354,7 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
     if (get_buf(ptri, &bt, 'd', 2, stri, "triangles") < 0) goto done;
     salb[0] = stri[0];
     if (get_buf(palb, &ba, 'd', 2, salb, "albedo") < 0) goto done;
-    if (!(jitter >= 0.0) || !isfinite(jitter) || (lobe != 0 && lobe != 1) ||
+    if (!(jitter >= 0.0) || !isfinite(jitter) || (lobe < 0 || lobe > 2) ||
         !(outside >= 0.0) || !isfinite(outside) || !(((const double *)br.view.buf)[3] >= 0.0)) {
         PyErr_SetString(PyExc_ValueError, "trace_paths: bad jitter, lobe, outside or reach");
         goto done;

@@ -3,8 +3,9 @@ the precompute fills it, the cache patches its parts, the march reads it.
 
 In order: channel 0 the density; per lit light 3 channels of RGB optical depth to it; with
 multiple scattering in a forward-scattering medium per lit light 3 channels of its forward
-peak's light; with a lit world 3 channels of world light, then with multiple scattering 3 of
-its multiply scattered part; last, for a medium with an emission grid only, 3 channels of its
+peak's light; with a lit world or a medium that glows (PreparedMedium.glows) 3 channels of
+world light, then with multiple scattering 3 of its multiply scattered part (the glow's light
+scattered once and more is added to them, precompute.emissionlight); last, for a medium with an emission grid only, 3 channels of its
 emitted radiance.  The world's and the emission's channels run to the end of the field
 (``world_first``).
 """
@@ -58,12 +59,14 @@ def light_channels(lights) -> List[Optional[int]]:
 
 def field_layout(media: Sequence[PreparedMedium], lights, world_color, multiple: bool,
                  delta: Optional[Sequence[PreparedMedium]] = None,
-                 peak: bool = True) -> FieldLayout:
+                 peak: bool = True, glow: bool = True) -> FieldLayout:
     """The layout of the fields the precompute gives ``media`` lit by ``lights`` and a world
     of colour ``world_color``, with or without ``multiple`` scattering.  ``delta``: the
     media delta-scaled (media.delta_scaled), where the caller has them.  ``peak``: whether
     multiple scattering carries the forward peak's light apart (the walk's beam channels,
-    precompute.source.peak_light); traced paths (paths.py) carry it themselves."""
+    precompute.source.peak_light); traced paths (paths.py) carry it themselves.  ``glow``:
+    whether the media's glow counts as world light (the cache's part without the world
+    sets it False)."""
     chans = light_channels(lights)
     c = 1 + 3 * sum(ch is not None for ch in chans)
     beams = [None] * len(lights)
@@ -73,7 +76,8 @@ def field_layout(media: Sequence[PreparedMedium], lights, world_color, multiple:
             if chans[i] is not None:
                 beams[i] = c
                 c += 3
-    amb = c if np.any(np.asarray(world_color) > 0) else None
+    lit = np.any(np.asarray(world_color) > 0) or (glow and any(pm.glows for pm in media))
+    amb = c if lit else None
     amb_ms = None
     if amb is not None:
         c += 3

@@ -4,6 +4,7 @@ deposits, seen from the camera, become the one level the march reads (march.Marc
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
@@ -11,7 +12,7 @@ import numpy as np
 from .. import kernels
 from ..camera import towards_camera
 from ..parallel import worker_count
-from ..paths import PATHS_MAX_SPAN, PathInputs, from_power, rate_span
+from ..paths import MAX_COLLISIONS, PATHS_MAX_SPAN, PathInputs, from_power, rate_span
 from .lattice import lattice_points, walk_lattice
 from .pathstarts import Surroundings, fog_starts, reach, surface_albedo, surface_starts
 from .source import light_direction, source_and_density, tent_restrict
@@ -43,12 +44,10 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     caller keeps the walk."""
     stride, shape, h = walk_lattice(pm, resolution)
     base, _, pts = source_and_density(pm, fld, light, channel, stride)
-    i2w = np.asarray(pm.i2w[:3, :3], np.float64)
-    vol = float(abs(np.linalg.det(i2w))) * stride ** 3
+    vol = cell_volume(pm, stride)
     power = base * vol
     live = power.sum(axis=1) > 0.0
     fog = pm.endless
-    density = pm.path_density()
     sets = []   # (points, power W, directions, jitter, lobe)
     if np.any(live):
         sets.append((pts[live], power[live], light_direction(light, pts[live]), 1.0, 0))
@@ -63,35 +62,80 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
                 sets.append(got[:3] + (got[3], 1))
     if not sets:
         return stride, h, np.zeros(tuple(shape) + (3,), np.float32), None
-    _, lpts = lattice_points(pm, shape, stride)
-    towards = np.ascontiguousarray(towards_camera(camera, lpts).reshape(tuple(shape) + (3,)))
-    st = np.asarray(pm.sigma_t, np.float64)
-    rate = max(float(density.max()) * float(st.max()), 1.0 / h)
-    if not rate_span(rate, i2w, density.shape) <= PATHS_MAX_SPAN:
+    lat = PathLattice.of(pm, camera, resolution)
+    if lat is None:
         return None
-    mean_rho = density.astype(np.float64)
-    for axis in range(3):
-        mean_rho = tent_restrict(mean_rho, axis, stride, shape[axis])
-    # a small medium needs no more paths than PATHS_PER_POINT per lattice point it fills
-    n_paths = min(int(n_paths), PATHS_PER_POINT * int(np.count_nonzero(mean_rho > 0.0)))
-    acc = _trace(sets, n_paths, seed, threads, should_cancel, density,
-                 np.asarray(pm.w2i, np.float64), i2w, pm, stride, towards, rate, around)
-    # the deposits are density-weighted: divide by the density under each point's tent
-    # (the lattice cell's mean), so that M is the medium's own average there and a point
-    # beside the medium's surface is not diluted by the empty side
-    mean_rho = mean_rho[..., None] * vol
-    m = np.divide(acc, mean_rho, out=np.zeros_like(acc), where=mean_rho > 0.0)
+    n_paths = lat.paths(n_paths)
+    m = lat.mean(_trace(sets, n_paths, seed, threads, should_cancel, pm, lat, around))
     far = None
     if fog and camera is not None:
         far = _far_multiple(pm, sets, camera, n_paths, seed, threads, should_cancel, around)
-    return stride, h, np.ascontiguousarray(m, np.float32), far
+    return stride, h, m, far
 
 
-def _trace(sets, n_paths, seed, threads, should_cancel, density, w2i, i2w, pm, stride, towards,
-           rate, around) -> np.ndarray:
+def cell_volume(pm, stride: int) -> float:
+    """m^3 of a cell of the lattice ``stride`` voxels apart on medium ``pm``."""
+    return float(abs(np.linalg.det(np.asarray(pm.i2w[:3, :3], np.float64)))) * stride ** 3
+
+
+@dataclass
+class PathLattice:
+    """Where a medium's paths deposit: the light pyramid's lattice (``stride`` voxels apart,
+    ``shape``, spacing ``h`` m) on the medium's path density ``density`` (maps ``w2i`` /
+    ``i2w``), the unit directions ``towards`` the camera from its points, the tentative
+    collision ``rate`` (1/m), the density under each point's tent times the cell volume
+    ``tent_mass`` (m^3, (LX,LY,LZ,1)) that turns deposits into M, and ``cells``, the
+    lattice points the medium fills."""
+
+    stride: int
+    shape: tuple
+    h: float
+    density: np.ndarray
+    w2i: np.ndarray
+    i2w: np.ndarray
+    towards: np.ndarray
+    rate: float
+    tent_mass: np.ndarray
+    cells: int
+
+    @classmethod
+    def of(cls, pm, camera, resolution: int):
+        """The lattice of medium ``pm`` at ``resolution`` seen from ``camera``; None where the
+        medium is too dense for paths (paths.PATHS_MAX_SPAN)."""
+        stride, shape, h = walk_lattice(pm, resolution)
+        i2w = np.asarray(pm.i2w[:3, :3], np.float64)
+        density = pm.path_density()
+        rate = max(float(density.max()) * float(np.max(pm.sigma_t)), 1.0 / h)
+        if not rate_span(rate, i2w, density.shape) <= PATHS_MAX_SPAN:
+            return None
+        _, lpts = lattice_points(pm, shape, stride)
+        towards = np.ascontiguousarray(towards_camera(camera, lpts).reshape(tuple(shape) + (3,)))
+        mean_rho = density.astype(np.float64)
+        for axis in range(3):
+            mean_rho = tent_restrict(mean_rho, axis, stride, shape[axis])
+        return cls(stride, tuple(shape), h, density, np.asarray(pm.w2i, np.float64), i2w,
+                   towards, rate, mean_rho[..., None] * cell_volume(pm, stride),
+                   int(np.count_nonzero(mean_rho > 0.0)))
+
+    def paths(self, n_paths: int) -> int:
+        """``n_paths``, at most ``PATHS_PER_POINT`` per lattice point the medium fills."""
+        return min(int(n_paths), PATHS_PER_POINT * self.cells)
+
+    def mean(self, acc: np.ndarray) -> np.ndarray:
+        """M (float32, W/(m^2 sr)) from the deposits ``acc``: divided by the density under each
+        point's tent (the cell's mean), so that M is the medium's own average there and a point
+        beside the medium's surface is not diluted by the empty side."""
+        m = np.divide(acc, self.tent_mass, out=np.zeros_like(acc), where=self.tent_mass > 0.0)
+        return np.ascontiguousarray(m, np.float32)
+
+
+def _trace(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
+           max_collisions: int = MAX_COLLISIONS) -> np.ndarray:
     """The deposits (LX,LY,LZ,3) of ``n_paths`` paths shared among the start ``sets`` in
-    proportion to their power, on the grid ``density`` / ``w2i`` / ``i2w`` with lattice
-    ``stride``; raises cancel.Cancelled on Esc."""
+    proportion to their power, on the PathLattice ``lat``; each path ends after
+    ``max_collisions`` real collisions and bounces (1: its first flight alone); raises
+    cancel.Cancelled on Esc."""
+    density, w2i, i2w = lat.density, lat.w2i, lat.i2w
     surf = around.surfaces if around is not None else None
     centre, radius = reach(pm, (w2i, density.shape))
     extra = dict(outside=pm.outside_density, reach_centre=centre, reach_radius=radius)
@@ -105,9 +149,9 @@ def _trace(sets, n_paths, seed, threads, should_cancel, density, w2i, i2w, pm, s
         n_k = max(1, int(round(n_paths * totals[k] / totals.sum())))
         weights, cdf = from_power(pw)
         inp = PathInputs(density, w2i, i2w, np.asarray(pm.sigma_s, np.float64), st, float(pm.g),
-                         stride, towards, np.ascontiguousarray(starts), weights,
-                         np.ascontiguousarray(dirs), cdf, rate, n_k, int(seed) + 104729 * k,
-                         jitter=jitter, lobe=lobe, **extra)
+                         lat.stride, lat.towards, np.ascontiguousarray(starts), weights,
+                         np.ascontiguousarray(dirs), cdf, lat.rate, n_k, int(seed) + 104729 * k,
+                         max_collisions=max_collisions, jitter=jitter, lobe=lobe, **extra)
         got = kernels.trace_paths(inp, threads=worker_count(threads), should_cancel=should_cancel)
         acc = got if acc is None else acc + got
     return acc
@@ -131,6 +175,8 @@ def _far_multiple(pm, sets, camera, n_paths, seed, threads, should_cancel, aroun
     pts = lidx @ i2w4[:3, :3].T + i2w4[:3, 3]
     towards = np.ascontiguousarray(towards_camera(camera, pts).reshape(tuple(shape) + (3,)))
     rate = max(float(np.max(pm.sigma_t)), 1.0 / voxel)
+    lat = PathLattice(1, tuple(shape), voxel, density, w2i, np.ascontiguousarray(i2w4[:3, :3]),
+                      towards, rate, np.full(tuple(shape) + (1,), voxel ** 3), int(density.size))
     acc = _trace(sets, max(1, int(n_paths * FAR_PATHS)), int(seed) + 7, threads, should_cancel,
-                 density, w2i, np.ascontiguousarray(i2w4[:3, :3]), pm, 1, towards, rate, around)
+                 pm, lat, around)
     return FarField(w2i, np.ascontiguousarray(acc / voxel ** 3, np.float32))

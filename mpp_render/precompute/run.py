@@ -17,6 +17,7 @@ from .layout import FieldLayout, field_layout
 from .lightdepth import (SHADOW_TAU, light_optical_depth, near_sharp_surfaces, soft_visibility,
                          split_fog, sweep_light)
 from .flatten import flattened
+from .emissionlight import EMISSION_PATHS, add_lattice, emission_light
 from .lightpaths import traced_multiple
 from .pathstarts import Surroundings
 from .lightpyramid import MultipleField, multiple_field
@@ -42,17 +43,23 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                progress: Optional[Callable[[float, str], None]] = None,
                surfaces=None, threads: int = 0, multiple: bool = False,
                multiple_resolution: int = MULTIPLE_RESOLUTION, multiple_paths: int = 0,
-               tuning: Tuning = Tuning(), surface_bounce: bool = True) -> Precomputed:
+               tuning: Tuning = Tuning(), surface_bounce: bool = True,
+               glow: bool = True) -> Precomputed:
     """Field arrays for every medium, and with ``multiple`` the light pyramids; raises
     cancel.Cancelled when ``should_cancel`` says so.  ``surfaces`` (a SurfaceSet or None)
     shadow the lights and the sky.  Media that cannot scatter (sigma_s = 0) get no
     multiple-scattering data.  ``multiple_paths``: light paths traced per light and medium
     for multiple scattering (precompute.lightpaths); 0: the walk of the light pyramid.  ``tuning``: the
     method's knobs (scene.Tuning, with the Settings).  ``surface_bounce``: the traced paths
-    start on the lit surfaces and reflect off them (else the surfaces only absorb them)."""
+    start on the lit surfaces and reflect off them (else the surfaces only absorb them).
+    ``glow``: the light the media give off, scattered in them (precompute.emissionlight), is
+    added to the world channels (cache.precompute_cached's part without the world leaves it
+    out)."""
     t_start = time.perf_counter()
     delta = [delta_scaled(pm) for pm in media]
-    layout = field_layout(media, lights, world.color, multiple, delta, peak=multiple_paths <= 0)
+    layout = field_layout(media, lights, world.color, multiple, delta, peak=multiple_paths <= 0,
+                          glow=glow)
+    world_lit = bool(np.any(np.asarray(world.color) > 0))
     chans, beams = layout.light_channels, layout.beam_channels or [None] * len(lights)
     c = layout.channels
     ms_all = []
@@ -67,6 +74,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
     fields = []
     n_pts = 0
     n_ambient = 0
+    n_glow = 0
     for mi, pm in enumerate(media):
         cm = c if pm.emission_grid is None else c + 3
         f = np.zeros(pm.grid.shape + (cm,), np.float32)
@@ -122,7 +130,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                   multiple_resolution, should_cancel, fog=pm is fog,
                                   tuning=tuning)
                 kernels.upsample_into(f, beams[li], peak[0], peak[1], flat)
-        if layout.ambient_channel is not None:
+        if layout.ambient_channel is not None and world_lit:
             if progress:
                 progress(0.0, f"World light on {pm.medium.name}")
             got = fill_world_light(f, (layout.ambient_channel, layout.ambient_multiple_channel),
@@ -130,6 +138,19 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                    seed=seed + mi, should_cancel=should_cancel,
                                    surfaces=surfaces, threads=threads, tuning=tuning)
             n_ambient += got
+        if glow and layout.ambient_channel is not None and pm.glows:
+            if progress:
+                progress(0.0, f"Emitted light on {pm.medium.name}")
+            got = emission_light(pm, camera, multiple_paths if multiple_paths > 0
+                                 else EMISSION_PATHS, multiple_resolution, multiple,
+                                 seed=seed + 7919 * mi + 6007, threads=threads,
+                                 should_cancel=should_cancel, around=around)
+            if got is not None:
+                stride, once, more = got
+                add_lattice(f, layout.ambient_channel, once, stride, flat)
+                if more is not None and layout.ambient_multiple_channel is not None:
+                    add_lattice(f, layout.ambient_multiple_channel, more, stride, flat)
+                n_glow += 1
         ms = [None] * len(lights)
         if multiple and np.any(pm.sigma_s > 0):
             for li, light in enumerate(lights):
@@ -168,4 +189,4 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
         fields.append(f)
     return Precomputed(fields, layout, ms_all, time.perf_counter() - t_start,
                        {"points": n_pts, "ambient_points": n_ambient,
-                        "backend": kernels.backend()})
+                        "backend": kernels.backend(), "glowing": n_glow})

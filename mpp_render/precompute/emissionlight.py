@@ -1,0 +1,95 @@
+"""Emission as a light source: the light a glowing medium gives off, scattered by that same
+medium (docs/method.md, "Emission that lights the scene").
+
+A medium's emission e(x) (W/(m^3 sr): the constant ``Medium.emission`` wherever the density
+is > 0, plus the emission grid) sends 4 pi e(x) watts per cubic metre out uniformly over the
+sphere.  Light paths (paths.py, lobe 2) start from the emitting voxels in proportion to that
+power, each offset by a tent of one voxel, so that they start where the emission
+interpolated trilinearly is, as the march reads it (``voxel_starts``).  Their deposits, on
+the light pyramid's lattice (precompute.lightpaths.PathLattice), estimate at each lattice
+point y
+
+    E1(y) = <integral of L_0(x, w) p(w . v(y); g) dw>_rho,t_y       [W/(m^2 sr)]
+    Em(y) = <integral of L_1+(x, w) p(w . v(y); g) dw>_rho,t_y
+
+L_0 the emitted radiance that has not scattered yet (its first flights: the paths traced with
+``max_collisions`` 1) and L_1+ what has scattered at least once (every later flight: all the
+flights' deposits minus the first flights', the same paths drawing the same numbers, so the
+difference has no noise of the first flights).  The march reads E1 with the sky's light
+(scattered once towards the camera: Volume Single) and Em with the sky's multiple scattering
+(Volume Multiple): both are added to the field's world channels (precompute/layout.py),
+interpolated from the lattice to the voxels.  The paths reflect off the surfaces as the
+lights' do; the surfaces' own light from the glow is their gather march's (surfaces.py).
+
+What it leaves out: the glow of one medium scattered in another (paths fly in their own
+medium, as the lights' do), and the world volume's emission (an endless medium: left to the
+march's emission).  A medium that does not glow, or cannot scatter, costs nothing.
+"""
+from __future__ import annotations
+
+from typing import Optional
+
+import numpy as np
+
+from .. import kernels
+from ..media import PreparedMedium
+from .lightpaths import PathLattice, _trace
+from .pathstarts import Surroundings
+
+CHUNK = 1 << 20  # voxels interpolated at once when the lattice is added to the field
+# paths for the glow where the Paths setting is 0 (the walk: Preview); the walk has no
+# emission light of its own
+EMISSION_PATHS = 250_000
+
+
+def emission_light(pm: PreparedMedium, camera, n_paths: int, resolution: int,
+                   multiple: bool, seed: int = 0, threads: int = 0, should_cancel=None,
+                   around: Optional[Surroundings] = None):
+    """(stride, E1, Em) on the light pyramid's lattice of ``pm`` (module docstring), float32
+    (LX,LY,LZ,3) W/(m^2 sr); Em None without ``multiple``.  ``n_paths`` paths (at most
+    lightpaths.PATHS_PER_POINT per lattice point the medium fills), ``around`` the surfaces
+    they reflect off.  None where nothing glows or the medium is too dense for paths."""
+    e = pm.emitted()
+    if e is None or camera is None:
+        return None
+    lat = PathLattice.of(pm, camera, resolution)
+    if lat is None:
+        return None
+    sets = voxel_starts(pm, e, lat.stride)
+    if sets is None:
+        return None
+    n = max(1, lat.paths(n_paths))
+    first = _trace(sets, n, seed, threads, should_cancel, pm, lat, around, max_collisions=1)
+    later = None
+    if multiple:
+        every = _trace(sets, n, seed, threads, should_cancel, pm, lat, around)
+        later = lat.mean(np.maximum(every - first, 0.0))
+    return lat.stride, lat.mean(first), later
+
+
+def voxel_starts(pm: PreparedMedium, e: np.ndarray, stride: int):
+    """[(points (N,3) m, power (N,3) W, directions, jitter, lobe 2)]: the emitting voxels,
+    each of power 4 pi e V (V the voxel's volume) and offset by a tent of half-width one
+    voxel (``jitter`` 1 / ``stride`` lattice steps), so that the starts follow the emission
+    interpolated trilinearly, as the march reads it; None where nothing glows."""
+    flat = np.flatnonzero(e.sum(axis=-1) > 0.0)
+    if not flat.size:
+        return None
+    vox = float(abs(np.linalg.det(np.asarray(pm.i2w[:3, :3], np.float64))))
+    power = 4.0 * np.pi * vox * e.reshape(-1, 3)[flat]
+    ijk = np.stack(np.unravel_index(flat, e.shape[:3]), axis=1).astype(np.float64)
+    up = np.zeros((len(flat), 3))
+    up[:, 2] = 1.0                                      # any axis: the lobe is uniform
+    return [(pm.to_world(ijk), power, up, 1.0 / stride, 2)]
+
+
+def add_lattice(f: np.ndarray, channel: int, lattice: np.ndarray, stride: int,
+                flat: np.ndarray) -> None:
+    """Add the trilinear values of ``lattice`` (LX,LY,LZ,3; point k at voxel k ``stride``)
+    to ``f``'s channels ``channel``..+2 at the voxels ``flat`` (C-order indices)."""
+    view = f.reshape(-1, f.shape[-1])
+    shape = f.shape[:3]
+    for a in range(0, len(flat), CHUNK):
+        part = flat[a:a + CHUNK]
+        idx = np.stack(np.unravel_index(part, shape), axis=1).astype(np.float64) / stride
+        view[part, channel:channel + 3] += kernels.trilinear(lattice, idx).astype(np.float32)

@@ -1,0 +1,69 @@
+"""Rectangular area lights sampled in the solid angle they subtend (lights.light_sample,
+csrc/light.h): the same light as points uniform over the area, without their noise."""
+import numpy as np
+import pytest
+
+from mpp_render.lightrecord import L_AX, L_AY, L_NORMAL, L_POS
+from mpp_render.lights import light_sample, pack_light, rect_solid_angle_sample
+from mpp_render.scene import Light
+
+
+def rect_light(tilt=0.3, shape="RECTANGLE"):
+    c, s = np.cos(tilt), np.sin(tilt)
+    m = np.array([[c, 0, s, 0.1], [0, 1, 0, 0.0], [-s, 0, c, 0.8], [0, 0, 0, 1.0]])
+    return pack_light(Light("AREA", "rect", np.full(3, 300.0), matrix=m, shape=shape,
+                            size_x=0.6, size_y=0.4))
+
+
+def by_area(rec, x, u1, u2):
+    """The irradiance estimate of points uniform over the rectangle: L cos A / r^2."""
+    a, b = 2.0 * u1 - 1.0, 2.0 * u2 - 1.0
+    src = rec[L_POS:L_POS + 3] + rec[L_AX:L_AX + 3] * a[:, None] + rec[L_AY:L_AY + 3] * b[:, None]
+    v = x - src
+    r2 = np.einsum("ij,ij->i", v, v)
+    cos = np.maximum((v / np.sqrt(r2)[:, None]) @ rec[L_NORMAL:L_NORMAL + 3], 0.0)
+    area = 4.0 * np.linalg.norm(rec[L_AX:L_AX + 3]) * np.linalg.norm(rec[L_AY:L_AY + 3])
+    radiance = 300.0 / np.pi / area
+    return radiance * cos * area / r2, v / np.sqrt(r2)[:, None]
+
+
+@pytest.mark.parametrize("point", [(0.0, 0.0, 0.7), (0.5, 0.3, 0.2), (0.35, 0.15, 0.6),
+                                   (3.0, 2.0, -1.0), (0.1, 0.0, 0.79)])
+def test_solid_angle_samples_carry_the_light_of_area_samples_without_their_noise(point):
+    rec = rect_light()
+    rng = np.random.default_rng(1)
+    n = 200_000
+    x = np.tile(np.asarray(point, np.float64), (n, 1))
+    u1, u2 = rng.random(n), rng.random(n)
+    d, e, _, _, ds = light_sample(rec, x, u1, u2)
+    ea, da = by_area(rec, x, u1, u2)
+    assert ea.mean() > 0.0                   # the point is in front of the light
+    # every sample is the light's radiance times its solid angle: no noise at all
+    assert np.ptp(e[:, 0]) <= 1e-9 * e[0, 0]
+    assert e[0, 0] == pytest.approx(ea.mean(), rel=6 * ea.std() / np.sqrt(n) / ea.mean() + 1e-3)
+    # the directions are those of the light's points, weighted as area samples weigh them
+    mean_dir = (e[:, :1] * d).mean(axis=0)
+    want = (ea[:, None] * da).mean(axis=0)
+    assert mean_dir == pytest.approx(want, abs=8 * ea.std() / np.sqrt(n) + 1e-3 * ea.mean())
+    # and every sampled point lies on the rectangle
+    src = x - d * ds[:, None]
+    local = src - rec[L_POS:L_POS + 3]
+    ax, ay = rec[L_AX:L_AX + 3], rec[L_AY:L_AY + 3]
+    assert np.all(np.abs(local @ ax / (ax @ ax)) <= 1 + 1e-9)
+    assert np.all(np.abs(local @ ay / (ay @ ay)) <= 1 + 1e-9)
+    assert np.abs(local @ np.cross(ax, ay)).max() <= 1e-9
+
+
+def test_behind_in_the_plane_far_or_round_falls_back():
+    rec = rect_light()
+    u = np.full(3, 0.4)
+    x = np.array([[0.1, 0.0, 0.9], [0.1, 0.0, 0.8], [0.1, 0.0, -100.0]])
+    omega, _ = rect_solid_angle_sample(rec, x, np.linalg.norm(x - rec[L_POS:L_POS + 3], axis=1),
+                                       u, u)
+    assert np.all(omega[:2] < 0.0)          # behind it; in its plane (at its centre)
+    assert omega[2] < 0.0                    # 100 m: over 64 diagonals away, by area
+    e = light_sample(rec, x, u, u)[1]
+    assert np.all(e[0] == 0.0) and np.all(e[2] > 0.0)
+    disc = rect_light(shape="DISK")
+    got = light_sample(disc, np.array([[0.0, 0.0, 0.7]]), np.array([0.3]), np.array([0.6]))[1]
+    assert got[0, 0] > 0.0

@@ -1,0 +1,174 @@
+"""Emission as a light source (precompute/emissionlight.py): paths from the emitting voxels,
+their first flights against the closed form round a uniform emitting sphere, their energy
+against the power emitted, the twins on the uniform lobe, and what a render does with it."""
+import dataclasses
+
+import numpy as np
+import pytest
+
+from mpp_render import kernels
+from mpp_render.media import prepare
+from mpp_render.paths import PathInputs, from_power, trace_paths_np
+from mpp_render.precompute import precompute
+from mpp_render.precompute.emissionlight import emission_light
+from mpp_render.precompute.lattice import lattice_points, lattice_shape
+from mpp_render.precompute.lightpaths import PathLattice
+from mpp_render.render import render
+from mpp_render.scene import Camera, Medium, SceneDescription, Settings, World
+
+needs_c = pytest.mark.skipif(kernels._c is None, reason="compiled kernels not built")
+
+GAUSS = np.polynomial.legendre.leggauss(2000)
+N, VOX = 64, 0.1           # a 6.4 m cube of 0.1 m voxels centred on the origin
+R, E = 0.8, 2.0            # the emitting sphere's radius (m), its emission W/(m^3 sr)
+
+
+def camera():
+    c2w = np.eye(4)
+    c2w[:3, 3] = [0.0, 0.0, 20.0]
+    return Camera("ORTHO", c2w, 16, 16, (-3.2, 3.2, -3.2, 3.2))
+
+
+def glowing_cube(sigma_t=1.0, albedo=0.8, g=0.0, radius=R, density=None):
+    """A homogeneous cube (density 1) with a uniformly emitting sphere at its centre, given
+    as an emission grid."""
+    idx = (np.arange(N) - 0.5 * (N - 1)) * VOX
+    x, y, z = np.meshgrid(idx, idx, idx, indexing="ij")
+    glow = (x * x + y * y + z * z <= radius * radius)
+    grid = (glow[..., None] * np.full(3, E)).astype(np.float32)
+    i2w = np.eye(4)
+    i2w[:3, :3] *= VOX
+    i2w[:3, 3] = idx[0]
+    d = np.ones((N, N, N), np.float32) if density is None else density
+    return Medium("glow", d, i2w, np.full(3, albedo * sigma_t), np.full(3, (1 - albedo) * sigma_t),
+                  g, emission_grid=grid)
+
+
+def sphere_first_flight(r, sigma_t, radius=R):
+    """(1 / 4 pi) x the integral over directions of the unscattered emitted radiance at
+    distances ``r`` (array, m) from the centre of a uniformly emitting sphere in a
+    homogeneous medium: along each direction e (exp(-sigma_t t1) - exp(-sigma_t t2)) /
+    sigma_t over the chord [t1, t2], averaged over the cosine mu (Gauss-Legendre)."""
+    mu, w = GAUSS
+    r = np.asarray(r, np.float64)[..., None]
+    b = r * mu                     # along the direction: |x + t w|^2 = r^2 + 2 t b + t^2
+    disc = b * b - (r * r - radius * radius)
+    ok = disc > 0
+    s = np.sqrt(np.where(ok, disc, 0.0))
+    t1, t2 = np.maximum(-b - s, 0.0), np.maximum(-b + s, 0.0)
+    lum = np.where(ok, E * (np.exp(-sigma_t * t1) - np.exp(-sigma_t * t2)) / sigma_t, 0.0)
+    return 0.5 * np.sum(w * lum, axis=-1)
+
+
+def tent_mean(y, h, sigma_t):
+    """``sphere_first_flight`` averaged under the trilinear tent of half-width h round y:
+    what a lattice point's M is the mean of (paths.py)."""
+    t = np.linspace(-1.0, 1.0, 9)[1:-1]
+    wt = 1.0 - np.abs(t)
+    grid = np.stack(np.meshgrid(t, t, t, indexing="ij"), -1)
+    w = wt[:, None, None] * wt[None, :, None] * wt[None, None, :]
+    f = sphere_first_flight(np.linalg.norm(y + h * grid, axis=-1), sigma_t)
+    return float((f * w).sum() / w.sum())
+
+
+def lattice_point(pm, stride, point):
+    """(index, world position) of the lattice point nearest ``point``."""
+    idx = np.rint(pm.to_index(np.asarray([point], np.float64))[0] / stride).astype(int)
+    return tuple(idx), pm.to_world(idx[None] * float(stride))[0]
+
+
+def first_flight_errors(resolution, seed=3):
+    """Relative errors of the first flights' M: at the lattice point nearest the centre and
+    averaged over lattice points in shells round the sphere, against the closed form under
+    each point's tent, scaled by the voxelised sphere's volume over the sphere's."""
+    m = glowing_cube(sigma_t=1.0, albedo=0.8)
+    volume = np.count_nonzero(m.emission_grid[..., 0]) * VOX ** 3 / (4.0 / 3.0 * np.pi * R ** 3)
+    pm = prepare(m)
+    stride, once, _ = emission_light(pm, camera(), 400_000, resolution, multiple=False,
+                                     seed=seed)
+    assert np.all(np.ptp(once, axis=-1) == 0.0)        # grey medium, grey glow
+    idx, y = lattice_point(pm, stride, (0.0, 0.0, 0.0))
+    h = stride * VOX
+    out = [float(once[idx][0]) / (volume * tent_mean(y, h, 1.0)) - 1.0]
+    _, pts = lattice_points(pm, once.shape[:3], stride)
+    r = np.linalg.norm(pts, axis=1)
+    got = once[..., 0].reshape(-1)
+    for lo, hi in ((0.3, 0.5), (1.2, 1.6), (1.8, 2.4)):
+        shell = np.flatnonzero((r > lo) & (r < hi))[::41]
+        want = volume * np.mean([tent_mean(pts[i], h, 1.0) for i in shell])
+        out.append(float(got[shell].mean() / want) - 1.0)
+    return np.array(out)
+
+
+def test_first_flights_match_the_closed_form_round_an_emitting_sphere():
+    """The glow's first flights (its single scattering's source) at the sphere's centre,
+    inside it and outside it, against the closed form; the error shrinks as the lattice is
+    refined (the starts' tent blurs the source)."""
+    fine = first_flight_errors(64)
+    coarse = first_flight_errors(32)
+    print("relative errors, lattice 64:", np.round(fine, 4), " 32:", np.round(coarse, 4))
+    assert np.all(np.abs(fine) <= 0.03)
+    assert np.abs(fine[0]) < np.abs(coarse[0])
+
+
+def test_the_absorbed_power_is_the_emitted_power():
+    """Energy: in a medium too large for the light to leave, what every flight deposits
+    times sigma_a is what the sphere emits, 4 pi e V; the first flights alone carry 1 /
+    sigma_t of a watt's track length, all of them 1 / sigma_a."""
+    st, albedo = 3.0, 0.6
+    pm = prepare(glowing_cube(sigma_t=st, albedo=albedo, radius=0.5))
+    lat = PathLattice.of(pm, camera(), 32)
+    stride, once, more = emission_light(pm, camera(), 400_000, 32, multiple=True, seed=5)
+    mass = lat.tent_mass[..., 0]
+    fluence_once = 4.0 * np.pi * np.einsum("xyz,xyzc->c", mass, once.astype(np.float64))
+    fluence_all = fluence_once + 4.0 * np.pi * np.einsum("xyz,xyzc->c", mass,
+                                                         more.astype(np.float64))
+    inside = pm.emitted()[..., 0] > 0
+    power = 4.0 * np.pi * E * np.count_nonzero(inside) * VOX ** 3
+    assert fluence_once == pytest.approx(np.full(3, power / st), rel=0.03)
+    assert fluence_all * (1.0 - albedo) * st == pytest.approx(np.full(3, power), rel=0.04)
+    assert np.all(more >= 0.0)
+
+
+@needs_c
+def test_twins_agree_on_the_uniform_lobe():
+    rng = np.random.default_rng(2)
+    n, stride, vox = 16, 2, 0.1
+    ls = lattice_shape((n, n, n), stride)
+    tow = rng.normal(size=ls + (3,))
+    tow /= np.linalg.norm(tow, axis=-1, keepdims=True)
+    starts = rng.random((5, 3)) * 1.4
+    w, cdf = from_power(rng.random((5, 3)) + 0.1)
+    inp = PathInputs(rng.random((n, n, n)).astype(np.float32),
+                     np.concatenate([np.eye(3) / vox, np.zeros((3, 1))], 1), np.eye(3) * vox,
+                     np.array([1.0, 1.5, 2.0]), np.array([2.0, 2.0, 2.5]), 0.7, stride, tow,
+                     starts, w, np.tile([0.0, 0.0, 1.0], (5, 1)), cdf, 5.0, 1500, 9, lobe=2)
+    a = trace_paths_np(inp)
+    b = kernels.trace_paths(inp, threads=2)
+    assert a.sum() > 0.0
+    assert np.abs(a - b).max() <= 1e-9 * np.abs(a).max()
+    # the uniform lobe does not follow the medium's anisotropy: g changes the deposits'
+    # phase towards the camera, but not where the first flights go
+    first = dataclasses.replace(inp, max_collisions=1)
+    iso = kernels.trace_paths(dataclasses.replace(first, g=0.0)).sum()
+    assert kernels.trace_paths(dataclasses.replace(first, lobe=0, g=0.9)).sum() != \
+        pytest.approx(iso, rel=1e-3)
+
+
+def test_a_glowing_medium_lights_itself_and_a_dark_one_costs_nothing():
+    small = dict(density=None)
+    m = glowing_cube(sigma_t=1.0, albedo=0.9, **small)
+    desc = SceneDescription(camera(), media=[m], settings=Settings(samples=1, multiple=True,
+                                                                    multiple_paths=50_000,
+                                                                    multiple_resolution=24))
+    out = render(desc)
+    single, multi = out.passes["Volume Single"], out.passes["Volume Multiple"]
+    assert single.max() > 0 and multi.max() > 0
+    assert out.stats["precompute"].get("glowing") == 1 if "precompute" in out.stats else True
+    # brightest over the sphere, darker towards the cube's edge
+    assert single[8, 8, 0] > 3 * single[8, 1, 0]
+    dark = dataclasses.replace(m, emission_grid=np.zeros_like(m.emission_grid))
+    out = render(dataclasses.replace(desc, media=[dark]))
+    assert np.all(out.passes["Volume Single"] == 0) and np.all(out.passes["Volume Multiple"] == 0)
+    pre = precompute([prepare(dark)], [], World(), camera(), multiple=True, multiple_paths=1000)
+    assert pre.layout.ambient_channel is None and pre.stats["glowing"] == 0
