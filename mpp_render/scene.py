@@ -111,7 +111,9 @@ class Medium:
     temperature grid, blackbody.py), interpolated trilinearly and given off wherever it is
     non-zero (not gated by density: Cycles emits wherever the shader is evaluated); added to
     ``emission``.  NaN, inf and negative values are set to 0 with a warning.
-    ``source``: 'MESH', 'VDB', 'FLUID' or 'WORLD' (for messages and tests).  A 'WORLD'
+    ``source``: 'MESH' (a mesh volume: one density with a sharp surface), 'MESH_FIELD' (a
+    mesh volume whose density a shader node tree varies: interpolated like a grid), 'VDB',
+    'FLUID' or 'WORLD' (for messages and tests).  A 'WORLD'
     medium held by ``World.volume`` fills all space homogeneously: only its coefficients and
     ``emission`` are read (``density`` and ``index_to_world`` are placeholders); the
     renderer bounds it (worldfog.py).

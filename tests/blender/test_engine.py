@@ -184,10 +184,10 @@ def test_unsupported_node_is_reported_and_the_rest_renders(empty_scene, capfd):
     sc = small_scene(empty_scene, cubes=((-1.5, 0.0, 0.0), (1.5, 0.0, 0.0)))
     # Cube1's density comes from a texture, which the translation does not evaluate.
     nt = bpy.data.materials["Vol1"].node_tree
-    noise = nt.nodes.new("ShaderNodeTexNoise")
+    noise = nt.nodes.new("ShaderNodeTexBrick")
     nt.links.new(noise.outputs["Fac"], nt.nodes["Principled Volume"].inputs["Density"])
     last = frame.render_mpp()
-    msgs = [w for w in last.output.warnings if "Noise Texture" in w]
+    msgs = [w for w in last.output.warnings if "Brick Texture" in w]
     assert msgs, f"no warning about the unsupported node in {last.output.warnings}"
     printed = capfd.readouterr()
     assert msgs[0] in printed.out + printed.err  # shown by self.report
@@ -265,7 +265,7 @@ def test_what_is_left_out_is_reported_before_the_render_runs(empty_scene, monkey
     sc = small_scene(empty_scene)
     sc.render.use_motion_blur = True
     nt = bpy.data.materials["Vol0"].node_tree
-    noise = nt.nodes.new("ShaderNodeTexNoise")
+    noise = nt.nodes.new("ShaderNodeTexBrick")
     nt.links.new(noise.outputs["Fac"], nt.nodes["Principled Volume"].inputs["Density"])
     events = []
     real_render = render_mod.render
@@ -279,12 +279,12 @@ def test_what_is_left_out_is_reported_before_the_render_runs(empty_scene, monkey
     frame.render_depsgraph(depsgraph, W, H, on_translated=lambda w: events.append(("told", w)))
     assert [k for k, _ in events] == ["told", "render"]
     told = events[0][1]
-    assert any("motion blur" in m for m in told) and any("Noise Texture" in m for m in told)
+    assert any("motion blur" in m for m in told) and any("Brick Texture" in m for m in told)
     capfd.readouterr()
     frame.render_mpp()
     printed = capfd.readouterr()
     text = printed.out + printed.err
-    for key in ("motion blur is not supported", "Noise Texture"):
+    for key in ("motion blur is not supported", "Brick Texture"):
         assert text.count(key) == 1, (key, text[-3000:])
 
 

@@ -43,7 +43,9 @@ copied):
   Attribute 'color' tints its scattering colour by the smoke colour averaged over the density
   (one colour per domain: a warning says when it varies).  Without a material, or without a
   volume shader, a domain renders nothing (Cycles gives a mesh domain the default *surface*
-  shader).
+  shader).  Inputs node trees drive (fields) are evaluated at the medium's cells by
+  ``vdb.block_medium``, Generated mapping the texture space to [0, 1]^3 and Attribute /
+  Volume Info nodes reading the smoke grids.
 * **Fire.**  Emission that grids drive is done by the VDB path's helper
   (``vdb.lattice_emission``), so a domain glows as a Volume object with the same grids and
   shader does: Principled Volume's blackbody with T = Temperature x the grid named by its
@@ -78,7 +80,9 @@ from .fluidcache import (DATA_GRIDS, NOISE_GRIDS, cache_file, cache_frame, place
                          read_cache_file)
 from .vdb import block_medium, emission_grids, missing_strength_grids, translation
 from .convert import scalar
-from .materials import ClosureInputs, VolumeCoefficients, merge, principled_volume, volume_shading
+from .materials import (ClosureInputs, VolumeCoefficients, field_grids, merge_by_field,
+                        principled_volume, volume_shading)
+from .shadergraph import Field, FieldContext
 from .nodes import closures, output_node
 
 STANDARD_GRIDS = ("density", "flame", "heat", "temperature", "color")
@@ -219,6 +223,7 @@ class FluidTranslator:
     def __init__(self, warnings: List[str], frame: int):
         self.warnings = warnings
         self.frame = int(frame)
+        self._fields = FieldContext(frame=self.frame)
 
     def translate(self, ob, dse, world_matrix: np.ndarray) -> List[Medium]:
         where = f"fluid domain '{ob.name}'"
@@ -241,7 +246,8 @@ class FluidTranslator:
             return []
         colour_nodes = principled_colour_attributes(mat)
         wanted = {co.attribute for co in shading if co.attribute in STANDARD_GRIDS}
-        wanted |= {n for n in emission_grids(shading) if n in SCALAR_GRIDS}
+        wanted |= {n for n in emission_grids(shading) + field_grids(shading)
+                   if n in SCALAR_GRIDS}
         if colour_nodes:
             wanted.add("color")
         grids = self._grids(ob, dse, where, wanted)
@@ -256,6 +262,7 @@ class FluidTranslator:
                                  f"'{socket}'; that emission is 0 (as in Cycles)")
         shading = self._tint(shading, colour_nodes, grids, mwhere)
         lo, hi = texture_box(ob.data)
+        self._fields = FieldContext((lo, hi), self.frame)
         return self._media(ob, shading, grids, lo, hi, np.asarray(world_matrix, np.float64),
                            float(getattr(dse, "clipping", 0.0)), where)
 
@@ -430,11 +437,11 @@ class FluidTranslator:
         those grids is non-zero -- the first density grid's, else the first grid driving an
         emission -- as for Volume objects (vdb.py), with the emission grids drive on its
         lattice.  A material that reads no grid renders nothing in Cycles."""
-        coeff = merge(uniform)
         if media:
             base_name, block = media[0].name, lattices[0]
         else:
-            found = [n for n in emission_grids(uniform) if blocks.get(n) is not None]
+            found = [n for n in emission_grids(uniform) + field_grids(uniform)
+                     if blocks.get(n) is not None]
             if not found:
                 self.warnings.append(f"{where}: its material reads no smoke grid (density, flame, "
                                      "heat or temperature) that holds data at this frame; "
@@ -444,15 +451,18 @@ class FluidTranslator:
             full = blocks.get(base_name)
             first, last = _support_box(full, full)  # with the reach of its interpolation
             block = (_crop(full[0], first, last), tuple(int(v) for v in first), full[2])
-        medium, lost = block_medium(f"{ob.name}:uniform", coeff, block, blocks, world_matrix,
-                                    "FLUID", zero=SCALAR_GRIDS, uniform=True)
-        for name, outside in lost.items():
-            self.warnings.append(f"{where}: {outside:.0%} of grid '{name}' lies outside the "
-                                 f"cells of '{base_name}'; that part of its emission is not "
-                                 "rendered")
+        for i, coeff in enumerate(merge_by_field(uniform)):
+            medium, lost = block_medium(f"{ob.name}:uniform" + (f"{i}" if i else ""), coeff,
+                                        block, blocks, world_matrix, "FLUID", zero=SCALAR_GRIDS,
+                                        uniform=True, fields=self._fields, where=where,
+                                        warnings=self.warnings)
+            for name, outside in lost.items():
+                self.warnings.append(f"{where}: {outside:.0%} of grid '{name}' lies outside the "
+                                     f"cells of '{base_name}'; that part of its emission is not "
+                                     "rendered")
+            media.append(medium)
         self.warnings.append(f"{where}: shaders with a uniform density are approximated inside "
                              f"the non-zero voxels of '{base_name}'")
-        media.append(medium)
 
     def _grid_medium(self, ob, co, attr, blocks, world_matrix, where, several):
         """``(medium, its block)`` of a closure whose density is grid ``attr``, or None.  The
@@ -476,7 +486,8 @@ class FluidTranslator:
         block = (_crop(values, first, last), tuple(int(v) for v in first), i2o)
         # the box holds the emission grids' reach: nothing is lost
         medium, _ = block_medium(f"{ob.name}:{attr}" if several else ob.name, co, block, blocks,
-                                 world_matrix, "FLUID", zero=SCALAR_GRIDS)
+                                 world_matrix, "FLUID", zero=SCALAR_GRIDS, fields=self._fields,
+                                 where=where, warnings=self.warnings)
         grid = medium.emission_grid
         if not np.any(medium.density > 0) and (grid is None or not np.any(grid > 0)):
             return None
@@ -577,7 +588,9 @@ def principled_colour_attributes(material) -> list:
         inp = ClosureInputs(c, "", quiet)
         if inp.raw("Color Attribute")[0] != "color":
             continue
-        dens, linked = inp.raw("Density", allow_attribute=True)
+        dens, linked = inp.raw("Density", allow_attribute=True, allow_field=True)
+        if isinstance(dens, Field):
+            dens = 1.0  # materials.py: coefficients per unit of the density field
         attr = inp.raw("Density Attribute")[0] or None
         if linked is not None and attr is not None:
             linked = None  # materials.py then uses Density 1 with the Density Attribute

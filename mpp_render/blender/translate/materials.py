@@ -24,19 +24,40 @@ at the constant Temperature, 0 for an attribute), which is what meshes and the w
 A reader of grids (vdb.py for Volume objects and, through the same helper, fluid.py for
 smoke domains: ``vdb.lattice_emission``) replaces that constant by the per-voxel emission.
 
+Inputs driven by node trees (*fields*, ``shadergraph.Field``; evaluated where the values are
+needed, at a medium's voxels, by ``realise``):
+
+* Density (Principled Volume, Volume Scatter, Volume Absorption): the closure's coefficients
+  are per unit of the field, ``VolumeCoefficients.density_field``; the medium's density grid
+  is its mask or grid x max(field, 0) (Cycles clamps the density at 0 and multiplies it by
+  the Density Attribute grid where that exists).
+* Emission Strength / Emission Color (and an Emission shader's Strength / Color): a
+  :class:`FieldEmissionTerm`, colour x strength per voxel; Temperature (with Blackbody
+  Intensity > 0): a :class:`FieldBlackbodyTerm`, T = field x the Temperature Attribute grid
+  where it exists.
+* Color / Absorption Color: the MPP medium has one set of coefficients, so a
+  :class:`ColourMean` computes them from the fields' density-weighted means over the voxels
+  (with a warning giving the mean).
+* Any other input (Anisotropy, Blackbody Intensity, a surface's inputs, ...) driven by a
+  field that varies in space takes the socket's own value, with a warning.  A field that
+  does not vary (Math on constants) is a constant; nodes a field cannot evaluate are named
+  in a warning and replaced by their input's value.
+
 Coefficients are in 1/m, emission in W/(m^3 sr).  Closures that read the same density source
 add; their anisotropies combine as the mean weighted by each closure's mean sigma_s.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional, Tuple, Union
+from typing import Callable, Dict, List, Optional, Tuple, Union
 
 import numpy as np
 
 from ... import blackbody
 from .convert import fmt, rgb, scalar
 from .nodes import Closure, closures, describe, output_node, resolve
+from .shadergraph import Field
 
 DEFAULT_SURFACE_COLOR = np.full(3, 0.8)   # Cycles' default surface: 0.8 grey diffuse
 HG = "HENYEY_GREENSTEIN"
@@ -93,7 +114,97 @@ class AttributeEmissionTerm:
         return (self.weight * g[..., None] * np.asarray(self.colour, np.float64)).astype(np.float32)
 
 
-EmissionTerm = Union[BlackbodyTerm, AttributeEmissionTerm]
+@dataclass
+class FieldEmissionTerm:
+    """Emission whose colour or strength a node tree drives (Principled Volume's Emission
+    Color x Emission Strength, an Emission shader's Color x Strength; not scaled by density):
+    ``colour`` an RGB array or a Field, ``strength`` a float, a Field, or the name of the grid
+    an Attribute node reads (0 where it is missing).  The translators put it on the voxels
+    (``per_voxel``); ``constant`` (its part of VolumeCoefficients.emission) is 0.  ``socket``:
+    the strength input's name; ``weight``: the Mix Shader factors."""
+
+    colour: object
+    strength: object
+    socket: str = "Emission Strength"
+    weight: float = 1.0
+    constant: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    attribute = None  # no grid by name of its own (vdb.lattice_emission passes it by)
+
+    def scaled(self, w: float) -> "FieldEmissionTerm":
+        return dataclasses.replace(self, weight=self.weight * w)
+
+    def fields(self) -> List[Field]:
+        return [f for f in (self.colour, self.strength) if isinstance(f, Field)]
+
+    def grids(self) -> List[str]:
+        return [self.strength] if isinstance(self.strength, str) else []
+
+    def per_voxel(self, sample, grid_of) -> np.ndarray:
+        """weight x colour x strength at the lattice ``sample`` evaluates fields on (..., 3)
+        float32, >= 0."""
+        c = sample(self.colour) if isinstance(self.colour, Field) else rgb(self.colour)
+        if isinstance(self.strength, Field):
+            s = sample(self.strength)
+        elif isinstance(self.strength, str):
+            grid = grid_of(self.strength)
+            s = np.zeros(()) if grid is None else np.maximum(np.nan_to_num(grid), 0.0)
+        else:
+            s = np.asarray(float(self.strength))
+        out = self.weight * np.asarray(s, np.float64)[..., None] * np.asarray(c, np.float64)
+        return np.maximum(np.nan_to_num(out), 0.0).astype(np.float32)
+
+
+@dataclass
+class FieldBlackbodyTerm:
+    """Principled Volume's blackbody with its Temperature driven by a node tree: T = the field
+    x max(grid ``grid``, 0) where that grid (Temperature Attribute) exists, else the field;
+    ``intensity``, ``tint``, ``weight`` as :class:`BlackbodyTerm`.  Put on the voxels by the
+    translators; ``constant`` is 0."""
+
+    intensity: float
+    temperature: Field
+    grid: Optional[str]
+    tint: np.ndarray
+    weight: float = 1.0
+    constant: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    attribute = None
+
+    def scaled(self, w: float) -> "FieldBlackbodyTerm":
+        return dataclasses.replace(self, weight=self.weight * w)
+
+    def fields(self) -> List[Field]:
+        return [self.temperature]
+
+    def grids(self) -> List[str]:
+        return [self.grid] if self.grid else []
+
+    def per_voxel(self, sample, grid_of) -> np.ndarray:
+        t = np.asarray(sample(self.temperature), np.float64)
+        grid = grid_of(self.grid) if self.grid else None
+        if grid is not None:
+            t = t * np.maximum(np.nan_to_num(np.asarray(grid, np.float64)), 0.0)
+        return (self.weight * blackbody.emission(t, self.intensity, self.tint)).astype(np.float32)
+
+
+EmissionTerm = Union[BlackbodyTerm, AttributeEmissionTerm, FieldEmissionTerm, FieldBlackbodyTerm]
+FIELD_TERMS = (FieldEmissionTerm, FieldBlackbodyTerm)
+
+
+@dataclass
+class ColourMean:
+    """A closure whose Color or Absorption Color a node tree drives.  The medium has one set
+    of coefficients, so ``build(means)`` -> (sigma_s, sigma_a) per unit density (1/m) is
+    called with ``means`` (input name -> RGB) the density-weighted means of ``fields`` (input
+    name -> Field) over the voxels (``realise``).  ``g``: the closure's anisotropy;
+    ``weight``: the Mix Shader factors."""
+
+    fields: Dict[str, Field]
+    build: Callable[[Dict[str, np.ndarray]], Tuple[np.ndarray, np.ndarray]]
+    g: float = 0.0
+    weight: float = 1.0
+
+    def scaled(self, w: float) -> "ColourMean":
+        return dataclasses.replace(self, weight=self.weight * w)
 
 
 @dataclass
@@ -105,8 +216,11 @@ class VolumeCoefficients:
     Attribute node linked into a Density input (rather than Principled Volume's 'Density
     Attribute').  ``sigma_s``, ``sigma_a``: RGB 1/m per unit density; ``g``: anisotropy;
     ``emission``: RGB W/(m^3 sr), not scaled by density (the emission terms included at
-    their ``constant``); ``emission_terms``: the emission that grids drive
-    (:class:`BlackbodyTerm`, :class:`AttributeEmissionTerm`)."""
+    their ``constant``); ``emission_terms``: the emission that grids and fields drive
+    (:class:`BlackbodyTerm`, :class:`AttributeEmissionTerm`, :class:`FieldEmissionTerm`,
+    :class:`FieldBlackbodyTerm`).  ``density_field``: a Field the density is multiplied by
+    (None: none); ``colour_means``: closures whose colours fields drive (:class:`ColourMean`;
+    their coefficients are not yet in ``sigma_s``/``sigma_a``)."""
 
     attribute: Optional[str]
     sigma_s: np.ndarray = field(default_factory=lambda: np.zeros(3))
@@ -115,6 +229,8 @@ class VolumeCoefficients:
     emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
     from_attribute_node: bool = False
     emission_terms: List[EmissionTerm] = field(default_factory=list)
+    density_field: Optional[Field] = None
+    colour_means: List[ColourMean] = field(default_factory=list)
 
 
 def principled_volume(color, density, anisotropy, absorption_color, emission=(0.0, 0.0, 0.0),
@@ -135,14 +251,17 @@ def default_volume() -> VolumeCoefficients:
 
 
 class ClosureInputs:
-    """Constant inputs of one closure node; warns about inputs that are not constant."""
+    """The inputs of one closure node: constants, attributes and fields; warns about the
+    inputs it cannot give (and about nodes a field cannot evaluate)."""
 
     def __init__(self, closure: Closure, where: str, warnings: List[str]):
         self.closure, self.where, self.warnings = closure, where, warnings
 
-    def raw(self, name, allow_attribute=False):
-        """``(value, attribute)`` of input ``name``; non-constant inputs fall back to the
-        socket's own value with a warning (an attribute is returned when allowed)."""
+    def raw(self, name, allow_attribute=False, allow_field=False):
+        """``(value, attribute)`` of input ``name``.  A field that does not vary gives its
+        value; one that varies is returned as the value when ``allow_field`` (a
+        :class:`~.shadergraph.Field`), else the socket's own value is used with a warning;
+        an attribute is returned when allowed, else likewise."""
         node = self.closure.node
         socket = node.inputs.get(name)
         if socket is None:
@@ -150,6 +269,17 @@ class ClosureInputs:
         res = resolve(socket, self.closure.stack)
         if res.attribute is not None and allow_attribute:
             return 1.0, res.attribute
+        if res.field is not None:
+            f = res.field
+            self.warnings.extend(f.messages(self.where))
+            if not f.varies:
+                return f.constant(), None
+            if allow_field:
+                return f, None
+            self.warnings.append(
+                f"{self.where}: {f.describe()} varies in space, which the MPP engine does not "
+                f"support for this input; using the input's value {fmt(socket.default_value)}")
+            return _plain(socket.default_value), None
         if res.value is None:
             culprit = _culprit(res)
             self.warnings.append(
@@ -180,13 +310,44 @@ def _phase_g(node, inputs: ClosureInputs, where, warnings) -> float:
     return g
 
 
+def _density(inp: "ClosureInputs"):
+    """``(d, attribute, field)`` of a closure's Density: d >= 0 the constant density (1 when
+    an attribute or a field gives it), the attribute an Attribute node reads, the Field."""
+    dens, attr = inp.raw("Density", allow_attribute=True, allow_field=True)
+    if isinstance(dens, Field):
+        return 1.0, attr, dens
+    return max(scalar(dens), 0.0), attr, None
+
+
+def _colours(inp: "ClosureInputs", names) -> Tuple[Dict[str, np.ndarray], Dict[str, Field]]:
+    """The constant colours and the fields among the inputs ``names``."""
+    consts, fields = {}, {}
+    for name in names:
+        v = inp.raw(name, allow_field=True)[0]
+        if isinstance(v, Field):
+            fields[name] = v
+        else:
+            consts[name] = rgb(v)
+    return consts, fields
+
+
+def _with_colours(co: "VolumeCoefficients", consts, fields, build, g: float):
+    """``co`` with the coefficients ``build(colours)`` -> (sigma_s, sigma_a): now when every
+    colour is constant, else deferred to the fields' means (:class:`ColourMean`)."""
+    if not fields:
+        co.sigma_s, co.sigma_a = build(consts)
+        return co
+    co.colour_means = [ColourMean(fields, lambda means: build({**consts, **means}), g)]
+    return co
+
+
 def _volume_closure(c: Closure, where, warnings):
     """The :class:`VolumeCoefficients` of one closure (before its Mix weight), or None (with
     a warning) when the node is not a volume shader."""
     node, kind = c.node, c.node.bl_idname
     inp = ClosureInputs(c, where, warnings)
     if kind == "ShaderNodeVolumePrincipled":
-        dens, linked_attr = inp.raw("Density", allow_attribute=True)
+        d, linked_attr, dfield = _density(inp)
         attr = inp.raw("Density Attribute")[0] or None
         if linked_attr is not None and attr is not None:
             warnings.append(f"{where}: attribute '{linked_attr}' linked into 'Density' of "
@@ -198,30 +359,41 @@ def _volume_closure(c: Closure, where, warnings):
             warnings.append(f"{where}: Color Attribute '{color_attr}' of {describe(node)} is not "
                             "supported; using its Color")
         emission, terms = _emission(inp, "Emission Color", "Emission Strength")
-        co = principled_volume(inp.color("Color"), scalar(dens), inp.number("Anisotropy"),
-                               inp.color("Absorption Color"), emission,
-                               attribute=linked_attr or attr)
+        g = inp.number("Anisotropy")
+        consts, fields = _colours(inp, ("Color", "Absorption Color"))
+
+        def build(colours):
+            pv = principled_volume(colours["Color"], d, g, colours["Absorption Color"])
+            return pv.sigma_s, pv.sigma_a
+
+        co = _with_colours(VolumeCoefficients(linked_attr or attr, g=g, emission=rgb(emission)),
+                           consts, fields, build, g)
         co.from_attribute_node = linked_attr is not None
+        co.density_field = dfield
         co.emission_terms = terms
         b = inp.number("Blackbody Intensity")
         if b > 0.0:
-            t = inp.number("Temperature")
+            t = inp.raw("Temperature", allow_field=True)[0]
             tint = inp.color("Blackbody Tint")
-            term = BlackbodyTerm(b, t, inp.raw("Temperature Attribute")[0] or None, tint,
-                                 constant=blackbody.emission(t, b, tint))
-            co.emission = co.emission + term.constant
-            co.emission_terms = co.emission_terms + [term]
+            grid = inp.raw("Temperature Attribute")[0] or None
+            if isinstance(t, Field):
+                co.emission_terms = co.emission_terms + [FieldBlackbodyTerm(b, t, grid, tint)]
+            else:
+                t = scalar(t)
+                term = BlackbodyTerm(b, t, grid, tint, constant=blackbody.emission(t, b, tint))
+                co.emission = co.emission + term.constant
+                co.emission_terms = co.emission_terms + [term]
         return co
     if kind in ("ShaderNodeVolumeScatter", "ShaderNodeVolumeAbsorption"):
-        dens, attr = inp.raw("Density", allow_attribute=True)
-        d = max(scalar(dens), 0.0)
-        co = VolumeCoefficients(attr, from_attribute_node=attr is not None)
+        d, attr, dfield = _density(inp)
+        co = VolumeCoefficients(attr, from_attribute_node=attr is not None, density_field=dfield)
+        consts, fields = _colours(inp, ("Color",))
         if kind == "ShaderNodeVolumeScatter":
-            co.sigma_s = np.maximum(inp.color("Color"), 0.0) * d
             co.g = _phase_g(node, inp, where, warnings)
-        else:
-            co.sigma_a = np.maximum(1.0 - inp.color("Color"), 0.0) * d
-        return co
+            return _with_colours(co, consts, fields,
+                                 lambda cs: (np.maximum(cs["Color"], 0.0) * d, np.zeros(3)), co.g)
+        return _with_colours(co, consts, fields,
+                             lambda cs: (np.zeros(3), np.maximum(1.0 - cs["Color"], 0.0) * d), 0.0)
     if kind == "ShaderNodeVolumeCoefficients":
         return VolumeCoefficients(
             None, np.maximum(inp.color("Scatter Coefficients"), 0.0),
@@ -235,11 +407,17 @@ def _volume_closure(c: Closure, where, warnings):
 
 
 def _emission(inp: ClosureInputs, colour: str, strength: str):
-    """``(constant emission RGB, [AttributeEmissionTerm])`` of a colour x strength pair of
-    inputs: an Attribute node linked into the strength makes it a term (0 where the grid is
-    missing), else the product is constant."""
-    value, attr = inp.raw(strength, allow_attribute=True)
-    c = inp.color(colour)
+    """``(constant emission RGB, [terms])`` of a colour x strength pair of inputs: a field
+    in either makes a :class:`FieldEmissionTerm`; an Attribute node linked into the strength
+    (with a constant colour) an :class:`AttributeEmissionTerm` (0 where the grid is
+    missing); else the product is constant."""
+    value, attr = inp.raw(strength, allow_attribute=True, allow_field=True)
+    c = inp.raw(colour, allow_field=True)[0]
+    if isinstance(c, Field) or isinstance(value, Field):
+        s = attr if attr is not None else (value if isinstance(value, Field) else scalar(value))
+        c = c if isinstance(c, Field) else rgb(c)
+        return np.zeros(3), [FieldEmissionTerm(c, s, socket=strength)]
+    c = rgb(c)
     if attr is not None:
         return np.zeros(3), [AttributeEmissionTerm(c, attr, socket=strength)]
     return c * scalar(value), []
@@ -251,11 +429,18 @@ def _culprit(res) -> str:
         return f"attribute '{res.attribute}'"
     if res.unsupported is not None:
         return f"node {describe(res.unsupported)}"
+    if res.field is not None:
+        names = ", ".join(f"'{n}'" for n in res.field.nodes) or "nodes"
+        return f"a node tree ({names}) that varies in space"
     return "a link"
 
 
 def _mix_warning(where, warnings):
     def warn(node, res):
+        if res.field is not None:
+            warnings.extend(res.field.messages(where))
+            if not res.field.varies:
+                return
         culprit = _culprit(res)
         warnings.append(f"{where}: {culprit} linked into the factor of {describe(node)} is not "
                         f"supported; using its value {fmt(node.inputs[0].default_value)}")
@@ -277,12 +462,30 @@ def is_linked(tree, socket_name) -> bool:
     return bool(socket is not None and socket.is_linked)
 
 
+def _field_key(co: VolumeCoefficients):
+    return co.density_field.key if co.density_field is not None else None
+
+
+def _add(acc: VolumeCoefficients, co: VolumeCoefficients, w: float) -> float:
+    """Add closures ``co`` with weight ``w`` into ``acc``; returns the weight of co's
+    anisotropy in the mean (w x its mean sigma_s), which the caller divides by."""
+    acc.sigma_s = acc.sigma_s + w * co.sigma_s
+    acc.sigma_a = acc.sigma_a + w * co.sigma_a
+    acc.emission = acc.emission + w * co.emission
+    acc.emission_terms = acc.emission_terms + [t.scaled(w) for t in co.emission_terms]
+    acc.colour_means = acc.colour_means + [m.scaled(w) for m in co.colour_means]
+    s = w * float(np.mean(co.sigma_s))
+    acc.g += s * co.g
+    return s
+
+
 def volume_shading(material, where: str, warnings: List[str],
                    grids: bool = False) -> Optional[List[VolumeCoefficients]]:
-    """The volume coefficients of ``material``, one entry per density source; None when the
-    material has no volume shader (nothing linked into its output's 'Volume').  Without
-    ``grids`` (meshes, the world: nothing to read attributes from) an Attribute node driving
-    an emission strength is warned about: it gives 0 there, as in Cycles."""
+    """The volume coefficients of ``material``, one entry per density source (a grid name,
+    an Attribute node, a density field); None when the material has no volume shader
+    (nothing linked into its output's 'Volume').  Without ``grids`` (meshes, the world:
+    nothing to read attributes from) an Attribute node driving an emission strength is
+    warned about: it gives 0 there, as in Cycles."""
     tree = getattr(material, "node_tree", None)
     if tree is None or not is_linked(tree, "Volume"):
         return None
@@ -292,21 +495,17 @@ def volume_shading(material, where: str, warnings: List[str],
         co = _volume_closure(c, where, warnings)
         if co is None:
             continue
-        key = (co.attribute, co.from_attribute_node)
+        key = (co.attribute, co.from_attribute_node, _field_key(co))
         acc = groups.setdefault(key, VolumeCoefficients(co.attribute,
-                                                        from_attribute_node=co.from_attribute_node))
-        w = c.weight
-        acc.sigma_s = acc.sigma_s + w * co.sigma_s
-        acc.sigma_a = acc.sigma_a + w * co.sigma_a
-        acc.emission = acc.emission + w * co.emission
-        acc.emission_terms = acc.emission_terms + [t.scaled(w) for t in co.emission_terms]
-        s = w * float(np.mean(co.sigma_s))
-        acc.g += s * co.g
-        g_weight[key] = g_weight.get(key, 0.0) + s
+                                                        from_attribute_node=co.from_attribute_node,
+                                                        density_field=co.density_field))
+        g_weight[key] = g_weight.get(key, 0.0) + _add(acc, co, c.weight)
         if not grids:
             for t in co.emission_terms:
-                if isinstance(t, AttributeEmissionTerm):
-                    warnings.append(f"{where}: attribute '{t.attribute}' linked into "
+                if isinstance(t, AttributeEmissionTerm) or (
+                        isinstance(t, FieldEmissionTerm) and isinstance(t.strength, str)):
+                    name = t.attribute if isinstance(t, AttributeEmissionTerm) else t.strength
+                    warnings.append(f"{where}: attribute '{name}' linked into "
                                     f"'{t.socket}' of {describe(c.node)} has no values here "
                                     "(only Volume objects and smoke domains have grids); that "
                                     "emission is 0, as in Cycles")
@@ -316,19 +515,106 @@ def volume_shading(material, where: str, warnings: List[str],
 
 
 def merge(groups: List[VolumeCoefficients]) -> VolumeCoefficients:
-    """All density sources of a material added into one uniform set of coefficients."""
+    """All density sources of a material added into one uniform set of coefficients (with
+    the groups' emission terms and colour means; the density field of the first group that
+    has one -- use ``merge_by_field`` for groups with different density fields)."""
     out = VolumeCoefficients(None)
     sw = 0.0
     for co in groups:
-        out.sigma_s = out.sigma_s + co.sigma_s
-        out.sigma_a = out.sigma_a + co.sigma_a
-        out.emission = out.emission + co.emission
-        out.emission_terms = out.emission_terms + list(co.emission_terms)
-        s = float(np.mean(co.sigma_s))
-        out.g += s * co.g
-        sw += s
+        sw += _add(out, co, 1.0)
+        if out.density_field is None:
+            out.density_field = co.density_field
     out.g = out.g / sw if sw > 0.0 else 0.0
     return out
+
+
+def merge_by_field(groups: List[VolumeCoefficients]) -> List[VolumeCoefficients]:
+    """``groups`` merged into one uniform set per density field (the groups without one
+    together), in the order they first appear."""
+    by: Dict[Optional[str], List[VolumeCoefficients]] = {}
+    for co in groups:
+        by.setdefault(_field_key(co), []).append(co)
+    return [merge(same) for same in by.values()]
+
+
+# -- fields on a lattice --------------------------------------------------------------------
+
+def has_fields(co: VolumeCoefficients) -> bool:
+    """Whether closures ``co`` need fields evaluated (``realise``)."""
+    return (co.density_field is not None or bool(co.colour_means)
+            or any(isinstance(t, FIELD_TERMS) for t in co.emission_terms))
+
+
+def field_grids(shading: List[VolumeCoefficients]) -> List[str]:
+    """The grid names the fields of ``shading`` read (Attribute and Volume Info nodes inside
+    them, a field blackbody's Temperature Attribute, an attribute-driven strength next to a
+    field colour), in order, once each."""
+    names: List[str] = []
+    for co in shading:
+        fields = [co.density_field] if co.density_field is not None else []
+        for m in co.colour_means:
+            fields += list(m.fields.values())
+        for t in co.emission_terms:
+            if isinstance(t, FIELD_TERMS):
+                fields += t.fields()
+                names += t.grids()
+        for f in fields:
+            names += f.attributes()
+    return list(dict.fromkeys(names))
+
+
+def weighted_mean(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """The mean of ``values`` (shape + (3,)) weighted by ``weights`` (shape; the plain mean
+    where all weights are 0)."""
+    v = np.nan_to_num(np.asarray(values, np.float64)).reshape(-1, 3)
+    w = np.maximum(np.nan_to_num(np.asarray(weights, np.float64)).reshape(-1), 0.0)
+    total = w.sum()
+    return (w @ v) / total if total > 0.0 else v.mean(axis=0)
+
+
+def realise(co: VolumeCoefficients, base, sample, grid_of, where: str, warnings: List[str],
+            how: Optional[str] = "density-weighted mean"):
+    """Closures ``co`` on a lattice: ``(density, coefficients, emission grid or None)``.
+
+    ``base``: the density before the fields (a mesh's inside mask, a grid's values), float32;
+    ``sample(field)``: the field's values at the lattice points (``shadergraph.Sampler``);
+    ``grid_of(name)``: a grid's values there or None.  The density is ``base`` x max(density
+    field, 0); the coefficients add the colour means (:class:`ColourMean`, means weighted by
+    that density, each varying colour named in a warning with its ``how`` unless that is
+    None); the emission grid
+    (shape + (3,), W/(m^3 sr)) sums the field emission terms.  The coefficients returned have
+    no fields left."""
+    density = np.asarray(base, np.float32)
+    if co.density_field is not None:
+        f = np.maximum(np.nan_to_num(np.asarray(sample(co.density_field), np.float64)), 0.0)
+        density = (density * f).astype(np.float32)
+    out = dataclasses.replace(co, density_field=None, colour_means=[],
+                              emission_terms=[t for t in co.emission_terms
+                                              if not isinstance(t, FIELD_TERMS)])
+    if co.colour_means:
+        sw = float(np.mean(out.sigma_s))
+        g_sum = out.g * sw
+        for m in co.colour_means:
+            means = {}
+            for name, f in m.fields.items():
+                means[name] = weighted_mean(sample(f), density)
+                if how is not None:
+                    warnings.append(f"{where}: {f.describe()} varies per voxel; the MPP "
+                                    f"engine uses its {how} {fmt(tuple(means[name]))}")
+            ss, sa = m.build(means)
+            out.sigma_s = out.sigma_s + m.weight * np.maximum(ss, 0.0)
+            out.sigma_a = out.sigma_a + m.weight * np.maximum(sa, 0.0)
+            s = m.weight * float(np.mean(ss))
+            g_sum += s * m.g
+            sw += s
+        out.g = g_sum / sw if sw > 0.0 else out.g
+    grid = None
+    for t in co.emission_terms:
+        if isinstance(t, FIELD_TERMS):
+            per = t.per_voxel(sample, grid_of)
+            per = np.broadcast_to(per, density.shape + (3,))
+            grid = per.astype(np.float32) if grid is None else grid + per
+    return density, out, grid
 
 
 # Principled BSDF inputs read into scene.Surface (name in the node -> Surface field); the

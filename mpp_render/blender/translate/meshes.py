@@ -1,4 +1,18 @@
-"""Mesh objects: volume materials become voxelised media, other materials opaque surfaces."""
+"""Mesh objects: volume materials become voxelised media, other materials opaque surfaces.
+
+A volume mesh's medium is its interior on a voxel lattice in object space (voxelise.py).
+Closures whose inputs node trees drive (fields, materials.py) are evaluated at the voxel
+centres (materials.realise): the density grid is the inside mask x the density field, the
+emission fields give ``Medium.emission_grid`` (inside the mesh only), varying colours their
+density-weighted means.  A mesh has no grids, so Attribute and Volume Info nodes read 0 (as
+in Cycles).  Generated coordinates map the mesh's texture space (its bounding box unless set
+otherwise) to [0, 1]^3.  Closures with different density fields become one medium each.
+
+A medium whose density a field varies has the source ``FIELD_SOURCE`` rather than 'MESH':
+the renderer (media.py) gives a 'MESH' medium a sharp surface of *one* density (its grid
+thresholded at one half), so a varying density is rendered as a grid, interpolated
+trilinearly (the surface then blurs over a voxel).
+"""
 from __future__ import annotations
 
 from typing import Dict, List
@@ -6,7 +20,9 @@ from typing import Dict, List
 import numpy as np
 
 from ...scene import Medium, Surface
-from .materials import is_linked, merge, surface_shading, volume_shading
+from .materials import has_fields, is_linked, merge_by_field, realise, surface_shading, \
+    volume_shading
+from .shadergraph import FieldContext
 from .voxelise import inside, is_closed, lattice
 
 
@@ -28,6 +44,21 @@ def mesh_arrays(mesh):
             mat.astype(np.int64))
 
 
+FIELD_SOURCE = "MESH_FIELD"  # a mesh medium with a varying density (module docstring)
+
+
+def texture_space(mesh, verts):
+    """``(lo, hi)`` object-space box of the mesh's texture space (Blender's
+    ``texspace_location`` +- ``texspace_size``; the vertices' bounding box without one)."""
+    loc = getattr(mesh, "texspace_location", None)
+    size = getattr(mesh, "texspace_size", None)
+    if loc is None or size is None:
+        return verts.min(axis=0), verts.max(axis=0)
+    loc, size = np.asarray(loc, np.float64), np.asarray(size, np.float64)
+    size = np.where(size != 0.0, size, 1.0)
+    return loc - size, loc + size
+
+
 def slot_materials(ob, mesh) -> list:
     """The material of each slot of ``ob`` (None for an empty slot)."""
     mats = [slot.material for slot in ob.material_slots]
@@ -40,7 +71,10 @@ class MeshTranslator:
     """Turns evaluated mesh instances into media and surfaces.
 
     ``resolution``: voxels along the longest world side of a volume mesh.  Voxelisations are
-    cached per mesh and lattice shape, so instances of one mesh are voxelised once."""
+    cached per mesh and lattice shape, so instances of one mesh are voxelised once; fields
+    evaluated on a lattice are cached beside them under the field's key (and the object's
+    matrix when the field reads world positions), so an unchanged tree is evaluated once
+    across frames."""
 
     def __init__(self, resolution: int, warnings: List[str]):
         self.resolution = int(resolution)
@@ -63,14 +97,17 @@ class MeshTranslator:
             if shading is not None:
                 volumes[s] = (mat, shading)
         if volumes:
-            return self._medium(ob, verts, tris, per_slot, volumes, world_matrix, cache_key), []
+            texspace = texture_space(mesh, verts)
+            return self._medium(ob, verts, tris, per_slot, volumes, world_matrix, cache_key,
+                                texspace), []
         return [], self._surfaces(ob, verts, tris, slot_of, per_slot, world_matrix)
 
     @staticmethod
     def _where(ob, mat) -> str:
         return f"material '{mat.name}' on object '{ob.name}'" if mat is not None else f"object '{ob.name}'"
 
-    def _medium(self, ob, verts, tris, per_slot, volumes, world_matrix, cache_key) -> List[Medium]:
+    def _medium(self, ob, verts, tris, per_slot, volumes, world_matrix, cache_key,
+                texspace=None) -> List[Medium]:
         slot, (mat, shading) = next(iter(volumes.items()))
         where = self._where(ob, mat)
         others = [m.name for s, m in per_slot.items() if s != slot and m is not None]
@@ -87,7 +124,6 @@ class MeshTranslator:
                                      "mesh; using a uniform density")
         if not shading:
             return []
-        coeff = merge(shading)
         if not is_closed(tris):
             self.warnings.append(f"object '{ob.name}': the mesh is not closed, so its volume "
                                  "interior is approximate")
@@ -98,14 +134,34 @@ class MeshTranslator:
             return []
         shape, i2o = lat
         key = (cache_key, shape) if cache_key is not None else None
-        density = self._cache.get(key) if key is not None else None
-        if density is None:
-            density = inside(verts, tris, i2o, shape).astype(np.float32)
+        mask = self._cache.get(key) if key is not None else None
+        if mask is None:
+            mask = inside(verts, tris, i2o, shape).astype(np.float32)
             if key is not None:
-                self._cache[key] = density
-        return [Medium(name=ob.name, density=density, index_to_world=world_matrix @ i2o,
-                       sigma_s=coeff.sigma_s, sigma_a=coeff.sigma_a, g=float(coeff.g),
-                       emission=coeff.emission, source="MESH")]
+                self._cache[key] = mask
+        groups = merge_by_field(shading)
+        fields = FieldContext(texspace, store=self._cache if key is not None else None)
+        sampler = fields.sampler(shape, i2o, world_matrix)
+        media = []
+        for i, coeff in enumerate(groups):
+            density, grid, fielded = mask, None, has_fields(coeff)
+            varies = coeff.density_field is not None
+            if fielded:
+                density, coeff, grid = realise(coeff, mask, sampler, lambda name: None, where,
+                                               self.warnings)
+                if grid is not None:
+                    grid = (grid * mask[..., None]).astype(np.float32)
+                    if not np.any(grid > 0):
+                        grid = None
+            if fielded and not np.any(density > 0) and grid is None \
+                    and not np.any(coeff.emission > 0):
+                continue  # nothing here (a field that is 0 inside the mesh)
+            media.append(Medium(name=ob.name if len(groups) == 1 else f"{ob.name}:{i}",
+                                density=density, index_to_world=world_matrix @ i2o,
+                                sigma_s=coeff.sigma_s, sigma_a=coeff.sigma_a,
+                                g=float(coeff.g), emission=coeff.emission,
+                                source=FIELD_SOURCE if varies else "MESH", emission_grid=grid))
+        return media
 
     def _surfaces(self, ob, verts, tris, slot_of, per_slot, world_matrix) -> List[Surface]:
         world = verts @ world_matrix[:3, :3].T + world_matrix[:3, 3]

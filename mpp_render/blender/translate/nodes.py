@@ -1,10 +1,12 @@
 """Walking shader node trees: which closures reach an output socket, and with what inputs.
 
-Only what is constant per material is evaluated: unlinked socket values, RGB and Value nodes,
-and links through Reroute nodes, node groups and muted nodes.  An Attribute node linked into
-an input is reported by name (the caller may map it to a VDB grid).  Anything else linked
-into an input (textures, math nodes, ...) is reported as unsupported, so the caller can warn
-and fall back to the socket's own value.
+An input resolves to one of three kinds: a *constant* (unlinked socket values, RGB and Value
+nodes, links through Reroute nodes, node groups and muted nodes), an *attribute* (an
+Attribute node linked straight in, reported by name: the caller may map it to a VDB grid),
+or a *field*: any other node tree (textures, math, colour ramps, ...), copied by
+``shadergraph.build`` into a plain graph the caller evaluates where it needs the values (a
+medium's voxels).  A field that reads nothing of the point (a Math node on constants) is
+constant; nodes a field cannot evaluate are listed in it and replaced by their input's value.
 
 Objects returned here hold Blender nodes: use them only while the depsgraph is alive.
 """
@@ -45,16 +47,19 @@ class Resolved:
     """What feeds one input socket.
 
     Exactly one of: ``value`` (a constant float or tuple), ``attribute`` (name of the
-    geometry attribute an Attribute node reads; ``output`` names its socket), or
-    ``unsupported`` (the node that makes the input non-constant)."""
+    geometry attribute an Attribute node reads; ``output`` names its socket), or ``field``
+    (a ``shadergraph.Field``: the node tree linked in; it may turn out constant,
+    ``field.varies`` False).  ``unsupported``: the node that makes the input non-constant
+    when no field could be built."""
 
     value: object = None
     attribute: Optional[str] = None
     output: Optional[str] = None
     unsupported: object = None
+    field: object = None
 
 
-def _link_into(socket):
+def link_into(socket):
     """The enabled link feeding an input socket, or None."""
     if not socket.is_linked:
         return None
@@ -88,7 +93,7 @@ def _through_muted(node, out_socket):
     return None
 
 
-def _upstream(node, out_socket, stack):
+def upstream(node, out_socket, stack):
     """Follow pass-through nodes (reroute, groups, muted nodes) back from ``out_socket``.
 
     Returns ``(input_socket, stack)`` to continue from, or None when ``node`` is a real
@@ -121,11 +126,11 @@ def closures(socket, weight: float = 1.0, stack: Stack = (), on_unsupported=None
     a Mix Shader factor is not constant (its socket value is used instead)."""
     if socket is None or weight == 0.0 or _depth > MAX_DEPTH:
         return []
-    link = _link_into(socket)
+    link = link_into(socket)
     if link is None:
         return []
     node, out_socket = link.from_node, link.from_socket
-    nxt = _upstream(node, out_socket, stack)
+    nxt = upstream(node, out_socket, stack)
     if nxt is not None:
         sock, inner = nxt
         return closures(sock, weight, inner, on_unsupported, _depth + 1)
@@ -136,8 +141,13 @@ def closures(socket, weight: float = 1.0, stack: Stack = (), on_unsupported=None
     if kind == MIX_SHADER:
         res = resolve(node.inputs[0], stack)
         fac = res.value
+        if res.field is not None:
+            if (res.field.varies or res.field.unsupported) and on_unsupported is not None:
+                on_unsupported(node, res)
+            if not res.field.varies:
+                fac = res.field.constant()
         if fac is None:
-            if on_unsupported is not None:
+            if on_unsupported is not None and res.field is None:
                 on_unsupported(node, res)
             fac = node.inputs[0].default_value
         fac = min(max(scalar(fac), 0.0), 1.0)
@@ -146,30 +156,34 @@ def closures(socket, weight: float = 1.0, stack: Stack = (), on_unsupported=None
     return [Closure(node, weight, stack)]
 
 
-def resolve(socket, stack: Stack = (), _depth: int = 0) -> Resolved:
-    """What feeds the (non-shader) input ``socket``: a constant, an attribute, or an
-    unsupported node.  See :class:`Resolved`."""
-    link = _link_into(socket) if _depth <= MAX_DEPTH else None
+def resolve(socket, stack: Stack = (), _depth: int = 0, _top=None) -> Resolved:
+    """What feeds the (non-shader) input ``socket``: a constant, an attribute, or a field.
+    See :class:`Resolved`."""
+    top = _top if _top is not None else (socket, stack)
+    link = link_into(socket) if _depth <= MAX_DEPTH else None
     if link is None:
         value = getattr(socket, "default_value", None)
         if value is not None and not isinstance(value, (int, float, str)):
             value = tuple(value)
         return Resolved(value=value)
     node, out_socket = link.from_node, link.from_socket
-    nxt = _upstream(node, out_socket, stack)
+    nxt = upstream(node, out_socket, stack)
     if nxt is not None:
         sock, inner = nxt
         if sock is None:
-            return Resolved(value=_socket_value(out_socket))
-        return resolve(sock, inner, _depth + 1)
+            return Resolved(value=socket_value(out_socket))
+        return resolve(sock, inner, _depth + 1, top)
     if node.bl_idname in CONSTANT_NODES:
-        return Resolved(value=_socket_value(out_socket))
-    if node.bl_idname == ATTRIBUTE_NODE:
+        return Resolved(value=socket_value(out_socket))
+    if node.bl_idname == ATTRIBUTE_NODE and getattr(node, "attribute_type", "GEOMETRY") \
+            == "GEOMETRY":
         return Resolved(attribute=node.attribute_name, output=out_socket.name)
-    return Resolved(unsupported=node)
+    from .shadergraph import build  # shadergraph walks links with the helpers above
+    return Resolved(field=build(*top))
 
 
-def _socket_value(socket):
+def socket_value(socket):
+    """The value of an (output) socket as a float or a tuple."""
     value = getattr(socket, "default_value", 0.0)
     if isinstance(value, (int, float)):
         return float(value)

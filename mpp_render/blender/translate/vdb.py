@@ -18,6 +18,14 @@ rendered, with a warning).  Without that grid the blackbody uses the constant Te
 and an attribute-driven strength is 0 (as in Cycles).  ``lattice_emission`` serves smoke
 domains too (fluid.py).
 
+Inputs that node trees drive (fields, materials.py) are evaluated at the voxels of the grid
+a medium sits on (``block_medium``): the density is the grid's values x the density field
+(Cycles multiplies the Density by the Density Attribute grid), emission fields give
+per-voxel emission inside the grid's non-zero voxels (how the hull of active voxels Cycles
+shades is approximated here), varying colours their density-weighted means.  Attribute and
+Volume Info nodes read the object's grids resampled onto that lattice; Generated maps the
+object's bounding box to [0, 1]^3.
+
 A bad file never stops the frame: a missing, truncated or corrupt .vdb, a grid the material
 reads but the file lacks, or bad voxel values are reported by object and file name and the
 volume is skipped (or sanitised); the rest of the scene renders.
@@ -35,7 +43,9 @@ from ...cache import CACHE, digest
 from ...media import sanitise
 from ...scene import Medium
 from .convert import matrix
-from .materials import VolumeCoefficients, default_volume, merge, volume_shading
+from .materials import (VolumeCoefficients, default_volume, field_grids, has_fields,
+                        merge_by_field, realise, volume_shading)
+from .shadergraph import FieldContext
 
 SCALAR_TYPES = {"FLOAT": np.float32, "DOUBLE": np.float64}
 
@@ -178,21 +188,48 @@ def lattice_emission(co, block, blocks, zero=()):
     return np.maximum(emission, 0.0), grid, lost
 
 
-def block_medium(name, coeff, block, blocks, world_matrix, source, zero=(), uniform=False):
+def block_medium(name, coeff, block, blocks, world_matrix, source, zero=(), uniform=False,
+                 fields: Optional[FieldContext] = None, where: str = "", warnings=None):
     """``(Medium, lost)`` of closures ``coeff`` (materials.VolumeCoefficients) on grid block
     ``block`` (values, ijk origin, index->object 4x4): the block's values are the density,
     or with ``uniform`` (closures of uniform density) 1 in its non-zero voxels -- how Volume
     objects and fluid domains approximate Cycles' hull of the grids a material reads.  The
     emission the grids in ``blocks`` drive is resampled onto the block (lattice_emission,
-    which also gives ``lost`` and reads ``zero``)."""
+    which also gives ``lost`` and reads ``zero``).  Fields (materials.realise) are evaluated
+    at the block's voxels with ``fields`` (texture space, frame, cache; messages name
+    ``where`` in ``warnings``); the grids they read are resampled onto the block."""
     values, origin, index_to_object = block
-    emission, grid, lost = lattice_emission(coeff, block, blocks, zero=zero)
     density = (values > 0).astype(np.float32) if uniform else values
+    extra = None
+    if has_fields(coeff):
+        def grid_of(name):
+            src = blocks.get(name)
+            return None if src is None else resample(src, block)[0]
+        ctx = fields if fields is not None else FieldContext()
+        sampler = ctx.sampler(values.shape, np.asarray(index_to_object) @ translation(origin),
+                              world_matrix, grid_of)
+        density, coeff, extra = realise(coeff, density, sampler, grid_of, where,
+                                        warnings if warnings is not None else [])
+        if extra is not None:
+            extra = (extra * (values > 0)[..., None]).astype(np.float32)
+    emission, grid, lost = lattice_emission(coeff, block, blocks, zero=zero)
+    if extra is not None and np.any(extra > 0):
+        grid = extra if grid is None else grid + extra
     medium = Medium(name=name, density=density,
                     index_to_world=np.asarray(world_matrix) @ np.asarray(index_to_object)
                     @ translation(origin), sigma_s=coeff.sigma_s, sigma_a=coeff.sigma_a,
                     g=float(coeff.g), emission=emission, source=source, emission_grid=grid)
     return medium, lost
+
+
+def bounding_box(ob):
+    """``(lo, hi)`` object-space corners of the evaluated object's bounding box (a Volume
+    object's texture space), or None."""
+    try:
+        corners = np.array([tuple(c) for c in ob.bound_box], np.float64)
+    except (AttributeError, TypeError):
+        return None
+    return (corners.min(axis=0), corners.max(axis=0)) if len(corners) else None
 
 
 def emission_grids(shading) -> List[str]:
@@ -218,8 +255,9 @@ class VolumeTranslator:
     """Turns evaluated Volume objects into media.  Grids are read once per volume datablock,
     so instances of one volume share their density arrays."""
 
-    def __init__(self, warnings: List[str]):
+    def __init__(self, warnings: List[str], frame: float = 0.0):
         self.warnings = warnings
+        self.frame = frame
         self._cache: Dict[tuple, Optional[tuple]] = {}
 
     def translate(self, ob, world_matrix: np.ndarray) -> List[Medium]:
@@ -233,13 +271,14 @@ class VolumeTranslator:
             self.warnings.append(self._no_grids_message(vol, where))
             return []
         names = [co.attribute for co in shading if co.attribute in grids]
-        names += [n for n in emission_grids(shading) if n in grids]
+        names += [n for n in emission_grids(shading) + field_grids(shading) if n in grids]
         wanted = [grids[n] for n in dict.fromkeys(names)]
         for attr, socket in missing_strength_grids(shading, lambda n: n in grids):
             self.warnings.append(f"{where}: the volume has no grid '{attr}' for the attribute "
                                  f"linked into '{socket}'; that emission is 0 (as in Cycles)")
         # grids straight from a file (no modifier changes them) are kept between renders
         blocks = self._blocks(vol, wanted, where, reusable=len(ob.modifiers) == 0)
+        self._fields = FieldContext(bounding_box(ob), self.frame, CACHE.store("voxels"))
         media: List[Medium] = []
         lattices: List[tuple] = []
         uniform: List[VolumeCoefficients] = []
@@ -405,7 +444,8 @@ class VolumeTranslator:
 
     def _medium(self, ob, co, block, g, world_matrix, several, blocks, where) -> Medium:
         medium, lost = block_medium(f"{ob.name}:{g.name}" if several else ob.name, co, block,
-                                    blocks, world_matrix, "VDB")
+                                    blocks, world_matrix, "VDB", fields=self._fields,
+                                    where=where, warnings=self.warnings)
         self._warn_lost(lost, g.name, where)
         return medium
 
@@ -421,11 +461,11 @@ class VolumeTranslator:
         emission) that emission grid's -- with the emission those grids drive on its lattice.
         A material that reads no grid renders nothing in Cycles."""
         names = ", ".join(f"'{n}'" for n in grids)
-        coeff = merge(uniform)
         if media:
             base_name, block = media[0].name, lattices[0]
         else:
-            found = [n for n in emission_grids(uniform) if blocks.get(n) is not None]
+            found = [n for n in emission_grids(uniform) + field_grids(uniform)
+                     if blocks.get(n) is not None]
             if not found:
                 wanted = sorted({co.attribute for co in uniform if co.attribute})
                 what = (f"reads grid {', '.join(repr(w) for w in wanted)}, which the volume "
@@ -435,10 +475,14 @@ class VolumeTranslator:
                                      "grid it renders nothing; skipped")
                 return
             base_name, block = found[0], blocks[found[0]]
-        medium, lost = block_medium(f"{ob.name}:uniform", coeff, block, blocks, world_matrix,
-                                    "VDB", uniform=True)
-        self._warn_lost(lost, base_name, where)
+        merged = merge_by_field(uniform)
+        for i, coeff in enumerate(merged):
+            medium, lost = block_medium(f"{ob.name}:uniform" + (f"{i}" if i else ""), coeff,
+                                        block, blocks, world_matrix, "VDB", uniform=True,
+                                        fields=self._fields, where=where,
+                                        warnings=self.warnings)
+            self._warn_lost(lost, base_name, where)
+            media.append(medium)
         self.warnings.append(f"{where}: shaders with a uniform density are approximated inside "
                              f"the non-zero voxels of '{base_name}'")
-        media.append(medium)
 

@@ -1,15 +1,23 @@
 """The world: constant background radiance from the world's Surface shader, and its Volume
-shader as a homogeneous fog filling all space (rendered by mpp_render.worldfog)."""
+shader as a homogeneous fog filling all space (rendered by mpp_render.worldfog).
+
+The fog is homogeneous, so an input a node tree drives (a field, materials.py) cannot vary
+in it: each field is taken at one point, the camera's position (object and generated
+coordinates are the world position there, as for Cycles' background shader; grids read 0),
+with a warning naming the input and the value used.
+"""
 from __future__ import annotations
 
-from typing import List
+from typing import List, Optional
 
 import numpy as np
 
 from ...scene import Medium, World
-from .convert import rgb
-from .materials import ClosureInputs, is_linked, merge, output_closures, volume_shading
+from .convert import fmt, matrix, rgb
+from .materials import (ClosureInputs, has_fields, is_linked, merge, output_closures, realise,
+                        volume_shading)
 from .nodes import describe
+from .shadergraph import point_sampler
 
 
 def world_from_scene(scene, warnings: List[str]) -> World:
@@ -34,17 +42,32 @@ def world_from_scene(scene, warnings: List[str]) -> World:
             color += c.weight * inp.color("Color") * inp.number("Strength")
         else:
             warnings.append(f"{where}: shader {describe(c.node)} is not supported; ignored")
-    return World(color=color, volume=world_volume(world, where, warnings))
+    return World(color=color, volume=world_volume(world, where, warnings,
+                                                  camera_position(scene)))
 
 
-def world_volume(world, where: str, warnings: List[str]):
+def camera_position(scene) -> Optional[np.ndarray]:
+    """World position (m) of the scene's camera, or None without one."""
+    cam = getattr(scene, "camera", None)
+    if cam is None:
+        return None
+    return matrix(cam.matrix_world)[:3, 3]
+
+
+def world_volume(world, where: str, warnings: List[str], at=None):
     """The world's Volume shader as a 'WORLD' Medium (coefficients in 1/m, emission in
-    W/(m^3 sr)), or None when nothing is linked into it or it neither attenuates nor emits."""
+    W/(m^3 sr)), or None when nothing is linked into it or it neither attenuates nor emits.
+    Fields are taken at the point ``at`` (the camera position; None: the origin)."""
     if not is_linked(world.node_tree, "Volume"):
         return None
     groups = volume_shading(world, where, warnings)
     if not groups:
         return None
+    at = np.zeros(3) if at is None else np.asarray(at, np.float64)
+    sample = point_sampler(at, lambda f: warnings.append(
+        f"{where}: {f.describe()} varies in space, but the world's fog is homogeneous; the MPP "
+        f"engine uses its value at the camera {fmt(tuple(at))}"))
+    groups = [_folded(co, sample, where, warnings) for co in groups]
     co = merge(groups)
     sigma_s = np.maximum(np.asarray(co.sigma_s, np.float64), 0.0)
     sigma_a = np.maximum(np.asarray(co.sigma_a, np.float64), 0.0)
@@ -54,3 +77,18 @@ def world_volume(world, where: str, warnings: List[str]):
     return Medium(name=f"world '{world.name}'", density=np.ones((1, 1, 1), np.float32),
                   index_to_world=np.eye(4), sigma_s=sigma_s, sigma_a=sigma_a, g=float(co.g),
                   emission=emission, source="WORLD")
+
+
+def _folded(co, sample, where, warnings):
+    """Closures ``co`` with their fields taken at one point (``sample``) and folded into the
+    constant coefficients and emission."""
+    if not has_fields(co):
+        return co
+    density, out, grid = realise(co, np.ones(1, np.float32), sample, lambda name: None, where,
+                                 warnings, how=None)
+    d = float(density[0])
+    out.sigma_s = out.sigma_s * d
+    out.sigma_a = out.sigma_a * d
+    if grid is not None:
+        out.emission = out.emission + np.asarray(grid[0], np.float64)
+    return out

@@ -1,0 +1,1 @@
+"""Blender's procedural textures evaluated on arrays of points (no bpy)."""
