@@ -35,16 +35,6 @@ def tile_size(samples: int, largest: int = 64) -> int:
     return int(np.clip(int(math.sqrt(TILE_RAYS / max(1, samples))), 4, largest))
 
 
-def pixel_offsets(samples: int, rng):
-    """(samples, 2) jittered offsets in [0,1)^2: stratified on a k x k grid when samples is
-    a square, otherwise uniform."""
-    k = int(round(math.sqrt(samples)))
-    if k * k == samples:
-        g = np.stack(np.meshgrid(np.arange(k), np.arange(k), indexing="ij"), -1).reshape(-1, 2)
-        return (g + rng.random((samples, 2))) / k
-    return rng.random((samples, 2))
-
-
 @dataclass
 class FrameMarch:
     """What every tile of one frame reads: the settings ``st``, the camera ``cam``, the
@@ -125,8 +115,7 @@ class FrameMarch:
         # no round to add when the first holds every sample: the plain draw, as threshold 0
         adaptive = st.noise_threshold > 0.0 and spp > first
         order = sample_order(spp) if adaptive else np.arange(spp)
-        offs = scrambled_offsets(spp, npx, rng) if adaptive else \
-            np.broadcast_to(pixel_offsets(spp, rng)[None], (npx, spp, 2))
+        offs = pixel_offsets(spp, npx, rng)
         lens = rng.random((npx * spp, 2)).reshape(npx, spp, 2) if self.cam.aperture > 0.0 \
             else None
         bands = gather_bands(spp, npx, rng, order if adaptive else None)
@@ -212,19 +201,21 @@ def noisy_pixels(acc, active, threshold: float, tw: int, th: int) -> np.ndarray:
     return np.flatnonzero(wide & keep)
 
 
-def scrambled_offsets(spp: int, npx: int, rng) -> np.ndarray:
-    """(npx, spp, 2) offsets in [0,1)^2 of each pixel's samples for adaptive rounds: on a
-    k x k grid of strata when ``spp`` = k^2 (k a power of two), sample s in stratum
-    (i, j) XOR a random mask per pixel (so that sample_order's first 4^m samples are one in
-    each cell of a 2^m x 2^m grid, each uniform in its cell), jittered in it; otherwise
-    uniform."""
-    k = power_of_two_side(spp)
+def pixel_offsets(spp: int, npx: int, rng) -> np.ndarray:
+    """(npx, spp, 2) offsets in [0,1)^2 of each pixel's samples, drawn for each pixel apart:
+    on a k x k grid of strata when ``spp`` = k^2, jittered in each; with k a power of two,
+    sample s in stratum (i, j) XOR a random mask per pixel (so that sample_order's first 4^m
+    samples are one in each cell of a 2^m x 2^m grid, each uniform in its cell); otherwise
+    uniform.  (Offsets shared by a tile's pixels made their errors alike: a row of pixels
+    straddling a lamp's bright edge all bright or all dark together.)"""
     u = rng.random((npx, spp, 2))
-    if not k:
+    k = int(round(math.sqrt(spp)))
+    if k * k != spp:
         return u
     i, j = np.divmod(np.arange(spp), k)
-    masks = rng.integers(0, k, size=(npx, 1, 2))
-    cells = np.stack([np.broadcast_to(i, (npx, spp)), np.broadcast_to(j, (npx, spp))], -1) ^ masks
+    cells = np.stack([np.broadcast_to(i, (npx, spp)), np.broadcast_to(j, (npx, spp))], -1)
+    if power_of_two_side(spp):
+        cells = cells ^ rng.integers(0, k, size=(npx, 1, 2))
     return (cells + u) / k
 
 

@@ -5,10 +5,11 @@ pixel's samples in an order whose prefixes stay stratified."""
 import dataclasses
 
 import numpy as np
+import pytest
 
 from mpp_render import tiles
 from mpp_render.render import render
-from mpp_render.tiles import Accumulator, gather_bands, sample_order, scrambled_offsets
+from mpp_render.tiles import Accumulator, gather_bands, pixel_offsets, sample_order
 
 from test_cache import scene
 
@@ -81,7 +82,7 @@ def test_every_round_prefix_is_stratified_over_the_pixel_and_the_gather_bands():
     rng = np.random.default_rng(3)
     order = sample_order(16)
     assert sorted(order.tolist()) == list(range(16))
-    offs = scrambled_offsets(16, 50, rng)
+    offs = pixel_offsets(16, 50, rng)
     bands = gather_bands(16, 50, rng, order)
     for n, cells in ((4, 2), (16, 4)):
         first = offs[:, order[:n]]                     # (pixels, n, 2)
@@ -91,9 +92,27 @@ def test_every_round_prefix_is_stratified_over_the_pixel_and_the_gather_bands():
             for dim in range(2):                       # and in each of n equal bands
                 assert len(set((bands[dim, p, order[:n]] * n // 16).tolist())) == n
     # unbiased: the first 4 samples are spread uniformly over the pixel
-    big = scrambled_offsets(16, 20000, rng)[:, order[:4]]
+    big = pixel_offsets(16, 20000, rng)[:, order[:4]]
     assert abs(big.mean() - 0.5) < 0.01
     assert np.histogram(big[..., 0], bins=8, range=(0, 1))[0].min() > 0.9 * 20000 * 4 / 8
+
+
+@pytest.mark.parametrize("spp", [1, 4, 9, 16, 6])
+def test_each_pixel_draws_its_own_offsets(spp):
+    """No two pixels of a tile share their samples' places: a row of pixels straddling an
+    edge would be all bright or all dark together (p_area_in_box's lamp, 50 %, 4 spp)."""
+    offs = pixel_offsets(spp, 4000, np.random.default_rng(7))
+    assert offs.shape == (4000, spp, 2) and offs.min() >= 0.0 and offs.max() < 1.0
+    first = offs[:, 0, 1]
+    assert len(np.unique(first)) == 4000
+    # neighbouring pixels' offsets are uncorrelated, and each is uniform over the pixel
+    assert abs(np.corrcoef(first[:-1], first[1:])[0, 1]) < 0.05
+    assert abs(offs.mean() - 0.5) < 0.01
+    k = int(round(np.sqrt(spp)))
+    if k * k == spp:                                   # one sample in each stratum
+        cells = np.floor(offs * k).astype(int)
+        for p in range(0, 4000, 397):
+            assert len({(a, b) for a, b in cells[p]}) == spp
 
 
 def test_no_more_samples_than_the_first_round_renders_as_without_adaptive_sampling():

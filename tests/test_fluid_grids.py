@@ -119,8 +119,8 @@ def test_cache_frame_and_file_names(kind, offset, frame, want):
 def test_low_resolution_grid_drives_emission_on_the_noise_lattice():
     from mpp_render import blackbody
     from mpp_render.blender.translate import vdb
-    from mpp_render.blender.translate.materials import (AttributeEmissionTerm, BlackbodyTerm,
-                                                        VolumeCoefficients)
+    from mpp_render.blender.translate.emissionterms import AttributeEmissionTerm, BlackbodyTerm
+    from mpp_render.blender.translate.materials import VolumeCoefficients
     lo, hi = np.zeros(3), np.array([2.0, 1.0, 1.0])
     heat = np.zeros((8, 4, 4), np.float32)
     heat[3, 1, 2], heat[4, 1, 2] = 1.0, 3.0            # low resolution: 0.25 m cells

@@ -1,4 +1,5 @@
-"""Volume and surface shading of Blender materials, reduced to constant coefficients.
+"""Volume shading of Blender materials, reduced to coefficients (surfaces: surfaceshading.py;
+the emission that grids and fields drive: emissionterms.py).
 
 Volume shaders follow Cycles (``svm_closure.h``); for a closure reached with weight ``w``
 (Mix Shader factors) and a density ``d`` (the Density input, >= 0):
@@ -50,144 +51,18 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Callable, Dict, List, Optional, Tuple, Union
+from typing import Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 
 from ... import blackbody
 from .convert import fmt, rgb, scalar
+from .emissionterms import (FIELD_TERMS, AttributeEmissionTerm, BlackbodyTerm, EmissionTerm,
+                            FieldBlackbodyTerm, FieldEmissionTerm)
 from .nodes import Closure, closures, describe, output_node, resolve
 from .shadergraph import Field
 
-DEFAULT_SURFACE_COLOR = np.full(3, 0.8)   # Cycles' default surface: 0.8 grey diffuse
 HG = "HENYEY_GREENSTEIN"
-
-
-@dataclass
-class BlackbodyTerm:
-    """The blackbody emission of one Principled Volume (Cycles' ``svm_node_principled_volume``).
-
-    ``intensity``: Blackbody Intensity (> 0); ``temperature``: Temperature (K); ``attribute``:
-    Temperature Attribute (the grid that multiplies the temperature where it exists) or None;
-    ``tint``: Blackbody Tint (RGB); ``weight``: the Mix Shader factors on the way;
-    ``constant``: weight x its emission at the constant temperature, W/(m^3 sr) (part of
-    VolumeCoefficients.emission)."""
-
-    intensity: float
-    temperature: float
-    attribute: Optional[str]
-    tint: np.ndarray
-    weight: float = 1.0
-    constant: np.ndarray = field(default_factory=lambda: np.zeros(3))
-
-    def scaled(self, w: float) -> "BlackbodyTerm":
-        return BlackbodyTerm(self.intensity, self.temperature, self.attribute, self.tint,
-                             self.weight * w, self.constant * w)
-
-    def per_voxel(self, grid) -> np.ndarray:
-        """weight x emission (..., 3) float32 with T = temperature x max(grid, 0) (W/(m^3 sr))."""
-        t = self.temperature * np.maximum(np.nan_to_num(np.asarray(grid, np.float64)), 0.0)
-        return (self.weight * blackbody.emission(t, self.intensity, self.tint)).astype(np.float32)
-
-
-@dataclass
-class AttributeEmissionTerm:
-    """Emission whose strength an Attribute node gives (linked into Principled Volume's
-    Emission Strength or the Emission shader's Strength): ``colour`` (Emission Color, RGB)
-    x the value of grid ``attribute``, W/(m^3 sr).  Where the attribute does not exist
-    Cycles reads 0, so ``constant`` (the part of VolumeCoefficients.emission) is 0.
-    ``socket``: the input's name, for messages; ``weight``: the Mix Shader factors."""
-
-    colour: np.ndarray
-    attribute: str
-    socket: str = "Emission Strength"
-    weight: float = 1.0
-    constant: np.ndarray = field(default_factory=lambda: np.zeros(3))
-
-    def scaled(self, w: float) -> "AttributeEmissionTerm":
-        return AttributeEmissionTerm(self.colour, self.attribute, self.socket, self.weight * w,
-                                     self.constant * w)
-
-    def per_voxel(self, grid) -> np.ndarray:
-        """weight x colour x max(grid, 0): (..., 3) float32, W/(m^3 sr)."""
-        g = np.maximum(np.nan_to_num(np.asarray(grid, np.float64)), 0.0)
-        return (self.weight * g[..., None] * np.asarray(self.colour, np.float64)).astype(np.float32)
-
-
-@dataclass
-class FieldEmissionTerm:
-    """Emission whose colour or strength a node tree drives (Principled Volume's Emission
-    Color x Emission Strength, an Emission shader's Color x Strength; not scaled by density):
-    ``colour`` an RGB array or a Field, ``strength`` a float, a Field, or the name of the grid
-    an Attribute node reads (0 where it is missing).  The translators put it on the voxels
-    (``per_voxel``); ``constant`` (its part of VolumeCoefficients.emission) is 0.  ``socket``:
-    the strength input's name; ``weight``: the Mix Shader factors."""
-
-    colour: object
-    strength: object
-    socket: str = "Emission Strength"
-    weight: float = 1.0
-    constant: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    attribute = None  # no grid by name of its own (vdb.lattice_emission passes it by)
-
-    def scaled(self, w: float) -> "FieldEmissionTerm":
-        return dataclasses.replace(self, weight=self.weight * w)
-
-    def fields(self) -> List[Field]:
-        return [f for f in (self.colour, self.strength) if isinstance(f, Field)]
-
-    def grids(self) -> List[str]:
-        return [self.strength] if isinstance(self.strength, str) else []
-
-    def per_voxel(self, sample, grid_of) -> np.ndarray:
-        """weight x colour x strength at the lattice ``sample`` evaluates fields on (..., 3)
-        float32, >= 0."""
-        c = sample(self.colour) if isinstance(self.colour, Field) else rgb(self.colour)
-        if isinstance(self.strength, Field):
-            s = sample(self.strength)
-        elif isinstance(self.strength, str):
-            grid = grid_of(self.strength)
-            s = np.zeros(()) if grid is None else np.maximum(np.nan_to_num(grid), 0.0)
-        else:
-            s = np.asarray(float(self.strength))
-        out = self.weight * np.asarray(s, np.float64)[..., None] * np.asarray(c, np.float64)
-        return np.maximum(np.nan_to_num(out), 0.0).astype(np.float32)
-
-
-@dataclass
-class FieldBlackbodyTerm:
-    """Principled Volume's blackbody with its Temperature driven by a node tree: T = the field
-    x max(grid ``grid``, 0) where that grid (Temperature Attribute) exists, else the field;
-    ``intensity``, ``tint``, ``weight`` as :class:`BlackbodyTerm`.  Put on the voxels by the
-    translators; ``constant`` is 0."""
-
-    intensity: float
-    temperature: Field
-    grid: Optional[str]
-    tint: np.ndarray
-    weight: float = 1.0
-    constant: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    attribute = None
-
-    def scaled(self, w: float) -> "FieldBlackbodyTerm":
-        return dataclasses.replace(self, weight=self.weight * w)
-
-    def fields(self) -> List[Field]:
-        return [self.temperature]
-
-    def grids(self) -> List[str]:
-        return [self.grid] if self.grid else []
-
-    def per_voxel(self, sample, grid_of) -> np.ndarray:
-        t = np.asarray(sample(self.temperature), np.float64)
-        grid = grid_of(self.grid) if self.grid else None
-        if grid is not None:
-            t = t * np.maximum(np.nan_to_num(np.asarray(grid, np.float64)), 0.0)
-        return (self.weight * blackbody.emission(t, self.intensity, self.tint)).astype(np.float32)
-
-
-EmissionTerm = Union[BlackbodyTerm, AttributeEmissionTerm, FieldEmissionTerm, FieldBlackbodyTerm]
-FIELD_TERMS = (FieldEmissionTerm, FieldBlackbodyTerm)
 
 
 @dataclass
@@ -615,106 +490,3 @@ def realise(co: VolumeCoefficients, base, sample, grid_of, where: str, warnings:
             per = np.broadcast_to(per, density.shape + (3,))
             grid = per.astype(np.float32) if grid is None else grid + per
     return density, out, grid
-
-
-# Principled BSDF inputs read into scene.Surface (name in the node -> Surface field); the
-# specular F0 and the emission are derived from several inputs
-_PRINCIPLED_NUMBERS = {"Roughness": "roughness", "Metallic": "metallic",
-                       "Coat Weight": "coat_weight", "Coat Roughness": "coat_roughness",
-                       "Coat IOR": "coat_ior", "Diffuse Roughness": "diffuse_roughness"}
-_PRINCIPLED_COLOURS = {"Base Color": "base_color", "Specular Tint": "specular_tint",
-                       "Coat Tint": "coat_tint"}
-# inputs whose effect we leave out: (name, value that means "off", what is lost)
-_PRINCIPLED_IGNORED = (("Subsurface Weight", 0.0, "subsurface scattering (rendered as diffuse)"),
-                       ("Transmission Weight", 0.0, "transmission (rendered opaque)"),
-                       ("Sheen Weight", 0.0, "sheen"),
-                       ("Alpha", 1.0, "transparency (rendered opaque)"),
-                       ("Anisotropic", 0.0, "anisotropy (rendered isotropic)"),
-                       ("Thin Film Thickness", 0.0, "thin-film iridescence"))
-
-
-def principled_f0(ior: float, specular_ior_level: float) -> float:
-    """F0 of the Principled BSDF's dielectric specular layer as Cycles adjusts it:
-    ((IOR - 1) / (IOR + 1))^2 x 2 x Specular IOR Level, clamped to [0, 1]."""
-    ior = max(float(ior), 1e-5)
-    f0 = ((ior - 1.0) / (ior + 1.0)) ** 2 * 2.0 * max(float(specular_ior_level), 0.0)
-    return float(min(max(f0, 0.0), 1.0))
-
-
-def _principled(inp: ClosureInputs, where, warnings) -> dict:
-    """The scene.Surface shading fields of one Principled BSDF node."""
-    node = inp.closure.node
-    out = {field: inp.number(name) for name, field in _PRINCIPLED_NUMBERS.items()}
-    out.update({field: inp.color(name) for name, field in _PRINCIPLED_COLOURS.items()})
-    out["specular"] = principled_f0(inp.number("IOR"), inp.number("Specular IOR Level"))
-    out["emission"] = inp.color("Emission Color") * inp.number("Emission Strength")
-    out["multiscatter"] = getattr(node, "distribution", "MULTI_GGX") == "MULTI_GGX"
-    lost = [what for name, off, what in _PRINCIPLED_IGNORED
-            if name in node.inputs and abs(inp.number(name) - off) > 1e-6]
-    lost += [f"the linked '{name}'" for name in ("Normal", "Coat Normal", "Tangent")
-             if name in node.inputs and node.inputs[name].is_linked]
-    if lost:
-        warnings.append(f"{where}: {describe(node)} uses {', '.join(lost)}, which the MPP "
-                        "engine does not render; left out")
-    return out
-
-
-_DIFFUSE_DEFAULTS = {"specular": 0.0, "metallic": 0.0, "coat_weight": 0.0}
-
-
-def surface_shading(material, where: str, warnings: List[str]) -> dict:
-    """The scene.Surface shading fields of an opaque material, as keyword arguments:
-    ``base_color``, ``emission`` (W/(m^2 sr)), ``specular`` (F0), ``roughness``,
-    ``metallic``, ``specular_tint``, ``coat_*``, ``diffuse_roughness``, ``multiscatter`` and
-    ``weight`` (see scene.Surface).
-
-    A Principled BSDF gives all of them; a Diffuse BSDF is a base colour with no specular layer
-    (its Roughness is the Oren-Nayar roughness); Emission shaders and the Principled emission
-    add, weighted by their Mix Shader factors.  Several BSDFs mixed together become one with
-    the weighted mean of their inputs (with a warning); ``weight`` is the BSDFs' total share.
-    No material: Cycles' default 0.8 grey diffuse."""
-    if material is None:
-        return {"base_color": DEFAULT_SURFACE_COLOR.copy()}
-    tree = getattr(material, "node_tree", None)
-    if tree is None:
-        return {"base_color": rgb(material.diffuse_color)}
-    found = output_closures(tree, "Surface", where, warnings)
-    emission = np.zeros(3)
-    bsdfs = []
-    if not found:
-        warnings.append(f"{where}: no surface or volume shader is connected; rendered black")
-    for c in found:
-        inp = ClosureInputs(c, where, warnings)
-        kind = c.node.bl_idname
-        if kind == "ShaderNodeBsdfPrincipled":
-            fields = _principled(inp, where, warnings)
-            emission = emission + c.weight * fields.pop("emission")
-            bsdfs.append((c.weight, fields))
-        elif kind == "ShaderNodeBsdfDiffuse":
-            bsdfs.append((c.weight, dict(_DIFFUSE_DEFAULTS, base_color=inp.color("Color"),
-                                         diffuse_roughness=inp.number("Roughness"))))
-        elif kind == "ShaderNodeEmission":
-            emission = emission + c.weight * inp.color("Color") * inp.number("Strength")
-        else:
-            warnings.append(f"{where}: surface shader {describe(c.node)} is not supported; "
-                            "ignored (black)")
-    out = {"emission": emission}
-    total = sum(w for w, _ in bsdfs)
-    if not bsdfs or total <= 0.0:
-        out.update(base_color=np.zeros(3), weight=0.0)
-        return out
-    if len(bsdfs) > 1:
-        warnings.append(f"{where}: {len(bsdfs)} surface BSDFs are mixed; rendered as one "
-                        "Principled BSDF with the weighted mean of their inputs")
-    keys = set().union(*(f for _, f in bsdfs))
-    for k in keys:
-        vals = [(w, f[k]) for w, f in bsdfs if k in f]
-        wsum = sum(w for w, _ in vals)
-        if k == "multiscatter":
-            out[k] = any(v for _, v in vals)
-        else:
-            out[k] = sum(w * np.asarray(v, np.float64) for w, v in vals) / wsum
-            if np.ndim(out[k]) == 0:
-                out[k] = float(out[k])
-    out["weight"] = float(total)
-    return out

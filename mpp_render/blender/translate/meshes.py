@@ -20,8 +20,8 @@ from typing import Dict, List
 import numpy as np
 
 from ...scene import Medium, Surface
-from .materials import has_fields, is_linked, merge_by_field, realise, surface_shading, \
-    volume_shading
+from .materials import has_fields, is_linked, merge_by_field, realise, volume_shading
+from .surfaceshading import surface_shading
 from .shadergraph import FieldContext
 from .voxelise import inside, is_closed, lattice
 

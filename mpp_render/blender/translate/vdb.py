@@ -241,7 +241,7 @@ def emission_grids(shading) -> List[str]:
 def missing_strength_grids(shading, has) -> List[tuple]:
     """``(attribute, socket)`` of the attribute-driven emission strengths of ``shading``
     whose grid ``has(name)`` denies: Cycles reads 0 there."""
-    from .materials import AttributeEmissionTerm
+    from .emissionterms import AttributeEmissionTerm
     out = []
     for co in shading:
         for t in co.emission_terms:
