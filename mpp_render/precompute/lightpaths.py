@@ -110,9 +110,13 @@ class PathLattice:
             return None
         _, lpts = lattice_points(pm, shape, stride)
         towards = np.ascontiguousarray(towards_camera(camera, lpts).reshape(tuple(shape) + (3,)))
+        # the paths read the nearest voxel's density (paths.py): each voxel's density holds
+        # over its whole cell, so the tent is integrated over the cell (a voxel just beyond
+        # a point's tent still holds a sliver of it; weighing voxel centres alone gave such
+        # a point no mass and its deposits from that sliver a spike in M)
         mean_rho = density.astype(np.float64)
         for axis in range(3):
-            mean_rho = tent_restrict(mean_rho, axis, stride, shape[axis])
+            mean_rho = tent_restrict(mean_rho, axis, stride, shape[axis], boxed=True)
         return cls(stride, tuple(shape), h, density, np.asarray(pm.w2i, np.float64), i2w,
                    towards, rate, mean_rho[..., None] * cell_volume(pm, stride),
                    int(np.count_nonzero(mean_rho > 0.0)))

@@ -205,21 +205,41 @@ def cell_mean_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel:
     return q.reshape(len(cells), len(offs), 3).mean(axis=1)
 
 
-def tent_restrict(a: np.ndarray, axis: int, stride: int, n_out: int) -> np.ndarray:
+def tent_restrict(a: np.ndarray, axis: int, stride: int, n_out: int,
+                  boxed: bool = False) -> np.ndarray:
     """``a`` restricted along ``axis`` to every ``stride``-th point with the tent weights
     (stride - |t|) / stride^2, t = -(stride-1)..stride-1 (zero beyond the ends): each point's
     value shared among the lattice points around it in proportion to their nearness, so that
-    the sum times the lattice spacing keeps the sum times the voxel size."""
+    the sum times the lattice spacing keeps the sum times the voxel size.  ``boxed``: the
+    weights are the tent's integral over each voxel's width instead (``box_tent_weights``,
+    t = -stride..stride), for a value that holds over the whole voxel (the paths' nearest-
+    voxel density)."""
+    weights = box_tent_weights(stride) if boxed else \
+        {t: (stride - abs(t)) / float(stride * stride) for t in range(-(stride - 1), stride)}
+    reach = max(weights)
     n = a.shape[axis]
     pad = [(0, 0)] * a.ndim
-    pad[axis] = (stride - 1, stride * n_out - n + stride)
+    pad[axis] = (reach, stride * n_out - n + reach + 1)
     p = np.pad(a, pad)
     out = 0.0
-    for i, t in enumerate(range(-(stride - 1), stride)):
+    for t, w in weights.items():
         sl = [slice(None)] * a.ndim
-        sl[axis] = slice(i, i + stride * n_out, stride)
-        out = out + ((stride - abs(t)) / float(stride * stride)) * p[tuple(sl)]
+        sl[axis] = slice(t + reach, t + reach + stride * n_out, stride)
+        out = out + w * p[tuple(sl)]
     return out
+
+
+def box_tent_weights(stride: int) -> dict:
+    """{t: w}: the tent of half-width ``stride`` (voxels; height 1 / stride, so its integral
+    is 1) integrated over the voxel [t - 1/2, t + 1/2], t = -stride..stride: a voxel beside
+    the tent's end still holds a sliver of it."""
+    s = float(stride)
+
+    def g(u):  # the tent's integral from -s to u
+        u = min(max(u, -s), s)
+        return (u + s) ** 2 / (2.0 * s) if u <= 0.0 else s - (s - u) ** 2 / (2.0 * s)
+
+    return {t: (g(t + 0.5) - g(t - 0.5)) / s for t in range(-stride, stride + 1)}
 
 
 def restricted_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int,
