@@ -1,4 +1,6 @@
 """The compiled kernels agree with their numpy twins (relative difference <= 1e-4)."""
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -34,9 +36,6 @@ def all_lights():
     spot_m[:3, 3] = [0.3, 0.2, 3.0]
     area_m = np.diag([1.0, 2.0, 1.0, 1.0])
     area_m[:3, 3] = [-0.5, 0.5, 2.5]
-    # a rectangle just above the media, tilted: sampled in its solid angle (lights.py)
-    c, s_ = np.cos(0.3), np.sin(0.3)
-    rect_m = np.array([[c, 0, s_, 0.1], [0, 1, 0, 0.0], [-s_, 0, c, 0.9], [0, 0, 0, 1.0]])
     return [Light("SUN", "sun", np.array([3.0, 2.5, 2.0]), direction=np.array([0.3, 0.2, -0.93])),
             Light("POINT", "pt", np.array([50.0, 40.0, 30.0]), position=np.array([1.5, -1.0, 0.5]), radius=0.2),
             Light("SPOT", "spot", np.array([300.0, 300, 300]), position=spot_m[:3, 3],
@@ -44,10 +43,16 @@ def all_lights():
                   radius=0.3),
             Light("AREA", "area", np.array([80.0, 80, 80]), matrix=area_m, shape="ELLIPSE",
                   size_x=0.5, size_y=0.3),
-            Light("AREA", "rect", np.array([60.0, 50, 40]), matrix=rect_m,
-                  position=rect_m[:3, 3].copy(), direction=-rect_m[:3, 2] / np.linalg.norm(rect_m[:3, 2]),
-                  shape="RECTANGLE", size_x=0.6, size_y=0.4),
             Light("POINT", "dark", np.zeros(3), position=np.zeros(3))]
+
+
+def rect_light():
+    """A rectangle just above the media, tilted: sampled in its solid angle (lights.py)."""
+    c, s_ = np.cos(0.3), np.sin(0.3)
+    rect_m = np.array([[c, 0, s_, 0.1], [0, 1, 0, 0.0], [-s_, 0, c, 0.9], [0, 0, 0, 1.0]])
+    return Light("AREA", "rect", np.array([60.0, 50, 40]), matrix=rect_m,
+                 position=rect_m[:3, 3].copy(), direction=-rect_m[:3, 2],
+                 shape="RECTANGLE", size_x=0.6, size_y=0.4)
 
 
 def unjittered_lights():
@@ -62,10 +67,11 @@ def unjittered_lights():
 
 
 def indirect_lights():
-    """all_lights with the point and the area light standing for scattered light (a
-    surface's bounce, scene.Light.indirect)."""
+    """all_lights with the point and a rectangular area light (in place of the ellipse)
+    standing for scattered light (a surface's bounce, scene.Light.indirect)."""
     lights = all_lights()
-    lights[1].indirect = lights[3].indirect = lights[4].indirect = True
+    lights[3] = rect_light()    # the twins also on a rectangle, sampled in its solid angle
+    lights[1].indirect = lights[3].indirect = True
     return lights
 
 
@@ -181,7 +187,8 @@ def test_an_indirect_lights_single_scattering_is_multiple(backend):
     o, d, t0, t1 = downward_rays(rng, 500, 2.0, 0.3, 2.5)
     axial, keys = rng.uniform(0.5, 1, 500), rng.integers(0, 2**32, 500, dtype=np.uint32)
     out = []
-    for lights in (all_lights(), indirect_lights()):
+    direct = [dataclasses.replace(light, indirect=False) for light in indirect_lights()]
+    for lights in (direct, indirect_lights()):
         pre = precompute(media, lights, World(np.zeros(3)), cam, n_dirs=8, multiple=True)
         multiple = MarchContext(media, pre.fields, pre.layout, lights, 0.07, pre.multiple).multiple
         out.append(kernels.march(MarchInputs(

@@ -30,6 +30,7 @@ def test_principled_volume_emission_renders(empty_scene):
     sc.camera = cam
     sc.render.resolution_x, sc.render.resolution_y = 24, 16
     batch.set_mpp(sc, 1, multiple=True)
+    sc.mpp.multiple_paths = 100_000   # the lamps' and the glow's paths: a tenth of the default
     p = frame.render_mpp().output.passes
     e = p["Emission"][8, 12]
     # through 2 m of sigma_t 1: 2 * (1, .5, .25) * (1 - e^-2)

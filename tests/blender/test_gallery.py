@@ -29,6 +29,7 @@ def test_fire_scene_renders_every_pass(tmp_path):
     sc = g.build_fire(str(tmp_path), 32, 24)
     assert (tmp_path / "gallery_fire.vdb").exists()
     batch.set_mpp(sc, 1, multiple=True, seed=0)
+    sc.mpp.multiple_paths = 100_000   # the lamps' and the glow's paths: a tenth of the default
     sc.mpp.voxel_resolution = 32
     out = frame.render_mpp().output
     assert not out.cancelled and not out.warnings, out.warnings
