@@ -1,5 +1,6 @@
 """The compiled kernels agree with their numpy twins (relative difference <= 1e-4)."""
 import dataclasses
+import os
 
 import numpy as np
 import pytest
@@ -12,6 +13,10 @@ from mpp_render.media import prepare
 from mpp_render.precompute import precompute
 from mpp_render.scene import Camera, Light, Medium, World
 from rays import downward_rays
+
+# rays per march twin case; the sanitizer run (test_sanitizers.py) takes fewer, as there the
+# compiled side is what is checked and the numpy twin's time buys nothing
+TWIN_RAYS = int(os.environ.get("MPP_TWIN_RAYS", "3000"))
 
 needs_c = pytest.mark.skipif(kernels.backend() != "c" and kernels._c is None,
                              reason="compiled kernels not built")
@@ -87,7 +92,7 @@ def test_march_twins_agree_on_random_rays(lights, density):
     pre = precompute(media, lights, World(np.array([0.2, 0.3, 0.5])), cam, n_dirs=8,
                      multiple=True)
     multiple = MarchContext(media, pre.fields, pre.layout, lights, 0.07, pre.multiple).multiple
-    n = 3000
+    n = TWIN_RAYS
     o, d, t0, t1 = downward_rays(rng, n, 2.0, 0.3, 2.5)
     inputs = MarchInputs(o, d, t0, t1, rng.uniform(0.5, 1, n),
                          rng.integers(0, 2**32, n, dtype=np.uint32), pre.fields,

@@ -1,6 +1,7 @@
 """Repeatability: the same scene and settings give bit-identical passes across runs and
 thread counts (1 and 2), with multiple scattering, the world light, area/point/spot/sun
-lights, a sharp mesh medium beside a soft VDB-like one, and an opaque surface."""
+lights, a sharp mesh medium beside a soft VDB-like one, and an opaque surface (20 000 light
+paths per light and medium: the same code as the default's 250 000, in a tenth of the time)."""
 import numpy as np
 import pytest
 
@@ -40,7 +41,8 @@ def scene(threads, seed=3, samples=4):
     return SceneDescription(cam, lights, [cloud, box], surfaces=[ground],
                             world=World(np.array([0.05, 0.07, 0.1])),
                             settings=Settings(samples=samples, threads=threads, seed=seed,
-                                              multiple=True, ambient_directions=16))
+                                              multiple=True, ambient_directions=16,
+                                              multiple_paths=20000))
 
 
 @pytest.fixture(scope="module")
