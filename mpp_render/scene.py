@@ -215,11 +215,7 @@ class Tuning:
     took p_fog_spot_shafts' single scattering from 0.194 to 0.079 at 16 spp (its pillars are
     lit by the spot-lit ground, its ground by the beam's fog) for 25-40 % more render time in
     scenes with a ground.  ``adaptive_first``: with adaptive sampling, the samples every pixel
-    gets before its noise is judged (at least 2: a variance needs two; a noisy pixel's 3 x 3
-    neighbours go on with it, tiles.noisy_pixels).  2 against 4 (docs/adaptive.md, 640 x 360,
-    the images against all 16 samples): cloud_vdb 0.0002 -> 0.0003, slab_forward 0.0011 ->
-    0.0023, p_area_in_box 0.0010 -> 0.0014, smoke_plume 0.0050 -> 0.0059, for 1.4-1.6x less
-    march where the pixels are quiet."""
+    gets before its noise is judged (at least 2: a variance needs two)."""
 
     skip_min_voxels: int = 1 << 20
     spot_cull: bool = True
@@ -231,7 +227,7 @@ class Tuning:
     adapt_tau: float = 0.1
     tile: int = 64
     surface_gathers: int = 4
-    adaptive_first: int = 2
+    adaptive_first: int = 4
 
 
 # light paths per light and medium at the default quality (docs/method.md, "Traced paths")

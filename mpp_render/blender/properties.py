@@ -50,7 +50,7 @@ class MPPRenderSettings(bpy.types.PropertyGroup):
         name="Noise Threshold", default=0.01, min=0.0, soft_max=0.1, precision=4,
         description="Adaptive sampling: a pixel stops taking samples once its noise (the "
                     "standard error of its mean, over the square root of that mean, as "
-                    "Cycles' threshold) is below this; it first takes 2. Higher: faster, "
+                    "Cycles' threshold) is below this; it first takes 4. Higher: faster, "
                     "noisier. 0 = every pixel takes all its samples")
     viewport_samples: IntProperty(
         name="Viewport", default=16, min=1, soft_max=1024,

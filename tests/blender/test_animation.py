@@ -56,9 +56,6 @@ def animated_scene(scene, out_dir, animate_light=True):
     scene.world.color = (0.05, 0.05, 0.06)
     add_camera(scene)
     r = mpp_output(scene, W, H).render
-    # every pixel takes all its samples: frames of other brightness would otherwise stop
-    # other pixels (adaptive sampling), and the sun's light would not add up linearly
-    scene.mpp.noise_threshold = 0.0
     scene.frame_start, scene.frame_end = 1, 3
     ims = r.image_settings
     ims.media_type = "MULTI_LAYER_IMAGE"
