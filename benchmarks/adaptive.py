@@ -1,12 +1,15 @@
 """Adaptive sampling at production size: the default Noise Threshold against every pixel
 taking all its samples, side by side in one run.
 
-    .venv/bin/python benchmarks/adaptive.py [--scenes a,b] [--size 1920x1080] [--out docs]
+    .venv/bin/python benchmarks/adaptive.py [--scenes a,b] [--size 1920x1080] [--first 4,2]
+                                            [--out docs]
 
 Each scene is translated at ``--size`` with its own settings (the defaults an artist gets:
 16 samples, Noise Threshold 0.01); its precompute runs once (timed) and is then shared
 through the cache, so the two renders differ only in the march: ``noise_threshold`` 0.01
 (adaptive) and 0 (all 16 samples), which goes first alternating from scene to scene.
+With ``--first 4,2`` one adaptive render per first-round size (``Tuning.adaptive_first``:
+the samples every pixel takes before its noise is judged).
 Reported: the march seconds of each, the mean samples per pixel the adaptive render took,
 and how far its image is from the all-samples one (rel_rmse_4 of shared/reference/metrics.md,
 the all-samples image as the reference: the noise adaptive sampling leaves).  Writes ``OUT/adaptive.json`` and
@@ -28,7 +31,9 @@ SCENES = os.environ.get("MPP_SCENES") or os.path.join(os.path.dirname(REPO), "sh
 DEFAULT_SCENES = "cloud_vdb,smoke_plume,slab_forward"   # p_fog_spot_shafts: over 20 min at 1080p
 
 
-def measure(name, w, h, adaptive_first):
+def measure(name, w, h, firsts, reverse):
+    """One scene: its precompute once, then the all-samples render and one adaptive render
+    per first-round size in ``firsts`` (in reverse order when ``reverse``)."""
     from mpp_render import metrics
     from mpp_render.blender import batch
     from mpp_render.blender.properties import settings_from_scene
@@ -43,23 +48,27 @@ def measure(name, w, h, adaptive_first):
     t = time.perf_counter()
     first = render(desc)
     row = {"scene": name, "size": [w, h], "threshold": default,
+           "default_first": desc.settings.tuning.adaptive_first,
            "first_render_s": time.perf_counter() - t,
-           "precompute_s": first.timings.get("precompute", 0.0)}
+           "precompute_s": first.timings.get("precompute", 0.0), "adaptive": []}
+    runs = [(0.0, None)] + [(default, f) for f in firsts]
     images = {}
-    for th in ((default, 0.0) if adaptive_first else (0.0, default)):
-        d = dataclasses.replace(desc, settings=dataclasses.replace(desc.settings,
-                                                                   noise_threshold=th))
+    for th, f in (runs[::-1] if reverse else runs):
+        tuning = desc.settings.tuning if f is None else \
+            dataclasses.replace(desc.settings.tuning, adaptive_first=f)
+        d = dataclasses.replace(desc, settings=dataclasses.replace(
+            desc.settings, noise_threshold=th, tuning=tuning))
         out = render(d)
-        key = "adaptive" if th > 0 else "all"
-        row.setdefault(f"{key}_march_s", []).append(out.timings["march"])
-        row[f"{key}_spp"] = out.stats["pixel_samples"]
-        images[key] = out.passes["Combined"][..., :3]
-    m = metrics.compare(images["adaptive"], [images["all"]])
-    row["adaptive_vs_all_rel_rmse_4"] = m["rel_rmse_4"]
-    row["adaptive_vs_all_bias"] = m["bias"]
-    for key in ("adaptive", "all"):
-        row[f"{key}_march_s"] = row[f"{key}_march_s"][0]
-    row["speedup"] = row["all_march_s"] / row["adaptive_march_s"]
+        images[f] = out.passes["Combined"][..., :3]
+        if f is None:
+            row["all_march_s"] = out.timings["march"]
+        else:
+            row["adaptive"].append({"first": f, "march_s": out.timings["march"],
+                                    "spp": out.stats["pixel_samples"]})
+    for a in row["adaptive"]:
+        m = metrics.compare(images[a["first"]], [images[None]])
+        a["vs_all_rel_rmse_4"], a["vs_all_bias"] = m["rel_rmse_4"], m["bias"]
+        a["speedup"] = row["all_march_s"] / a["march_s"]
     print(json.dumps(row), flush=True)
     return row
 
@@ -68,16 +77,19 @@ def write_md(rows, path):
     w, h = rows[0]["size"]
     lines = ["# Adaptive sampling at production size", "",
              f"`benchmarks/adaptive.py`, {w} x {h}, each scene's own settings (16 samples at "
-             f"most, Noise Threshold {rows[0]['threshold']}), {os.cpu_count()} cores; the two "
+             f"most, Noise Threshold {rows[0]['threshold']}), {os.cpu_count()} cores; the "
              "renders of a scene share one precompute and ran one after the other in one run "
-             "(which first alternating). *Difference*: rel_rmse_4 of the adaptive image against the "
-             "all-samples image, the noise adaptive sampling leaves in.", "",
-             "| scene | precompute (s) | march, all 16 samples (s) | march, adaptive (s) | "
-             "speedup | samples per pixel | difference |", "|---|---|---|---|---|---|---|"]
+             "(their order reversed from scene to scene). *First*: the samples every pixel "
+             "takes before its noise is judged (Tuning.adaptive_first; the default is "
+             f"{rows[0]['default_first']}). *Difference*: rel_rmse_4 of the adaptive image against "
+             "the all-samples image, the noise adaptive sampling leaves in.", "",
+             "| scene | precompute (s) | march, all 16 samples (s) | first | march, adaptive (s) "
+             "| speedup | samples per pixel | difference |", "|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        lines.append(f"| {r['scene']} | {r['precompute_s']:.1f} | {r['all_march_s']:.1f} | "
-                     f"{r['adaptive_march_s']:.1f} | {r['speedup']:.1f}x | "
-                     f"{r['adaptive_spp']:.1f} | {r['adaptive_vs_all_rel_rmse_4']:.4f} |")
+        for a in r["adaptive"]:
+            lines.append(f"| {r['scene']} | {r['precompute_s']:.1f} | {r['all_march_s']:.1f} | "
+                         f"{a['first']} | {a['march_s']:.1f} | {a['speedup']:.1f}x | "
+                         f"{a['spp']:.2f} | {a['vs_all_rel_rmse_4']:.4f} |")
     with open(path, "w") as f:
         f.write("\n".join(lines) + "\n")
 
@@ -86,10 +98,13 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--scenes", default=DEFAULT_SCENES)
     ap.add_argument("--size", default="1920x1080")
+    ap.add_argument("--first", default="4,2",
+                    help="first-round sizes to compare (comma-separated)")
     ap.add_argument("--out", default=os.path.join(REPO, "docs"))
     args = ap.parse_args(argv)
     w, h = (int(v) for v in args.size.split("x"))
-    rows = [measure(n, w, h, i % 2 == 1) for i, n in enumerate(args.scenes.split(","))]
+    firsts = [int(v) for v in args.first.split(",")]
+    rows = [measure(n, w, h, firsts, i % 2 == 1) for i, n in enumerate(args.scenes.split(","))]
     with open(os.path.join(args.out, "adaptive.json"), "w") as f:
         json.dump(rows, f, indent=1)
     write_md(rows, os.path.join(args.out, "adaptive.md"))
