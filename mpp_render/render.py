@@ -93,7 +93,7 @@ def render(desc: SceneDescription,
                        media_lights, step, pre.multiple if st.multiple else None,
                        cam, st.tuning) if media else None
     frame = FrameMarch(st, cam, media, surf, lights, np.asarray(world.color, np.float64), fog,
-                       fog_pm, far, ctx, step, out, cancel)
+                       fog_pm, far, ctx, step, out)
     t_march = time.perf_counter()
     threads = worker_count(st.threads)
     (march_samples, camera_samples), cancelled = march_tiles(frame.tile, len(frame.tiles),

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable, Optional
+from typing import Optional
 
 import numpy as np
 
@@ -55,17 +55,10 @@ class FrameMarch:
     ctx: Optional[MarchContext]
     step: float
     out: dict
-    should_cancel: Optional[Callable[[], bool]] = None
 
     def __post_init__(self):
         self.spp = max(1, int(self.st.samples))
-        self.first = max(2, int(self.st.tuning.adaptive_first))
-        # no round to add when the first holds every sample: the plain draw, as threshold 0
-        self.adaptive = self.st.noise_threshold > 0.0 and self.spp > self.first
-        # a tile holds TILE_RAYS rays in its first two rounds (adaptive: most pixels stop
-        # there; sized for all the samples, its pixels' Python work outweighed the march)
-        self.size = tile_size(min(self.spp, 2 * self.first) if self.adaptive else self.spp,
-                              self.st.tuning.tile)
+        self.size = tile_size(self.spp, self.st.tuning.tile)
         W, H = int(self.cam.width), int(self.cam.height)
         self.tiles = [(x0, y0) for y0 in range(0, H, self.size) for x0 in range(0, W, self.size)]
         self.solid = split_fog(self.media)[0]
@@ -107,8 +100,7 @@ class FrameMarch:
         round takes it.  Adaptive sampling (``Settings.noise_threshold`` > 0): every pixel
         first takes ``Tuning.adaptive_first`` of them (``sample_order``: spread over the
         pixel), then rounds each doubling a pixel's samples (up to ``samples``) go to the
-        pixels whose noise (``Accumulator.noise``) is above the threshold; ``should_cancel``
-        (Esc) is polled between rounds.  With the
+        pixels whose noise (``Accumulator.noise``) is above the threshold.  With the
         threshold 0, or no more samples than the first round takes, one round of all the
         samples, drawn as without adaptive sampling."""
         st, spp = self.st, self.spp
@@ -119,7 +111,9 @@ class FrameMarch:
         npx = tw * th
         yy, xx = np.mgrid[y0:y0 + th, x0:x0 + tw]
         yy, xx = yy.ravel(), xx.ravel()
-        first, adaptive = self.first, self.adaptive
+        first = max(2, int(st.tuning.adaptive_first))
+        # no round to add when the first holds every sample: the plain draw, as threshold 0
+        adaptive = st.noise_threshold > 0.0 and spp > first
         order = sample_order(spp) if adaptive else np.arange(spp)
         offs = pixel_offsets(spp, npx, rng)
         lens = rng.random((npx * spp, 2)).reshape(npx, spp, 2) if self.cam.aperture > 0.0 \
@@ -139,8 +133,8 @@ class FrameMarch:
                                         keys[active][:, batch].ravel(), strata)
             acc.add(active, len(batch), r, hit, behind, st.film_transparent)
             steps += float(r["steps"].sum())
-            if taken >= spp or (self.should_cancel is not None and self.should_cancel()):
-                break   # (Esc between rounds: the pixels keep the samples they took)
+            if taken >= spp:
+                break
             active = noisy_pixels(acc, active, st.noise_threshold, tw, th)
             if not len(active):
                 break

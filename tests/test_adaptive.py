@@ -50,7 +50,7 @@ def test_a_lower_threshold_takes_more_samples_and_no_worse_an_image():
         err = float(np.sqrt(np.mean((out.passes["Combined"][..., :3] - ref) ** 2)))
         got.append((out.stats["pixel_samples"], err))
     spp = [g[0] for g in got]
-    assert desc.settings.tuning.adaptive_first <= spp[0] < spp[1] < spp[2] == 16
+    assert 4 <= spp[0] < spp[1] < spp[2] == 16
     assert got[0][1] > got[2][1]                      # more samples, closer to the converged
     assert got[1][1] < 1.1 * got[2][1]                # the threshold holds the error
 
@@ -117,37 +117,8 @@ def test_each_pixel_draws_its_own_offsets(spp):
 
 def test_no_more_samples_than_the_first_round_renders_as_without_adaptive_sampling():
     desc = base()
-    for spp in (1, desc.settings.tuning.adaptive_first):
+    for spp in (1, 4):
         a = render(variant(desc, samples=spp, noise_threshold=0.01)).passes
         b = render(variant(desc, samples=spp, noise_threshold=0.0)).passes
         for k in a:
             np.testing.assert_array_equal(a[k], b[k], err_msg=f"{spp} {k}")
-
-
-def test_adaptive_tiles_hold_the_first_two_rounds_and_esc_stops_between_rounds(monkeypatch):
-    """With adaptive sampling a tile is sized for its first two rounds (4 + 4 samples a pixel
-    at the default 16: 22 x 22 pixels, not 16 x 16 for all 16), and Esc pressed after a
-    round stops the tile there: its pixels keep the samples they took."""
-    desc = base()
-    first = desc.settings.tuning.adaptive_first
-    assert tiles.tile_size(2 * first) == 22
-    out = render(desc)
-    assert out.stats["tiles"] == 4   # 40 x 30 pixels in tiles of 22
-    assert first < out.stats["pixel_samples"] < 16   # some pixels went on, not all
-    plain = render(variant(desc, noise_threshold=0.0))
-    assert plain.stats["tiles"] == 6   # all 16 samples: tiles of 16
-
-    pressed = []
-    add = tiles.Accumulator.add
-
-    def add_then_press(self, *args, **kw):
-        add(self, *args, **kw)
-        pressed.append(True)      # Esc, once a round is in
-
-    monkeypatch.setattr(tiles.Accumulator, "add", add_then_press)
-    stopped = render(desc, should_cancel=lambda: bool(pressed))
-    assert stopped.cancelled
-    written = stopped.passes["Combined"][..., 3] == 1.0
-    assert written.any()
-    # every tile that came back took its first round only
-    assert stopped.stats["pixel_samples"] * written.size == pytest.approx(first * written.sum())
