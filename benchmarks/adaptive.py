@@ -1,15 +1,15 @@
-"""Adaptive sampling at production size: the default Noise Threshold against every pixel
-taking all its samples, side by side in one run.
+"""Adaptive sampling at production size: the default Noise Threshold, at one or more
+first-round sizes, against every pixel taking all its samples, side by side in one run.
 
     .venv/bin/python benchmarks/adaptive.py [--scenes a,b] [--size 1920x1080] [--first 4,2]
                                             [--out docs]
 
 Each scene is translated at ``--size`` with its own settings (the defaults an artist gets:
 16 samples, Noise Threshold 0.01); its precompute runs once (timed) and is then shared
-through the cache, so the two renders differ only in the march: ``noise_threshold`` 0.01
-(adaptive) and 0 (all 16 samples), which goes first alternating from scene to scene.
-With ``--first 4,2`` one adaptive render per first-round size (``Tuning.adaptive_first``:
-the samples every pixel takes before its noise is judged).
+through the cache, so the renders differ only in the march: ``noise_threshold`` 0 (all 16
+samples) and 0.01 (adaptive) once per first-round size of ``--first`` (``Tuning.adaptive_first``:
+the samples every pixel takes before its noise is judged), their order reversed from scene to
+scene.
 Reported: the march seconds of each, the mean samples per pixel the adaptive render took,
 and how far its image is from the all-samples one (rel_rmse_4 of shared/reference/metrics.md,
 the all-samples image as the reference: the noise adaptive sampling leaves).  Writes ``OUT/adaptive.json`` and
