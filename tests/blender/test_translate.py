@@ -454,6 +454,30 @@ def test_vdb_density_scale_sanitising_and_transform(empty_scene, vdb_file):
     np.testing.assert_allclose(m.index_to_world @ [3, 2, 1, 1], [2.3, 0.2, 0.1, 1], atol=1e-6)
 
 
+@pytest.mark.parametrize("scale", [(0.5, 0.5, 0.5), (1.0, 2.0, 4.0)])
+def test_vdb_coefficients_follow_the_object_scale_in_object_space(empty_scene, vdb_file, scale):
+    """Render space 'Object' (the default) keeps a scaled volume's look: Cycles multiplies
+    every closure, emission included, by 1 / |M (1,1,1)/sqrt(3)|; 'World' does not."""
+    mat, _, _ = volume_material("ShaderNodeVolumePrincipled",
+                                **{"Color": (0.9, 0.9, 0.9, 1), "Density": 12.0,
+                                   "Emission Strength": 2.0})
+    ob = volume_object(vdb_file, mat=mat)
+    ob.scale = scale
+    ob.rotation_euler = (0.3, 0.0, 0.7)
+    assert ob.data.render.space == "OBJECT"
+    scaled = only_medium(translate())
+    factor = 1.0 / np.linalg.norm(np.asarray(scale) / math.sqrt(3.0))
+    assert factor != pytest.approx(1.0)
+    np.testing.assert_allclose(scaled.sigma_s, np.full(3, 0.9 * 12 * factor), rtol=1e-5)
+    np.testing.assert_allclose(scaled.sigma_a, np.full(3, 0.1 * 12 * factor), rtol=1e-5)
+    ob.data.render.space = "WORLD"
+    world = only_medium(translate())
+    np.testing.assert_allclose(world.sigma_s, np.full(3, 0.9 * 12), rtol=1e-5)
+    assert np.all(world.emission > 0)
+    np.testing.assert_allclose(scaled.emission, world.emission * factor, rtol=1e-5)
+    np.testing.assert_array_equal(scaled.density, world.density)
+
+
 def test_vdb_without_material_is_a_default_principled_volume(empty_scene, vdb_file):
     volume_object(vdb_file)
     m = only_medium(translate())

@@ -6,7 +6,10 @@ the openvdb module bundled with Blender.  Each grid a material reads becomes one
 density is the grid's values (NaN, inf and negatives set to 0; values below the volume's
 render clipping set to 0) and whose coefficients are the material's, per unit grid value.
 ``index_to_world`` = object world matrix @ grid index->object matrix @ offset of the dense
-block, so integer ijk of the array are voxel centres, as in OpenVDB.
+block, so integer ijk of the array are voxel centres, as in OpenVDB.  With the volume's
+render space 'Object' (Blender's default) the coefficients and the emission are divided by
+the object's scale (``object_space_density``), as Cycles does; fluid domains have no such
+setting and stay in world units.
 
 Emission that a grid drives (materials.py's ``emission_terms``: Principled Volume's
 blackbody with the grid named by its Temperature Attribute -- commonly 'temperature' or
@@ -35,6 +38,7 @@ from __future__ import annotations
 import os
 import sys
 import tempfile
+from dataclasses import replace
 from typing import Dict, List, Optional
 
 import numpy as np
@@ -222,6 +226,30 @@ def block_medium(name, coeff, block, blocks, world_matrix, source, zero=(), unif
     return medium, lost
 
 
+def object_space_density(world_matrix) -> float:
+    """The factor on a Volume object's coefficients when its render space is 'Object'
+    (Blender's default: "keeps the volume's appearance when the object is scaled"):
+    1 / |M (1, 1, 1) / sqrt(3)| with M the 3x3 part of the object->world matrix, Cycles'
+    ``object_volume_density`` (intern/cycles/scene/object.cpp).  A uniform scale s gives
+    1 / s: the optical depth across the object stays that of the unscaled object.  1 for a
+    degenerate matrix (the object has no extent)."""
+    m = np.asarray(world_matrix, np.float64)[:3, :3]
+    length = float(np.linalg.norm(m @ np.full(3, 1.0 / np.sqrt(3.0))))
+    return 1.0 / length if np.isfinite(length) and length > 1e-12 else 1.0
+
+
+def scaled_medium(medium: Medium, factor: float) -> Medium:
+    """``medium`` with its scattering, absorption and emission times ``factor`` (Cycles
+    scales a volume closure's weight, emission included, by ``object_volume_density``)."""
+    if factor == 1.0:
+        return medium
+    grid = None if medium.emission_grid is None else \
+        (medium.emission_grid * np.float32(factor)).astype(np.float32)
+    return replace(medium, sigma_s=np.asarray(medium.sigma_s) * factor,
+                   sigma_a=np.asarray(medium.sigma_a) * factor,
+                   emission=np.asarray(medium.emission) * factor, emission_grid=grid)
+
+
 def bounding_box(ob):
     """``(lo, hi)`` object-space corners of the evaluated object's bounding box (a Volume
     object's texture space), or None."""
@@ -292,6 +320,9 @@ class VolumeTranslator:
                 lattices.append(block)
         if uniform:
             self._uniform(ob, where, uniform, media, lattices, grids, blocks, world_matrix)
+        if getattr(vol.render, "space", "WORLD") == "OBJECT":
+            scale = object_space_density(world_matrix)
+            media = [scaled_medium(m, scale) for m in media]
         return media
 
     # -- pieces -----------------------------------------------------------------------------
