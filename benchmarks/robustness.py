@@ -33,7 +33,9 @@ sys.path.insert(0, os.path.join(REPO, "tests"))
 
 from mpp_render import kernels  # noqa: E402
 from mpp_render.render import render  # noqa: E402
-from mpp_render.tiles import TILE_RAYS  # noqa: E402
+from mpp_render.scene import Tuning  # noqa: E402
+
+TILE_RAYS = Tuning().tile_rays
 from mpp_render.scene import Settings, World  # noqa: E402
 
 import test_cancel  # noqa: E402  (scene builders of the Esc tests)

@@ -214,7 +214,11 @@ class Tuning:
     surface gathers the sky, the volumes' light and the other surfaces' (surfaces.shade); 4
     took p_fog_spot_shafts' single scattering from 0.194 to 0.079 at 16 spp (its pillars are
     lit by the spot-lit ground, its ground by the beam's fog) for 25-40 % more render time in
-    scenes with a ground.  ``adaptive_first``: with adaptive sampling, the samples every pixel
+    scenes with a ground.  ``tile_rays``: camera rays per tile at most (all its samples);
+    each tile's Python work is a fixed cost beside the kernels' (16384 marched cloud_vdb at
+    1920x1080 1.2x faster, but the noisy scenes' single scattering came out worse on 4 seeds
+    out of 4: docs/adaptive.md).
+    ``adaptive_first``: with adaptive sampling, the samples every pixel
     gets before its noise is judged (at least 2: a variance needs two)."""
 
     skip_min_voxels: int = 1 << 20
@@ -226,6 +230,7 @@ class Tuning:
     skip_empty: bool = True
     adapt_tau: float = 0.1
     tile: int = 64
+    tile_rays: int = 4096
     surface_gathers: int = 4
     adaptive_first: int = 4
 

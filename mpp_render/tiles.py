@@ -1,6 +1,6 @@
 """One frame's camera march, tile by tile (render.py prepares what it reads).
 
-A tile is up to ``TILE_RAYS`` camera rays: ``samples`` jittered rays per pixel
+A tile is up to ``Tuning.tile_rays`` camera rays: ``samples`` jittered rays per pixel
 (``pixel_offsets``; with depth of field each ray also leaves its own point of the lens),
 their surface hits (surfaces.py), the march through the media (march.py) to the hit or the
 clip end, the surfaces' shading with the volumes' light gathered onto them, and for the
@@ -25,14 +25,13 @@ from .precompute.lightdepth import kernel_arrays, split_fog
 from .surfaces import SurfaceSet, intersect, shade
 
 GATHER_SEED = 0x5BD1E995  # offsets the seed of the rays that gather volume light onto surfaces
-TILE_RAYS = 4096     # rays per tile at most: Esc and progress are served between tiles
 ROUND_SEED = 0x9E3779B1  # offsets the seed of each adaptive round's gathering rays
 
 
-def tile_size(samples: int, largest: int = 64) -> int:
-    """Tile side (pixels) so that a tile holds at most TILE_RAYS rays (4 to ``largest``,
-    Tuning.tile)."""
-    return int(np.clip(int(math.sqrt(TILE_RAYS / max(1, samples))), 4, largest))
+def tile_size(samples: int, largest: int = 64, rays: int = 4096) -> int:
+    """Tile side (pixels) so that a tile holds at most ``rays`` rays (Tuning.tile_rays), 4 to
+    ``largest`` (Tuning.tile).  Esc and progress are served between tiles."""
+    return int(np.clip(int(math.sqrt(max(1, rays) / max(1, samples))), 4, largest))
 
 
 @dataclass
@@ -58,7 +57,7 @@ class FrameMarch:
 
     def __post_init__(self):
         self.spp = max(1, int(self.st.samples))
-        self.size = tile_size(self.spp, self.st.tuning.tile)
+        self.size = tile_size(self.spp, self.st.tuning.tile, self.st.tuning.tile_rays)
         W, H = int(self.cam.width), int(self.cam.height)
         self.tiles = [(x0, y0) for y0 in range(0, H, self.size) for x0 in range(0, W, self.size)]
         self.solid = split_fog(self.media)[0]
