@@ -326,7 +326,9 @@ def trace_paths(inp, *, threads: int = 1, should_cancel=None, backend=None):
     extra = (float(inp.jitter), int(inp.lobe), float(inp.outside),
              _f64(np.append(np.asarray(inp.reach_centre, np.float64).reshape(3),
                             float(inp.reach_radius))),
-             tri, _f64(inp.albedo).reshape(len(tri), 3))
+             tri, _f64(inp.albedo).reshape(len(tri), 3),
+             _f32(inp.start_source) if inp.start_source is not None else np.zeros((0, 0, 0), np.float32),
+             _f64(inp.start_peak).reshape(-1) if inp.start_source is not None else np.zeros(0))
 
     cancelled = []
 

@@ -2,12 +2,15 @@
 estimate keeps energy where the answer is known in closed form, its second order matches an
 independent quadrature of the double-scattering integral, it converges as paths are added,
 it does not depend on the thread count, and bad input raises instead of crashing."""
+import dataclasses
+
 import numpy as np
 import pytest
 
 from mpp_render import kernels
 from mpp_render.cancel import Cancelled
-from mpp_render.paths import MAX_RATE_SPAN, PathInputs, from_power, rate_span, trace_paths_np
+from mpp_render.paths import (MAX_RATE_SPAN, PathInputs, from_power, path_keys, rate_span,
+                              start_positions, trace_paths_np)
 from mpp_render.phase import hg
 from mpp_render.precompute.lattice import lattice_shape
 
@@ -53,6 +56,103 @@ def test_twins_agree_on_a_chromatic_grid():
     b = kernels.trace_paths(inp, threads=2)
     assert a.sum() > 0.0
     assert np.abs(a - b).max() <= 1e-9 * np.abs(a).max()
+
+
+def half_empty_case(n_paths=4000):
+    """A 20^3 grid whose voxels with i < 10 are empty, chromatic, first scatterings at lattice
+    points on the boundary plane and beside it (their tents reach both halves)."""
+    rng = np.random.default_rng(3)
+    n, stride, vox = 20, 2, 0.1
+    ls = lattice_shape((n, n, n), stride)
+    tow = rng.normal(size=ls + (3,))
+    tow /= np.linalg.norm(tow, axis=-1, keepdims=True)
+    dens = rng.random((n, n, n)).astype(np.float32) + 0.5
+    dens[:10] = 0.0
+    starts = np.array([[0.9, 1.0, 1.0], [1.0, 0.6, 1.2], [0.9, 1.4, 0.4]])  # i = 9, 10, 9
+    d = np.array([[-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.6, 0.8, 0.0]])
+    w, cdf = from_power(np.array([[1.0, 1.0, 1.0], [0.5, 0.7, 0.9], [1.0, 0.2, 0.4]]))
+    return PathInputs(dens, np.concatenate([np.eye(3) / vox, np.zeros((3, 1))], 1),
+                      np.eye(3) * vox, np.array([1.0, 1.5, 2.0]), np.array([2.0, 2.0, 2.5]),
+                      0.6, stride, tow, starts, w, d, cdf, 5.0, n_paths, 7)
+
+
+def test_lattice_starts_land_in_the_medium():
+    """A lattice start's tent offset is drawn again where it lands in an empty voxel: the
+    light that first scatters beside a surface starts inside the medium, not outside it."""
+    inp = half_empty_case()
+    keys = path_keys(inp.seed, inp.n_paths)
+    k = np.arange(inp.n_paths) % 3
+    pos = start_positions(inp, keys, k)
+    # the first draws: the same keys over a grid with no empty voxel
+    full = dataclasses.replace(inp, density=np.ones_like(inp.density))
+    first = start_positions(full, keys, k)
+    out = np.floor(pos[:, 0] / 0.1 + 0.5) < 10
+    out_first = np.floor(first[:, 0] / 0.1 + 0.5) < 10
+    assert out_first.mean() > 0.4          # a tent of 2 voxels about i = 9 or 10
+    assert out.mean() < 0.2 * out_first.mean()
+    # a start that no draw puts in the medium keeps its first draw; the others moved in
+    np.testing.assert_array_equal(pos[out], first[out])
+    assert np.all(np.abs(pos - inp.starts[k]) <= 2 * 0.1 + 1e-12)   # within the tent
+    # an emitting voxel (lobe 2) emits whatever the density: its starts are not moved
+    glow = dataclasses.replace(inp, lobe=2)
+    np.testing.assert_array_equal(start_positions(glow, keys, k), first)
+
+
+def test_twins_agree_where_starts_are_drawn_again():
+    inp = half_empty_case()
+    a = trace_paths_np(inp)
+    b = kernels.trace_paths(inp, threads=2)
+    assert a.sum() > 0.0
+    assert np.abs(a - b).max() <= 1e-9 * np.abs(a).max()
+
+
+def graded_source(inp, rate=1.5):
+    """``inp`` with a first-scattering source that falls as exp(-rate i) along x (i the
+    voxel index) inside the medium, and each start's peak under its tent."""
+    from mpp_render.precompute.lightpaths import tent_peak
+    n = inp.density.shape[0]
+    q = (np.exp(-rate * np.arange(n))[:, None, None] * (inp.density > 0)).astype(np.float32)
+    shape = lattice_shape(inp.density.shape, inp.stride)
+    lat = np.floor(inp.starts / 0.1 / inp.stride + 0.5).astype(int)   # the nearest points
+    peak = tent_peak(q, inp.stride, shape)[lat[:, 0], lat[:, 1], lat[:, 2]]
+    return dataclasses.replace(inp, start_source=q, start_peak=peak)
+
+
+def test_lattice_starts_follow_the_voxels_source():
+    """With a source, a first scattering's start is rejection-sampled within its lattice
+    point's tent: the voxels it lands in are distributed as tent x source."""
+    from mpp_render.precompute.source import box_tent_weights
+    inp = graded_source(dataclasses.replace(half_empty_case(), density=np.ones((20, 20, 20),
+                                                                              np.float32)))
+    n = 40000
+    keys = path_keys(11, n)
+    k = np.ones(n, np.int64)                       # the start at lattice point (5, 3, 6)
+    pos = start_positions(inp, keys, k)
+    i = np.floor(pos[:, 0] / 0.1 + 0.5).astype(int)
+    w = box_tent_weights(2)
+    expect = np.array([w[t] * np.exp(-1.5 * (10 + t)) for t in range(-2, 3)])
+    expect /= expect.sum()
+    got = np.array([np.mean(i == 10 + t) for t in range(-2, 3)])
+    np.testing.assert_allclose(got, expect, atol=0.01)
+    # the tent alone (no source) would put a quarter of them at i >= 10
+    assert got[3:].sum() < 0.1
+
+
+def test_twins_agree_with_a_start_source():
+    inp = graded_source(half_empty_case())
+    a = trace_paths_np(inp)
+    b = kernels.trace_paths(inp, threads=2)
+    assert a.sum() > 0.0
+    assert np.abs(a - b).max() <= 1e-9 * np.abs(a).max()
+
+
+@needs_c
+def test_a_start_source_of_the_wrong_shape_raises():
+    inp = graded_source(half_empty_case())
+    with pytest.raises(ValueError, match="start_source"):
+        kernels.trace_paths(dataclasses.replace(inp, start_source=inp.start_source[:5]))
+    with pytest.raises(ValueError, match="start_source"):
+        kernels.trace_paths(dataclasses.replace(inp, start_peak=inp.start_peak[:1]))
 
 
 @needs_c

@@ -9,7 +9,7 @@
 const char trace_paths_doc[] =
     "trace_paths(out, density, w2i, i2w, sigma_s, sigma_t, g, stride, towards, starts, weights,\n"
     "            dirs, cdf, rate, path_lo, path_hi, n_paths, seed, max_collisions, roulette,\n"
-    "            jitter, lobe, outside, reach, triangles, albedo)\n"
+    "            jitter, lobe, outside, reach, triangles, albedo, start_source, start_peak)\n"
     "Twin of mpp_render.paths.trace_paths_np: adds to out (LX,LY,LZ,3) float64 the deposits\n"
     "of paths path_lo..path_hi-1 of n_paths.";
 
@@ -26,6 +26,9 @@ const char trace_paths_doc[] =
 #define D_TURN 12
 #define D_RR 14
 #define D_BOUNCE 15
+#define D_RETRY 16     /* a start's offset drawn again: 6 dimensions per try (event 0) */
+#define D_ACCEPT 512   /* a start's acceptance draw, one dimension per try (event 0) */
+#define START_TRIES 64 /* offsets drawn for a first scattering until one is accepted */
 
 /* The unit direction at cosine c and azimuth 2 pi u2 about the unit vector axis. */
 static inline void about(double c, double u2, const double axis[3], double out[3]) {
@@ -62,6 +65,8 @@ static inline void cosine_dir(double u1, double u2, const double n[3], double ou
 
 typedef struct {
     const float *dens;
+    const float *src;         /* NULL, or each voxel's first-scattering source (any unit) */
+    const double *peak;       /* with src: each start's largest src under its tent */
     Py_ssize_t n[3];
     double w2i[12], i2w[9], ss[3], st[3], st_max, st_min, g, mu, roulette, jitter, outside;
     double reach[4];          /* centre (m) and radius (m) beyond which a path outside ends */
@@ -147,6 +152,25 @@ static Py_ssize_t surface_hit(const Tracer *T, const double o[3], const double d
     return found;
 }
 
+/* What a first scattering's start is weighed by at world point p: the nearest voxel's
+ * source T->src, or without it 1 where the voxel's density is > 0; 0 outside the box. */
+static double source_at(const Tracer *T, const double p[3]) {
+    Py_ssize_t v[3];
+    for (int r = 0; r < 3; r++) {
+        double idx = T->w2i[4 * r] * p[0] + T->w2i[4 * r + 1] * p[1] + T->w2i[4 * r + 2] * p[2] +
+                     T->w2i[4 * r + 3];
+        double f = floor(idx + 0.5);
+        if (!(f >= 0.0 && f < (double)T->n[r])) return 0.0;
+        v[r] = (Py_ssize_t)f;
+    }
+    Py_ssize_t flat = (v[0] * T->n[1] + v[1]) * T->n[2] + v[2];
+    if (T->src) {
+        double q = (double)T->src[flat];
+        return q > 0.0 ? q : 0.0;
+    }
+    return T->dens[flat] > 0.0f ? 1.0 : 0.0;
+}
+
 /* After a real collision or a bounce: Russian roulette below T->roulette of the start weight.
  * 0 when the path ends (roulette, the collision cap, or no weight left). */
 static inline int survive(const Tracer *T, uint32_t key, long ev, double w[3], double w0,
@@ -159,7 +183,7 @@ static inline int survive(const Tracer *T, uint32_t key, long ev, double w[3], d
 }
 
 static void trace_one(const Tracer *T, uint32_t key, const double *start, const double *w_start,
-                      const double *dir, double inv_n) {
+                      const double *dir, double inv_n, double peak) {
     double pos[3], d[3], w[3], off[3], w0 = 0.0;
     if (T->lobe == 1) {   /* a surface: a tent of half-width jitter metres in its plane */
         double t1[3], t2[3];
@@ -169,12 +193,30 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
                       1.0) * T->jitter;
         for (int a = 0; a < 3; a++) pos[a] = start[a] + t1[a] * off[0] + t2[a] * off[1];
     } else {              /* a lattice point: a tent of half-width jitter lattice steps */
-        for (int a = 0; a < 3; a++)
-            off[a] = (uniform01(key, 0, D_JIT + 2 * a) + uniform01(key, 0, D_JIT + 2 * a + 1) -
-                      1.0) * ((double)T->stride * T->jitter);
-        for (int a = 0; a < 3; a++)
-            pos[a] = start[a] + T->i2w[3 * a] * off[0] + T->i2w[3 * a + 1] * off[1] +
-                     T->i2w[3 * a + 2] * off[2];
+        /* a first scattering (lobe 0): rejection sampling of the source within the
+         * tent, so that the starts follow the voxels' source and not the tent alone (the
+         * lattice point holds the voxels' power shared by the tent): a draw is accepted
+         * with probability source / peak; after START_TRIES the draw with the most source
+         * is kept.  An emitting voxel (lobe 2) emits where it is drawn. */
+        double best[3] = {start[0], start[1], start[2]}, best_q = -1.0;
+        for (int k = 0; k < START_TRIES; k++) {
+            int base = k == 0 ? D_JIT : D_RETRY + 6 * (k - 1);
+            for (int a = 0; a < 3; a++)
+                off[a] = (uniform01(key, 0, base + 2 * a) + uniform01(key, 0, base + 2 * a + 1) -
+                          1.0) * ((double)T->stride * T->jitter);
+            for (int a = 0; a < 3; a++)
+                pos[a] = start[a] + T->i2w[3 * a] * off[0] + T->i2w[3 * a + 1] * off[1] +
+                         T->i2w[3 * a + 2] * off[2];
+            if (T->lobe != 0 || T->jitter <= 0.0) break;
+            double q = source_at(T, pos);
+            if (uniform01(key, 0, D_ACCEPT + k) * peak < q) break;
+            if (q > best_q) {
+                best_q = q;
+                for (int a = 0; a < 3; a++) best[a] = pos[a];
+            }
+            if (k == START_TRIES - 1)
+                for (int a = 0; a < 3; a++) pos[a] = best[a];
+        }
     }
     if (T->lobe == 1)
         cosine_dir(uniform01(key, 0, D_DIR), uniform01(key, 0, D_DIR + 1), dir, d);
@@ -320,17 +362,17 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
 
 PyObject *trace_paths(PyObject *self, PyObject *args) {
     PyObject *po, *pd, *pw2i, *pi2w, *pss, *pst, *ptw, *pstarts, *pws, *pdirs, *pcdf, *preach,
-        *ptri, *palb;
+        *ptri, *palb, *psrc, *ppeak;
     double g, rate, roulette, jitter, outside;
     long stride, lo, hi, n_paths, max_hits, lobe;
     unsigned long seed;
-    if (!PyArg_ParseTuple(args, "OOOOOOdlOOOOOdlllklddldOOO", &po, &pd, &pw2i, &pi2w, &pss, &pst,
-                          &g, &stride, &ptw, &pstarts, &pws, &pdirs, &pcdf, &rate, &lo, &hi,
-                          &n_paths, &seed, &max_hits, &roulette, &jitter, &lobe, &outside,
-                          &preach, &ptri, &palb))
+    if (!PyArg_ParseTuple(args, "OOOOOOdlOOOOOdlllklddldOOOOO", &po, &pd, &pw2i, &pi2w, &pss,
+                          &pst, &g, &stride, &ptw, &pstarts, &pws, &pdirs, &pcdf, &rate, &lo,
+                          &hi, &n_paths, &seed, &max_hits, &roulette, &jitter, &lobe, &outside,
+                          &preach, &ptri, &palb, &psrc, &ppeak))
         return NULL;
     Buf bo = {0}, bd = {0}, bw = {0}, bi = {0}, bss = {0}, bst = {0}, btw = {0}, bs = {0},
-        bws = {0}, bdir = {0}, bc = {0}, br = {0}, bt = {0}, ba = {0};
+        bws = {0}, bdir = {0}, bc = {0}, br = {0}, bt = {0}, ba = {0}, bq = {0}, bp = {0};
     double *boxes = NULL;
     int ok = 0;
     Py_ssize_t so[4] = {-1, -1, -1, 3}, sd[3] = {-1, -1, -1}, sw[2] = {3, 4}, si[2] = {3, 3},
@@ -354,6 +396,18 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
     if (get_buf(ptri, &bt, 'd', 2, stri, "triangles") < 0) goto done;
     salb[0] = stri[0];
     if (get_buf(palb, &ba, 'd', 2, salb, "albedo") < 0) goto done;
+    /* the starts' source: (0,0,0) and (0,) for none, else the density's shape and one peak
+     * per start */
+    Py_ssize_t sq[3] = {-1, -1, -1}, sp[1] = {-1};
+    if (get_buf(psrc, &bq, 'f', 3, sq, "start_source") < 0) goto done;
+    if (get_buf(ppeak, &bp, 'd', 1, sp, "start_peak") < 0) goto done;
+    int has_src = sq[0] * sq[1] * sq[2] > 0;
+    if (has_src ? (sq[0] != sd[0] || sq[1] != sd[1] || sq[2] != sd[2] || sp[0] != sn[0])
+                : sp[0] != 0) {
+        PyErr_SetString(PyExc_ValueError, "trace_paths: start_source must have the density's "
+                        "shape and start_peak one value per start (or both be empty)");
+        goto done;
+    }
     if (!(jitter >= 0.0) || !isfinite(jitter) || (lobe < 0 || lobe > 2) ||
         !(outside >= 0.0) || !isfinite(outside) || !(((const double *)br.view.buf)[3] >= 0.0)) {
         PyErr_SetString(PyExc_ValueError, "trace_paths: bad jitter, lobe, outside or reach");
@@ -384,6 +438,8 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
     }
     Tracer T;
     T.dens = (const float *)bd.view.buf;
+    T.src = has_src ? (const float *)bq.view.buf : NULL;
+    T.peak = has_src ? (const double *)bp.view.buf : NULL;
     for (int a = 0; a < 3; a++) { T.n[a] = sd[a]; T.ls[a] = so[a]; }
     memcpy(T.w2i, bw.view.buf, sizeof T.w2i);
     memcpy(T.i2w, bi.view.buf, sizeof T.i2w);
@@ -452,7 +508,8 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
             if (C[mid] <= u) a = mid + 1; else b = mid;
         }
         if (a > n_starts - 1) a = n_starts - 1;
-        trace_one(&T, key, S + 3 * a, W + 3 * a, D + 3 * a, 1.0 / (double)n_paths);
+        trace_one(&T, key, S + 3 * a, W + 3 * a, D + 3 * a, 1.0 / (double)n_paths,
+                  T.peak ? T.peak[a] : 1.0);
     }
     Py_END_ALLOW_THREADS
     ok = 1;
@@ -460,6 +517,7 @@ done:
     buf_release(&bo); buf_release(&bd); buf_release(&bw); buf_release(&bi); buf_release(&bss);
     buf_release(&bst); buf_release(&btw); buf_release(&bs); buf_release(&bws);
     buf_release(&bdir); buf_release(&bc); buf_release(&br); buf_release(&bt); buf_release(&ba);
+    buf_release(&bq); buf_release(&bp);
     free(boxes);
     if (!ok) return NULL;
     Py_RETURN_NONE;

@@ -15,7 +15,7 @@ from ..parallel import worker_count
 from ..paths import MAX_COLLISIONS, PATHS_MAX_SPAN, PathInputs, from_power, rate_span
 from .lattice import lattice_points, walk_lattice
 from .pathstarts import Surroundings, fog_starts, reach, surface_albedo, surface_starts
-from .source import light_direction, source_and_density, tent_restrict
+from .source import light_direction, near_light_cells, source_and_density, tent_restrict
 
 
 # paths per lattice point the medium fills, at most (the Paths setting caps the total): a
@@ -33,8 +33,9 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     (lattice.walk_lattice at ``resolution``), from ``n_paths`` paths (paths.py; at most
     ``PATHS_PER_POINT`` per lattice point the medium fills) seen from ``camera``; ``threads``
     share them; raises cancel.Cancelled when ``should_cancel`` says so.  The paths start
-    where the light's unscattered beam first scatters in the medium (source.source_and_density),
-    and with ``around`` (pathstarts.Surroundings) also where it first scatters in the world
+    where the light's unscattered beam first scatters in the medium (source.source_and_density:
+    a lattice point by its power, then a point of its tent by the voxels' own source,
+    paths.start_positions), and with ``around`` (pathstarts.Surroundings) also where it first scatters in the world
     fog beyond the fog's grid and where the lit surfaces reflect it (pathstarts.py); they
     reflect off the surfaces, and in the world fog they fly on beyond its grid.  Each kind
     of start gets paths in proportion to its power.  ``pm`` is the medium itself, not
@@ -43,14 +44,22 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     else None.  None where the medium is too dense for paths (paths.PATHS_MAX_SPAN): the
     caller keeps the walk."""
     stride, shape, h = walk_lattice(pm, resolution)
-    base, _, pts = source_and_density(pm, fld, light, channel, stride)
+    voxels = np.zeros(pm.grid.shape[:3], np.float32)
+    base, _, pts = source_and_density(pm, fld, light, channel, stride, voxels=voxels)
     vol = cell_volume(pm, stride)
     power = base * vol
     live = power.sum(axis=1) > 0.0
     fog = pm.endless
-    sets = []   # (points, power W, directions, jitter, lobe)
+    sets = []   # (points, power W, directions, jitter, lobe, start source and peaks or None)
     if np.any(live):
-        sets.append((pts[live], power[live], light_direction(light, pts[live]), 1.0, 0))
+        peak = tent_peak(voxels, stride, shape).reshape(-1)
+        if light.kind in ("POINT", "SPOT"):
+            # round a lamp the voxels' source is a point sample of ~1/r^2 (their lattice power
+            # is the cells' mean, source.cell_mean_source): there the starts only keep to the
+            # medium (a peak of 0 accepts any draw with source)
+            peak[near_light_cells(pm, light, stride, shape)] = 0.0
+        sets.append((pts[live], power[live], light_direction(light, pts[live]), 1.0, 0,
+                     (voxels, peak[live])))
     if around is not None:
         if fog:
             got = fog_starts(pm, light, around, seed + 1)
@@ -71,6 +80,27 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     if fog and camera is not None:
         far = _far_multiple(pm, sets, camera, n_paths, seed, threads, should_cancel, around)
     return stride, h, m, far
+
+
+def tent_peak(voxels: np.ndarray, stride: int, shape) -> np.ndarray:
+    """(LX,LY,LZ): the largest of ``voxels`` (X,Y,Z) within each lattice point's tent, the
+    voxels -stride..stride from it along each axis (0 beyond the grid): the peak that a
+    first scattering's start is rejection-sampled against (paths.start_positions)."""
+    m = voxels.astype(np.float32)
+    for axis in range(m.ndim):
+        n = m.shape[axis]
+        pad = [(0, 0)] * m.ndim
+        pad[axis] = (stride, stride)
+        p = np.pad(m, pad)
+        out = p.take(range(0, n), axis=axis)
+        for t in range(1, 2 * stride + 1):
+            np.maximum(out, p.take(range(t, t + n), axis=axis), out=out)
+        m = out
+    idx = [np.minimum(np.arange(s) * stride, voxels.shape[a] - 1) for a, s in enumerate(shape)]
+    # a point past the grid's last voxel (lattice_shape may reach beyond it) takes the last
+    # voxel's window, which holds its whole tent within the grid (a peak too high only
+    # makes the sampling slower, never wrong)
+    return m[np.ix_(*idx)].astype(np.float64)
 
 
 def cell_volume(pm, stride: int) -> float:
@@ -147,15 +177,20 @@ def _trace(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
         albedo = surface_albedo(surf) if around.bounce else np.zeros((len(surf.v0), 3))
         extra.update(triangles=np.stack([surf.v0, surf.e1, surf.e2], axis=1), albedo=albedo)
     st = np.asarray(pm.sigma_t, np.float64)
-    totals = np.array([float(p.sum()) for _, p, _, _, _ in sets])
+    totals = np.array([float(item[1].sum()) for item in sets])
     acc = None
-    for k, (starts, pw, dirs, jitter, lobe) in enumerate(sets):
+    for k, item in enumerate(sets):
+        starts, pw, dirs, jitter, lobe = item[:5]
+        source, peak = item[5] if len(item) > 5 and item[5] is not None else (None, None)
+        if source is not None and source.shape != density.shape:
+            source, peak = None, None
         n_k = max(1, int(round(n_paths * totals[k] / totals.sum())))
         weights, cdf = from_power(pw)
         inp = PathInputs(density, w2i, i2w, np.asarray(pm.sigma_s, np.float64), st, float(pm.g),
                          lat.stride, lat.towards, np.ascontiguousarray(starts), weights,
                          np.ascontiguousarray(dirs), cdf, lat.rate, n_k, int(seed) + 104729 * k,
-                         max_collisions=max_collisions, jitter=jitter, lobe=lobe, **extra)
+                         max_collisions=max_collisions, jitter=jitter, lobe=lobe,
+                         start_source=source, start_peak=peak, **extra)
         got = kernels.trace_paths(inp, threads=worker_count(threads), should_cancel=should_cancel)
         acc = got if acc is None else acc + got
     return acc

@@ -245,7 +245,8 @@ def box_tent_weights(stride: int) -> dict:
 def restricted_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int,
                    stride: int, shape, chunk: int = 16,
                    should_cancel: Optional[Callable[[], bool]] = None,
-                   beam: Optional[int] = None) -> np.ndarray:
+                   beam: Optional[int] = None,
+                   voxels: Optional[np.ndarray] = None) -> np.ndarray:
     """The first-scattering source Q = sigma_s E exp(-tau) (W/m^3, (N,3) in the C order of
     the lattice ``shape`` ``stride`` voxels apart) from every voxel of the field ``fld``
     (optical depth at ``channel``), each voxel's power shared among the lattice points
@@ -253,7 +254,9 @@ def restricted_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel
     reading Q at the lattice points alone missed (or doubled) the thin layer a light lights
     inside a dense medium's face as the lattice fell against it (docs/ms_resolution.md).
     Stride 1 reads the voxels themselves.  Made ``chunk`` voxel planes at a time; raises
-    cancel.Cancelled when ``should_cancel`` says so between them."""
+    cancel.Cancelled when ``should_cancel`` says so between them.  ``voxels`` (float32, the
+    grid's shape): filled with each voxel's Q summed over its channels (the paths' starts,
+    precompute.lightpaths)."""
     nx = pm.grid.shape[0]
     rows = np.zeros((nx, shape[1], shape[2], 3))
     flat_fld = fld.reshape(nx, -1, fld.shape[-1])
@@ -274,6 +277,8 @@ def restricted_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel
                                        None if beam is None else v[live, beam:beam + 3],
                                        disc_transmittance(light, pts, tau, pm.voxel_size))
         q = q.reshape((b - a,) + tuple(pm.grid.shape[1:]) + (3,))
+        if voxels is not None:
+            voxels[a:b] = q.sum(axis=-1)
         if stride > 1:
             q = tent_restrict(tent_restrict(q, 1, stride, shape[1]), 2, stride, shape[2])
         rows[a:b] = q
@@ -284,16 +289,18 @@ def restricted_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel
 
 def source_and_density(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int,
                    stride: int, beam: Optional[int] = None,
-                   should_cancel: Optional[Callable[[], bool]] = None):
+                   should_cancel: Optional[Callable[[], bool]] = None,
+                   voxels: Optional[np.ndarray] = None):
     """(source (N,3) W/m^3, density (N,), points (N,3) m) on the lattice ``stride`` voxels
     apart (C order of ``lattice_shape``): the first-scattering source of ``restricted_source``,
     averaged over the cells round a point or spot light (``cell_mean_source``), and the
-    medium's density at the lattice points.  Raises cancel.Cancelled on Esc."""
+    medium's density at the lattice points.  Raises cancel.Cancelled on Esc.  ``voxels``:
+    filled with the voxels' own source (``restricted_source``)."""
     shape = lattice_shape(pm.grid.shape, stride)
     idx, pts = lattice_points(pm, shape, stride)
     rho = density_from(lattice_values(fld[..., 0], idx, stride), pm.threshold)
     base = restricted_source(pm, fld, light, channel, stride, shape, should_cancel=should_cancel,
-                          beam=beam)
+                          beam=beam, voxels=voxels)
     if light.kind in ("POINT", "SPOT"):
         near = near_light_cells(pm, light, stride, shape)
         if near.size:

@@ -47,8 +47,12 @@ TARGET = {"rel_rmse_4": 0.03, "bias": 0.02}
 # smoke_plume 0.023 -> 0.036 and fog_beam 0.098 -> 0.324 up (the beam, two lattice cells
 # wide, loses 14 % of its glow to the rows beside it: the walk carried its forward peak at the
 # voxels' resolution).  The trade was taken for the suite's worst scenes (docs/accuracy.md).
-FULL_BOUND = {"cloud_vdb": 0.020, "colored_sphere": 0.024, "fog_beam": 0.360,
-              "slab_forward": 0.080, "slab_isotropic": 0.048, "smoke_plume": 0.040}
+# Lowered when a first scattering's path start began to follow the voxels' source within its
+# lattice point's tent (paths.start_positions): fog_beam 0.324 -> 0.247 (the beam's starts no
+# longer spread over the rows beside it), slab_forward 0.057, slab_isotropic 0.029, smoke_plume
+# 0.014 (cloud_vdb 0.015 and colored_sphere 0.016 keep their bounds).
+FULL_BOUND = {"cloud_vdb": 0.020, "colored_sphere": 0.024, "fog_beam": 0.294,
+              "slab_forward": 0.076, "slab_isotropic": 0.043, "smoke_plume": 0.026}
 SCENE_NAMES = sorted(FULL_BOUND)
 
 
