@@ -299,7 +299,7 @@ def march(inputs: MarchInputs, *, backend=None) -> MarchResult:
 
 
 def trace_paths(inp, *, threads: int = 1, should_cancel=None, backend=None):
-    """Light paths' deposits (LX,LY,LZ,3) float64 for ``inp`` (a paths.PathInputs; the numpy
+    """Light paths' deposits (LX,LY,LZ,inp.channels) float64 for ``inp`` (a paths.PathInputs; the numpy
     twin is paths.trace_paths_np).  The paths are cut into ``PATH_BLOCKS`` blocks, each with
     its own sums added in a fixed order, which ``threads`` workers share (the caller sizes
     them: parallel.worker_count):
@@ -309,7 +309,7 @@ def trace_paths(inp, *, threads: int = 1, should_cancel=None, backend=None):
     from .paths import ROULETTE, trace_paths_np
     if not _on_c(backend) or not hasattr(_c, "trace_paths"):
         return trace_paths_np(inp)
-    shape = tuple(inp.towards.shape[:3]) + (3,)
+    shape = tuple(inp.towards.shape[:3]) + (inp.channels,)
     n = int(inp.n_paths)
     if n <= 0 or len(inp.cdf) == 0:
         return np.zeros(shape)

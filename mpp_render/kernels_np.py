@@ -16,7 +16,7 @@ from .lightrecord import (KIND_AREA, KIND_POINT, KIND_SPOT, KIND_SUN, L_AREA, L_
 from .media import BRICK, density_from, trilinear
 from .walk import table_lookup
 from .lights import light_sample, path_stretch
-from .phase import hg
+from .phase import G_LIMIT, hg
 
 
 CROSSING_HALVINGS = 6  # bisection steps that bracket a sharp surface inside a segment
@@ -328,7 +328,30 @@ def _refined_tau(fields, w2is, thrs, sig_ts, mi, c, x, w, dist, delta):
     return tau + _fetch(fields[mi], w2is[mi], end, c, 3)
 
 
-def multiple_source(ms_fields, table, rho, x, w2i, cos):
+MOMENT_G_MAX = G_LIMIT   # the largest anisotropy of a moments' lobe
+
+
+def read_level(level, idx, d):
+    """(N,3) a multiple-scattering level read at index points ``idx``: its 3 channels as they
+    are, or a level of 12 (the traced paths' moments M0, M1, paths.py "Moments") towards
+    v = -d (rays ``d`` (N,3)): per channel 4 pi M0 HG(v . G / |G|; |G|), G = M1 / M0
+    (csrc/march.c read_level)."""
+    q = trilinear(level, idx)
+    if q.shape[1] != 12:
+        return q[:, :3]
+    out = np.zeros((len(q), 3))
+    for a in range(3):
+        m0 = q[:, a]
+        ok = m0 > 0.0
+        G = np.stack([q[:, 3 + a], q[:, 6 + a], q[:, 9 + a]], axis=1) / np.where(ok, m0, 1.0)[:, None]
+        gl = np.sqrt(G[:, 0] * G[:, 0] + G[:, 1] * G[:, 1] + G[:, 2] * G[:, 2])
+        cs = np.where(gl > 0.0, -(G[:, 0] * d[:, 0] + G[:, 1] * d[:, 1] + G[:, 2] * d[:, 2])
+                      / np.where(gl > 0.0, gl, 1.0), 0.0)
+        out[:, a] = np.where(ok, 4.0 * np.pi * m0 * hg(cs, np.minimum(gl, MOMENT_G_MAX)), 0.0)
+    return out
+
+
+def multiple_source(ms_fields, table, rho, x, w2i, cos, d):
     """Multiply scattered radiance (N,3), W/(m^2 sr), arriving at world points ``x`` (N,3)
     of one medium of density ``rho`` (N,) and scattered towards the camera (before the final
     sigma_s), summed over lights: the path-length integral of docs/method.md on the light
@@ -336,7 +359,8 @@ def multiple_source(ms_fields, table, rho, x, w2i, cos):
 
     ``ms_fields``: per light None or (levels, stride, h) of precompute.MultipleField;
     ``table``: the medium's walk.level_table; ``w2i`` world -> padded index map; ``cos`` (L,N)
-    the cosine between each light's propagation direction and the direction to the camera.
+    the cosine between each light's propagation direction and the direction to the camera;
+    ``d`` (N,3) the rays' directions (a level of moments is read towards -d, ``read_level``).
     Level k adds pyramid_k(x) weight_k HG(cos; g_k), by colour channel.  The levels come
     moved by their paths' drift towards what the camera sees (precompute.drift_levels), having
     lost the light that leaves through the medium's surface (boundary.py)."""
@@ -348,8 +372,8 @@ def multiple_source(ms_fields, table, rho, x, w2i, cos):
         levels, stride, h = msf
         idx0 = (x @ w2i[:, :3].T + w2i[:, 3]) / float(stride)
         for k in range(min(len(levels), len(tab))):
-            q = trilinear(levels[k], idx0 / float(2 ** k))
-            out += q[:, :3] * (tab[k, :, :3] * hg(cos[li][:, None], tab[k, :, 3:]))
+            q = read_level(levels[k], idx0 / float(2 ** k), d)
+            out += q * (tab[k, :, :3] * hg(cos[li][:, None], tab[k, :, 3:]))
     return out
 
 
@@ -576,7 +600,8 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
                         wd = np.stack([emit[li][0][live] for li in range(len(lights))]) \
                             if len(lights) else np.zeros((0, live.size, 3))
                         cos = -np.einsum("lij,ij->li", wd, d[live])
-                        ms_inc = multiple_source(ms_fields, tables[mi], rho[live], x[live], w2is[mi], cos)
+                        ms_inc = multiple_source(ms_fields, tables[mi], rho[live], x[live], w2is[mi], cos,
+                                                 d[live])
                         if amb_ms >= 0:
                             ms_inc += v[live, amb_ms:amb_ms + 3]
                         src_ms[live] += rho[live, None] * sigma_ss[mi][None, :] * ms_inc

@@ -34,6 +34,7 @@ hash of (ray key, step, dimension), so both twins draw the same ones.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import List, Optional
 
@@ -81,7 +82,10 @@ def ray_keys(seed: int, tile: int, n: int) -> np.ndarray:
 class MarchContext:
     """What the march reads: prepared media, their fields and layout, the lights, the step
     (m) and, for multiple scattering, the per-medium per-light MultipleFields (or None).
-    ``multiple``: what the march kernel reads of them (a kernels.MultipleInputs, or None)."""
+    ``multiple``: what the march kernel reads of them (a kernels.MultipleInputs, or None).
+    ``gathers``: the context marches a surface's gathers, not camera rays: the traced paths'
+    M is read from its moments towards each ray's own origin where it has them
+    (MultipleField.moments; ``for_gathers``)."""
 
     media: List[PreparedMedium]
     fields: List[np.ndarray]
@@ -91,6 +95,7 @@ class MarchContext:
     multiple_fields: Optional[list] = None
     camera: Optional[Camera] = None
     tuning: Tuning = field(default_factory=Tuning)
+    gathers: bool = False
 
     def __post_init__(self):
         self.packed = pack_lights(self.lights, self.layout)
@@ -106,7 +111,7 @@ class MarchContext:
                 if ref is not None and (ref.traced or ref.flat):
                     # one level a light: the traced paths' M (paths.py), or a mesh volume's
                     # pyramids flattened by the precompute (precompute.flatten): summed
-                    total = sum(m.levels[0] for m in mfs if m is not None)
+                    total = sum(self.level_of(m) for m in mfs if m is not None)
                     per_medium.append([LevelField([np.ascontiguousarray(total, np.float32)],
                                                   ref.stride, ref.h)] + [None] * (len(mfs) - 1))
                     tables.append(FLAT_TABLE)
@@ -115,6 +120,28 @@ class MarchContext:
                                    for m in mfs])
                 tables.append(table)
             self.multiple = MultipleInputs(-1 if amb is None else amb, per_medium, tables)
+
+    def level_of(self, msf) -> np.ndarray:
+        """The level a traced or flattened MultipleField gives the march: its M towards the
+        camera, or for the gathers its moments (12 channels; an M without them as its order
+        0, the camera's M read the same from every direction)."""
+        if not self.gathers:
+            return msf.levels[0]
+        if msf.moments is not None:
+            return msf.moments
+        m = msf.levels[0]
+        return np.concatenate([m, np.zeros(m.shape[:3] + (9,), m.dtype)], axis=-1)
+
+    def for_gathers(self) -> "MarchContext":
+        """This context for the surfaces' gathers (``gathers``), made once; itself where no
+        medium's traced paths have moments."""
+        if self.gathers or not any(m is not None and m.moments is not None
+                                   for mfs in (self.multiple_fields or []) for m in mfs):
+            return self
+        made = self.__dict__.get("_for_gathers")
+        if made is None:
+            made = self.__dict__["_for_gathers"] = dataclasses.replace(self, gathers=True)
+        return made
 
 
 # A medium of one density wherever it has any (a mesh volume: density_from thresholds its

@@ -81,14 +81,29 @@ class FrameMarch:
         media."""
         if self.ctx is None:
             return None
+        ctx = self.ctx.for_gathers()
 
         def radiance(p, d, t_max):
             n = len(p)
             t0, t1 = union_interval(self.media, p, d, np.zeros(n), t_max)
-            r = march_rays(self.ctx, p, d, t0, t1, np.ones(n),
+            r = march_rays(ctx, p, d, t0, t1, np.ones(n),
                            ray_keys(self.st.seed + GATHER_SEED + ROUND_SEED * k, index, n))
+            r = self.fog_tail(r, p, d, np.zeros(n), t_max)
             return r["single"] + r["multiple"] + r["emission"]
         return radiance
+
+    def fog_tail(self, r, o, d, tmin, t_end):
+        """The march's results ``r`` for rays o + t d with the world fog beyond its grid
+        added, from where the grid's tail starts (not before ``tmin``) to ``t_end``, seen
+        through the march (worldfog.tail); ``r`` as it is without a world fog."""
+        if self.fog_pm is None:
+            return r
+        s0 = np.maximum(worldfog.tail_start(self.fog_pm, o, d), tmin)
+        t_single, t_emit, t_trans, t_multi = worldfog.tail(self.fog, self.lights, o, d, s0,
+                                                           t_end, far=self.far)
+        return dict(r, single=r["single"] + r["T"] * t_single,
+                    multiple=r["multiple"] + r["T"] * t_multi,
+                    emission=r["emission"] + r["T"] * t_emit, T=r["T"] * t_trans)
 
     def tile(self, index):
         """(index, (x0, y0, width, height), passes of the tile (pixels, C), (march samples,
@@ -172,14 +187,8 @@ class FrameMarch:
                                 strata=(strata[0][hit], strata[1][hit], strata[2]))
             dh = t_hit[hit] * axial[hit]
             r["depth"][hit] = np.minimum(r["depth"][hit], dh)
-        if fog_pm is not None:  # the homogeneous fog beyond its grid, seen through the march
-            s0 = np.maximum(worldfog.tail_start(fog_pm, o, d), tmin)
-            t_single, t_emit, t_trans, t_multi = worldfog.tail(self.fog, self.lights, o, d, s0,
-                                                               t_end, far=self.far)
-            r = dict(r, single=r["single"] + r["T"] * t_single,
-                     multiple=r["multiple"] + r["T"] * t_multi,
-                     emission=r["emission"] + r["T"] * t_emit, T=r["T"] * t_trans)
-        return r, hit, behind
+        # the homogeneous fog beyond its grid, seen through the march
+        return self.fog_tail(r, o, d, tmin, t_end), hit, behind
 
 
 def noisy_pixels(acc, active, threshold: float, tw: int, th: int) -> np.ndarray:

@@ -102,7 +102,7 @@ def test_infinite_medium_point_light_follows_diffusion_theory():
             u = rng.normal(size=(3000, 3))
             x = light.position + r * u / np.linalg.norm(u, axis=1, keepdims=True)
             F = multiple_source([(msf.levels, msf.stride, msf.h)], table, np.ones(len(x)), x,
-                                pm.w2i, np.zeros((1, len(x))))[:, 0]
+                                pm.w2i, np.zeros((1, len(x))), np.zeros((len(x), 3)))[:, 0]
             phi = (ss / sigma_t) * power * np.exp(-r / L) / (4 * np.pi * D * r)
             ratios.append(4 * np.pi * F.mean() / phi)
         ratios = np.array(ratios)

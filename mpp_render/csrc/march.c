@@ -37,6 +37,7 @@ static void refined_tau(const Grid *f, int nm, int mi, int c, const double x[3],
 
 /* ---- multiple scattering (twin of kernels_np.multiple_source) ---- */
 #define MAX_LEVELS 16
+#define MOMENT_G_MAX 0.999   /* kernels_np.MOMENT_G_MAX: phase.G_LIMIT */
 typedef struct {
     int first[MAX_MEDIA][MAX_LIGHTS];   /* index of level 0 in `lv`, or -1 */
     int nlev[MAX_MEDIA][MAX_LIGHTS];
@@ -48,8 +49,29 @@ typedef struct {
     int amb;                            /* world-light multiple channel or -1 */
 } MS;
 
+/* A level of 12 channels holds the traced paths' moments (paths.py, "Moments"): M0 (RGB),
+ * then M1 along x, y, z (RGB each); the radiance towards v = -d is, per channel,
+ * 4 pi M0 HG(v . G / |G|; |G|) with G = M1 / M0.  A level of 3 channels is read as it is.
+ * Twin of kernels_np.read_level. */
+static int read_level(const Grid *lv, const double idx[3], const double d[3], double q[3]) {
+    double m[12];
+    int nc = (int)lv->nc;
+    if (!trilinear(lv, idx, 0, nc, m)) return 0;
+    for (int a = 0; a < 3; a++) {
+        q[a] = m[a];
+        if (nc != 12) continue;
+        if (!(m[a] > 0.0)) { q[a] = 0.0; continue; }
+        double G[3] = {m[3 + a] / m[a], m[6 + a] / m[a], m[9 + a] / m[a]};
+        double gl = sqrt(G[0] * G[0] + G[1] * G[1] + G[2] * G[2]);
+        double cs = gl > 0.0 ? -(G[0] * d[0] + G[1] * d[1] + G[2] * d[2]) / gl : 0.0;
+        q[a] = 4.0 * M_PI * m[a] * hg_phase(cs, gl < MOMENT_G_MAX ? gl : MOMENT_G_MAX);
+    }
+    return 1;
+}
+
 static void multiple_source_c(const MS *ms, const Grid *lv, int m, int nl, const double *cosl,
-                              double rho, const double x[3], const double *w2i, double out[3]) {
+                              double rho, const double x[3], const double d[3],
+                              const double *w2i, double out[3]) {
     double idx_w[3];
     for (int r = 0; r < 3; r++)
         idx_w[r] = w2i[4 * r] * x[0] + w2i[4 * r + 1] * x[1] + w2i[4 * r + 2] * x[2] + w2i[4 * r + 3];
@@ -70,7 +92,7 @@ static void multiple_source_c(const MS *ms, const Grid *lv, int m, int nl, const
             const double *e0 = tab + ((Py_ssize_t)k * ms->nr + i) * 6, *e1 = e0 + 6;
             double scale = stride * ldexp(1.0, k), idx[3], q[3];
             for (int a = 0; a < 3; a++) idx[a] = idx_w[a] / scale;
-            if (trilinear(&lv[f0 + k], idx, 0, 3, q)) {
+            if (read_level(&lv[f0 + k], idx, d, q)) {
                 double phase = 0.0, g_prev = 0.0;
                 for (int a = 0; a < 3; a++) {  /* by channel; one phase when they agree */
                     double gk = e0[3 + a] * (1.0 - t) + e1[3 + a] * t;
@@ -285,15 +307,16 @@ static int parse_multiple(March *c, PyObject *pms) {
     c->lv = (Grid *)calloc((size_t)(nlv > 0 ? nlv : 1), sizeof(Grid));
     if (!c->lvb || !c->lv) { PyErr_NoMemory(); return -1; }
     for (int i = 0; i < nlv; i++) {
-        Py_ssize_t sh[4] = {-1, -1, -1, 3};
+        Py_ssize_t sh[4] = {-1, -1, -1, -1};
         if (get_buf(PyList_GET_ITEM(plv, i), &c->lvb[i], 'f', 4, sh, "pyramid level") < 0) return -1;
-        if (sh[0] < 2 || sh[1] < 2 || sh[2] < 2) {
-            PyErr_SetString(PyExc_ValueError, "pyramid level: every extent must be >= 2");
+        if (sh[0] < 2 || sh[1] < 2 || sh[2] < 2 || (sh[3] != 3 && sh[3] != 12)) {
+            PyErr_SetString(PyExc_ValueError, "pyramid level: every extent must be >= 2 and "
+                            "the channels 3 (or 12, moments)");
             return -1;
         }
         Grid *lv = &c->lv[i];
         lv->data = (const float *)c->lvb[i].view.buf;
-        lv->nx = sh[0]; lv->ny = sh[1]; lv->nz = sh[2]; lv->nc = 3;
+        lv->nx = sh[0]; lv->ny = sh[1]; lv->nz = sh[2]; lv->nc = sh[3];
         lv->thr = -1.0;
     }
     Py_ssize_t nr = -1;
@@ -506,7 +529,7 @@ static void medium_sources(const March *c, int m, const double x[3], const doubl
             const double *wi = la->wi[l];
             cosl[l] = -(wi[0] * d[0] + wi[1] * d[1] + wi[2] * d[2]);
         }
-        multiple_source_c(&c->ms, c->lv, m, (int)c->nl, cosl, rho, x, g->w2i, msi);
+        multiple_source_c(&c->ms, c->lv, m, (int)c->nl, cosl, rho, x, d, g->w2i, msi);
         if (c->ms.amb >= 0)
             for (int a = 0; a < 3; a++) msi[a] += v[c->ms.amb + a];
         for (int a = 0; a < 3; a++) s->src_ms[a] += rho * c->sig_s[m][a] * (msi[a] + beam_inc[a]);

@@ -10,8 +10,9 @@ const char trace_paths_doc[] =
     "trace_paths(out, density, w2i, i2w, sigma_s, sigma_t, g, stride, towards, starts, weights,\n"
     "            dirs, cdf, rate, path_lo, path_hi, n_paths, seed, max_collisions, roulette,\n"
     "            jitter, lobe, outside, reach, triangles, albedo, start_source, start_peak)\n"
-    "Twin of mpp_render.paths.trace_paths_np: adds to out (LX,LY,LZ,3) float64 the deposits\n"
-    "of paths path_lo..path_hi-1 of n_paths.";
+    "Twin of mpp_render.paths.trace_paths_np: adds to out (LX,LY,LZ,C) float64 the deposits\n"
+    "of paths path_lo..path_hi-1 of n_paths: C = 3, towards the camera; C = 15, those and their\n"
+    "moments of order 0 and 1 (paths.py, \"Moments\"; paths.MOMENT_CHANNELS).";
 
 #define MAX_EVENTS 1000000L   /* tentative collisions per path, whatever the medium */
 #define MAX_RATE_SPAN 1e6    /* rate x the grid's diagonal (m): tentative points across it */
@@ -76,6 +77,7 @@ typedef struct {
     const double *tw;
     Py_ssize_t ls[3];
     double *out;
+    int nc;                   /* channels of out: 3, or 15 with the moments */
     const double *tri, *alb;  /* (T,9) corner and two edges; (T,3) diffuse albedo */
     Py_ssize_t n_tri, n_box;
     const double *box;        /* (n_box,6) lo, hi of each TRI_CHUNK triangles */
@@ -319,8 +321,16 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
                 Py_ssize_t flat = (cc[0] * T->ls[1] + cc[1]) * T->ls[2] + cc[2];
                 const double *tv = T->tw + 3 * flat;
                 double ph = hg_phase(d[0] * tv[0] + d[1] * tv[1] + d[2] * tv[2], T->g);
-                for (int c = 0; c < 3; c++)
-                    T->out[3 * flat + c] += (w[c] / T->mu) * rho * share * ph;
+                double *o_pt = T->out + (Py_ssize_t)T->nc * flat;
+                for (int c = 0; c < 3; c++) {
+                    double dep = (w[c] / T->mu) * rho * share;
+                    o_pt[c] += dep * ph;
+                    if (T->nc == 15) {  /* the moments: dep / (4 pi), g d dep / (4 pi) */
+                        double m0 = dep * (1.0 / (4.0 * M_PI)), m1 = m0 * T->g;
+                        o_pt[3 + c] += m0;
+                        for (int j = 0; j < 3; j++) o_pt[6 + 3 * j + c] += m1 * d[j];
+                    }
+                }
             }
         }
         /* real or null collision; chromatic media use spectral tracking (Kutz et al. 2017),
@@ -375,9 +385,13 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
         bws = {0}, bdir = {0}, bc = {0}, br = {0}, bt = {0}, ba = {0}, bq = {0}, bp = {0};
     double *boxes = NULL;
     int ok = 0;
-    Py_ssize_t so[4] = {-1, -1, -1, 3}, sd[3] = {-1, -1, -1}, sw[2] = {3, 4}, si[2] = {3, 3},
+    Py_ssize_t so[4] = {-1, -1, -1, -1}, sd[3] = {-1, -1, -1}, sw[2] = {3, 4}, si[2] = {3, 3},
                s3[1] = {3}, stw[4] = {-1, -1, -1, 3}, sn[2] = {-1, 3}, sc[1] = {-1};
     if (get_buf_ex(po, &bo, 'd', 4, so, "out", PyBUF_WRITABLE) < 0) goto done;
+    if (so[3] != 3 && so[3] != 15) {
+        PyErr_SetString(PyExc_ValueError, "trace_paths: out must have 3 or 15 channels");
+        goto done;
+    }
     if (get_buf(pd, &bd, 'f', 3, sd, "density") < 0) goto done;
     if (get_buf(pw2i, &bw, 'd', 2, sw, "w2i") < 0) goto done;
     if (get_buf(pi2w, &bi, 'd', 2, si, "i2w") < 0) goto done;
@@ -493,6 +507,7 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
     T.box = boxes;
     T.tw = (const double *)btw.view.buf;
     T.out = (double *)bo.view.buf;
+    T.nc = (int)so[3];
     const double *S = (const double *)bs.view.buf, *W = (const double *)bws.view.buf,
                  *D = (const double *)bdir.view.buf, *C = (const double *)bc.view.buf;
     Py_ssize_t n_starts = sn[0];

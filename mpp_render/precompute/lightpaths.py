@@ -28,7 +28,7 @@ FAR_PATHS = 0.25     # the far box's paths, a fraction of the grid's
 def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: int,
                     resolution: int, seed: int = 0, threads: int = 0, should_cancel=None,
                     around: Optional[Surroundings] = None):
-    """(stride, h, M, far) for ``light`` on medium ``pm`` (its field ``fld``, the light's optical
+    """(stride, h, M, far, moments) for ``light`` on medium ``pm`` (its field ``fld``, the light's optical
     depth at ``channel``): M float32 (LX,LY,LZ,3) W/(m^2 sr) on the light pyramid's lattice
     (lattice.walk_lattice at ``resolution``), from ``n_paths`` paths (paths.py; at most
     ``PATHS_PER_POINT`` per lattice point the medium fills) seen from ``camera``; ``threads``
@@ -41,8 +41,10 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     of start gets paths in proportion to its power.  ``pm`` is the medium itself, not
     delta-scaled: the paths carry the forward peak (the split was measured worse,
     docs/history.md).  ``far``: for the world fog, its M beyond the grid (``_far_multiple``),
-    else None.  None where the medium is too dense for paths (paths.PATHS_MAX_SPAN): the
-    caller keeps the walk."""
+    else None.  ``moments``: with surfaces round the medium (``around``), whose gathers look
+    through it along other directions than the camera's, float32 (LX,LY,LZ,12) M's first two
+    spherical-harmonic moments (paths.py, "Moments"), else None.  None where the medium is
+    too dense for paths (paths.PATHS_MAX_SPAN): the caller keeps the walk."""
     stride, shape, h = walk_lattice(pm, resolution)
     voxels = np.zeros(pm.grid.shape[:3], np.float32)
     base, _, pts = source_and_density(pm, fld, light, channel, stride, voxels=voxels)
@@ -70,16 +72,21 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
             if got is not None:
                 sets.append(got[:3] + (got[3], 1))
     if not sets:
-        return stride, h, np.zeros(tuple(shape) + (3,), np.float32), None
+        return stride, h, np.zeros(tuple(shape) + (3,), np.float32), None, None
     lat = PathLattice.of(pm, camera, resolution)
     if lat is None:
         return None
     n_paths = lat.paths(n_paths)
-    m = lat.mean(_trace(sets, n_paths, seed, threads, should_cancel, pm, lat, around))
+    gathered = around is not None and around.surfaces is not None
+    m = lat.mean(_trace(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
+                        moments=gathered))
     far = None
     if fog and camera is not None:
         far = _far_multiple(pm, sets, camera, n_paths, seed, threads, should_cancel, around)
-    return stride, h, m, far
+    if not gathered:
+        return stride, h, m, far, None
+    return (stride, h, np.ascontiguousarray(m[..., :3]), far,
+            np.ascontiguousarray(m[..., 3:]))
 
 
 def tent_peak(voxels: np.ndarray, stride: int, shape) -> np.ndarray:
@@ -164,10 +171,11 @@ class PathLattice:
 
 
 def _trace(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
-           max_collisions: int = MAX_COLLISIONS) -> np.ndarray:
+           max_collisions: int = MAX_COLLISIONS, moments: bool = False) -> np.ndarray:
     """The deposits (LX,LY,LZ,3) of ``n_paths`` paths shared among the start ``sets`` in
     proportion to their power, on the PathLattice ``lat``; each path ends after
-    ``max_collisions`` real collisions and bounces (1: its first flight alone); raises
+    ``max_collisions`` real collisions and bounces (1: its first flight alone); with
+    ``moments`` (LX,LY,LZ,15), their moments too (paths.py, "Moments"); raises
     cancel.Cancelled on Esc."""
     density, w2i, i2w = lat.density, lat.w2i, lat.i2w
     surf = around.surfaces if around is not None else None
@@ -190,7 +198,7 @@ def _trace(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
                          lat.stride, lat.towards, np.ascontiguousarray(starts), weights,
                          np.ascontiguousarray(dirs), cdf, lat.rate, n_k, int(seed) + 104729 * k,
                          max_collisions=max_collisions, jitter=jitter, lobe=lobe,
-                         start_source=source, start_peak=peak, **extra)
+                         start_source=source, start_peak=peak, moments=moments, **extra)
         got = kernels.trace_paths(inp, threads=worker_count(threads), should_cancel=should_cancel)
         acc = got if acc is None else acc + got
     return acc

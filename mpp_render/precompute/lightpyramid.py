@@ -36,7 +36,9 @@ class MultipleField:
     weight (precompute.flatten.flatten_levels).  ``flat``: the levels are summed once towards the camera (``flattens``; precompute.flatten).
     ``traced``: ``levels`` is one level, the traced paths' M (paths.py), read as it is.
     ``far``: for the world fog's traced paths, their M beyond its grid (worldfog.FarField,
-    read by worldfog.tail), else None."""
+    read by worldfog.tail), else None.  ``moments``: for traced paths in a scene with
+    surfaces, None or float32 (LX,LY,LZ,12) M's first two spherical-harmonic moments
+    (paths.py, "Moments"), which the surfaces' gathers read (march.MarchContext.gathers)."""
 
     stride: int
     h: float
@@ -45,6 +47,7 @@ class MultipleField:
     flat: bool = False
     traced: bool = False
     far: Optional[object] = None
+    moments: Optional[np.ndarray] = None
 
 
 def flattens(pm: PreparedMedium, camera: Optional[Camera], tuning: Tuning = Tuning()) -> bool:

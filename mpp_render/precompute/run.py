@@ -168,7 +168,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                              around=around)
                 if traced is not None:
                     ms[li] = MultipleField(traced[0], traced[1], [traced[2]], traced=True,
-                                           far=traced[3])
+                                           far=traced[3], moments=traced[4])
                     check(should_cancel)
                     continue
                 # the walk starts where the beam of unscattered and forward-scattered light
