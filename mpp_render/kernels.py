@@ -309,14 +309,15 @@ def trace_paths(inp, *, threads: int = 1, should_cancel=None, backend=None):
     from .paths import ROULETTE, trace_paths_np
     if not _on_c(backend) or not hasattr(_c, "trace_paths"):
         return trace_paths_np(inp)
-    shape = tuple(inp.towards.shape[:3]) + (inp.channels,)
+    lshape = tuple(inp.towards.shape[:3])
     n = int(inp.n_paths)
     if n <= 0 or len(inp.cdf) == 0:
-        return np.zeros(shape)
+        return np.zeros(lshape + (inp.channels,))
     blocks = min(PATH_BLOCKS, n)
     workers = max(1, min(int(threads), blocks))
     cuts = np.linspace(0, n, blocks + 1).astype(np.int64)
-    outs = [np.zeros(shape) for _ in range(blocks)]
+    outs = [np.zeros(lshape + (3,)) for _ in range(blocks)]
+    moms = [np.zeros(lshape + (12,) if inp.moments else (0, 0, 0, 12)) for _ in range(blocks)]
     args = (_f32(inp.density), _f64(inp.w2i).reshape(3, 4), _f64(inp.i2w).reshape(3, 3),
             _f64(inp.sigma_s).reshape(3), _f64(inp.sigma_t).reshape(3), float(inp.g),
             int(inp.stride),
@@ -339,7 +340,7 @@ def trace_paths(inp, *, threads: int = 1, should_cancel=None, backend=None):
                 return
             _c.trace_paths(outs[i], *args, a, min(a + PATH_CHUNK, int(cuts[i + 1])), n,
                            int(inp.seed) & 0xFFFFFFFF, int(inp.max_collisions), float(ROULETTE),
-                           *extra)
+                           *extra, moms[i])
 
     if workers == 1:
         for i in range(blocks):
@@ -350,10 +351,11 @@ def trace_paths(inp, *, threads: int = 1, should_cancel=None, backend=None):
             list(ex.map(work, range(blocks)))
     if cancelled:
         raise Cancelled
-    total = outs[0]
-    for o in outs[1:]:
+    total, moments = outs[0], moms[0]
+    for o, m in zip(outs[1:], moms[1:]):
         total += o
-    return total
+        moments += m
+    return np.concatenate([total, moments], axis=-1) if inp.moments else total
 
 
 PATH_BLOCKS = 4   # trace_paths' blocks of paths (its sums' order, whatever the threads)

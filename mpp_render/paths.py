@@ -66,7 +66,10 @@ precompute.emissionlight): the direction is uniform over the sphere, the offset 
 lattice point; a surface's gather looks through the medium along other directions (the ground
 under a cloud sees the light scattered down, not towards the camera).  With ``moments`` every
 deposit also adds, per channel, M0 += deposit / (4 pi) (channels 3..5) and
-M1 += g w deposit / (4 pi) (channels 6 + 3 j + c, axis j; w the path's direction).  These are
+M1 += g w deposit / (4 pi) (channels 6 + 3 j + c, axis j; w the path's direction), all of it
+on one of the 8 lattice points round it, drawn with the trilinear shares as probabilities
+(the same mean as sharing it, an eighth of the work: the moments' sums were most of the
+precompute where they were shared).  These are
 the first two Legendre moments of M(v) for every v: M(v) = M0 (1 + 3 G . v + ...) with
 G = M1 / M0, whatever the paths' directions.  The march (kernels_np.read_level) closes the
 series with a Henyey-Greenstein lobe, M(v) ~ 4 pi M0 HG(v . G / |G|; |G|), exact where the
@@ -107,6 +110,7 @@ PATHS_MAX_SPAN = 2000.0
 _D_PICK, _D_JIT, _D_DIR, _D_FLY, _D_HIT, _D_TURN, _D_RR, _D_BOUNCE = 0, 1, 7, 10, 11, 12, 14, 15
 _D_RETRY = 16     # a start's offset drawn again: 6 dimensions per try (csrc/paths.c)
 _D_ACCEPT = 512   # a start's acceptance draw, one dimension per try
+_D_CORNER = 600   # the lattice corner a deposit's moments go to
 START_TRIES = 64  # offsets drawn for a first scattering until one is accepted
 # deposits with the moments: 3 towards the camera, 3 of order 0, 3 x 3 of order 1 (x, y, z)
 MOMENT_CHANNELS = 15
@@ -461,12 +465,24 @@ def trace_paths_np(inp: PathInputs) -> np.ndarray:
                     ph = hg(_dot(da, tw[flat]), g)
                     for ch in range(3):
                         out[:, ch] += np.bincount(flat, wd[:, ch] * share * ph, minlength=len(out))
-                        if nc == MOMENT_CHANNELS:   # the moments (module docstring)
-                            m0 = wd[:, ch] * share * (1.0 / (4.0 * np.pi))
-                            out[:, 3 + ch] += np.bincount(flat, m0, minlength=len(out))
-                            for j in range(3):
-                                out[:, 6 + 3 * j + ch] += np.bincount(
-                                    flat, m0 * g * da[:, j], minlength=len(out))
+                if nc == MOMENT_CHANNELS:
+                    # the moments on one corner drawn by the shares (module docstring)
+                    u = uniform(kk[coll][inn], ev[coll][inn], _D_CORNER)
+                    ups = []
+                    for a in range(3):     # one draw picks the corner axis by axis
+                        up = u < fr[:, a]
+                        with np.errstate(divide="ignore", invalid="ignore"):
+                            u = np.where(up, u / fr[:, a], (u - fr[:, a]) / (1.0 - fr[:, a]))
+                        ups.append(up)
+                    cc = base + np.stack(ups, axis=1)
+                    ok = np.all((cc >= 0) & (cc < lsh), axis=1)
+                    flat = np.ravel_multi_index(tuple(np.where(ok[:, None], cc, 0).T), lshape)
+                    for ch in range(3):
+                        m0 = wd[:, ch] * ok * (1.0 / (4.0 * np.pi))
+                        out[:, 3 + ch] += np.bincount(flat, m0, minlength=len(out))
+                        for j in range(3):
+                            out[:, 6 + 3 * j + ch] += np.bincount(flat, m0 * g * da[:, j],
+                                                                  minlength=len(out))
             live_c = keep[coll]
             rc = rate[coll]
             kc, ec = kk[coll], ev[coll]

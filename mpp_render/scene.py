@@ -219,7 +219,10 @@ class Tuning:
     1920x1080 1.2x faster, but the noisy scenes' single scattering came out worse on 4 seeds
     out of 4: docs/adaptive.md).
     ``adaptive_first``: with adaptive sampling, the samples every pixel
-    gets before its noise is judged (at least 2: a variance needs two)."""
+    gets before its noise is judged (at least 2: a variance needs two).
+    ``gather_moments``: where surfaces gather the media's light, the traced paths also keep
+    their moments, which the gathers read towards the surface (paths.py, "Moments");
+    False: the gathers read the camera's M (benchmarks/gathers.py compares the two)."""
 
     skip_min_voxels: int = 1 << 20
     spot_cull: bool = True
@@ -233,6 +236,7 @@ class Tuning:
     tile_rays: int = 4096
     surface_gathers: int = 4
     adaptive_first: int = 4
+    gather_moments: bool = True
 
 
 # light paths per light and medium at the default quality (docs/method.md, "Traced paths")

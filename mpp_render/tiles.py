@@ -26,6 +26,7 @@ from .surfaces import SurfaceSet, intersect, shade
 
 GATHER_SEED = 0x5BD1E995  # offsets the seed of the rays that gather volume light onto surfaces
 ROUND_SEED = 0x9E3779B1  # offsets the seed of each adaptive round's gathering rays
+GATHER_TAIL_NODES = 4   # Gauss-Legendre points of the fog tail on a gather ray (worldfog.tail)
 
 
 def tile_size(samples: int, largest: int = 64, rays: int = 4096) -> int:
@@ -88,11 +89,11 @@ class FrameMarch:
             t0, t1 = union_interval(self.media, p, d, np.zeros(n), t_max)
             r = march_rays(ctx, p, d, t0, t1, np.ones(n),
                            ray_keys(self.st.seed + GATHER_SEED + ROUND_SEED * k, index, n))
-            r = self.fog_tail(r, p, d, np.zeros(n), t_max)
+            r = self.fog_tail(r, p, d, np.zeros(n), t_max, nodes=GATHER_TAIL_NODES)
             return r["single"] + r["multiple"] + r["emission"]
         return radiance
 
-    def fog_tail(self, r, o, d, tmin, t_end):
+    def fog_tail(self, r, o, d, tmin, t_end, nodes: int = worldfog.TAIL_NODES):
         """The march's results ``r`` for rays o + t d with the world fog beyond its grid
         added, from where the grid's tail starts (not before ``tmin``) to ``t_end``, seen
         through the march (worldfog.tail); ``r`` as it is without a world fog."""
@@ -100,7 +101,7 @@ class FrameMarch:
             return r
         s0 = np.maximum(worldfog.tail_start(self.fog_pm, o, d), tmin)
         t_single, t_emit, t_trans, t_multi = worldfog.tail(self.fog, self.lights, o, d, s0,
-                                                           t_end, far=self.far)
+                                                           t_end, nodes=nodes, far=self.far)
         return dict(r, single=r["single"] + r["T"] * t_single,
                     multiple=r["multiple"] + r["T"] * t_multi,
                     emission=r["emission"] + r["T"] * t_emit, T=r["T"] * t_trans)

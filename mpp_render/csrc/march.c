@@ -54,17 +54,24 @@ typedef struct {
  * 4 pi M0 HG(v . G / |G|; |G|) with G = M1 / M0.  A level of 3 channels is read as it is.
  * Twin of kernels_np.read_level. */
 static int read_level(const Grid *lv, const double idx[3], const double d[3], double q[3]) {
-    double m[12];
+    double m[12], G_prev[3] = {0.0, 0.0, 0.0}, p_prev = -1.0;
     int nc = (int)lv->nc;
     if (!trilinear(lv, idx, 0, nc, m)) return 0;
     for (int a = 0; a < 3; a++) {
         q[a] = m[a];
         if (nc != 12) continue;
         if (!(m[a] > 0.0)) { q[a] = 0.0; continue; }
-        double G[3] = {m[3 + a] / m[a], m[6 + a] / m[a], m[9 + a] / m[a]};
-        double gl = sqrt(G[0] * G[0] + G[1] * G[1] + G[2] * G[2]);
-        double cs = gl > 0.0 ? -(G[0] * d[0] + G[1] * d[1] + G[2] * d[2]) / gl : 0.0;
-        q[a] = 4.0 * M_PI * m[a] * hg_phase(cs, gl < MOMENT_G_MAX ? gl : MOMENT_G_MAX);
+        double G[3] = {m[3 + a] / m[a], m[6 + a] / m[a], m[9 + a] / m[a]}, p;
+        if (p_prev >= 0.0 && G[0] == G_prev[0] && G[1] == G_prev[1] && G[2] == G_prev[2]) {
+            p = p_prev;   /* the channels' lobes agree (a grey medium): one phase */
+        } else {
+            double gl = sqrt(G[0] * G[0] + G[1] * G[1] + G[2] * G[2]);
+            double cs = gl > 0.0 ? -(G[0] * d[0] + G[1] * d[1] + G[2] * d[2]) / gl : 0.0;
+            p = hg_phase(cs, gl < MOMENT_G_MAX ? gl : MOMENT_G_MAX);
+            G_prev[0] = G[0]; G_prev[1] = G[1]; G_prev[2] = G[2];
+            p_prev = p;
+        }
+        q[a] = 4.0 * M_PI * m[a] * p;
     }
     return 1;
 }

@@ -9,10 +9,11 @@
 const char trace_paths_doc[] =
     "trace_paths(out, density, w2i, i2w, sigma_s, sigma_t, g, stride, towards, starts, weights,\n"
     "            dirs, cdf, rate, path_lo, path_hi, n_paths, seed, max_collisions, roulette,\n"
-    "            jitter, lobe, outside, reach, triangles, albedo, start_source, start_peak)\n"
-    "Twin of mpp_render.paths.trace_paths_np: adds to out (LX,LY,LZ,C) float64 the deposits\n"
-    "of paths path_lo..path_hi-1 of n_paths: C = 3, towards the camera; C = 15, those and their\n"
-    "moments of order 0 and 1 (paths.py, \"Moments\"; paths.MOMENT_CHANNELS).";
+    "            jitter, lobe, outside, reach, triangles, albedo, start_source, start_peak,\n"
+    "            moments)\n"
+    "Twin of mpp_render.paths.trace_paths_np: adds to out (LX,LY,LZ,3) float64 the deposits\n"
+    "of paths path_lo..path_hi-1 of n_paths towards the camera, and to moments (LX,LY,LZ,12)\n"
+    "float64, unless it is empty, their moments of order 0 and 1 (paths.py, \"Moments\").";
 
 #define MAX_EVENTS 1000000L   /* tentative collisions per path, whatever the medium */
 #define MAX_RATE_SPAN 1e6    /* rate x the grid's diagonal (m): tentative points across it */
@@ -29,6 +30,7 @@ const char trace_paths_doc[] =
 #define D_BOUNCE 15
 #define D_RETRY 16     /* a start's offset drawn again: 6 dimensions per try (event 0) */
 #define D_ACCEPT 512   /* a start's acceptance draw, one dimension per try (event 0) */
+#define D_CORNER 600   /* the lattice corner a deposit's moments go to */
 #define START_TRIES 64 /* offsets drawn for a first scattering until one is accepted */
 
 /* The unit direction at cosine c and azimuth 2 pi u2 about the unit vector axis. */
@@ -77,7 +79,7 @@ typedef struct {
     const double *tw;
     Py_ssize_t ls[3];
     double *out;
-    int nc;                   /* channels of out: 3, or 15 with the moments */
+    double *mom;              /* NULL, or (LX,LY,LZ,12) the deposits' moments */
     const double *tri, *alb;  /* (T,9) corner and two edges; (T,3) diffuse albedo */
     Py_ssize_t n_tri, n_box;
     const double *box;        /* (n_box,6) lo, hi of each TRI_CHUNK triangles */
@@ -297,7 +299,8 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
             }
             rho = (double)T->dens[(v[0] * T->n[1] + v[1]) * T->n[2] + v[2]];
             if (!(rho >= 0.0)) rho = 0.0;   /* NaN or negative density: empty */
-            /* deposit, weighted by the density, on the 8 lattice points round the point */
+            /* deposit, weighted by the density, on the 8 lattice points round the point
+             * (nothing where the density is 0: an empty voxel adds nothing) */
             double lat[3], fr[3];
             Py_ssize_t b[3];
             for (int a = 0; a < 3; a++) {
@@ -307,7 +310,7 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
                 b[a] = (Py_ssize_t)fl;
                 fr[a] = lat[a] - fl;
             }
-            for (int corner = 0; corner < 8; corner++) {
+            for (int corner = 0; rho > 0.0 && corner < 8; corner++) {
                 int o[3] = {(corner >> 2) & 1, (corner >> 1) & 1, corner & 1};
                 Py_ssize_t cc[3];
                 double share = 1.0;
@@ -321,14 +324,29 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
                 Py_ssize_t flat = (cc[0] * T->ls[1] + cc[1]) * T->ls[2] + cc[2];
                 const double *tv = T->tw + 3 * flat;
                 double ph = hg_phase(d[0] * tv[0] + d[1] * tv[1] + d[2] * tv[2], T->g);
-                double *o_pt = T->out + (Py_ssize_t)T->nc * flat;
-                for (int c = 0; c < 3; c++) {
-                    double dep = (w[c] / T->mu) * rho * share;
-                    o_pt[c] += dep * ph;
-                    if (T->nc == 15) {  /* the moments: dep / (4 pi), g d dep / (4 pi) */
-                        double m0 = dep * (1.0 / (4.0 * M_PI)), m1 = m0 * T->g;
-                        o_pt[3 + c] += m0;
-                        for (int j = 0; j < 3; j++) o_pt[6 + 3 * j + c] += m1 * d[j];
+                double *o_pt = T->out + 3 * flat;
+                for (int c = 0; c < 3; c++)
+                    o_pt[c] += (w[c] / T->mu) * rho * share * ph;
+            }
+            if (T->mom && rho > 0.0) {
+                /* the moments, dep / (4 pi) and g d dep / (4 pi), on one corner drawn by the
+                 * trilinear shares with the whole weight: the same mean, an eighth of the
+                 * work (paths.py, "Moments"); one draw picks the corner axis by axis */
+                Py_ssize_t cc[3];
+                int ok = 1;
+                double u = uniform01(key, ev, D_CORNER);
+                for (int a = 0; a < 3; a++) {
+                    int up = u < fr[a];
+                    u = up ? u / fr[a] : (u - fr[a]) / (1.0 - fr[a]);
+                    cc[a] = b[a] + up;
+                    if (cc[a] < 0 || cc[a] >= T->ls[a]) ok = 0;
+                }
+                if (ok) {
+                    double *o_pt = T->mom + 12 * ((cc[0] * T->ls[1] + cc[1]) * T->ls[2] + cc[2]);
+                    for (int c = 0; c < 3; c++) {
+                        double m0 = (w[c] / T->mu) * rho * (1.0 / (4.0 * M_PI)), m1 = m0 * T->g;
+                        o_pt[c] += m0;
+                        for (int j = 0; j < 3; j++) o_pt[3 + 3 * j + c] += m1 * d[j];
                     }
                 }
             }
@@ -372,26 +390,22 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
 
 PyObject *trace_paths(PyObject *self, PyObject *args) {
     PyObject *po, *pd, *pw2i, *pi2w, *pss, *pst, *ptw, *pstarts, *pws, *pdirs, *pcdf, *preach,
-        *ptri, *palb, *psrc, *ppeak;
+        *ptri, *palb, *psrc, *ppeak, *pmom;
     double g, rate, roulette, jitter, outside;
     long stride, lo, hi, n_paths, max_hits, lobe;
     unsigned long seed;
-    if (!PyArg_ParseTuple(args, "OOOOOOdlOOOOOdlllklddldOOOOO", &po, &pd, &pw2i, &pi2w, &pss,
+    if (!PyArg_ParseTuple(args, "OOOOOOdlOOOOOdlllklddldOOOOOO", &po, &pd, &pw2i, &pi2w, &pss,
                           &pst, &g, &stride, &ptw, &pstarts, &pws, &pdirs, &pcdf, &rate, &lo,
                           &hi, &n_paths, &seed, &max_hits, &roulette, &jitter, &lobe, &outside,
-                          &preach, &ptri, &palb, &psrc, &ppeak))
+                          &preach, &ptri, &palb, &psrc, &ppeak, &pmom))
         return NULL;
     Buf bo = {0}, bd = {0}, bw = {0}, bi = {0}, bss = {0}, bst = {0}, btw = {0}, bs = {0},
-        bws = {0}, bdir = {0}, bc = {0}, br = {0}, bt = {0}, ba = {0}, bq = {0}, bp = {0};
+        bws = {0}, bdir = {0}, bc = {0}, br = {0}, bt = {0}, ba = {0}, bq = {0}, bp = {0}, bm = {0};
     double *boxes = NULL;
     int ok = 0;
-    Py_ssize_t so[4] = {-1, -1, -1, -1}, sd[3] = {-1, -1, -1}, sw[2] = {3, 4}, si[2] = {3, 3},
+    Py_ssize_t so[4] = {-1, -1, -1, 3}, sd[3] = {-1, -1, -1}, sw[2] = {3, 4}, si[2] = {3, 3},
                s3[1] = {3}, stw[4] = {-1, -1, -1, 3}, sn[2] = {-1, 3}, sc[1] = {-1};
     if (get_buf_ex(po, &bo, 'd', 4, so, "out", PyBUF_WRITABLE) < 0) goto done;
-    if (so[3] != 3 && so[3] != 15) {
-        PyErr_SetString(PyExc_ValueError, "trace_paths: out must have 3 or 15 channels");
-        goto done;
-    }
     if (get_buf(pd, &bd, 'f', 3, sd, "density") < 0) goto done;
     if (get_buf(pw2i, &bw, 'd', 2, sw, "w2i") < 0) goto done;
     if (get_buf(pi2w, &bi, 'd', 2, si, "i2w") < 0) goto done;
@@ -420,6 +434,14 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
                 : sp[0] != 0) {
         PyErr_SetString(PyExc_ValueError, "trace_paths: start_source must have the density's "
                         "shape and start_peak one value per start (or both be empty)");
+        goto done;
+    }
+    /* the moments: (0,0,0,12) for none, else the lattice's shape */
+    Py_ssize_t sm[4] = {-1, -1, -1, 12};
+    if (get_buf_ex(pmom, &bm, 'd', 4, sm, "moments", PyBUF_WRITABLE) < 0) goto done;
+    int has_mom = sm[0] * sm[1] * sm[2] > 0;
+    if (has_mom && (sm[0] != so[0] || sm[1] != so[1] || sm[2] != so[2])) {
+        PyErr_SetString(PyExc_ValueError, "trace_paths: moments must have the lattice's shape");
         goto done;
     }
     if (!(jitter >= 0.0) || !isfinite(jitter) || (lobe < 0 || lobe > 2) ||
@@ -507,7 +529,7 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
     T.box = boxes;
     T.tw = (const double *)btw.view.buf;
     T.out = (double *)bo.view.buf;
-    T.nc = (int)so[3];
+    T.mom = has_mom ? (double *)bm.view.buf : NULL;
     const double *S = (const double *)bs.view.buf, *W = (const double *)bws.view.buf,
                  *D = (const double *)bdir.view.buf, *C = (const double *)bc.view.buf;
     Py_ssize_t n_starts = sn[0];
@@ -532,7 +554,7 @@ done:
     buf_release(&bo); buf_release(&bd); buf_release(&bw); buf_release(&bi); buf_release(&bss);
     buf_release(&bst); buf_release(&btw); buf_release(&bs); buf_release(&bws);
     buf_release(&bdir); buf_release(&bc); buf_release(&br); buf_release(&bt); buf_release(&ba);
-    buf_release(&bq); buf_release(&bp);
+    buf_release(&bq); buf_release(&bp); buf_release(&bm);
     free(boxes);
     if (!ok) return NULL;
     Py_RETURN_NONE;

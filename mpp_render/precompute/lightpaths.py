@@ -27,7 +27,7 @@ FAR_PATHS = 0.25     # the far box's paths, a fraction of the grid's
 
 def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: int,
                     resolution: int, seed: int = 0, threads: int = 0, should_cancel=None,
-                    around: Optional[Surroundings] = None):
+                    around: Optional[Surroundings] = None, moments: bool = True):
     """(stride, h, M, far, moments) for ``light`` on medium ``pm`` (its field ``fld``, the light's optical
     depth at ``channel``): M float32 (LX,LY,LZ,3) W/(m^2 sr) on the light pyramid's lattice
     (lattice.walk_lattice at ``resolution``), from ``n_paths`` paths (paths.py; at most
@@ -41,7 +41,8 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     of start gets paths in proportion to its power.  ``pm`` is the medium itself, not
     delta-scaled: the paths carry the forward peak (the split was measured worse,
     docs/history.md).  ``far``: for the world fog, its M beyond the grid (``_far_multiple``),
-    else None.  ``moments``: with surfaces round the medium (``around``), whose gathers look
+    else None.  ``moments`` (with ``moments`` asked for): with surfaces round the medium
+    (``around``), whose gathers look
     through it along other directions than the camera's, float32 (LX,LY,LZ,12) M's first two
     spherical-harmonic moments (paths.py, "Moments"), else None.  None where the medium is
     too dense for paths (paths.PATHS_MAX_SPAN): the caller keeps the walk."""
@@ -77,7 +78,7 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     if lat is None:
         return None
     n_paths = lat.paths(n_paths)
-    gathered = around is not None and around.surfaces is not None
+    gathered = moments and around is not None and around.surfaces is not None
     m = lat.mean(_trace(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
                         moments=gathered))
     far = None

@@ -165,7 +165,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                     traced = traced_multiple(pm, f, light, chans[li], camera, multiple_paths,
                                              multiple_resolution, seed=seed + 7919 * mi + li,
                                              threads=threads, should_cancel=should_cancel,
-                                             around=around)
+                                             around=around, moments=tuning.gather_moments)
                 if traced is not None:
                     ms[li] = MultipleField(traced[0], traced[1], [traced[2]], traced=True,
                                            far=traced[3], moments=traced[4])
