@@ -52,7 +52,8 @@ def emission_light(pm: PreparedMedium, camera, n_paths: int, resolution: int,
     e = pm.emitted()
     if e is None or camera is None:
         return None
-    lat = PathLattice.of(pm, camera, resolution)
+    lat = PathLattice.of(pm, camera, resolution,
+                         None if around is None else around.enclosed(pm))
     if lat is None:
         return None
     sets = voxel_starts(pm, e, lat.stride)

@@ -74,7 +74,8 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
                 sets.append(got[:3] + (got[3], 1))
     if not sets:
         return stride, h, np.zeros(tuple(shape) + (3,), np.float32), None, None
-    lat = PathLattice.of(pm, camera, resolution)
+    lat = PathLattice.of(pm, camera, resolution,
+                         None if around is None else around.enclosed(pm))
     if lat is None:
         return None
     n_paths = lat.paths(n_paths)
@@ -137,9 +138,12 @@ class PathLattice:
     cells: int
 
     @classmethod
-    def of(cls, pm, camera, resolution: int):
+    def of(cls, pm, camera, resolution: int, enclosed: Optional[np.ndarray] = None):
         """The lattice of medium ``pm`` at ``resolution`` seen from ``camera``; None where the
-        medium is too dense for paths (paths.PATHS_MAX_SPAN)."""
+        medium is too dense for paths (paths.PATHS_MAX_SPAN).  ``enclosed``: None, or bool
+        (X,Y,Z) the voxels behind the scene's surfaces (Surroundings.enclosed), left out of
+        the tent mass: no light reaches them, and a lattice point by a ground is the mean of
+        the medium above it."""
         stride, shape, h = walk_lattice(pm, resolution)
         i2w = np.asarray(pm.i2w[:3, :3], np.float64)
         density = pm.path_density()
@@ -153,6 +157,8 @@ class PathLattice:
         # a point's tent still holds a sliver of it; weighing voxel centres alone gave such
         # a point no mass and its deposits from that sliver a spike in M)
         mean_rho = density.astype(np.float64)
+        if enclosed is not None and enclosed.shape == mean_rho.shape:
+            mean_rho[enclosed] = 0.0
         for axis in range(3):
             mean_rho = tent_restrict(mean_rho, axis, stride, shape[axis], boxed=True)
         return cls(stride, tuple(shape), h, density, np.asarray(pm.w2i, np.float64), i2w,

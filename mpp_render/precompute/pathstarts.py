@@ -54,6 +54,17 @@ class Surroundings:
     def __post_init__(self):
         if self.surfaces is not None and self.surfaces.empty:
             self.surfaces = None
+        self._enclosed = {}
+
+    def enclosed(self, pm) -> Optional[np.ndarray]:
+        """bool (X,Y,Z) the voxels of prepared medium ``pm`` behind the surfaces
+        (enclosed.enclosed_voxels), made once per medium; None without surfaces."""
+        if self.surfaces is None:
+            return None
+        if id(pm) not in self._enclosed:
+            from .enclosed import enclosed_voxels
+            self._enclosed[id(pm)] = enclosed_voxels(pm, self.surfaces)
+        return self._enclosed[id(pm)]
 
 
 def reach(pm, grid=None) -> tuple:
