@@ -83,6 +83,22 @@ def cell_mean_irradiance(light: Light, pts, cell: np.ndarray, n: int = 2,
     return acc / len(offs)
 
 
+VOXEL_POINTS = 3   # per axis: a spot's irradiance is a voxel's mean over VOXEL_POINTS^3 points
+
+
+def voxel_irradiance(light: Light, pts, i2w, n: int = VOXEL_POINTS) -> np.ndarray:
+    """The light's irradiance (W/m^2, (N,3)) at voxel centres ``pts`` (N,3, m): a spot's the
+    mean over each voxel (``cell_mean_irradiance`` on the voxel's cell ``i2w``, ``n``^3
+    points), any other light's read at the centre.  A spot's cone a few voxels wide read at
+    the centres alone is over- or under-counted as the voxels fall (the single scattering
+    reads it exactly at every march sample, the paths' source did not): on fog_beam the
+    paths' second order went from 1.186 to 1.155 of Cycles' (split by volume_bounces), the
+    same at 6 points per axis as at 3."""
+    if light.kind != "SPOT":
+        return irradiance(light, pts)
+    return cell_mean_irradiance(light, pts, np.asarray(i2w, np.float64), n)
+
+
 def peak_light(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int, beam: int,
                mean_sigma_s: float, flat, step: float,
                resolution: int = MULTIPLE_RESOLUTION,
@@ -271,7 +287,7 @@ def restricted_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel
         q = np.zeros((len(v), 3))
         if np.any(live):
             pts = pm.to_world(ijk[live].astype(np.float64))
-            e = irradiance(light, pts)
+            e = voxel_irradiance(light, pts, pm.i2w[:3, :3])
             tau = v[live, channel:channel + 3]
             q[live] = first_scattering(pm, rho[live], e, tau,
                                        None if beam is None else v[live, beam:beam + 3],
