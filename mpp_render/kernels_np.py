@@ -16,7 +16,7 @@ from .lightrecord import (KIND_AREA, KIND_POINT, KIND_SPOT, KIND_SUN, L_AREA, L_
 from .media import BRICK, density_from, trilinear
 from .walk import table_lookup
 from .lights import light_sample, path_stretch
-from .phase import G_LIMIT, hg
+from .phase import hg
 
 
 CROSSING_HALVINGS = 6  # bisection steps that bracket a sharp surface inside a segment
@@ -328,14 +328,11 @@ def _refined_tau(fields, w2is, thrs, sig_ts, mi, c, x, w, dist, delta):
     return tau + _fetch(fields[mi], w2is[mi], end, c, 3)
 
 
-MOMENT_G_MAX = G_LIMIT   # the largest anisotropy of a moments' lobe
-
-
 def read_level(level, idx, d):
     """(N,3) a multiple-scattering level read at index points ``idx``: its 3 channels as they
     are, or a level of 12 (the traced paths' moments M0, M1, paths.py "Moments") towards
     v = -d (rays ``d`` (N,3)): per channel 4 pi M0 HG(v . G / |G|; |G|), G = M1 / M0
-    (csrc/march.c read_level)."""
+    (csrc/march.c read_level; phase.hg clamps |G| to phase.G_LIMIT)."""
     q = trilinear(level, idx)
     if q.shape[1] != 12:
         return q[:, :3]
@@ -347,7 +344,7 @@ def read_level(level, idx, d):
         gl = np.sqrt(G[:, 0] * G[:, 0] + G[:, 1] * G[:, 1] + G[:, 2] * G[:, 2])
         cs = np.where(gl > 0.0, -(G[:, 0] * d[:, 0] + G[:, 1] * d[:, 1] + G[:, 2] * d[:, 2])
                       / np.where(gl > 0.0, gl, 1.0), 0.0)
-        out[:, a] = np.where(ok, 4.0 * np.pi * m0 * hg(cs, np.minimum(gl, MOMENT_G_MAX)), 0.0)
+        out[:, a] = np.where(ok, 4.0 * np.pi * m0 * hg(cs, gl), 0.0)
     return out
 
 

@@ -133,7 +133,7 @@ class PathInputs:
     ``outside``: the density beyond the grid; ``reach_centre`` (3,) m, ``reach_radius`` m:
     where a path outside ends; ``triangles``: (T,3,3) each triangle's corner and two edges
     (m); ``albedo``: (T,3) their diffuse albedo; ``moments``: the deposits also hold the
-    phase function's first two spherical-harmonic moments (module docstring,
+    moments of order 0 and 1 (module docstring,
     "Moments"); ``start_source``: None, or float32 (X,Y,Z)
     each voxel's first-scattering source (any unit) that a first scattering's start within
     its lattice point's tent is drawn by, with ``start_peak`` (N,) its largest value under

@@ -200,7 +200,9 @@ static inline double inside_fraction(const Grid *g, const double o[3], const dou
     return (ia ? cross - sa : sb - cross) / len;
 }
 
-/* Henyey-Greenstein p(c) in 1/sr (twin of phase.hg; the caller clamps g): c the cosine
+#define G_LIMIT 0.999   /* |g| is clamped here (phase.G_LIMIT) */
+
+/* Henyey-Greenstein p(c) in 1/sr (twin of phase.hg; the caller clamps g to G_LIMIT): c the cosine
  * between the propagation directions before and after the scattering. */
 static inline double hg_phase(double c, double g) {
     double denom = 1.0 + g * g - 2.0 * g * c;

@@ -37,7 +37,6 @@ static void refined_tau(const Grid *f, int nm, int mi, int c, const double x[3],
 
 /* ---- multiple scattering (twin of kernels_np.multiple_source) ---- */
 #define MAX_LEVELS 16
-#define MOMENT_G_MAX 0.999   /* kernels_np.MOMENT_G_MAX: phase.G_LIMIT */
 typedef struct {
     int first[MAX_MEDIA][MAX_LIGHTS];   /* index of level 0 in `lv`, or -1 */
     int nlev[MAX_MEDIA][MAX_LIGHTS];
@@ -67,7 +66,7 @@ static int read_level(const Grid *lv, const double idx[3], const double d[3], do
         } else {
             double gl = sqrt(G[0] * G[0] + G[1] * G[1] + G[2] * G[2]);
             double cs = gl > 0.0 ? -(G[0] * d[0] + G[1] * d[1] + G[2] * d[2]) / gl : 0.0;
-            p = hg_phase(cs, gl < MOMENT_G_MAX ? gl : MOMENT_G_MAX);
+            p = hg_phase(cs, gl < G_LIMIT ? gl : G_LIMIT);
             G_prev[0] = G[0]; G_prev[1] = G[1]; G_prev[2] = G[2];
             p_prev = p;
         }

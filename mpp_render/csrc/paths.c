@@ -486,7 +486,7 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
         PyErr_SetString(PyExc_ValueError, "trace_paths: sigma_t must be positive and finite");
         goto done;
     }
-    T.g = g > 0.999 ? 0.999 : (g < -0.999 ? -0.999 : g);
+    T.g = g > G_LIMIT ? G_LIMIT : (g < -G_LIMIT ? -G_LIMIT : g);
     T.mu = rate;
     T.roulette = roulette;
     T.stride = stride;

@@ -41,10 +41,10 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     of start gets paths in proportion to its power.  ``pm`` is the medium itself, not
     delta-scaled: the paths carry the forward peak (the split was measured worse,
     docs/history.md).  ``far``: for the world fog, its M beyond the grid (``_far_multiple``),
-    else None.  ``moments`` (with ``moments`` asked for): with surfaces round the medium
-    (``around``), whose gathers look
-    through it along other directions than the camera's, float32 (LX,LY,LZ,12) M's first two
-    spherical-harmonic moments (paths.py, "Moments"), else None.  None where the medium is
+    else None.  Returned ``moments``: where ``moments`` is asked for and surfaces are round the
+    medium (``around``), whose gathers look through it along other directions than the
+    camera's, float32 (LX,LY,LZ,12) M's moments of order 0 and 1 (paths.py, "Moments"), else
+    None.  None where the medium is
     too dense for paths (paths.PATHS_MAX_SPAN): the caller keeps the walk."""
     stride, shape, h = walk_lattice(pm, resolution)
     voxels = np.zeros(pm.grid.shape[:3], np.float32)

@@ -37,7 +37,7 @@ class MultipleField:
     ``traced``: ``levels`` is one level, the traced paths' M (paths.py), read as it is.
     ``far``: for the world fog's traced paths, their M beyond its grid (worldfog.FarField,
     read by worldfog.tail), else None.  ``moments``: for traced paths in a scene with
-    surfaces, None or float32 (LX,LY,LZ,12) M's first two spherical-harmonic moments
+    surfaces, None or float32 (LX,LY,LZ,12) M's moments of order 0 and 1
     (paths.py, "Moments"), which the surfaces' gathers read (march.MarchContext.gathers)."""
 
     stride: int
