@@ -293,6 +293,7 @@ def uniform(keys, step: int, dim: int):
 
 
 DIM_JITTER = 1000       # random dimension of the step jitter; lights use 2*i, 2*i + 1
+DIM_ROULETTE = 1001     # random dimension of the march's Russian roulette
 REFINE_STEPS = 8
 EDGE_EPS = 1e-6        # occupancies within this of 0 or 1 count as outside / inside
 T_MIN = 1e-6
@@ -441,7 +442,7 @@ def light_varies(lights, origins, dirs, s_a, s_b, g):
 
 def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs, thresholds,
           voxels, lights, ambient, step, depth_opacity, depth_miss, multiple=None, emissions=None,
-          bricks=None, adapt_tau=0.0, emission_channels=None):
+          bricks=None, adapt_tau=0.0, emission_channels=None, roulette=0.0):
     """March camera rays through media fields: the numpy twin of ``_kernels.march``.
 
     Rays ``origins + t dirs`` (N,3), t in [t0, t1] (N,) metres; ``axial`` (N,) turns t into
@@ -473,7 +474,10 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
     sharp (mesh) medium is there; not at all when a lit light is sampled with jitter (area,
     sphere lights).
     Each step adds T S (1 - exp(-sigma_t H)) / sigma_t with S the in-scattered radiance at its
-    point, then T *= exp(-sigma_t H).  Returns (single (N,3), T (N,3), depth (N,), multiple
+    point, then T *= exp(-sigma_t H).  ``roulette`` > 0: Russian roulette once the largest
+    channel of T is below it: the ray goes on with probability q = max T / ``roulette``
+    (random dimension DIM_ROULETTE of the step), T divided by q, or ends with T = 0 (the
+    same mean, fewer steps behind nearly opaque media).  Returns (single (N,3), T (N,3), depth (N,), multiple
     (N,3), steps (N,), emission (N,3)) float64, steps being the number of samples each ray
     took."""
     n = len(origins)
@@ -618,7 +622,17 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
                     fr = np.clip(np.log(tb[hit] / thr) / np.log(tb[hit] / np.maximum(ta[hit], 1e-300)), 0, 1)
                 depth[alive[hit]] = (seg[hit] + fr * hl[hit]) * axial[alive[hit]]
             steps[alive] += 1
-            stop = (T_after.max(axis=1) <= T_MIN) | ~(seg + Hs > seg)  # opaque, or t stalls
+            tmax = T_after.max(axis=1)
+            if roulette > 0.0:
+                low = np.flatnonzero(tmax < roulette)
+                if low.size:
+                    q = tmax[low] / roulette
+                    live = uniform(ka[low], k, DIM_ROULETTE) < q
+                    kept, lost = low[live], low[~live]
+                    trans[alive[kept]] = T_after[kept] / q[live][:, None]
+                    trans[alive[lost]] = 0.0
+                    tmax[kept], tmax[lost] = roulette, 0.0
+            stop = (tmax <= T_MIN) | ~(seg + Hs > seg)  # opaque, or t stalls
             going[sel[stop]] = False
         running = running[going]
         K += 1

@@ -169,6 +169,6 @@ def march_rays(ctx: MarchContext, origins, dirs, t0, t1, axial, keys):
         ctx.step, DEPTH_OPACITY, DEPTH_MISS, ctx.multiple,
         em if any(np.any(e > 0) for e in em) else None,
         [m.march_bricks for m in ctx.media] if ctx.tuning.skip_empty else None,
-        adapt_tau=ctx.tuning.adapt_tau, emission_channels=ec))
+        adapt_tau=ctx.tuning.adapt_tau, emission_channels=ec, roulette=ctx.tuning.roulette))
     return {"single": r.single, "T": r.T, "depth": r.depth, "multiple": r.multiple,
             "steps": r.steps, "emission": r.emission}

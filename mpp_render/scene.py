@@ -222,7 +222,10 @@ class Tuning:
     gets before its noise is judged (at least 2: a variance needs two).
     ``gather_moments``: where surfaces gather the media's light, the traced paths also keep
     their moments, which the gathers read towards the surface (paths.py, "Moments");
-    False: the gathers read the camera's M (benchmarks/gathers.py compares the two)."""
+    False: the gathers read the camera's M (benchmarks/gathers.py compares the two).
+    ``roulette``: the march's Russian roulette below this transmittance (a ray goes on with
+    probability T / roulette, T scaled up to keep the mean; 0: every ray marches on until
+    T < 1e-6): unbiased, with fewer steps behind nearly opaque media."""
 
     skip_min_voxels: int = 1 << 20
     spot_cull: bool = True
@@ -237,6 +240,7 @@ class Tuning:
     surface_gathers: int = 4
     adaptive_first: int = 4
     gather_moments: bool = True
+    roulette: float = 0.01
 
 
 # light paths per light and medium at the default quality (docs/method.md, "Traced paths")

@@ -6,6 +6,7 @@
 #define MAX_LIGHTS 64
 #define MAX_CH 256
 #define DIM_JITTER 1000
+#define DIM_ROULETTE 1001   /* kernels_np.DIM_ROULETTE */
 #define REFINE_STEPS 8
 #define EDGE_EPS 1e-6
 #define T_MIN 1e-6
@@ -46,6 +47,9 @@ typedef struct {
     Py_ssize_t nr;
     double lr0, dlr;                    /* log density of table entry 0, spacing */
     int amb;                            /* world-light multiple channel or -1 */
+    int flat[MAX_MEDIA];                /* the table is one level, the same at every density and
+                                         * isotropic (march.FLAT_TABLE): weight x phase is flat_w */
+    double flat_w[MAX_MEDIA][3];
 } MS;
 
 /* A level of 12 channels holds the traced paths' moments (paths.py, "Moments"): M0 (RGB),
@@ -82,12 +86,17 @@ static void multiple_source_c(const MS *ms, const Grid *lv, int m, int nl, const
     for (int r = 0; r < 3; r++)
         idx_w[r] = w2i[4 * r] * x[0] + w2i[4 * r + 1] * x[1] + w2i[4 * r + 2] * x[2] + w2i[4 * r + 3];
     out[0] = out[1] = out[2] = 0.0;
-    double f = (log(rho > 1e-300 ? rho : 1e-300) - ms->lr0) / ms->dlr;
-    double fmax = (double)(ms->nr - 1);
-    f = f < 0.0 ? 0.0 : (f > fmax ? fmax : f);
-    Py_ssize_t i = (Py_ssize_t)floor(f);
-    if (i > ms->nr - 2) i = ms->nr - 2;
-    double t = f - (double)i;
+    const int flat = ms->flat[m];
+    Py_ssize_t i = 0;
+    double t = 0.0;
+    if (!flat) {  /* the table's row by the density's logarithm */
+        double f = (log(rho > 1e-300 ? rho : 1e-300) - ms->lr0) / ms->dlr;
+        double fmax = (double)(ms->nr - 1);
+        f = f < 0.0 ? 0.0 : (f > fmax ? fmax : f);
+        i = (Py_ssize_t)floor(f);
+        if (i > ms->nr - 2) i = ms->nr - 2;
+        t = f - (double)i;
+    }
     const double *tab = ms->tab[m];
     for (int l = 0; l < nl; l++) {
         int f0 = ms->first[m][l], K = ms->nlev[m][l];
@@ -99,6 +108,10 @@ static void multiple_source_c(const MS *ms, const Grid *lv, int m, int nl, const
             double scale = stride * ldexp(1.0, k), idx[3], q[3];
             for (int a = 0; a < 3; a++) idx[a] = idx_w[a] / scale;
             if (read_level(&lv[f0 + k], idx, d, q)) {
+                if (flat) {
+                    for (int a = 0; a < 3; a++) out[a] += q[a] * ms->flat_w[m][a];
+                    continue;
+                }
                 double phase = 0.0, g_prev = 0.0;
                 for (int a = 0; a < 3; a++) {  /* by channel; one phase when they agree */
                     double gk = e0[3 + a] * (1.0 - t) + e1[3 + a] * t;
@@ -154,6 +167,7 @@ typedef struct {
     int chan[MAX_LIGHTS], beam[MAX_LIGHTS], indirect[MAX_LIGHTS], jitter[MAX_LIGHTS];
     int ambient;
     double step, depth_opacity, depth_miss, adapt_tau, thr_op;
+    double roulette;                       /* Russian roulette below this transmittance; 0: off */
     int use_ms;                            /* multiple scattering from the pyramid levels lv */
     MS ms;
     Grid *lv;
@@ -335,8 +349,14 @@ static int parse_multiple(March *c, PyObject *pms) {
             return -1;
         }
         nr = st[1];
-        ms->tab[m] = (const double *)c->btabs[m].view.buf;
+        const double *tab = ms->tab[m] = (const double *)c->btabs[m].view.buf;
         ms->tabk[m] = (int)st[0];
+        int flat = st[0] == 1;
+        for (Py_ssize_t r = 1; flat && r < nr; r++)
+            for (int a = 0; a < 6; a++) flat &= tab[6 * r + a] == tab[a];
+        for (int a = 3; flat && a < 6; a++) flat &= tab[a] == 0.0;
+        ms->flat[m] = flat;
+        for (int a = 0; a < 3; a++) ms->flat_w[m][a] = flat ? tab[a] * hg_phase(0.0, 0.0) : 0.0;
     }
     ms->nr = nr;
     ms->lr0 = lr0;
@@ -373,11 +393,16 @@ static int march_parse(March *c, PyObject *args) {
     PyObject *pms = Py_None, *pem = Py_None, *pbk = Py_None, *pec = Py_None;
     int brick = 4;
     c->adapt_tau = 0.0;
-    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOiddd|OOOidO", &po, &pd, &pt0, &pt1, &pax, &pk, &fields,
+    c->roulette = 0.0;
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOiddd|OOOidOd", &po, &pd, &pt0, &pt1, &pax, &pk, &fields,
                           &w2is, &sss, &sts, &gsl, &thrs, &vox, &plights, &c->ambient, &c->step,
                           &c->depth_opacity, &c->depth_miss, &pms, &pem, &pbk, &brick, &c->adapt_tau,
-                          &pec))
+                          &pec, &c->roulette))
         return -1;
+    if (!(c->roulette >= 0.0 && c->roulette < 1.0)) {
+        PyErr_SetString(PyExc_ValueError, "roulette must be in [0, 1)");
+        return -1;
+    }
     if (!isfinite(c->adapt_tau)) {
         PyErr_SetString(PyExc_ValueError, "adapt_tau must be finite");
         return -1;
@@ -613,6 +638,16 @@ static long march_ray(const March *c, Py_ssize_t r, RaySums *sums) {
             integrate_step(c, &s, seg, hl, c->AX[r], sums);
             double tmax = sums->T[0] > sums->T[1] ? sums->T[0] : sums->T[1];
             tmax = tmax > sums->T[2] ? tmax : sums->T[2];
+            if (tmax < c->roulette) {  /* Russian roulette: go on with probability q, T / q */
+                double q = tmax / c->roulette;
+                if (uniform01(key, k, DIM_ROULETTE) < q) {
+                    for (int a = 0; a < 3; a++) sums->T[a] /= q;
+                    tmax = c->roulette;
+                } else {
+                    for (int a = 0; a < 3; a++) sums->T[a] = 0.0;
+                    tmax = 0.0;
+                }
+            }
             /* opaque enough, or a step that no longer advances t: stop */
             if (!(tmax > T_MIN) || !(seg + H > seg)) { done = 1; break; }
         }
@@ -624,7 +659,7 @@ static long march_ray(const March *c, Py_ssize_t r, RaySums *sums) {
 const char march_doc[] =
     "march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs, thresholds,\n"
     "      voxels, lights, ambient, step, depth_opacity, depth_miss[, multiple, emissions, bricks, brick,\n"
-    "      adapt_tau, emission_channels])\n"
+    "      adapt_tau, emission_channels, roulette])\n"
     "  -> (single, T, depth, multiple, steps, emission) as bytes of float64\n"
     "Twin of kernels_np.march.";
 

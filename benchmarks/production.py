@@ -1,0 +1,195 @@
+"""Production size: our default render (F12) at 1920x1080 against Cycles CPU at equal error,
+every public scene, all in one run on one machine.
+
+    .venv/bin/python benchmarks/production.py [--scenes a,b] [--size 1920x1080]
+        [--cycles-spp 1,4,16,64] [--out docs] [--rows OUT/production_rows.json]
+
+For each scene, in this order and in the same run:
+
+1. ours at the suite's resolution with the defaults an artist gets: its rel_rmse_4 against
+   ``ref_s*.exr`` (metrics.md) is our error;
+2. Cycles at the suite's resolution at ``--cycles-spp`` (the reference settings, no
+   adaptive sampling): its error curve;
+3. ours at ``--size`` with the defaults: seconds of the render call and of its stages, the
+   samples per pixel adaptive sampling took, march samples per second per core;
+4. Cycles at ``--size`` with 1 and 2 samples: seconds per sample (the difference) and its
+   fixed cost (the rest of the 1-sample render).
+
+Cycles' seconds at ``--size`` to reach our error = fixed cost + n x seconds per sample, n
+interpolated log-log on the curve of step 2 (our error and the curve are measured at the
+suite's resolution: the images at ``--size`` have no reference).  Where the curve does not
+reach our error within its last point, n is extrapolated as Monte Carlo noise falls,
+error ~ n^-1/2, from the last point, and the row says "extrapolated".  The equal-error
+speedup is that time over ours at ``--size``.  Writes ``OUT/production.md`` and
+``OUT/production.json``; each scene's row is also appended to ``--rows`` as it completes.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+os.environ["MPP_CACHE_MB"] = "0"   # every render cold: the precompute's seconds count
+sys.path.insert(0, REPO)
+SCENES = os.environ.get("MPP_SCENES") or os.path.join(os.path.dirname(REPO), "shared", "scenes")
+
+
+def samples_to_reach(err: float, curve) -> tuple:
+    """(samples per pixel at which Cycles' ``curve`` [(spp, err)] reaches ``err``,
+    extrapolated?): log-log interpolation between points, error ~ spp^-1/2 beyond the last."""
+    pts = sorted((s, e) for s, e in curve if e and e > 0)
+    if not pts or not err or err <= 0:
+        return None, False
+    if err >= pts[0][1]:
+        return float(pts[0][0]), False
+    for (s0, e0), (s1, e1) in zip(pts, pts[1:]):
+        if e1 <= err <= e0:
+            if e0 == e1:
+                return float(s0), False
+            f = (np.log(err) - np.log(e0)) / (np.log(e1) - np.log(e0))
+            return float(np.exp(np.log(s0) + f * (np.log(s1) - np.log(s0)))), False
+    s_last, e_last = pts[-1]
+    return float(s_last * (e_last / err) ** 2), True
+
+
+def open_scene(name):
+    import bpy
+    bpy.ops.wm.open_mainfile(filepath=os.path.join(SCENES, name, "scene.blend"))
+    return bpy.context.scene
+
+
+def measure(name, size, cycles_spp, tmp):
+    from mpp_render import metrics
+    from mpp_render.blender import batch
+    from mpp_render.exr import read_passes
+
+    refs = [read_passes(p, names=("Combined",))["Combined"]
+            for p in metrics.reference_paths(os.path.join(SCENES, name), False)]
+    row = {"scene": name}
+    sc = open_scene(name)
+    sc.render.engine = 'MPP_RENDER'              # the file's own MPP settings: F12
+    rec = batch.render_current(sc, os.path.join(tmp, f"{name}_ours.exr"))
+    m = metrics.compare(rec["_passes"]["Combined"], refs)
+    row["ours_small"] = {"seconds": rec["render"], "rel_rmse_4": m["rel_rmse_4"],
+                         "floor_4": m["floor_4"], "bias": m["bias"]}
+    curve = []
+    for spp in cycles_spp:
+        sc = open_scene(name)
+        batch.set_cycles_reference(sc, spp, seed=2000 + spp)
+        rec = batch.render_current(sc, os.path.join(tmp, f"{name}_c{spp}.exr"))
+        m = metrics.compare(rec["_passes"]["Combined"], refs)
+        curve.append({"spp": spp, "seconds": rec["render"], "rel_rmse_4": m["rel_rmse_4"]})
+    row["cycles_small"] = curve
+    w, h = size
+    sc = open_scene(name)
+    sc.render.engine = 'MPP_RENDER'
+    sc.render.resolution_x, sc.render.resolution_y, sc.render.resolution_percentage = w, h, 100
+    rec = batch.render_current(sc, os.path.join(tmp, f"{name}_ours_hd.exr"))
+    out = rec["_frame"].output
+    threads = max(1, int(out.stats.get("threads", 1)))
+    march_s = rec["march"] or 0.0
+    row["ours_hd"] = {"seconds": rec["render"], "translate": rec["translate"],
+                      "precompute": rec["precompute"], "march": march_s,
+                      "pixel_samples": out.stats.get("pixel_samples"),
+                      "march_samples": out.stats.get("march_samples", 0.0),
+                      "samples_per_s_per_core": out.stats.get("march_samples", 0.0)
+                      / max(march_s, 1e-9) / threads}
+    hd = {}
+    for spp in (1, 2):
+        sc = open_scene(name)
+        batch.set_cycles_reference(sc, spp, seed=3000 + spp)
+        sc.render.resolution_x, sc.render.resolution_y = w, h
+        sc.render.resolution_percentage = 100
+        rec = batch.render_current(sc, os.path.join(tmp, f"{name}_chd{spp}.exr"))
+        hd[spp] = rec["render"]
+    per = max(hd[2] - hd[1], 1e-3)
+    row["cycles_hd"] = {"seconds_1spp": hd[1], "seconds_2spp": hd[2], "per_sample": per,
+                        "fixed": max(hd[1] - per, 0.0)}
+    n, extrap = samples_to_reach(row["ours_small"]["rel_rmse_4"],
+                                 [(c["spp"], c["rel_rmse_4"]) for c in curve])
+    row["cycles_spp_needed"], row["extrapolated"] = n, extrap
+    if n is not None:
+        t = row["cycles_hd"]["fixed"] + n * per
+        row["cycles_hd_seconds_at_our_error"] = t
+        row["speedup"] = t / row["ours_hd"]["seconds"]
+    print(json.dumps(row), flush=True)
+    return row
+
+
+def write_report(rows, out, size):
+    w, h = size
+    sp = [r["speedup"] for r in rows if r.get("speedup")]
+    L = ["# Production size: our defaults against Cycles at equal error", "",
+         f"Generated by `benchmarks/production.py` on {time.strftime('%Y-%m-%d')}, "
+         f"{os.cpu_count()} cores, every number from one run (ours and Cycles side by side, one "
+         "scene after the other; the machine is shared, so single timings carry some tens of "
+         "per cent). Ours: the scene's own settings, as F12 renders them (Final quality, "
+         f"adaptive sampling), at {w}x{h}. Cycles: the reference settings (CPU, no adaptive "
+         f"sampling, no denoising), its seconds per sample at {w}x{h} from 1- and 2-sample "
+         "renders, the samples it needs to reach our error from its error curve at the "
+         "suite's resolution in the same run (our error measured there too: the large images "
+         "have no reference). \"extrapolated\": Cycles did not reach our error within the "
+         "curve's last point, and error ~ samples^-1/2 took it further.", ""]
+    if sp:
+        L += [f"Equal-error speedup over the {len(sp)} scenes: median {np.median(sp):.1f}x, "
+              f"worst {min(sp):.1f}x ({min(rows, key=lambda r: r.get('speedup') or 1e9)['scene']}), "
+              f"best {max(sp):.1f}x.", ""]
+    L += [f"| scene | our error (rel_rmse_4) | ours at {w}x{h}: s (precompute / march) | "
+          "samples per pixel | march M samples/s/core | Cycles s per sample | Cycles fixed s | "
+          "Cycles samples to our error | Cycles s to our error | speedup |",
+          "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        o, c = r["ours_hd"], r["cycles_hd"]
+        n = r.get("cycles_spp_needed")
+        speed = f"{r['speedup']:.1f}x" if r.get("speedup") else "–"
+        L.append(f"| {r['scene']} | {r['ours_small']['rel_rmse_4']:.4f} | {o['seconds']:.1f} "
+                 f"({o['precompute'] or 0:.1f} / {o['march']:.1f}) | {o['pixel_samples'] or 0:.2f} | "
+                 f"{o['samples_per_s_per_core'] / 1e6:.1f} | {c['per_sample']:.2f} | "
+                 f"{c['fixed']:.1f} | {'–' if n is None else f'{n:.0f}'}"
+                 f"{' (extrapolated)' if r.get('extrapolated') else ''} | "
+                 f"{r.get('cycles_hd_seconds_at_our_error', 0):.0f} | "
+                 f"{speed} |")
+    with open(os.path.join(out, "production.md"), "w") as f:
+        f.write("\n".join(L) + "\n")
+    with open(os.path.join(out, "production.json"), "w") as f:
+        json.dump(rows, f, indent=1)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--scenes", default=None, help="comma-separated scene names (default: all)")
+    ap.add_argument("--size", default="1920x1080")
+    ap.add_argument("--cycles-spp", default="1,4,16,64")
+    ap.add_argument("--out", default=os.path.join(REPO, "docs"))
+    ap.add_argument("--rows", default=None, help="JSON lines file each scene's row is appended to")
+    ap.add_argument("--report-only", action="store_true", help="write the report from --rows")
+    args = ap.parse_args(argv)
+    size = tuple(int(v) for v in args.size.lower().split("x"))
+    if args.report_only:
+        with open(args.rows) as f:
+            rows = [json.loads(line) for line in f if line.strip()]
+        write_report(rows, args.out, size)
+        return 0
+    from mpp_render.metrics import scene_names
+    from mpp_render.blender import batch
+    batch.register()
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in scene_names(SCENES, args.scenes):
+            rows.append(measure(name, size, [int(s) for s in args.cycles_spp.split(",")], tmp))
+            if args.rows:
+                with open(args.rows, "a") as f:
+                    f.write(json.dumps(rows[-1]) + "\n")
+    os.makedirs(args.out, exist_ok=True)
+    write_report(rows, args.out, size)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
