@@ -389,11 +389,12 @@ def ray_to_index(w2i, origins, dirs):
     return lo, lv
 
 
-def segment_majorant(shape, bricks, lo, lv, s_a, s_b, brick=BRICK):
+def segment_majorant(shape, bricks, lo, lv, s_a, s_b, brick=BRICK, least=False):
     """The largest density bound (media.brick_bounds [..., 1], bricks of ``brick`` cells)
     among the bricks touched by the bounding box of each segment [s_a, s_b] of the lines
     lo + s lv (index coordinates of a grid of ``shape``); 0 for segments wholly outside the
-    grid, inf where the coordinates are not finite."""
+    grid, inf where the coordinates are not finite.  ``least``: the least bound ([..., 0])
+    instead, 0 where the segment leaves the grid or its coordinates are not finite."""
     nb = np.array(bricks.shape[:3])
     p0, p1 = lo + s_a[:, None] * lv, lo + s_b[:, None] * lv
     mn, mx = np.minimum(p0, p1), np.maximum(p0, p1)
@@ -403,7 +404,7 @@ def segment_majorant(shape, bricks, lo, lv, s_a, s_b, brick=BRICK):
     out_of = np.any((mx < 0.0) | (mn > dims), axis=1)
     blo = np.clip(np.floor(np.clip(mn / brick, -1.0, nb)), 0, nb - 1).astype(np.int64)
     bhi = np.clip(np.floor(np.clip(mx / brick, -1.0, nb)), 0, nb - 1).astype(np.int64)
-    best = np.zeros(len(lo), np.float32)
+    best = np.full(len(lo), np.inf if least else 0.0, np.float32)
     span = bhi - blo
     for di in range(int(span[:, 0].max(initial=0)) + 1):
         for dj in range(int(span[:, 1].max(initial=0)) + 1):
@@ -411,7 +412,11 @@ def segment_majorant(shape, bricks, lo, lv, s_a, s_b, brick=BRICK):
                 i = np.minimum(blo[:, 0] + di, bhi[:, 0])
                 j = np.minimum(blo[:, 1] + dj, bhi[:, 1])
                 k = np.minimum(blo[:, 2] + dk, bhi[:, 2])
-                best = np.maximum(best, bricks[i, j, k, 1])
+                best = np.minimum(best, bricks[i, j, k, 0]) if least else \
+                    np.maximum(best, bricks[i, j, k, 1])
+    if least:
+        partly = np.any((mn < 0.0) | (mx > dims), axis=1)
+        return np.where(bad | out_of | partly, 0.0, best.astype(np.float64))
     return np.where(bad, np.inf, np.where(out_of, 0.0, best.astype(np.float64)))
 
 
@@ -471,7 +476,8 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
     (``segment_majorant``) and, with ``adapt_tau`` > 0, the fewest steps (at least 1) that keep
     the majorant's optical depth per step within ``adapt_tau`` (thin medium: longer steps),
     unless a light's scattered light changes along the super-step (``light_varies``) or a
-    sharp (mesh) medium is there; not at all when a lit light is sampled with jitter (area,
+    sharp (mesh) medium's surface may be on it (the bricks' least bound below 1: not wholly
+    inside); not at all when a lit light is sampled with jitter (area,
     sphere lights).
     Each step adds T S (1 - exp(-sigma_t H)) / sigma_t with S the in-scattered radiance at its
     point, then T *= exp(-sigma_t H).  ``roulette`` > 0: Russian roulette once the largest
@@ -516,7 +522,10 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
                 lo, lv = lines[mi][0][running], lines[mi][1][running]
                 mm = segment_majorant(fields[mi].shape[:3], bricks[mi], lo, lv, s_lo, s_hi)
                 maj += mm * sig_max[mi]
-                sharp |= (thresholds[mi] >= 0.0) & (mm > 0.0)
+                if thresholds[mi] >= 0.0:   # where it may cross the mesh's surface
+                    inside = segment_majorant(fields[mi].shape[:3], bricks[mi], lo, lv, s_lo,
+                                              s_hi, least=True) >= 1.0
+                    sharp |= (mm > 0.0) & ~inside
             n_sub = np.where(maj > 0.0, n_sub, 0)
             if adapt_tau > 0.0:
                 want = np.ceil(maj * (s_hi - s_lo) / adapt_tau)

@@ -485,11 +485,13 @@ static int super_step_count(const March *c, const double o[3], const double d[3]
     int n_sub = SUPER;
     if (!c->skip) return n_sub;
     double maj = 0.0;
-    int sharp = 0;  /* a mesh volume's surface must keep the steps short */
+    int sharp = 0;  /* a mesh volume's surface must keep the steps short (not its inside) */
     for (int m = 0; m < c->ng; m++) {
         double mm = segment_majorant(&c->g[m], &c->bks[m], lo[m], lv[m], s_lo, s_hi);
         maj += mm * c->sig_max[m];
-        sharp |= c->g[m].thr >= 0.0 && mm > 0.0;
+        /* where it may cross the mesh's surface (not wholly inside) */
+        sharp |= c->g[m].thr >= 0.0 && mm > 0.0 &&
+                 !(segment_bound(&c->g[m], &c->bks[m], lo[m], lv[m], s_lo, s_hi, 0) >= 1.0);
     }
     if (!(maj > 0.0)) return 0;  /* wholly empty: nothing to add */
     if (c->adapt && !sharp) {
