@@ -133,14 +133,19 @@ class MarchContext:
         return np.concatenate([m, np.zeros(m.shape[:3] + (9,), m.dtype)], axis=-1)
 
     def for_gathers(self) -> "MarchContext":
-        """This context for the surfaces' gathers (``gathers``), made once; itself where no
-        medium's traced paths have moments."""
-        if self.gathers or not any(m is not None and m.moments is not None
-                                   for mfs in (self.multiple_fields or []) for m in mfs):
+        """This context for the surfaces' gathers, made once: marching with steps
+        ``Tuning.gather_step`` times as long, and reading the traced paths' moments where a
+        medium has them (``gathers``); itself when neither changes anything."""
+        if self.gathers:
             return self
         made = self.__dict__.get("_for_gathers")
         if made is None:
-            made = self.__dict__["_for_gathers"] = dataclasses.replace(self, gathers=True)
+            moments = any(m is not None and m.moments is not None
+                          for mfs in (self.multiple_fields or []) for m in mfs)
+            step = self.step * max(1.0, float(self.tuning.gather_step))
+            made = self if not moments and step == self.step else \
+                dataclasses.replace(self, gathers=moments, step=step)
+            self.__dict__["_for_gathers"] = made
         return made
 
 

@@ -241,6 +241,7 @@ class Tuning:
     adaptive_first: int = 4
     gather_moments: bool = True
     roulette: float = 0.01
+    gather_step: float = 4.0
 
 
 # light paths per light and medium at the default quality (docs/method.md, "Traced paths")

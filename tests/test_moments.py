@@ -16,7 +16,7 @@ from mpp_render.march import MarchContext, pack_lights
 from mpp_render.media import prepare
 from mpp_render.paths import MOMENT_CHANNELS, trace_paths_np
 from mpp_render.precompute import precompute
-from mpp_render.scene import Camera, Light, Medium, Surface, World
+from mpp_render.scene import Tuning, Camera, Light, Medium, Surface, World
 from test_paths import cube_case, half_empty_case
 
 needs_c = pytest.mark.skipif(kernels._c is None, reason="compiled kernels not built")
@@ -112,11 +112,18 @@ def test_moments_are_made_only_where_surfaces_gather():
         msf = pre.multiple[0][0]
         assert msf.traced
         ctx = MarchContext(media, pre.fields, pre.layout, lights, 0.05, pre.multiple, camera=cam)
+        same_step = MarchContext(media, pre.fields, pre.layout, lights, 0.05, pre.multiple,
+                                 camera=cam, tuning=Tuning(gather_step=1.0))
+        gathers = ctx.for_gathers()
+        assert gathers is ctx.for_gathers()                       # made once
+        assert gathers.step == 0.05 * ctx.tuning.gather_step     # the gathers' longer steps
         if surfaces is None:
-            assert msf.moments is None and ctx.for_gathers() is ctx
+            assert msf.moments is None and not gathers.gathers
+            assert same_step.for_gathers() is same_step          # nothing to change
         else:
             assert msf.moments.shape == msf.levels[0].shape[:3] + (12,)
-            assert ctx.for_gathers() is not ctx and ctx.for_gathers() is ctx.for_gathers()
+            assert gathers.gathers and same_step.for_gathers().gathers
+            assert same_step.for_gathers().step == 0.05
 
 
 @needs_c
