@@ -35,7 +35,6 @@ import time
 import numpy as np
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-os.environ["MPP_CACHE_MB"] = "0"   # every render cold: the precompute's seconds count
 sys.path.insert(0, REPO)
 SCENES = os.environ.get("MPP_SCENES") or os.path.join(os.path.dirname(REPO), "shared", "scenes")
 
@@ -176,6 +175,7 @@ def main(argv=None):
             rows = [json.loads(line) for line in f if line.strip()]
         write_report(rows, args.out, size)
         return 0
+    os.environ["MPP_CACHE_MB"] = "0"   # every render cold: the precompute's seconds count
     from mpp_render.metrics import scene_names
     from mpp_render.blender import batch
     batch.register()
