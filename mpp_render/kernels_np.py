@@ -483,9 +483,9 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
     point, then T *= exp(-sigma_t H).  ``roulette`` > 0: Russian roulette once the largest
     channel of T is below it: the ray goes on with probability q = max T / ``roulette``
     (random dimension DIM_ROULETTE of the step), T divided by q, or ends with T = 0 (the
-    same mean, fewer steps behind nearly opaque media).  Returns (single (N,3), T (N,3), depth (N,), multiple
-    (N,3), steps (N,), emission (N,3)) float64, steps being the number of samples each ray
-    took."""
+    same mean, fewer steps behind nearly opaque media).  Returns (single (N,3), T (N,3),
+    depth (N,), multiple (N,3), steps (N,), emission (N,3)) float64, steps being the number
+    of samples each ray took."""
     n = len(origins)
     single = np.zeros((n, 3))
     multi = np.zeros((n, 3))
@@ -522,7 +522,7 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
                 lo, lv = lines[mi][0][running], lines[mi][1][running]
                 mm = segment_majorant(fields[mi].shape[:3], bricks[mi], lo, lv, s_lo, s_hi)
                 maj += mm * sig_max[mi]
-                if thresholds[mi] >= 0.0:   # where it may cross the mesh's surface
+                if adapt_tau > 0.0 and thresholds[mi] >= 0.0:  # may it cross the mesh's surface?
                     inside = segment_majorant(fields[mi].shape[:3], bricks[mi], lo, lv, s_lo,
                                               s_hi, least=True) >= 1.0
                     sharp |= (mm > 0.0) & ~inside

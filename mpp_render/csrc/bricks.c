@@ -119,33 +119,37 @@ int walk_at(Walk *w, double s, double *end, double *value) {
  * lies wholly outside the grid).  Twin of kernels_np.segment_majorant. */
 double segment_majorant(const Grid *g, const Bricks *b, const double o[3], const double v[3],
                         double s_a, double s_b) {
-    return segment_bound(g, b, o, v, s_a, s_b, 1);
+    return segment_bounds(g, b, o, v, s_a, s_b, NULL);
 }
 
-double segment_bound(const Grid *g, const Bricks *b, const double o[3], const double v[3],
-                     double s_a, double s_b, int largest) {
+double segment_bounds(const Grid *g, const Bricks *b, const double o[3], const double v[3],
+                      double s_a, double s_b, double *least) {
     double dims[3] = {(double)(g->nx - 1), (double)(g->ny - 1), (double)(g->nz - 1)};
     Py_ssize_t lo[3], hi[3];
     double mn[3], mx[3];
+    int partly = 0;  /* the segment leaves the grid: its least density is 0 */
+    if (least) *least = 0.0;
     for (int a = 0; a < 3; a++) {
         double p0 = o[a] + s_a * v[a], p1 = o[a] + s_b * v[a];
         mn[a] = p0 < p1 ? p0 : p1;
         mx[a] = p0 < p1 ? p1 : p0;
-        if (isnan(mn[a]) || isnan(mx[a])) return largest ? INFINITY : 0.0;
+        if (isnan(mn[a]) || isnan(mx[a])) return INFINITY;
     }
     for (int a = 0; a < 3; a++) {
         if (mx[a] < 0.0 || mn[a] > dims[a]) return 0.0;  /* wholly outside the grid */
-        if (!largest && (mn[a] < 0.0 || mx[a] > dims[a])) return 0.0;  /* partly outside */
+        partly |= mn[a] < 0.0 || mx[a] > dims[a];
         lo[a] = floor_clamp(mn[a] / b->size, 0, b->n[a] - 1);
         hi[a] = floor_clamp(mx[a] / b->size, 0, b->n[a] - 1);
     }
-    float best = largest ? 0.0f : INFINITY;
+    float best = 0.0f, worst = INFINITY;
     for (Py_ssize_t i = lo[0]; i <= hi[0]; i++)
         for (Py_ssize_t j = lo[1]; j <= hi[1]; j++)
             for (Py_ssize_t k = lo[2]; k <= hi[2]; k++) {
-                float e = b->data[((i * b->n[1] + j) * b->n[2] + k) * 2 + (largest ? 1 : 0)];
-                if (largest ? e > best : e < best) best = e;
+                const float *e = b->data + ((i * b->n[1] + j) * b->n[2] + k) * 2;
+                if (e[1] > best) best = e[1];
+                if (e[0] < worst) worst = e[0];
             }
+    if (least && !partly) *least = (double)worst;
     return (double)best;
 }
 

@@ -49,11 +49,11 @@ int walk_at(Walk *w, double s, double *end, double *value);
  * kernels_np.segment_majorant. */
 double segment_majorant(const Grid *g, const Bricks *b, const double o[3], const double v[3],
                         double s_a, double s_b);
-/* The largest (``largest`` 1: segment_majorant) or least (0) density bound on the segment;
- * the least is 0 where the segment leaves the grid or its coordinates are not finite.  Twin
- * of kernels_np.segment_majorant (least=). */
-double segment_bound(const Grid *g, const Bricks *b, const double o[3], const double v[3],
-                     double s_a, double s_b, int largest);
+/* segment_majorant, and with `least` non-NULL the least density bound on the segment there
+ * (0 where the segment leaves the grid or its coordinates are not finite), from the same walk
+ * over the bricks.  Twin of kernels_np.segment_majorant (least=). */
+double segment_bounds(const Grid *g, const Bricks *b, const double o[3], const double v[3],
+                      double s_a, double s_b, double *least);
 /* Where the ray p + s d leaves the last of the media's padded boxes it crosses, capped at
  * t_max; 0 when it meets none ahead.  Twin of kernels_np.media_exit. */
 double media_exit(const Grid *g, int ng, const double p[3], const double d[3], double t_max);

@@ -487,11 +487,14 @@ static int super_step_count(const March *c, const double o[3], const double d[3]
     double maj = 0.0;
     int sharp = 0;  /* a mesh volume's surface must keep the steps short (not its inside) */
     for (int m = 0; m < c->ng; m++) {
-        double mm = segment_majorant(&c->g[m], &c->bks[m], lo[m], lv[m], s_lo, s_hi);
+        /* a mesh's least bound, where its surface may lie on the super-step (below 1), only
+         * where longer steps are possible */
+        int mesh = c->adapt && !sharp && c->g[m].thr >= 0.0;
+        double least = 1.0;
+        double mm = segment_bounds(&c->g[m], &c->bks[m], lo[m], lv[m], s_lo, s_hi,
+                                   mesh ? &least : NULL);
         maj += mm * c->sig_max[m];
-        /* where it may cross the mesh's surface (not wholly inside) */
-        sharp |= c->g[m].thr >= 0.0 && mm > 0.0 &&
-                 !(segment_bound(&c->g[m], &c->bks[m], lo[m], lv[m], s_lo, s_hi, 0) >= 1.0);
+        sharp |= mesh && mm > 0.0 && !(least >= 1.0);
     }
     if (!(maj > 0.0)) return 0;  /* wholly empty: nothing to add */
     if (c->adapt && !sharp) {
