@@ -215,7 +215,9 @@ class MarchInputs:
     optional parts: ``multiple``, per-medium RGB ``emissions``, ``bricks``
     (media.brick_bounds), ``adapt_tau`` (> 0: longer steps in thin media) and
     ``emission_channels`` (per medium the first channel of its emission grid, or -1) and
-    ``roulette`` (> 0: Russian roulette below that transmittance)."""
+    ``roulette`` (> 0: Russian roulette below that transmittance) and ``disc_reach`` (per
+    light, the distance in metres within which a point or spot light's disc point gets its
+    optical depth corrected by a march, kernels_np.disc_correction; None or 0: off)."""
     origins: np.ndarray
     dirs: np.ndarray
     t0: np.ndarray
@@ -240,6 +242,7 @@ class MarchInputs:
     adapt_tau: float = 0.0
     emission_channels: Optional[list] = None
     roulette: float = 0.0
+    disc_reach: Optional[list] = None
 
     def replace(self, **changes) -> "MarchInputs":
         return dataclasses.replace(self, **changes)
@@ -264,7 +267,7 @@ def march(inputs: MarchInputs, *, backend=None) -> MarchResult:
             a.origins, a.dirs, a.t0, a.t1, a.axial, a.keys, a.fields, a.w2is, a.sigma_ss,
             a.sigma_ts, a.gs, a.thresholds, a.voxels, a.lights, a.ambient, a.step,
             a.depth_opacity, a.depth_miss, a.multiple, a.emissions, a.bricks, a.adapt_tau,
-            a.emission_channels, a.roulette))
+            a.emission_channels, a.roulette, a.disc_reach))
     n = len(a.origins)
     nl = len(np.asarray(a.lights).reshape(-1, LIGHT_FIELDS))
     packed = None
@@ -292,7 +295,8 @@ def march(inputs: MarchInputs, *, backend=None) -> MarchResult:
         None if a.emissions is None else [_f64(x).reshape(3) for x in a.emissions],
         None if a.bricks is None else [_f32(b) for b in a.bricks], BRICK, float(a.adapt_tau),
         None if a.emission_channels is None else [int(c) for c in a.emission_channels],
-        float(a.roulette))
+        float(a.roulette),
+        None if a.disc_reach is None else [float(x) for x in a.disc_reach])
     return MarchResult(np.frombuffer(s, np.float64).reshape(n, 3),
                        np.frombuffer(t, np.float64).reshape(n, 3),
                        np.frombuffer(d, np.float64).reshape(n),

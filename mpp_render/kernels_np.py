@@ -329,6 +329,31 @@ def _refined_tau(fields, w2is, thrs, sig_ts, mi, c, x, w, dist, delta):
     return tau + _fetch(fields[mi], w2is[mi], end, c, 3)
 
 
+DISC_STEPS_MAX = 4096   # disc_correction's steps at most (the C twin's)
+
+
+def disc_correction(fields, w2is, thrs, sig_ts, x, wc, dc, wd, ds, stretch, step):
+    """(N,3) optical depth over every medium from points ``x`` (N,3, m) to a lamp's disc
+    point (unit directions ``wd``, distances ``ds``) minus ``stretch`` (N,) times that to the
+    lamp's centre (``wc``, ``dc``): what the field's stretched depth to the centre
+    (lights.path_stretch) misses where the medium is not homogeneous across the disc.  Both
+    paths take n = ceil(dc / ``step``) steps (at least 1, at most DISC_STEPS_MAX), each read
+    at its midpoint (trilinear density).  Twin of csrc/march.c disc_correction."""
+    n = np.clip(np.ceil(dc / step), 1, DISC_STEPS_MAX).astype(np.int64)
+    hc, hd = dc / n, ds / n
+    tc = np.zeros((len(x), 3))
+    td = np.zeros((len(x), 3))
+    for k in range(int(n.max()) if len(x) else 0):
+        sel = np.flatnonzero(n > k)
+        pc = x[sel] + wc[sel] * ((k + 0.5) * hc[sel])[:, None]
+        pd = x[sel] + wd[sel] * ((k + 0.5) * hd[sel])[:, None]
+        for f, w2i, thr, st in zip(fields, w2is, thrs, sig_ts):
+            st = np.asarray(st, np.float64)
+            tc[sel] += density_from(_fetch(f, w2i, pc, 0, 1)[:, 0], thr)[:, None] * st[None, :]
+            td[sel] += density_from(_fetch(f, w2i, pd, 0, 1)[:, 0], thr)[:, None] * st[None, :]
+    return td * hd[:, None] - stretch[:, None] * tc * hc[:, None]
+
+
 def read_level(level, idx, d):
     """(N,3) a multiple-scattering level read at index points ``idx``: its 3 channels as they
     are, or a level of 12 (the traced paths' moments M0, M1, paths.py "Moments") towards
@@ -447,7 +472,7 @@ def light_varies(lights, origins, dirs, s_a, s_b, g):
 
 def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs, thresholds,
           voxels, lights, ambient, step, depth_opacity, depth_miss, multiple=None, emissions=None,
-          bricks=None, adapt_tau=0.0, emission_channels=None, roulette=0.0):
+          bricks=None, adapt_tau=0.0, emission_channels=None, roulette=0.0, disc_reach=None):
     """March camera rays through media fields: the numpy twin of ``_kernels.march``.
 
     Rays ``origins + t dirs`` (N,3), t in [t0, t1] (N,) metres; ``axial`` (N,) turns t into
@@ -483,7 +508,9 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
     point, then T *= exp(-sigma_t H).  ``roulette`` > 0: Russian roulette once the largest
     channel of T is below it: the ray goes on with probability q = max T / ``roulette``
     (random dimension DIM_ROULETTE of the step), T divided by q, or ends with T = 0 (the
-    same mean, fewer steps behind nearly opaque media).  Returns (single (N,3), T (N,3),
+    same mean, fewer steps behind nearly opaque media).  ``disc_reach``: None or per light
+    the distance (m) within which a point or spot light's sampled disc point gets the
+    optical depth ``disc_correction`` adds to the stretched centre's.  Returns (single (N,3), T (N,3),
     depth (N,), multiple (N,3), steps (N,), emission (N,3)) float64, steps being the number
     of samples each ray took."""
     n = len(origins)
@@ -587,7 +614,17 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
                     off = ds != dc  # light from an emitter point off the centre
                     if off.any():
                         tau = tau.copy() if tau is raw else tau
-                        tau[off] = tau[off] * path_stretch(ds[off], dc[off], voxels[mi])[:, None]
+                        st = path_stretch(ds[off], dc[off], voxels[mi])
+                        tau[off] = tau[off] * st[:, None]
+                        reach = 0.0 if disc_reach is None else float(disc_reach[li])
+                        if reach > 0.0 and int(rec[L_KIND]) in (KIND_POINT, KIND_SPOT):
+                            near = np.flatnonzero(dc[off] < reach)
+                            if near.size:
+                                on = np.flatnonzero(off)[near]
+                                dt = disc_correction(fields, w2is, thresholds, sigma_ts, x[on],
+                                                     wc[on], dc[on], -wi[on], ds[on], st[near],
+                                                     min(voxels))
+                                tau[on] = np.maximum(tau[on] + dt, 0.0)
                     cos = -np.einsum("ij,ij->i", wi, d)
                     pe = hg(cos, gs[mi])[:, None] * e
                     if rec[L_INDIRECT] > 0.5:

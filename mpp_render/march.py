@@ -45,7 +45,7 @@ from .kernels import LevelField, MarchInputs, MultipleInputs
 from .kernels_np import REFINE_STEPS, T_MIN, hash32
 from .lightrecord import LIGHT_FIELDS
 from .lights import pack_light
-from .media import PreparedMedium
+from .media import PreparedMedium, disc_reaches
 from .walk import RHO_TABLE
 from .passes import DEPTH_MISS, DEPTH_OPACITY
 from .precompute.layout import FieldLayout
@@ -99,6 +99,8 @@ class MarchContext:
 
     def __post_init__(self):
         self.packed = pack_lights(self.lights, self.layout)
+        # per light, where the disc points' optical depth is marched (media.disc_reaches)
+        self.disc_reach = disc_reaches(self.media, self.lights, self.tuning.disc_exact)
         self.multiple = None
         if self.multiple_fields is not None:
             amb = self.layout.ambient_multiple_channel
@@ -174,6 +176,7 @@ def march_rays(ctx: MarchContext, origins, dirs, t0, t1, axial, keys):
         ctx.step, DEPTH_OPACITY, DEPTH_MISS, ctx.multiple,
         em if any(np.any(e > 0) for e in em) else None,
         [m.march_bricks for m in ctx.media] if ctx.tuning.skip_empty else None,
-        adapt_tau=ctx.tuning.adapt_tau, emission_channels=ec, roulette=ctx.tuning.roulette))
+        adapt_tau=ctx.tuning.adapt_tau, emission_channels=ec, roulette=ctx.tuning.roulette,
+        disc_reach=ctx.disc_reach))
     return {"single": r.single, "T": r.T, "depth": r.depth, "multiple": r.multiple,
             "steps": r.steps, "emission": r.emission}

@@ -340,3 +340,36 @@ def union_interval(media: List[PreparedMedium], origins, dirs, t_lo, t_hi):
         t0 = np.where(hit, np.minimum(t0, a), t0)
         t1 = np.where(hit, np.maximum(t1, b), t1)
     return np.maximum(t0, t_lo), np.minimum(t1, t_hi)
+
+
+def uneven_within(media, centre, radius: float) -> bool:
+    """Whether any of the prepared ``media`` may change its density within ``radius`` (m) of
+    ``centre`` (3,): a brick of its brick_bounds overlapping the ball's box holds density
+    and is not constant.  (A lamp's disc points see the stretched centre's optical depth,
+    lights.path_stretch, exactly where none does.)"""
+    c = np.asarray(centre, np.float64).reshape(3)
+    corners = c + radius * np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)],
+                                    np.float64)
+    for pm in media:
+        idx = corners @ np.asarray(pm.w2i, np.float64)[:, :3].T + np.asarray(pm.w2i, np.float64)[:, 3]
+        b = pm.bricks
+        lo = np.clip(np.floor(idx.min(axis=0) / BRICK).astype(int), 0, np.array(b.shape[:3]) - 1)
+        hi = np.clip(np.floor(idx.max(axis=0) / BRICK).astype(int), 0, np.array(b.shape[:3]) - 1)
+        if np.any(idx.max(axis=0) < 0) or np.any(idx.min(axis=0) > np.array(pm.grid.shape) - 1):
+            continue   # the ball misses the grid
+        sub = b[lo[0]:hi[0] + 1, lo[1]:hi[1] + 1, lo[2]:hi[2] + 1]
+        if np.any((sub[..., 1] > 0.0) & (sub[..., 0] != sub[..., 1])):
+            return True
+    return False
+
+
+def disc_reaches(media, lights, disc_exact: float) -> list:
+    """Per light, the distance (m) within which the march corrects a lamp's disc points'
+    optical depth (kernels_np.disc_correction): ``disc_exact`` (Tuning) times the radius of a
+    point or spot light whose surroundings within it are uneven (``uneven_within``), else 0."""
+    out = []
+    for light in lights:
+        r = float(getattr(light, "radius", 0.0) or 0.0)
+        reach = disc_exact * r if light.kind in ("POINT", "SPOT") and r > 0.0 else 0.0
+        out.append(reach if reach > 0.0 and uneven_within(media, light.position, reach) else 0.0)
+    return out

@@ -134,3 +134,69 @@ def test_the_disc_transmittance_is_what_the_marchs_disc_points_average_to():
         mc = np.exp(-tau[i][None, :] * path_stretch(ds, dc, 0.02)[:, None]).mean(axis=0)
         assert np.allclose(got[i], mc, rtol=3e-3), (i, got[i], mc)
     assert np.all(got[:3] < np.exp(-tau[:3]))   # longer paths than to the centre
+
+
+def test_the_disc_points_own_depth_near_a_lamp_in_an_uneven_medium():
+    """Where the medium is not the same across the lamp's disc the stretched centre's depth
+    is wrong: a point just inside a dense half-space (y > 0) whose disc points' paths partly
+    run through the empty half.  With the depth marched per disc point (``depth``, within
+    ``reach`` radii) the mean over many points equals a Monte Carlo over the march's random
+    disc points with their exact depths within 1 %; the stretched depth alone misses by far
+    more, and beyond ``reach`` nothing changes."""
+    from mpp_render.lights import disc_transmittance, light_sample
+    sigma = 4.0
+    light = Light("POINT", "p", np.full(3, 60.0), position=np.zeros(3), matrix=np.eye(4),
+                  radius=0.3)
+
+    def depth(p, d, t):   # exact: sigma times the length of the segment with y > 0
+        y0, y1 = p[:, 1], p[:, 1] + d[:, 1] * t
+        lo, hi = np.minimum(y0, y1), np.maximum(y0, y1)
+        frac = np.where(hi > lo, np.clip(hi, 0, None) - np.clip(lo, 0, None), (y0 > 0) * 1.0)
+        frac = np.where(hi > lo, frac / np.maximum(hi - lo, 1e-300), frac)
+        return np.repeat((sigma * t * frac)[:, None], 3, axis=1)
+
+    x0 = np.array([[0.5, 0.04, 0.2]])
+    n = 4000
+    xs = np.repeat(x0, n, axis=0)
+    wc = -x0 / np.linalg.norm(x0)
+    tau_c = depth(x0, wc, np.linalg.norm(x0)[None])
+    taus = np.repeat(tau_c, n, axis=0)
+    got = disc_transmittance(light, xs, taus, 0.01, depth=depth, reach=4.0).mean(axis=0)
+    rng = np.random.default_rng(3)
+    m = 200000
+    wi, _, _, _, ds = light_sample(pack_light(light), np.repeat(x0, m, axis=0), rng.random(m),
+                                   rng.random(m))
+    exact = np.exp(-depth(np.repeat(x0, m, axis=0), -wi, ds)).mean(axis=0)
+    stretched = disc_transmittance(light, x0, tau_c, 0.01)[0]
+    assert np.allclose(got, exact, rtol=0.01), (got, exact)
+    assert abs(stretched[0] / exact[0] - 1.0) > 0.1, (stretched, exact)
+    far = disc_transmittance(light, x0, tau_c, 0.01, depth=depth, reach=1.0)[0]
+    assert np.array_equal(far, stretched)
+
+
+def test_the_disc_points_are_marched_only_where_the_media_round_the_lamp_are_uneven():
+    """media.disc_reaches: Tuning.disc_exact radii round a lamp with a radius whose
+    surroundings hold uneven density; 0 in a homogeneous medium (the stretch is exact
+    there), far from every medium, for a lamp without radius and for other lights."""
+    from mpp_render.media import disc_reaches, prepare
+    from mpp_render.scene import Medium
+    i2w = np.eye(4)
+    i2w[:3, :3] *= 0.05
+    i2w[:3, 3] = -1.0
+    flat = prepare(Medium("flat", np.ones((40, 40, 40), np.float32), i2w, np.ones(3),
+                          np.zeros(3), 0.0))
+    rough = np.ones((40, 40, 40), np.float32)
+    rough[20:, :, :] = 3.0
+    lumpy = prepare(Medium("lumpy", rough, i2w, np.ones(3), np.zeros(3), 0.0))
+
+    def lamp_at(p, radius=0.1, kind="POINT"):
+        return Light(kind, "l", np.full(3, 10.0), position=np.array(p, float), matrix=np.eye(4),
+                     radius=radius, direction=np.array([0.0, 0.0, -1.0]))
+    inside = lamp_at([-0.5, 0.0, 0.0])       # 0.5 m from the density step at x = 0
+    near_step = lamp_at([0.05, 0.0, 0.0])
+    assert disc_reaches([flat], [inside, near_step], 2.0) == [0.0, 0.0]
+    assert disc_reaches([lumpy], [inside, near_step], 2.0) == [0.0, pytest.approx(0.2)]
+    assert disc_reaches([lumpy], [lamp_at([0.05, 0.0, 0.0], radius=0.0)], 2.0) == [0.0]
+    assert disc_reaches([lumpy], [lamp_at([5.0, 5.0, 5.0])], 2.0) == [0.0]
+    # the box's own edge is uneven too: a lamp by its face
+    assert disc_reaches([flat], [lamp_at([0.95, 0.0, 0.0])], 2.0) == [pytest.approx(0.2)]

@@ -12,6 +12,7 @@
 #define T_MIN 1e-6
 #define MAX_STEPS 1000000L  /* per ray: a 256^3 grid needs ~1000 */
 #define SUPER 4             /* steps per super-step (kernels_np.SUPER) */
+#define DISC_STEPS_MAX 4096 /* kernels_np.DISC_STEPS_MAX */
 
 static void refined_tau(const Grid *f, int nm, int mi, int c, const double x[3], const double w[3],
                         double dist, double delta, double tau[3]) {
@@ -33,6 +34,32 @@ static void refined_tau(const Grid *f, int nm, int mi, int c, const double x[3],
     to_index(&f[mi], end, idx);
     trilinear(&f[mi], idx, c, 3, v);
     for (int a = 0; a < 3; a++) tau[a] += v[a];
+}
+
+/* Optical depth (RGB) over every medium from x to a lamp's disc point (unit direction wd,
+ * distance ds) minus `stretch` times that to its centre (wc, dc): what the field's stretched
+ * depth to the centre misses in a medium that is not homogeneous across the disc.  Both paths
+ * take n = ceil(dc / step) steps, each read at its midpoint.  Twin of
+ * kernels_np.disc_correction. */
+static void disc_correction(const Grid *f, int nm, const double x[3], const double wc[3], double dc,
+                            const double wd[3], double ds, double stretch, double step,
+                            double out[3]) {
+    double nf = ceil(dc / step);
+    int n = nf < 1.0 ? 1 : (nf > DISC_STEPS_MAX ? DISC_STEPS_MAX : (int)nf);
+    double hc = dc / n, hd = ds / n, tc[3] = {0, 0, 0}, td[3] = {0, 0, 0};
+    for (int k = 0; k < n; k++) {
+        double pc[3], pd[3];
+        for (int a = 0; a < 3; a++) {
+            pc[a] = x[a] + wc[a] * (k + 0.5) * hc;
+            pd[a] = x[a] + wd[a] * (k + 0.5) * hd;
+        }
+        for (int m = 0; m < nm; m++) {
+            double rc = density_from(&f[m], fetch0(&f[m], pc));
+            double rd = density_from(&f[m], fetch0(&f[m], pd));
+            for (int a = 0; a < 3; a++) { tc[a] += rc * f[m].sig[a]; td[a] += rd * f[m].sig[a]; }
+        }
+    }
+    for (int a = 0; a < 3; a++) out[a] = td[a] * hd - stretch * tc[a] * hc;
 }
 
 
@@ -168,6 +195,9 @@ typedef struct {
     int ambient;
     double step, depth_opacity, depth_miss, adapt_tau, thr_op;
     double roulette;                       /* Russian roulette below this transmittance; 0: off */
+    double disc_step;                      /* disc_correction's step: the finest voxel (m) */
+    double disc_reach[MAX_LIGHTS];         /* per light, the distance (m) within which a disc
+                                            * point's depth is corrected (disc_correction) */
     int use_ms;                            /* multiple scattering from the pyramid levels lv */
     MS ms;
     Grid *lv;
@@ -390,14 +420,14 @@ static int parse_multiple(March *c, PyObject *pms) {
 /* Parse and check march()'s arguments into c (the caller releases it whatever the outcome). */
 static int march_parse(March *c, PyObject *args) {
     PyObject *po, *pd, *pt0, *pt1, *pax, *pk, *fields, *w2is, *sss, *sts, *gsl, *thrs, *vox, *plights;
-    PyObject *pms = Py_None, *pem = Py_None, *pbk = Py_None, *pec = Py_None;
+    PyObject *pms = Py_None, *pem = Py_None, *pbk = Py_None, *pec = Py_None, *pdr = Py_None;
     int brick = 4;
     c->adapt_tau = 0.0;
     c->roulette = 0.0;
-    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOiddd|OOOidOd", &po, &pd, &pt0, &pt1, &pax, &pk, &fields,
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOiddd|OOOidOdO", &po, &pd, &pt0, &pt1, &pax, &pk, &fields,
                           &w2is, &sss, &sts, &gsl, &thrs, &vox, &plights, &c->ambient, &c->step,
                           &c->depth_opacity, &c->depth_miss, &pms, &pem, &pbk, &brick, &c->adapt_tau,
-                          &pec, &c->roulette))
+                          &pec, &c->roulette, &pdr))
         return -1;
     if (!(c->roulette >= 0.0 && c->roulette < 1.0)) {
         PyErr_SetString(PyExc_ValueError, "roulette must be in [0, 1)");
@@ -425,6 +455,15 @@ static int march_parse(March *c, PyObject *args) {
     c->skip = pbk != Py_None;
     if (parse_media(c, sss, gsl, vox, pem, pec) < 0) return -1;
     if (parse_lights(c, plights) < 0) return -1;
+    for (Py_ssize_t l = 0; l < c->nl; l++) c->disc_reach[l] = 0.0;
+    if (pdr != Py_None) {
+        if (parse_doubles(pdr, c->nl, c->disc_reach, "disc_reach") < 0) return -1;
+        for (Py_ssize_t l = 0; l < c->nl; l++)
+            if (!(c->disc_reach[l] >= 0.0) || !isfinite(c->disc_reach[l])) {
+                PyErr_SetString(PyExc_ValueError, "disc_reach must be finite lengths >= 0");
+                return -1;
+            }
+    }
     if (pms != Py_None && parse_multiple(c, pms) < 0) return -1;
     c->O = (const double *)c->bo.view.buf;
     c->D = (const double *)c->bd.view.buf;
@@ -454,7 +493,10 @@ static void march_prepare(March *c) {
         const double *L = c->LR + l * LIGHT_FIELDS;
         int kind = (int)L[L_KIND];
         c->jitter[l] = kind == KIND_AREA || ((kind == KIND_POINT || kind == KIND_SPOT) && L[L_RADIUS] > 0.0);
+        if (!((kind == KIND_POINT || kind == KIND_SPOT) && L[L_RADIUS] > 0.0)) c->disc_reach[l] = 0.0;
     }
+    c->disc_step = HUGE_VAL;
+    for (int m = 0; m < ng; m++) if (c->voxel[m] < c->disc_step) c->disc_step = c->voxel[m];
     /* longer steps in thin media only where every lit light is sampled without jitter: the
      * jittered ones (area, sphere) average their shape over the steps' samples */
     c->adapt = c->adapt_tau > 0.0;
@@ -542,8 +584,16 @@ static void medium_sources(const March *c, int m, const double x[3], const doubl
         if (ch < 0) continue;
         double tau[3] = {v[ch], v[ch + 1], v[ch + 2]};
         if (edge) refined_tau(c->g, c->ng, m, ch, x, la->wc[l], la->dc[l], 0.5 * c->voxel[m], tau);
-        if (la->ds[l] != la->dc[l])  /* light from an emitter point off the centre */
-            for (int a = 0; a < 3; a++) tau[a] *= path_stretch(la->ds[l], la->dc[l], c->voxel[m]);
+        if (la->ds[l] != la->dc[l]) {  /* light from an emitter point off the centre */
+            double st = path_stretch(la->ds[l], la->dc[l], c->voxel[m]);
+            for (int a = 0; a < 3; a++) tau[a] *= st;
+            if (la->dc[l] < c->disc_reach[l]) {
+                double wd[3] = {-la->wi[l][0], -la->wi[l][1], -la->wi[l][2]}, dt[3];
+                disc_correction(c->g, c->ng, x, la->wc[l], la->dc[l], wd, la->ds[l], st,
+                                c->disc_step, dt);
+                for (int a = 0; a < 3; a++) tau[a] = tau[a] + dt[a] > 0.0 ? tau[a] + dt[a] : 0.0;
+            }
+        }
         int cb = c->use_ms ? c->beam[l] : -1;
         const double *wi = la->wi[l];
         double cs = -(wi[0] * d[0] + wi[1] * d[1] + wi[2] * d[2]);
@@ -664,7 +714,7 @@ static long march_ray(const March *c, Py_ssize_t r, RaySums *sums) {
 const char march_doc[] =
     "march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs, thresholds,\n"
     "      voxels, lights, ambient, step, depth_opacity, depth_miss[, multiple, emissions, bricks, brick,\n"
-    "      adapt_tau, emission_channels, roulette])\n"
+    "      adapt_tau, emission_channels, roulette, disc_reach])\n"
     "  -> (single, T, depth, multiple, steps, emission) as bytes of float64\n"
     "Twin of kernels_np.march.";
 

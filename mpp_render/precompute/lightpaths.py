@@ -48,7 +48,8 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     too dense for paths (paths.PATHS_MAX_SPAN): the caller keeps the walk."""
     stride, shape, h = walk_lattice(pm, resolution)
     voxels = np.zeros(pm.grid.shape[:3], np.float32)
-    base, _, pts = source_and_density(pm, fld, light, channel, stride, voxels=voxels)
+    base, _, pts = source_and_density(pm, fld, light, channel, stride, voxels=voxels,
+                                      disc=None if around is None else around.disc)
     vol = cell_volume(pm, stride)
     power = base * vol
     live = power.sum(axis=1) > 0.0

@@ -27,7 +27,9 @@ import numpy as np
 
 from ..lights import disc_transmittance, incident
 from ..scene import Light
-from .lightdepth import light_optical_depth, light_position
+from .. import kernels
+from ..media import disc_reaches
+from .lightdepth import kernel_arrays, light_optical_depth, light_position
 from .source import light_direction
 
 FOG_POINTS = 16384       # first scatterings drawn round a light in the fog, per light
@@ -43,13 +45,16 @@ class Surroundings:
     (1/m, None without one), ``surfaces`` a surfaces.SurfaceSet or None (an empty set becomes
     None), ``step`` the march
     step (m) of the light's optical depth, ``bounce`` whether the surfaces reflect light
-    (Settings.surface_bounce; else they only absorb it)."""
+    (Settings.surface_bounce; else they only absorb it), ``disc_exact`` the lamp radii within
+    which a lamp's disc points get their own optical depth (Tuning.disc_exact,
+    lights.disc_transmittance; 0: off)."""
 
     solid: List
     fog_sigma_t: Optional[np.ndarray]
     surfaces: object
     step: float
     bounce: bool = True
+    disc_exact: float = 0.0
 
     def __post_init__(self):
         if self.surfaces is not None and self.surfaces.empty:
@@ -65,6 +70,26 @@ class Surroundings:
             from .enclosed import enclosed_voxels
             self._enclosed[id(pm)] = enclosed_voxels(pm, self.surfaces)
         return self._enclosed[id(pm)]
+
+    def disc(self, light: Light, x, tau) -> np.ndarray:
+        """lights.disc_transmittance of ``light`` at points ``x`` (N,3, m) from the optical
+        depth ``tau`` (N,3) to its centre, the disc points within ``disc_exact`` radii of the
+        lamp marched through the solid media (the world fog, homogeneous, needs no
+        correction)."""
+        reach = disc_reaches(self.solid, [light], self.disc_exact)[0]
+        return disc_transmittance(light, x, tau, self.step, depth=self.depth() if reach else None,
+                                  reach=self.disc_exact)
+
+    def depth(self):
+        """Callable (points, unit dirs, lengths m) -> (N,3) optical depth through the solid
+        media (kernels.optical_depth at ``step``), or None without them."""
+        if not self.solid:
+            return None
+        arrays = kernel_arrays(self.solid)
+
+        def od(p, d, t):
+            return kernels.optical_depth(p, d, t, *arrays, float(self.step), 0.5, clip=True)
+        return od
 
 
 def reach(pm, grid=None) -> tuple:
@@ -124,7 +149,7 @@ def fog_starts(pm, light: Light, around: Surroundings, seed: int):
     _, e = incident(light, x)
     tau = light_optical_depth(around.solid, light, x, around.step, surfaces=around.surfaces,
                               fog_sigma_t=st)
-    q = np.asarray(pm.sigma_s, np.float64) * e * disc_transmittance(light, x, tau, around.step)
+    q = np.asarray(pm.sigma_s, np.float64) * e * around.disc(light, x, tau)
     omega = 2.0 * np.pi * (1.0 - cmin)
     pdf = sig * np.exp(-sig * r) / (omega * r * r)
     power = q / (pdf * FOG_POINTS)[:, None]
@@ -182,7 +207,7 @@ def surface_starts(pm, light: Light, around: Surroundings, seed: int):
     tau = light_optical_depth(around.solid, light, p, around.step, surfaces=ss,
                               fog_sigma_t=around.fog_sigma_t)
     power = albedo[pick[lit]] * e[lit] * np.abs(cos[lit])[:, None] * \
-        disc_transmittance(light, p, tau, around.step) * \
+        around.disc(light, p, tau) * \
         (total / SURFACE_POINTS)
     live = np.all(np.isfinite(power), axis=1) & (power.sum(axis=1) > 0.0)
     if not np.any(live):

@@ -70,7 +70,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
     solid_delta = [delta_of[id(pm)] for pm in solid]
     fog_delta = None if fog is None else delta_of[id(fog)].sigma_t
     shadowed = surfaces is not None and not surfaces.empty
-    around = Surroundings(solid, fog_st, surfaces, step, bool(surface_bounce))
+    around = Surroundings(solid, fog_st, surfaces, step, bool(surface_bounce),
+                          tuning.disc_exact)
     fields = []
     n_pts = 0
     n_ambient = 0

@@ -192,7 +192,7 @@ def point_falloff(r2, radius: float) -> np.ndarray:
 
 def cell_mean_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int,
                      stride: int, shape, cells: np.ndarray,
-                     beam: Optional[int] = None) -> np.ndarray:
+                     beam: Optional[int] = None, disc=None) -> np.ndarray:
     """The first-scattering source Q = sigma_s E exp(-tau) (W/m^3, (len(cells), 3)) averaged
     over the voxels of each lattice cell in ``cells`` (the voxels nearest to the cell's
     point), with a point light's falloff (``point_falloff``) read at max(r^2, R^2/3): for a
@@ -217,8 +217,16 @@ def cell_mean_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel:
              / point_falloff(r2, light.radius))[:, None]
     tau = v[:, channel:channel + 3]
     q = first_scattering(pm, rho, e, tau, None if beam is None else v[:, beam:beam + 3],
-                         disc_transmittance(light, pts, tau, pm.voxel_size))
+                         _disc(disc, light, pts, tau, pm))
     return q.reshape(len(cells), len(offs), 3).mean(axis=1)
+
+
+def _disc(disc, light: Light, pts, tau, pm: PreparedMedium) -> np.ndarray:
+    """The lamp's disc transmittance at ``pts`` through ``disc`` (see source_and_density) or
+    lights.disc_transmittance at the voxel size."""
+    if disc is not None:
+        return disc(light, pts, tau)
+    return disc_transmittance(light, pts, tau, pm.voxel_size)
 
 
 def tent_restrict(a: np.ndarray, axis: int, stride: int, n_out: int,
@@ -262,7 +270,7 @@ def restricted_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel
                    stride: int, shape, chunk: int = 16,
                    should_cancel: Optional[Callable[[], bool]] = None,
                    beam: Optional[int] = None,
-                   voxels: Optional[np.ndarray] = None) -> np.ndarray:
+                   voxels: Optional[np.ndarray] = None, disc=None) -> np.ndarray:
     """The first-scattering source Q = sigma_s E exp(-tau) (W/m^3, (N,3) in the C order of
     the lattice ``shape`` ``stride`` voxels apart) from every voxel of the field ``fld``
     (optical depth at ``channel``), each voxel's power shared among the lattice points
@@ -291,7 +299,7 @@ def restricted_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel
             tau = v[live, channel:channel + 3]
             q[live] = first_scattering(pm, rho[live], e, tau,
                                        None if beam is None else v[live, beam:beam + 3],
-                                       disc_transmittance(light, pts, tau, pm.voxel_size))
+                                       _disc(disc, light, pts, tau, pm))
         q = q.reshape((b - a,) + tuple(pm.grid.shape[1:]) + (3,))
         if voxels is not None:
             voxels[a:b] = q.sum(axis=-1)
@@ -306,21 +314,23 @@ def restricted_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel
 def source_and_density(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int,
                    stride: int, beam: Optional[int] = None,
                    should_cancel: Optional[Callable[[], bool]] = None,
-                   voxels: Optional[np.ndarray] = None):
+                   voxels: Optional[np.ndarray] = None, disc=None):
     """(source (N,3) W/m^3, density (N,), points (N,3) m) on the lattice ``stride`` voxels
     apart (C order of ``lattice_shape``): the first-scattering source of ``restricted_source``,
     averaged over the cells round a point or spot light (``cell_mean_source``), and the
     medium's density at the lattice points.  Raises cancel.Cancelled on Esc.  ``voxels``:
-    filled with the voxels' own source (``restricted_source``)."""
+    filled with the voxels' own source (``restricted_source``).  ``disc``: callable (light,
+    points, tau) -> transmittance (pathstarts.Surroundings.disc), or None for
+    lights.disc_transmittance at the voxel size."""
     shape = lattice_shape(pm.grid.shape, stride)
     idx, pts = lattice_points(pm, shape, stride)
     rho = density_from(lattice_values(fld[..., 0], idx, stride), pm.threshold)
     base = restricted_source(pm, fld, light, channel, stride, shape, should_cancel=should_cancel,
-                          beam=beam, voxels=voxels)
+                          beam=beam, voxels=voxels, disc=disc)
     if light.kind in ("POINT", "SPOT"):
         near = near_light_cells(pm, light, stride, shape)
         if near.size:
-            base[near] = cell_mean_source(pm, fld, light, channel, stride, shape, near, beam)
+            base[near] = cell_mean_source(pm, fld, light, channel, stride, shape, near, beam, disc)
     return base, rho, pts
 
 
