@@ -357,9 +357,28 @@ def incident(light: Light, points, u=None):
     if u is None:
         if light.kind == "AREA":
             return area_incident(light, points)
-        u = np.full((len(points), 2), 0.5)
+        u = point_jitter(points) if light.kind == "SPOT" and (light.radius or 0.0) > 0.0 \
+            else np.full((len(points), 2), 0.5)
     d, e = light_sample(pack_light(light), points, u[:, 0], u[:, 1])[:2]
     return d, e
+
+
+def point_jitter(points) -> np.ndarray:
+    """(N,2) jitter in [0, 1) drawn per point from a hash of its coordinates' bits: the same
+    for the same point whatever the call.  A spot with a radius averages its cone over
+    SPOT_DISC_POINTS disc points, a lattice the jitter shifts; one fixed shift for every
+    point counts the penumbra high (fog_beam's flux into the box at 1.6 m from its 0.1 m
+    lamp: 2.555 W at u = (0.5, 0.5), 2.310 with a jitter per point, 2.316 without the radius,
+    and 2.573 / 2.400 / 2.586 on 2 x 2 / 3 x 3 / 4 x 4 midpoint grids of shifts), and the
+    paths' source with it (fog_beam's multiple scattering 8 % over Cycles')."""
+    from .kernels_np import hash32
+    bits = np.ascontiguousarray(np.asarray(points, np.float64).reshape(-1, 3)).view(np.uint32)
+    h = np.full(len(bits), 0x9E3779B9, np.uint32)
+    for c in range(bits.shape[1]):
+        h = hash32(h ^ bits[:, c])
+    u1 = hash32(h ^ np.uint32(0x68E31DA4))
+    u2 = hash32(h ^ np.uint32(0xB5297A4D))
+    return np.stack([u1, u2], axis=1).astype(np.float64) / 4294967296.0
 
 
 def irradiance(light: Light, points) -> np.ndarray:

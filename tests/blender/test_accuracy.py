@@ -50,8 +50,10 @@ TARGET = {"rel_rmse_4": 0.03, "bias": 0.02}
 # Lowered when a first scattering's path start began to follow the voxels' source within its
 # lattice point's tent (paths.start_positions): fog_beam 0.324 -> 0.247 (the beam's starts no
 # longer spread over the rows beside it), slab_forward 0.057, slab_isotropic 0.029, smoke_plume
-# 0.014 (cloud_vdb 0.015 and colored_sphere 0.016 keep their bounds).
-FULL_BOUND = {"cloud_vdb": 0.020, "colored_sphere": 0.024, "fog_beam": 0.294,
+# 0.014 (cloud_vdb 0.015 and colored_sphere 0.016 keep their bounds).  fog_beam 0.294 -> 0.245
+# when the precompute began to read a spot's disc at a jitter per point (lights.point_jitter:
+# its multiple scattering had been 8 % over Cycles'; measured 0.2039, bias -0.005).
+FULL_BOUND = {"cloud_vdb": 0.020, "colored_sphere": 0.024, "fog_beam": 0.245,
               "slab_forward": 0.076, "slab_isotropic": 0.043, "smoke_plume": 0.026}
 SCENE_NAMES = sorted(FULL_BOUND)
 
