@@ -16,6 +16,7 @@ from .lightrecord import (KIND_AREA, KIND_POINT, KIND_SPOT, KIND_SUN, L_AREA, L_
 from .media import BRICK, density_from, trilinear
 from .walk import table_lookup
 from .lights import light_sample, path_stretch
+from .rng import hash32, uniform  # noqa: F401  (the twins' and paths' random numbers)
 from .phase import hg
 
 
@@ -266,30 +267,7 @@ def upsample_into(field, channel, lattice, stride, flat):
     field.reshape(-1, field.shape[3])[flat, channel:channel + nc] = fine[flat]
 
 
-# ---------------------------------------------------------------------------------------------
-# Counter-based random numbers shared by both twins: u = hash(key, step, dim) in [0, 1).
-# ``lowbias32`` (C. Wellons' integer hash); all arithmetic wraps modulo 2^32.
-
-_M32 = 0xFFFFFFFF
-
-
-def hash32(x):
-    """lowbias32 of uint32 array ``x`` (wrapping arithmetic)."""
-    x = np.asarray(x, np.uint32).copy()
-    x ^= x >> np.uint32(16)
-    x *= np.uint32(0x7FEB352D)
-    x ^= x >> np.uint32(15)
-    x *= np.uint32(0x846CA68B)
-    x ^= x >> np.uint32(16)
-    return x
-
-
-def uniform(keys, step: int, dim: int):
-    """Uniform [0, 1) numbers for ray ``keys`` (uint32) at march step ``step`` and dimension
-    ``dim``: 24 bits of hash(key ^ hash(step * 0x9E3779B1 + dim * 0x85EBCA77))."""
-    salt = hash32(np.uint32(((step * 0x9E3779B1) + (dim * 0x85EBCA77)) & _M32))
-    h = hash32(np.asarray(keys, np.uint32) ^ salt)
-    return (h >> np.uint32(8)).astype(np.float64) * (1.0 / 16777216.0)
+# Counter-based random numbers shared by both twins (rng.py).
 
 
 DIM_JITTER = 1000       # random dimension of the step jitter; lights use 2*i, 2*i + 1

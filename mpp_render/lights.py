@@ -34,6 +34,7 @@ from .lightrecord import (KIND_AREA, KIND_POINT, KIND_SPOT, KIND_SUN, L_AREA, L_
                           L_BLEND, L_CHANNEL, L_COND, L_COSHALF, L_DIR, L_INDIRECT, L_INV, L_KIND,
                           L_NORMAL, L_NORMALIZE, L_POS, L_RADIUS, L_ROUND, L_STRENGTH, LIGHT_FIELDS)
 from .phase import orthonormal_basis
+from .rng import hash32
 from .scene import Light
 
 
@@ -371,7 +372,6 @@ def point_jitter(points) -> np.ndarray:
     lamp: 2.555 W at u = (0.5, 0.5), 2.310 with a jitter per point, 2.316 without the radius,
     and 2.573 / 2.400 / 2.586 on 2 x 2 / 3 x 3 / 4 x 4 midpoint grids of shifts), and the
     paths' source with it (fog_beam's multiple scattering 8 % over Cycles')."""
-    from .kernels_np import hash32
     bits = np.ascontiguousarray(np.asarray(points, np.float64).reshape(-1, 3)).view(np.uint32)
     h = np.full(len(bits), 0x9E3779B9, np.uint32)
     for c in range(bits.shape[1]):

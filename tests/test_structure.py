@@ -14,7 +14,7 @@ LAYERS = [
     {"precompute", "march", "firstflight", "pyramid", "parallel"},      # the two stages
     {"kernels", "kernels_np", "_kernels", "paths"},                     # C kernels, numpy twins
     {"lights", "surfaces", "principled", "worldfog", "media", "phase", "mpp", "walk", "lightrecord",
-     "camera", "blackbody", "passes", "textures"},                                # physics, media, model
+     "camera", "blackbody", "passes", "textures", "rng"},                                # physics, media, model
     {"scene", "cancel"},                                                # the description; Esc
 ]
 
