@@ -15,6 +15,8 @@ import numpy as np
 from .phase import clamp_g, delta_fraction, delta_g
 from .scene import Medium
 
+PAD = 1  # voxels of zeros round every side of a prepared grid (the trilinear fade)
+
 
 @dataclass
 class PreparedMedium:
@@ -179,10 +181,10 @@ def prepare(medium: Medium, warnings=None) -> PreparedMedium:
         raise ValueError(f"medium '{medium.name}': non-finite transform; skipped")
     if abs(np.linalg.det(m[:3, :3])) < 1e-30 or np.linalg.cond(m[:3, :3]) > 1e12:
         raise ValueError(f"medium '{medium.name}': degenerate transform (zero scale); skipped")
-    grid = np.zeros(tuple(s + 2 for s in d.shape), np.float32)
-    grid[1:-1, 1:-1, 1:-1] = d
+    grid = np.zeros(tuple(s + 2 * PAD for s in d.shape), np.float32)
+    grid[PAD:-PAD, PAD:-PAD, PAD:-PAD] = d
     shift = np.eye(4)
-    shift[:3, 3] = -1.0
+    shift[:3, 3] = -float(PAD)
     i2w = m @ shift
     w2i = np.linalg.inv(i2w)[:3, :]
     voxel = float(np.min(np.linalg.norm(i2w[:3, :3], axis=0)))
@@ -213,8 +215,8 @@ def _emission_grid(medium: Medium, shape, warnings):
                         "negative and were set to 0")
     if not np.any(e > 0):
         return None
-    out = np.zeros(tuple(s + 2 for s in shape) + (3,), np.float32)
-    out[1:-1, 1:-1, 1:-1] = e
+    out = np.zeros(tuple(s + 2 * PAD for s in shape) + (3,), np.float32)
+    out[PAD:-PAD, PAD:-PAD, PAD:-PAD] = e
     return out
 
 

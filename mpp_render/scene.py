@@ -255,7 +255,7 @@ class Tuning:
 
 
 # light paths per light and medium at the default quality (docs/method.md, "Traced paths")
-MULTIPLE_PATHS = 1_000_000
+MULTIPLE_PATHS = 2_000_000
 
 # What the Quality menu sets (blender/properties.py; docs/usage.md gives what each costs and
 # how close it comes on the public scenes).  Preview: the walk's smooth, biased multiple

@@ -278,3 +278,26 @@ def test_a_medium_too_dense_for_paths_keeps_the_walk():
         assert msf.traced == traced and pre.layout.beam_channels is None
         assert all(np.all(np.isfinite(lev)) for lev in msf.levels)
         assert max(float(lev.max()) for lev in msf.levels) > 0.0
+
+
+def test_the_paths_lattice_counts_the_voxels_not_their_padding():
+    """precompute.lattice.paths_lattice: at most Resolution points along the medium's longest
+    side of voxels, its one-voxel padding left out (walk_lattice counts it: a mesh volume of
+    128 voxels, 130 padded, got stride 3 and 44 points at Resolution 64), never finer than
+    the voxels."""
+    from mpp_render.media import prepare
+    from mpp_render.precompute.lattice import paths_lattice, walk_lattice
+    from mpp_render.scene import Medium
+
+    def medium(shape):
+        i2w = np.eye(4)
+        i2w[:3, :3] *= 0.05
+        return prepare(Medium("m", np.ones(shape, np.float32), i2w, np.ones(3), np.zeros(3), 0.0))
+    mesh = medium((128, 52, 52))
+    assert walk_lattice(mesh, 64)[0] == 3
+    stride, shape, h = paths_lattice(mesh, 64)
+    assert stride == 2 and max(shape) >= 64 and h == pytest.approx(0.1)
+    assert paths_lattice(medium((82, 82, 58)), 64)[0] == 2     # 41 points: at most 64
+    assert paths_lattice(medium((60, 60, 60)), 64)[0] == 1
+    assert paths_lattice(medium((128, 128, 128)), 128)[0] == 1
+    assert paths_lattice(medium((3, 3, 3)), 64)[0] == 1

@@ -32,9 +32,9 @@ class MPPRenderSettings(bpy.types.PropertyGroup):
         name="Quality", default="FINAL", update=_apply_quality,
         items=[("PREVIEW", "Preview", "4 samples and the fast most-probable-path model of "
                 "multiple scattering: smooth, seconds, but biased (docs/accuracy.md)"),
-               ("FINAL", "Final", "16 samples at most (adaptive, Noise Threshold 0.01) and 1 "
+               ("FINAL", "Final", "16 samples at most (adaptive, Noise Threshold 0.01) and 2 "
                 "million traced light paths per light for multiple scattering: the defaults"),
-               ("REFERENCE", "Reference", "16 samples in every pixel (Noise Threshold 0), 4 "
+               ("REFERENCE", "Reference", "16 samples in every pixel (Noise Threshold 0), 8 "
                 "million paths per light on a lattice twice as fine: closest to Cycles, "
                 "several times the precompute")],
         description="Sets Samples, Noise Threshold, Multiple Scattering Paths and Resolution "

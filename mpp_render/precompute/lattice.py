@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..media import PreparedMedium
+from ..media import PAD, PreparedMedium
 
 
 MULTIPLE_RESOLUTION = 64  # lattice points along the longest side for the light pyramid
@@ -45,6 +45,18 @@ def walk_lattice(pm: PreparedMedium, resolution: int = MULTIPLE_RESOLUTION):
     """(stride, shape, h) of the light pyramid's lattice on ``pm``: about ``resolution``
     points along the grid's longest side, never finer than the voxels; h its spacing, m."""
     stride = max(1, int(np.ceil(max(pm.grid.shape) / max(int(resolution), 2))))
+    h = stride * float(np.cbrt(abs(np.linalg.det(pm.i2w[:3, :3]))))
+    return stride, lattice_shape(pm.grid.shape, stride), h
+
+
+def paths_lattice(pm: PreparedMedium, resolution: int = MULTIPLE_RESOLUTION):
+    """(stride, shape, h) of the traced paths' lattice on ``pm`` (precompute.lightpaths): at
+    most ``resolution`` points along the longest side of the medium's voxels, its padding
+    left out, never finer than the voxels; h its spacing, m.  (Counting the padding, as
+    ``walk_lattice`` does, put a mesh volume of 128 voxels, 130 with its padding, on 44
+    points for a Resolution of 64, not 64.)"""
+    voxels = max(max(pm.grid.shape) - 2 * PAD, 1)
+    stride = max(1, int(np.ceil(voxels / max(int(resolution), 2))))
     h = stride * float(np.cbrt(abs(np.linalg.det(pm.i2w[:3, :3]))))
     return stride, lattice_shape(pm.grid.shape, stride), h
 

@@ -13,13 +13,13 @@ from .. import kernels
 from ..camera import towards_camera
 from ..parallel import worker_count
 from ..paths import MAX_COLLISIONS, PATHS_MAX_SPAN, PathInputs, from_power, rate_span
-from .lattice import lattice_points, walk_lattice
+from .lattice import lattice_points, paths_lattice
 from .pathstarts import Surroundings, fog_starts, reach, surface_albedo, surface_starts
 from .source import light_direction, near_light_cells, source_and_density, tent_restrict
 
 
 # paths per lattice point the medium fills, at most (the Paths setting caps the total): a
-# 64-point lattice of a mesh cube holds 85 000 such points, past the default 1 000 000 paths
+# 65-point lattice of a mesh cube holds 270 000 such points, past the default 2 000 000 paths
 PATHS_PER_POINT = 32
 FAR_RESOLUTION = 32  # voxels along the longest side of the world fog's far box (worldfog.FarField)
 FAR_PATHS = 0.25     # the far box's paths, a fraction of the grid's
@@ -46,7 +46,7 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     camera's, float32 (LX,LY,LZ,12) M's moments of order 0 and 1 (paths.py, "Moments"), else
     None.  None where the medium is
     too dense for paths (paths.PATHS_MAX_SPAN): the caller keeps the walk."""
-    stride, shape, h = walk_lattice(pm, resolution)
+    stride, shape, h = paths_lattice(pm, resolution)
     voxels = np.zeros(pm.grid.shape[:3], np.float32)
     base, _, pts = source_and_density(pm, fld, light, channel, stride, voxels=voxels,
                                       disc=None if around is None else around.disc)
@@ -145,7 +145,7 @@ class PathLattice:
         (X,Y,Z) the voxels behind the scene's surfaces (Surroundings.enclosed), left out of
         the tent mass: no light reaches them, and a lattice point by a ground is the mean of
         the medium above it."""
-        stride, shape, h = walk_lattice(pm, resolution)
+        stride, shape, h = paths_lattice(pm, resolution)
         i2w = np.asarray(pm.i2w[:3, :3], np.float64)
         density = pm.path_density()
         rate = max(float(density.max()) * float(np.max(pm.sigma_t)), 1.0 / h)

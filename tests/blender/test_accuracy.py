@@ -52,9 +52,13 @@ TARGET = {"rel_rmse_4": 0.03, "bias": 0.02}
 # longer spread over the rows beside it), slab_forward 0.057, slab_isotropic 0.029, smoke_plume
 # 0.014 (cloud_vdb 0.015 and colored_sphere 0.016 keep their bounds).  fog_beam 0.294 -> 0.245
 # when the precompute began to read a spot's disc at a jitter per point (lights.point_jitter:
-# its multiple scattering had been 8 % over Cycles'; measured 0.2039, bias -0.005).
-FULL_BOUND = {"cloud_vdb": 0.020, "colored_sphere": 0.024, "fog_beam": 0.245,
-              "slab_forward": 0.076, "slab_isotropic": 0.043, "smoke_plume": 0.026}
+# its multiple scattering had been 8 % over Cycles'; measured 0.2039, bias -0.005).  Lowered
+# when the paths' lattice stopped counting the grid's padding (precompute.lattice.
+# paths_lattice: a 128-voxel mesh volume on 65 points, not 44) and the default paths doubled
+# to 2 000 000: fog_beam 0.245 -> 0.131, slab_forward 0.076 -> 0.067, slab_isotropic 0.043 ->
+# 0.033 (measured 0.1053, 0.0491, 0.0198; the others kept their bounds).
+FULL_BOUND = {"cloud_vdb": 0.020, "colored_sphere": 0.024, "fog_beam": 0.131,
+              "slab_forward": 0.067, "slab_isotropic": 0.033, "smoke_plume": 0.026}
 SCENE_NAMES = sorted(FULL_BOUND)
 
 
