@@ -13,6 +13,7 @@
 #define MAX_STEPS 1000000L  /* per ray: a 256^3 grid needs ~1000 */
 #define SUPER 4             /* steps per super-step (kernels_np.SUPER) */
 #define DISC_STEPS_MAX 4096 /* kernels_np.DISC_STEPS_MAX */
+#define DISC_STEP_VOXELS 2.0 /* kernels_np.DISC_STEP_VOXELS */
 
 static void refined_tau(const Grid *f, int nm, int mi, int c, const double x[3], const double w[3],
                         double dist, double delta, double tau[3]) {
@@ -195,7 +196,8 @@ typedef struct {
     int ambient;
     double step, depth_opacity, depth_miss, adapt_tau, thr_op;
     double roulette;                       /* Russian roulette below this transmittance; 0: off */
-    double disc_step;                      /* disc_correction's step: the finest voxel (m) */
+    double disc_step;                      /* disc_correction's step: DISC_STEP_VOXELS finest
+                                            * voxels (m) */
     double disc_reach[MAX_LIGHTS];         /* per light, the distance (m) within which a disc
                                             * point's depth is corrected (disc_correction) */
     int use_ms;                            /* multiple scattering from the pyramid levels lv */
@@ -497,6 +499,7 @@ static void march_prepare(March *c) {
     }
     c->disc_step = HUGE_VAL;
     for (int m = 0; m < ng; m++) if (c->voxel[m] < c->disc_step) c->disc_step = c->voxel[m];
+    c->disc_step *= DISC_STEP_VOXELS;
     /* longer steps in thin media only where every lit light is sampled without jitter: the
      * jittered ones (area, sphere) average their shape over the steps' samples */
     c->adapt = c->adapt_tau > 0.0;
