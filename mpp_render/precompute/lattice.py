@@ -44,9 +44,7 @@ def lattice_shape(shape, stride: int) -> tuple:
 def walk_lattice(pm: PreparedMedium, resolution: int = MULTIPLE_RESOLUTION):
     """(stride, shape, h) of the light pyramid's lattice on ``pm``: about ``resolution``
     points along the grid's longest side, never finer than the voxels; h its spacing, m."""
-    stride = max(1, int(np.ceil(max(pm.grid.shape) / max(int(resolution), 2))))
-    h = stride * float(np.cbrt(abs(np.linalg.det(pm.i2w[:3, :3]))))
-    return stride, lattice_shape(pm.grid.shape, stride), h
+    return _lattice_along(pm, max(pm.grid.shape), resolution)
 
 
 def paths_lattice(pm: PreparedMedium, resolution: int = MULTIPLE_RESOLUTION):
@@ -55,7 +53,12 @@ def paths_lattice(pm: PreparedMedium, resolution: int = MULTIPLE_RESOLUTION):
     left out, never finer than the voxels; h its spacing, m.  (Counting the padding, as
     ``walk_lattice`` does, put a mesh volume of 128 voxels, 130 with its padding, on 44
     points for a Resolution of 64, not 64.)"""
-    voxels = max(max(pm.grid.shape) - 2 * PAD, 1)
+    return _lattice_along(pm, max(max(pm.grid.shape) - 2 * PAD, 1), resolution)
+
+
+def _lattice_along(pm: PreparedMedium, voxels: int, resolution: int):
+    """(stride, shape, h): the fewest whole voxels a step that put at most ``resolution``
+    points along ``voxels`` voxels of ``pm``'s grid; h the spacing, m."""
     stride = max(1, int(np.ceil(voxels / max(int(resolution), 2))))
     h = stride * float(np.cbrt(abs(np.linalg.det(pm.i2w[:3, :3]))))
     return stride, lattice_shape(pm.grid.shape, stride), h
