@@ -16,7 +16,7 @@ from .lightrecord import (KIND_AREA, KIND_POINT, KIND_SPOT, KIND_SUN, L_AREA, L_
 from .media import BRICK, density_from, trilinear
 from .walk import table_lookup
 from .lights import light_sample, path_stretch
-from .rng import hash32, uniform  # noqa: F401  (the twins' and paths' random numbers)
+from .rng import uniform
 from .phase import hg
 
 
@@ -266,8 +266,6 @@ def upsample_into(field, channel, lattice, stride, flat):
     fine = upsample(lattice, int(stride), field.shape[:3]).reshape(-1, nc)
     field.reshape(-1, field.shape[3])[flat, channel:channel + nc] = fine[flat]
 
-
-# Counter-based random numbers shared by both twins (rng.py).
 
 
 DIM_JITTER = 1000       # random dimension of the step jitter; lights use 2*i, 2*i + 1

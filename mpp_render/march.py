@@ -42,12 +42,13 @@ import numpy as np
 
 from . import kernels
 from .kernels import LevelField, MarchInputs, MultipleInputs
-from .kernels_np import REFINE_STEPS, T_MIN, hash32
+from .kernels_np import REFINE_STEPS, T_MIN
 from .lightrecord import LIGHT_FIELDS
 from .lights import pack_light
 from .media import PreparedMedium, disc_reaches
 from .walk import RHO_TABLE
 from .passes import DEPTH_MISS, DEPTH_OPACITY
+from .rng import hash32
 from .precompute.layout import FieldLayout
 from .scene import Camera, Light, Tuning
 

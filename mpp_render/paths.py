@@ -79,7 +79,7 @@ always.  In a cube lit at one point (tests/test_moments.py) the closure's sum ov
 is within 1 % of the exact M towards v for g = 0.3, 6 % for 0.6, 15 % for 0.85 (cutting the
 series after two terms instead: 1 %, 21 %, 4x).
 
-Random numbers are the march's counter hash (kernels_np.uniform) of (path key, event,
+Random numbers are the march's counter hash (rng.uniform) of (path key, event,
 dimension), so the C kernel (csrc/paths.c) and this numpy twin draw the same numbers and
 trace the same paths.
 """
@@ -90,7 +90,7 @@ from typing import Optional
 
 import numpy as np
 
-from .kernels_np import hash32, uniform
+from .rng import hash32, uniform
 from .phase import clamp_g, hg, sample_hg
 
 __all__ = ["PathInputs", "trace_paths_np", "MAX_COLLISIONS", "ROULETTE", "PATHS_MAX_SPAN"]

@@ -60,6 +60,7 @@ class Surroundings:
         if self.surfaces is not None and self.surfaces.empty:
             self.surfaces = None
         self._enclosed = {}
+        self._disc_depth = {}
 
     def enclosed(self, pm) -> Optional[np.ndarray]:
         """bool (X,Y,Z) the voxels of prepared medium ``pm`` behind the surfaces
@@ -76,15 +77,15 @@ class Surroundings:
         depth ``tau`` (N,3) to its centre, the disc points within ``disc_exact`` radii of the
         lamp marched through the solid media (the world fog, homogeneous, needs no
         correction)."""
-        reach = disc_reaches(self.solid, [light], self.disc_exact)[0]
-        return disc_transmittance(light, x, tau, self.step, depth=self.depth() if reach else None,
+        if id(light) not in self._disc_depth:   # asked once per chunk of voxels: decide once
+            reach = disc_reaches(self.solid, [light], self.disc_exact)[0]
+            self._disc_depth[id(light)] = self._depth() if reach else None
+        return disc_transmittance(light, x, tau, self.step, depth=self._disc_depth[id(light)],
                                   reach=self.disc_exact)
 
-    def depth(self):
+    def _depth(self):
         """Callable (points, unit dirs, lengths m) -> (N,3) optical depth through the solid
-        media (kernels.optical_depth at ``step``), or None without them."""
-        if not self.solid:
-            return None
+        media (kernels.optical_depth at ``step``); the media are uneven, so there are some."""
         arrays = kernel_arrays(self.solid)
 
         def od(p, d, t):
