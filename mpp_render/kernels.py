@@ -306,25 +306,35 @@ def march(inputs: MarchInputs, *, backend=None) -> MarchResult:
 
 
 def trace_paths(inp, *, threads: int = 1, should_cancel=None, backend=None):
-    """Light paths' deposits (LX,LY,LZ,inp.channels) float64 for ``inp`` (a paths.PathInputs; the numpy
-    twin is paths.trace_paths_np).  The paths are cut into ``PATH_BLOCKS`` blocks, each with
-    its own sums added in a fixed order, which ``threads`` workers share (the caller sizes
-    them: parallel.worker_count):
-    the result is the same bits for any thread count (frames match across farm machines).
-    Each block runs ``PATH_CHUNK`` paths a call, asking ``should_cancel`` between calls:
-    raises cancel.Cancelled when it says so."""
-    from .paths import ROULETTE, trace_paths_np
+    """Light paths' deposits (LX,LY,LZ,inp.channels) float64 for ``inp`` (a paths.PathInputs
+    without others; the numpy twin is paths.trace_paths_np): ``trace_paths_media``'s first."""
+    return trace_paths_media(inp, threads=threads, should_cancel=should_cancel,
+                             backend=backend)[0]
+
+
+def trace_paths_media(inp, *, threads: int = 1, should_cancel=None, backend=None) -> list:
+    """Light paths' deposits for ``inp`` (a paths.PathInputs; the numpy twin is
+    paths.trace_paths_media_np): one float64 array (LX,LY,LZ,inp.channels) per medium on its
+    own lattice, the paths' own medium first, then ``inp.others`` in their order.  The paths
+    are cut into ``PATH_BLOCKS`` blocks, each with its own sums added in a fixed order, which
+    ``threads`` workers share (the caller sizes them: parallel.worker_count): the result is
+    the same bits for any thread count (frames match across farm machines).  Each block runs
+    ``PATH_CHUNK`` paths a call, asking ``should_cancel`` between calls: raises
+    cancel.Cancelled when it says so."""
+    from .paths import ROULETTE, trace_paths_media_np
     if not _on_c(backend) or not hasattr(_c, "trace_paths"):
-        return trace_paths_np(inp)
-    lshape = tuple(inp.towards.shape[:3])
+        return trace_paths_media_np(inp)
+    grids = [inp] + list(inp.others)
+    shapes = [tuple(m.towards.shape[:3]) for m in grids]
     n = int(inp.n_paths)
     if n <= 0 or len(inp.cdf) == 0:
-        return np.zeros(lshape + (inp.channels,))
+        return [np.zeros(sh + (inp.channels,)) for sh in shapes]
     blocks = min(PATH_BLOCKS, n)
     workers = max(1, min(int(threads), blocks))
     cuts = np.linspace(0, n, blocks + 1).astype(np.int64)
-    outs = [np.zeros(lshape + (3,)) for _ in range(blocks)]
-    moms = [np.zeros(lshape + (12,) if inp.moments else (0, 0, 0, 12)) for _ in range(blocks)]
+    outs = [[np.zeros(sh + (3,)) for sh in shapes] for _ in range(blocks)]
+    moms = [[np.zeros(sh + (12,) if inp.moments else (0, 0, 0, 12)) for sh in shapes]
+            for _ in range(blocks)]
     args = (_f32(inp.density), _f64(inp.w2i).reshape(3, 4), _f64(inp.i2w).reshape(3, 3),
             _f64(inp.sigma_s).reshape(3), _f64(inp.sigma_t).reshape(3), float(inp.g),
             int(inp.stride),
@@ -337,17 +347,21 @@ def trace_paths(inp, *, threads: int = 1, should_cancel=None, backend=None):
              tri, _f64(inp.albedo).reshape(len(tri), 3),
              _f32(inp.start_source) if inp.start_source is not None else np.zeros((0, 0, 0), np.float32),
              _f64(inp.start_peak).reshape(-1) if inp.start_source is not None else np.zeros(0))
+    fixed = [(_f32(m.density), _f64(m.w2i).reshape(3, 4), _f64(m.sigma_s).reshape(3),
+              _f64(m.sigma_t).reshape(3), float(m.g), int(m.stride), _f64(m.towards),
+              float(m.rate)) for m in inp.others]
 
     cancelled = []
 
     def work(i):
+        others = tuple((outs[i][1 + k], moms[i][1 + k]) + f for k, f in enumerate(fixed))
         for a in range(int(cuts[i]), int(cuts[i + 1]), PATH_CHUNK):
             if cancelled or (should_cancel is not None and should_cancel()):
                 cancelled.append(True)
                 return
-            _c.trace_paths(outs[i], *args, a, min(a + PATH_CHUNK, int(cuts[i + 1])), n,
+            _c.trace_paths(outs[i][0], *args, a, min(a + PATH_CHUNK, int(cuts[i + 1])), n,
                            int(inp.seed) & 0xFFFFFFFF, int(inp.max_collisions), float(ROULETTE),
-                           *extra, moms[i])
+                           *extra, moms[i][0], others)
 
     if workers == 1:
         for i in range(blocks):
@@ -358,11 +372,14 @@ def trace_paths(inp, *, threads: int = 1, should_cancel=None, backend=None):
             list(ex.map(work, range(blocks)))
     if cancelled:
         raise Cancelled
-    total, moments = outs[0], moms[0]
-    for o, m in zip(outs[1:], moms[1:]):
-        total += o
-        moments += m
-    return np.concatenate([total, moments], axis=-1) if inp.moments else total
+    result = []
+    for g in range(len(grids)):
+        total, moments = outs[0][g], moms[0][g]
+        for i in range(1, blocks):
+            total += outs[i][g]
+            moments += moms[i][g]
+        result.append(np.concatenate([total, moments], axis=-1) if inp.moments else total)
+    return result
 
 
 PATH_BLOCKS = 4   # trace_paths' blocks of paths (its sums' order, whatever the threads)

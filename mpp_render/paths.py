@@ -44,6 +44,17 @@ nearest-voxel domain).  A flight that crosses its face stops there and starts ag
 with the rate outside x sigma_t,max and deposits nothing; in empty space it flies straight to
 the box, or away for good.  A path outside beyond ``reach_radius`` of ``reach_centre`` ends.
 
+**Several media** (``others``, PathMedium).  Where media overlap (a cube of smoke inside a
+sphere of haze), a path flies through all of them: each medium keeps its own tentative
+collisions at its own rate mu_j inside its own box, so their sum is the whole's rate, and a
+tentative point is medium j's with probability mu_j over the sum (one more random number,
+``_D_MEDIUM``, drawn only with several media).  It then deposits on medium j's lattice (with
+j's phase function) and is a real collision by j's coefficients, turning by j's phase
+function.  What one medium's paths deposit on another's lattice is added to that medium's M
+(precompute.run): the light scattered in one and again in another, and the shadow each
+casts on the other's multiply scattered light.  The world's fog, which fills all space,
+traces alone.
+
 **Surfaces.**  Every flight is tested against the ``triangles`` (Moller-Trumbore, culled by
 boxes of 64 triangles); the nearest one hit before the flight's end stops it, and the path
 reflects diffusely (a cosine-distributed direction on the side it came from) with its weight
@@ -111,9 +122,30 @@ _D_PICK, _D_JIT, _D_DIR, _D_FLY, _D_HIT, _D_TURN, _D_RR, _D_BOUNCE = 0, 1, 7, 10
 _D_RETRY = 16     # a start's offset drawn again: 6 dimensions per try (csrc/paths.c)
 _D_ACCEPT = 512   # a start's acceptance draw, one dimension per try
 _D_CORNER = 600   # the lattice corner a deposit's moments go to
+_D_MEDIUM = 17    # which medium a tentative collision is in, with several (csrc/paths.c)
+PATH_MEDIA = 8    # media one trace flies through at most: its own and 7 others
 START_TRIES = 64  # offsets drawn for a first scattering until one is accepted
 # deposits with the moments: 3 towards the camera, 3 of order 0, 3 x 3 of order 1 (x, y, z)
 MOMENT_CHANNELS = 15
+
+
+@dataclass
+class PathMedium:
+    """Another medium a trace's paths fly through, scatter in and deposit on
+    (``PathInputs.others``): ``density`` float32 (X,Y,Z) per voxel, ``w2i`` (3,4) world ->
+    voxel index, ``sigma_s``, ``sigma_t`` (3,) 1/m per unit density, ``g``, ``stride``
+    voxels per lattice step, ``towards`` float64 (LX,LY,LZ,3) unit directions from its
+    lattice points to the camera, ``rate`` its tentative collisions per metre inside its
+    box (above its largest extinction, as PathInputs.rate)."""
+
+    density: np.ndarray
+    w2i: np.ndarray
+    sigma_s: np.ndarray
+    sigma_t: np.ndarray
+    g: float
+    stride: int
+    towards: np.ndarray
+    rate: float
 
 
 @dataclass
@@ -137,7 +169,11 @@ class PathInputs:
     "Moments"); ``start_source``: None, or float32 (X,Y,Z)
     each voxel's first-scattering source (any unit) that a first scattering's start within
     its lattice point's tent is drawn by, with ``start_peak`` (N,) its largest value under
-    each start's tent (``start_positions``)."""
+    each start's tent (``start_positions``).  ``others``: PathMedium, the other media the paths
+    fly through (at most ``PATH_MEDIA`` - 1, none of them the world's fog): each keeps its own
+    tentative collisions at its own rate inside its box, so a path meets them all, scatters
+    in whichever it collides in with that medium's albedo and phase function, and deposits
+    on that medium's lattice (module docstring, "Several media")."""
 
     density: np.ndarray
     w2i: np.ndarray
@@ -165,6 +201,7 @@ class PathInputs:
     start_source: Optional[np.ndarray] = None
     start_peak: Optional[np.ndarray] = None
     moments: bool = False
+    others: tuple = ()
 
     @property
     def channels(self) -> int:
@@ -351,14 +388,30 @@ def trace_paths_np(inp: PathInputs) -> np.ndarray:
     """The numpy twin of csrc/paths.c: float64 (LX,LY,LZ,3) sums of weight / mu x density x
     trilinear share x p(w . v) over every tentative point of ``inp.n_paths`` paths inside the
     grid (W m / sr; divide by the cell volume times the mean density under the point's tent
-    for M)."""
-    lshape = inp.towards.shape[:3]
+    for M): ``trace_paths_media_np``'s first."""
+    return trace_paths_media_np(inp)[0]
+
+
+def _own_medium(inp: PathInputs) -> PathMedium:
+    return PathMedium(inp.density, inp.w2i, inp.sigma_s, inp.sigma_t, inp.g, inp.stride,
+                      inp.towards, inp.rate)
+
+
+def trace_paths_media_np(inp: PathInputs) -> list:
+    """The numpy twin of csrc/paths.c with ``inp.others``: one float64 (LX,LY,LZ,channels)
+    array of deposits per medium on its own lattice, the paths' own medium first."""
+    grids = [_own_medium(inp)] + list(inp.others)
+    if len(grids) > PATH_MEDIA:
+        raise ValueError(f"trace_paths: at most {PATH_MEDIA - 1} other media")
+    nm = len(grids)
     nc = inp.channels
-    out = np.zeros((int(np.prod(lshape)), nc))
+    lshapes = [tuple(m.towards.shape[:3]) for m in grids]
+    outs = [np.zeros((int(np.prod(sh)), nc)) for sh in lshapes]
     n = int(inp.n_paths)
     if n <= 0 or len(inp.cdf) == 0:
-        return out.reshape(lshape + (nc,))
-    g = clamp_g(inp.g)
+        return [o.reshape(sh + (nc,)) for o, sh in zip(outs, lshapes)]
+    gs = [clamp_g(m.g) for m in grids]
+    g = gs[0]
     keys = path_keys(inp.seed, n)
     k = np.minimum(np.searchsorted(inp.cdf, uniform(keys, 0, _D_PICK), side="right"),
                    len(inp.cdf) - 1)
@@ -373,31 +426,38 @@ def trace_paths_np(inp: PathInputs) -> np.ndarray:
     event = np.zeros(n, np.int64)
     hits = np.zeros(n, np.int64)
     skip = np.full(n, -1, np.int64)
-    shape = np.array(inp.density.shape)
-    inside = np.all((np.floor(_to_index(inp, pos) + 0.5) >= 0)
-                    & (np.floor(_to_index(inp, pos) + 0.5) < shape), axis=1)
+    shapes = [np.array(m.density.shape) for m in grids]
+    inside = np.stack([np.all((np.floor(_to_index(m, pos) + 0.5) >= 0)
+                              & (np.floor(_to_index(m, pos) + 0.5) < sh), axis=1)
+                       for m, sh in zip(grids, shapes)], axis=1)
     alive = np.arange(n)
-    lsh = np.array(lshape)
-    st = np.asarray(inp.sigma_t, np.float64)
-    ss = np.asarray(inp.sigma_s, np.float64)
-    st_max, st_min = float(np.max(st)), float(np.min(st))
-    mu = float(inp.rate)
+    sts = [np.asarray(m.sigma_t, np.float64) for m in grids]
+    sss = [np.asarray(m.sigma_s, np.float64) for m in grids]
+    mus = [float(m.rate) for m in grids]
     outside = float(inp.outside)
     centre = np.asarray(inp.reach_centre, np.float64).reshape(3)
     radius = float(inp.reach_radius)
     albedo = np.asarray(inp.albedo, np.float64).reshape(-1, 3)
     n_tri = len(albedo)
-    tw = inp.towards.reshape(-1, 3)
+    tws = [m.towards.reshape(-1, 3) for m in grids]
     while alive.size:
         kk = keys[alive]
         ev = event[alive] + 1
         event[alive] = ev
         ins = inside[alive]
-        rate = np.where(ins, mu, outside * st_max)
+        if nm == 1:
+            rate = np.where(ins[:, 0], mus[0], outside * float(np.max(sts[0])))
+        else:       # each medium's tentative collisions at its own rate inside its box
+            rate = np.zeros(len(alive))
+            for j in range(nm):
+                rate = rate + np.where(ins[:, j], mus[j], 0.0)
         with np.errstate(divide="ignore"):
             t = np.where(rate > 0.0, -np.log(1.0 - uniform(kk, ev, _D_FLY)) /
                          np.where(rate > 0.0, rate, 1.0), np.inf)
-        tb = _box_cross(inp, pos[alive], d[alive], ins)
+        tbs = np.stack([_box_cross(m, pos[alive], d[alive], ins[:, j])
+                        for j, m in enumerate(grids)], axis=1)
+        jb = np.argmin(tbs, axis=1)
+        tb = tbs[np.arange(len(alive)), jb]
         tseg = np.minimum(t, tb)
         keep = np.ones(len(alive), bool)
         bounced = np.zeros(len(alive), bool)
@@ -428,90 +488,116 @@ def trace_paths_np(inp: PathInputs) -> np.ndarray:
         if np.any(cross):
             c = alive[cross]
             pos[c] += tb[cross, None] * d[c]
-            inside[c] = ~inside[c]
+            inside[c, jb[cross]] = ~inside[c, jb[cross]]
         coll = rest & ~gone & ~cross
+        pick = np.zeros(len(alive), np.int64)
+        if nm > 1 and np.any(coll):     # whose tentative point it is
+            u = uniform(kk, ev, _D_MEDIUM) * rate
+            cum = np.zeros(len(alive))
+            done = np.zeros(len(alive), bool)
+            for q in range(nm):
+                iq = ins[:, q] & ~done
+                pick[iq] = q
+                cum = np.where(iq, cum + mus[q], cum)
+                done |= iq & (u < cum)
+            rate = np.asarray(mus)[pick]
         if np.any(coll):
-            ci = alive[coll]
-            pos[ci] += t[coll, None] * d[ci]
-            rho = np.full(len(ci), outside)
-            out_c = ~ins[coll]
-            if np.any(out_c):
-                r2 = np.sum((pos[ci[out_c]] - centre) ** 2, axis=1)
-                far = ~(r2 <= radius * radius)
-                idx_far = np.flatnonzero(coll)[np.flatnonzero(out_c)[far]]
-                keep[idx_far] = False
-            inn = ins[coll]
-            if np.any(inn):
-                pi = ci[inn]
-                idx = _to_index(inp, pos[pi])
-                vox = np.floor(idx + 0.5)
-                vox = np.minimum(np.where(vox >= 0.0, vox, 0.0), shape - 1).astype(np.int64)
-                r = inp.density[tuple(vox.T)].astype(np.float64)
-                r = np.where(r >= 0.0, r, 0.0)
-                rho[inn] = r
-                # deposit, weighted by the density: the 8 lattice points round the point,
-                # each with its own phase
-                lat = idx / inp.stride
-                base = np.floor(lat).astype(np.int64)
-                fr = lat - base
-                wd = w[pi] * (r / mu)[:, None]
-                da = d[pi]
-                for corner in range(8):
-                    o = np.array([(corner >> 2) & 1, (corner >> 1) & 1, corner & 1])
-                    cc = base + o
-                    ok = np.all((cc >= 0) & (cc < lsh), axis=1)
-                    share = np.prod(np.where(o == 1, fr, 1.0 - fr), axis=1) * ok
-                    flat = np.ravel_multi_index(tuple(np.where(ok[:, None], cc, 0).T), lshape)
-                    ph = hg(_dot(da, tw[flat]), g)
-                    for ch in range(3):
-                        out[:, ch] += np.bincount(flat, wd[:, ch] * share * ph, minlength=len(out))
-                if nc == MOMENT_CHANNELS:
-                    # the moments on one corner drawn by the shares (module docstring)
-                    u = uniform(kk[coll][inn], ev[coll][inn], _D_CORNER)
-                    ups = []
-                    for a in range(3):     # one draw picks the corner axis by axis
-                        up = u < fr[:, a]
-                        with np.errstate(divide="ignore", invalid="ignore"):
-                            u = np.where(up, u / fr[:, a], (u - fr[:, a]) / (1.0 - fr[:, a]))
-                        ups.append(up)
-                    cc = base + np.stack(ups, axis=1)
-                    ok = np.all((cc >= 0) & (cc < lsh), axis=1)
-                    flat = np.ravel_multi_index(tuple(np.where(ok[:, None], cc, 0).T), lshape)
-                    for ch in range(3):
-                        m0 = wd[:, ch] * ok * (1.0 / (4.0 * np.pi))
-                        out[:, 3 + ch] += np.bincount(flat, m0, minlength=len(out))
-                        for j in range(3):
-                            out[:, 6 + 3 * j + ch] += np.bincount(flat, m0 * g * da[:, j],
-                                                                  minlength=len(out))
-            live_c = keep[coll]
-            rc = rate[coll]
-            kc, ec = kk[coll], ev[coll]
-            wc = w[ci]
-            if st_min == st_max:
-                p_hit = np.minimum(rho * st_max / rc, 1.0)
-                hit = uniform(kc, ec, _D_HIT) < p_hit
-                num = 1.0 - rho[:, None] * st[None, :] / rc[:, None]
-                wc = np.where(hit[:, None], wc * (ss / st_max)[None, :],
-                              wc * num / np.maximum(1.0 - p_hit, 1e-12)[:, None])
-            else:
-                real = rho * st_max
-                nul = np.maximum(rc - rho * st_min, 0.0)
-                p_hit = real / np.maximum(real + nul, 1e-300)
-                hit = uniform(kc, ec, _D_HIT) < p_hit
-                w_null = np.maximum(rc[:, None] - rho[:, None] * st[None, :], 0.0) / \
-                    np.maximum(rc * (1.0 - p_hit), 1e-300)[:, None]
-                w_real = rho[:, None] * ss[None, :] / np.maximum(rc * p_hit, 1e-300)[:, None]
-                wc = wc * np.where(hit[:, None], w_real, w_null)
-            if np.any(hit):
-                hi = ci[hit]
-                d[hi] = _turn(uniform(kc[hit], ec[hit], _D_TURN),
-                              uniform(kc[hit], ec[hit], _D_TURN + 1), g, d[hi])
-                hits[hi] += 1
-                live_h, wc[hit] = _survive(kc[hit], ec[hit], wc[hit], w0[hi], hits[hi],
-                                           inp.max_collisions)
-                live_c[hit] &= live_h
-            live_c[~hit] &= wc[~hit].max(axis=1) > 0.0
-            w[ci] = wc
-            keep[coll] = live_c
+            pos[alive[coll]] += t[coll, None] * d[alive[coll]]
+        for j in range(nm):
+            sel = coll & (pick == j)
+            if not np.any(sel):
+                continue
+            _collide(j, grids[j], outs[j], tws[j], gs[j], sts[j], sss[j], mus[j], sel, alive,
+                     ins[:, j], rate, kk, ev, pos, d, w, w0, hits, keep, nc, lshapes[j],
+                     outside, centre, radius, inp.max_collisions)
         alive = alive[keep & (ev < MAX_EVENTS)]
-    return out.reshape(lshape + (nc,))
+    return [o.reshape(sh + (nc,)) for o, sh in zip(outs, lshapes)]
+
+
+def _collide(j, m, out, tw, g, st, ss, mu, coll, alive, ins, rate, kk, ev, pos, d, w, w0, hits,
+             keep, nc, lshape, outside, centre, radius, max_collisions):
+    """The tentative collisions ``coll`` (a mask over ``alive``) in medium ``m`` (the j-th):
+    their deposits on its lattice ``out``, then real or null collisions (csrc/paths.c)."""
+    shape = np.array(m.density.shape)
+    lsh = np.array(lshape)
+    st_max, st_min = float(np.max(st)), float(np.min(st))
+    ci = alive[coll]
+    rho = np.full(len(ci), outside)
+    out_c = ~ins[coll]
+    if np.any(out_c):
+        r2 = np.sum((pos[ci[out_c]] - centre) ** 2, axis=1)
+        far = ~(r2 <= radius * radius)
+        idx_far = np.flatnonzero(coll)[np.flatnonzero(out_c)[far]]
+        keep[idx_far] = False
+    inn = ins[coll]
+    if np.any(inn):
+        pi = ci[inn]
+        idx = _to_index(m, pos[pi])
+        vox = np.floor(idx + 0.5)
+        vox = np.minimum(np.where(vox >= 0.0, vox, 0.0), shape - 1).astype(np.int64)
+        r = m.density[tuple(vox.T)].astype(np.float64)
+        r = np.where(r >= 0.0, r, 0.0)
+        rho[inn] = r
+        # deposit, weighted by the density: the 8 lattice points round the point,
+        # each with its own phase
+        lat = idx / m.stride
+        base = np.floor(lat).astype(np.int64)
+        fr = lat - base
+        wd = w[pi] * (r / mu)[:, None]
+        da = d[pi]
+        for corner in range(8):
+            o = np.array([(corner >> 2) & 1, (corner >> 1) & 1, corner & 1])
+            cc = base + o
+            ok = np.all((cc >= 0) & (cc < lsh), axis=1)
+            share = np.prod(np.where(o == 1, fr, 1.0 - fr), axis=1) * ok
+            flat = np.ravel_multi_index(tuple(np.where(ok[:, None], cc, 0).T), lshape)
+            ph = hg(_dot(da, tw[flat]), g)
+            for ch in range(3):
+                out[:, ch] += np.bincount(flat, wd[:, ch] * share * ph, minlength=len(out))
+        if nc == MOMENT_CHANNELS:
+            # the moments on one corner drawn by the shares (module docstring)
+            u = uniform(kk[coll][inn], ev[coll][inn], _D_CORNER)
+            ups = []
+            for a in range(3):     # one draw picks the corner axis by axis
+                up = u < fr[:, a]
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    u = np.where(up, u / fr[:, a], (u - fr[:, a]) / (1.0 - fr[:, a]))
+                ups.append(up)
+            cc = base + np.stack(ups, axis=1)
+            ok = np.all((cc >= 0) & (cc < lsh), axis=1)
+            flat = np.ravel_multi_index(tuple(np.where(ok[:, None], cc, 0).T), lshape)
+            for ch in range(3):
+                m0 = wd[:, ch] * ok * (1.0 / (4.0 * np.pi))
+                out[:, 3 + ch] += np.bincount(flat, m0, minlength=len(out))
+                for jj in range(3):
+                    out[:, 6 + 3 * jj + ch] += np.bincount(flat, m0 * g * da[:, jj],
+                                                           minlength=len(out))
+    live_c = keep[coll]
+    rc = rate[coll]
+    kc, ec = kk[coll], ev[coll]
+    wc = w[ci]
+    if st_min == st_max:
+        p_hit = np.minimum(rho * st_max / rc, 1.0)
+        hit = uniform(kc, ec, _D_HIT) < p_hit
+        num = 1.0 - rho[:, None] * st[None, :] / rc[:, None]
+        wc = np.where(hit[:, None], wc * (ss / st_max)[None, :],
+                      wc * num / np.maximum(1.0 - p_hit, 1e-12)[:, None])
+    else:
+        real = rho * st_max
+        nul = np.maximum(rc - rho * st_min, 0.0)
+        p_hit = real / np.maximum(real + nul, 1e-300)
+        hit = uniform(kc, ec, _D_HIT) < p_hit
+        w_null = np.maximum(rc[:, None] - rho[:, None] * st[None, :], 0.0) / \
+            np.maximum(rc * (1.0 - p_hit), 1e-300)[:, None]
+        w_real = rho[:, None] * ss[None, :] / np.maximum(rc * p_hit, 1e-300)[:, None]
+        wc = wc * np.where(hit[:, None], w_real, w_null)
+    if np.any(hit):
+        hi = ci[hit]
+        d[hi] = _turn(uniform(kc[hit], ec[hit], _D_TURN),
+                      uniform(kc[hit], ec[hit], _D_TURN + 1), g, d[hi])
+        hits[hi] += 1
+        live_h, wc[hit] = _survive(kc[hit], ec[hit], wc[hit], w0[hi], hits[hi], max_collisions)
+        live_c[hit] &= live_h
+    live_c[~hit] &= wc[~hit].max(axis=1) > 0.0
+    w[ci] = wc
+    keep[coll] = live_c

@@ -10,10 +10,12 @@ const char trace_paths_doc[] =
     "trace_paths(out, density, w2i, i2w, sigma_s, sigma_t, g, stride, towards, starts, weights,\n"
     "            dirs, cdf, rate, path_lo, path_hi, n_paths, seed, max_collisions, roulette,\n"
     "            jitter, lobe, outside, reach, triangles, albedo, start_source, start_peak,\n"
-    "            moments)\n"
+    "            moments, others)\n"
     "Twin of mpp_render.paths.trace_paths_np: adds to out (LX,LY,LZ,3) float64 the deposits\n"
     "of paths path_lo..path_hi-1 of n_paths towards the camera, and to moments (LX,LY,LZ,12)\n"
-    "float64, unless it is empty, their moments of order 0 and 1 (paths.py, \"Moments\").";
+    "float64, unless it is empty, their moments of order 0 and 1 (paths.py, \"Moments\").\n"
+    "others: a tuple of (out, moments, density, w2i, sigma_s, sigma_t, g, stride, towards,\n"
+    "rate), the other media the paths fly through, scatter in and deposit on (at most 7).";
 
 #define MAX_EVENTS 1000000L   /* tentative collisions per path, whatever the medium */
 #define MAX_RATE_SPAN 1e6    /* rate x the grid's diagonal (m): tentative points across it */
@@ -31,7 +33,9 @@ const char trace_paths_doc[] =
 #define D_RETRY 16     /* a start's offset drawn again: 6 dimensions per try (event 0) */
 #define D_ACCEPT 512   /* a start's acceptance draw, one dimension per try (event 0) */
 #define D_CORNER 600   /* the lattice corner a deposit's moments go to */
+#define D_MEDIUM 17    /* which medium a tentative collision is in, with several (event >= 1) */
 #define START_TRIES 64 /* offsets drawn for a first scattering until one is accepted */
+#define PATH_MEDIA 8    /* media one trace flies through: its own and 7 others */
 
 /* The unit direction at cosine c and azimuth 2 pi u2 about the unit vector axis. */
 static inline void about(double c, double u2, const double axis[3], double out[3]) {
@@ -66,20 +70,29 @@ static inline void cosine_dir(double u1, double u2, const double n[3], double ou
     about(sqrt(u1), u2, n, out);
 }
 
+/* One medium the paths fly through: its voxels, coefficients, tentative collision rate mu
+ * (1/m) inside its box, and the lattice it deposits on. */
 typedef struct {
     const float *dens;
-    const float *src;         /* NULL, or each voxel's first-scattering source (any unit) */
-    const double *peak;       /* with src: each start's largest src under its tent */
     Py_ssize_t n[3];
-    double w2i[12], i2w[9], ss[3], st[3], st_max, st_min, g, mu, roulette, jitter, outside;
-    double reach[4];          /* centre (m) and radius (m) beyond which a path outside ends */
-    long stride, max_hits;
-    int lobe;                 /* 0: the first direction by the phase function, 1: cosine,
-                                 2: uniform over the sphere */
+    double w2i[12], ss[3], st[3], st_max, st_min, g, mu;
+    long stride;
     const double *tw;
     Py_ssize_t ls[3];
     double *out;
     double *mom;              /* NULL, or (LX,LY,LZ,12) the deposits' moments */
+} PathGrid;
+
+typedef struct {
+    PathGrid m[PATH_MEDIA];        /* m[0]: the medium the paths start in; then the others */
+    int nm;
+    const float *src;         /* NULL, or each voxel's first-scattering source (any unit) */
+    const double *peak;       /* with src: each start's largest src under its tent */
+    double i2w[9], roulette, jitter, outside;
+    double reach[4];          /* centre (m) and radius (m) beyond which a path outside ends */
+    long max_hits;
+    int lobe;                 /* 0: the first direction by the phase function, 1: cosine,
+                                 2: uniform over the sphere */
     const double *tri, *alb;  /* (T,9) corner and two edges; (T,3) diffuse albedo */
     Py_ssize_t n_tri, n_box;
     const double *box;        /* (n_box,6) lo, hi of each TRI_CHUNK triangles */
@@ -87,7 +100,7 @@ typedef struct {
 
 /* Where the ray o + t d (t >= 0) enters (want_exit 0) or leaves (1) the grid's box in index
  * space, [-0.5, n - 0.5] per axis (the nearest-voxel domain); INFINITY when it does not. */
-static double box_cross(const Tracer *T, const double o[3], const double d[3], int want_exit) {
+static double box_cross(const PathGrid *T, const double o[3], const double d[3], int want_exit) {
     double t0 = 0.0, t1 = INFINITY;
     for (int r = 0; r < 3; r++) {
         double io = T->w2i[4 * r] * o[0] + T->w2i[4 * r + 1] * o[1] + T->w2i[4 * r + 2] * o[2] +
@@ -158,7 +171,8 @@ static Py_ssize_t surface_hit(const Tracer *T, const double o[3], const double d
 
 /* What a first scattering's start is weighed by at world point p: the nearest voxel's
  * source T->src, or without it 1 where the voxel's density is > 0; 0 outside the box. */
-static double source_at(const Tracer *T, const double p[3]) {
+static double source_at(const Tracer *TR, const double p[3]) {
+    const PathGrid *T = &TR->m[0];
     Py_ssize_t v[3];
     for (int r = 0; r < 3; r++) {
         double idx = T->w2i[4 * r] * p[0] + T->w2i[4 * r + 1] * p[1] + T->w2i[4 * r + 2] * p[2] +
@@ -168,8 +182,8 @@ static double source_at(const Tracer *T, const double p[3]) {
         v[r] = (Py_ssize_t)f;
     }
     Py_ssize_t flat = (v[0] * T->n[1] + v[1]) * T->n[2] + v[2];
-    if (T->src) {
-        double q = (double)T->src[flat];
+    if (TR->src) {
+        double q = (double)TR->src[flat];
         return q > 0.0 ? q : 0.0;
     }
     return T->dens[flat] > 0.0f ? 1.0 : 0.0;
@@ -184,6 +198,88 @@ static inline int survive(const Tracer *T, uint32_t key, long ev, double w[3], d
     int live = uniform01(key, ev, D_RR) < q;
     for (int c = 0; c < 3; c++) w[c] /= fmax(q, 1e-300);
     return live && hits < T->max_hits && fmax(w[0], fmax(w[1], w[2])) > 0.0;
+}
+
+/* Whether world point p lies in grid G's box (the nearest-voxel domain). */
+static int in_box(const PathGrid *G, const double p[3]) {
+    for (int r = 0; r < 3; r++) {
+        double idx = G->w2i[4 * r] * p[0] + G->w2i[4 * r + 1] * p[1] + G->w2i[4 * r + 2] * p[2] +
+                     G->w2i[4 * r + 3];
+        double f = floor(idx + 0.5);
+        if (!(f >= 0.0 && f < (double)G->n[r])) return 0;
+    }
+    return 1;
+}
+
+/* A tentative point at world pos inside grid G: its nearest voxel's density (0 for NaN or
+ * below 0), which it returns, weighs the deposit w / mu x density x trilinear share x
+ * p(d . v) on the 8 lattice points round the point (nothing where the density is 0: an
+ * empty voxel adds nothing), and with G->mom the moments on one of them. */
+static double deposit(const PathGrid *G, const double pos[3], const double w[3], const double d[3],
+                      uint32_t key, long ev) {
+    double idx[3];
+    for (int r = 0; r < 3; r++)
+        idx[r] = G->w2i[4 * r] * pos[0] + G->w2i[4 * r + 1] * pos[1] +
+                 G->w2i[4 * r + 2] * pos[2] + G->w2i[4 * r + 3];
+    Py_ssize_t v[3];
+    for (int a = 0; a < 3; a++) {
+        double f = floor(idx[a] + 0.5);
+        if (!(f >= 0.0)) f = 0.0;   /* on the box's face (or NaN): the edge voxel */
+        if (f > (double)(G->n[a] - 1)) f = (double)(G->n[a] - 1);
+        v[a] = (Py_ssize_t)f;
+    }
+    double rho = (double)G->dens[(v[0] * G->n[1] + v[1]) * G->n[2] + v[2]];
+    if (!(rho >= 0.0)) rho = 0.0;   /* NaN or negative density: empty */
+    double lat[3], fr[3];
+    Py_ssize_t b[3];
+    for (int a = 0; a < 3; a++) {
+        lat[a] = idx[a] / (double)G->stride;
+        double fl = floor(lat[a]);
+        if (!(fl > -2.0)) fl = -2.0;   /* NaN guard: no corner in range */
+        b[a] = (Py_ssize_t)fl;
+        fr[a] = lat[a] - fl;
+    }
+    for (int corner = 0; rho > 0.0 && corner < 8; corner++) {
+        int o[3] = {(corner >> 2) & 1, (corner >> 1) & 1, corner & 1};
+        Py_ssize_t cc[3];
+        double share = 1.0;
+        int ok = 1;
+        for (int a = 0; a < 3; a++) {
+            cc[a] = b[a] + o[a];
+            if (cc[a] < 0 || cc[a] >= G->ls[a]) ok = 0;
+            share *= o[a] ? fr[a] : 1.0 - fr[a];
+        }
+        if (!ok) continue;
+        Py_ssize_t flat = (cc[0] * G->ls[1] + cc[1]) * G->ls[2] + cc[2];
+        const double *tv = G->tw + 3 * flat;
+        double ph = hg_phase(d[0] * tv[0] + d[1] * tv[1] + d[2] * tv[2], G->g);
+        double *o_pt = G->out + 3 * flat;
+        for (int c = 0; c < 3; c++)
+            o_pt[c] += (w[c] / G->mu) * rho * share * ph;
+    }
+    if (G->mom && rho > 0.0) {
+        /* the moments, dep / (4 pi) and g d dep / (4 pi), on one corner drawn by the
+         * trilinear shares with the whole weight: the same mean, an eighth of the
+         * work (paths.py, "Moments"); one draw picks the corner axis by axis */
+        Py_ssize_t cc[3];
+        int ok = 1;
+        double u = uniform01(key, ev, D_CORNER);
+        for (int a = 0; a < 3; a++) {
+            int up = u < fr[a];
+            u = up ? u / fr[a] : (u - fr[a]) / (1.0 - fr[a]);
+            cc[a] = b[a] + up;
+            if (cc[a] < 0 || cc[a] >= G->ls[a]) ok = 0;
+        }
+        if (ok) {
+            double *o_pt = G->mom + 12 * ((cc[0] * G->ls[1] + cc[1]) * G->ls[2] + cc[2]);
+            for (int c = 0; c < 3; c++) {
+                double m0 = (w[c] / G->mu) * rho * (1.0 / (4.0 * M_PI)), m1 = m0 * G->g;
+                o_pt[c] += m0;
+                for (int j = 0; j < 3; j++) o_pt[3 + 3 * j + c] += m1 * d[j];
+            }
+        }
+    }
+    return rho;
 }
 
 static void trace_one(const Tracer *T, uint32_t key, const double *start, const double *w_start,
@@ -207,7 +303,7 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
             int base = k == 0 ? D_JIT : D_RETRY + 6 * (k - 1);
             for (int a = 0; a < 3; a++)
                 off[a] = (uniform01(key, 0, base + 2 * a) + uniform01(key, 0, base + 2 * a + 1) -
-                          1.0) * ((double)T->stride * T->jitter);
+                          1.0) * ((double)T->m[0].stride * T->jitter);
             for (int a = 0; a < 3; a++)
                 pos[a] = start[a] + T->i2w[3 * a] * off[0] + T->i2w[3 * a + 1] * off[1] +
                          T->i2w[3 * a + 2] * off[2];
@@ -225,30 +321,33 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
     if (T->lobe == 1)
         cosine_dir(uniform01(key, 0, D_DIR), uniform01(key, 0, D_DIR + 1), dir, d);
     else  /* lobe 2, an emitting voxel: uniform over the sphere (the phase function of g 0) */
-        turn(uniform01(key, 0, D_DIR), uniform01(key, 0, D_DIR + 1), T->lobe == 2 ? 0.0 : T->g,
-             dir, d);
+        turn(uniform01(key, 0, D_DIR), uniform01(key, 0, D_DIR + 1),
+             T->lobe == 2 ? 0.0 : T->m[0].g, dir, d);
     for (int c = 0; c < 3; c++) {
         w[c] = w_start[c] * inv_n;
         if (w[c] > w0) w0 = w[c];
     }
     long hits = 0;
     Py_ssize_t skip = -1;
-    int inside;
-    {
-        double idx0[3];
-        for (int r = 0; r < 3; r++)
-            idx0[r] = T->w2i[4 * r] * pos[0] + T->w2i[4 * r + 1] * pos[1] +
-                      T->w2i[4 * r + 2] * pos[2] + T->w2i[4 * r + 3];
-        inside = 1;
-        for (int a = 0; a < 3; a++) {
-            double f = floor(idx0[a] + 0.5);
-            if (!(f >= 0.0 && f < (double)T->n[a])) inside = 0;
-        }
-    }
+    int inside[PATH_MEDIA];
+    for (int j = 0; j < T->nm; j++) inside[j] = in_box(&T->m[j], pos);
     for (long ev = 1; ev <= MAX_EVENTS; ev++) {
-        double rate = inside ? T->mu : T->outside * T->st_max;
+        /* with several media each keeps its own tentative collisions at its rate inside its
+         * box: their sum is the rate of the whole, and a tentative point is medium j's with
+         * probability mu_j over the sum */
+        double rate = 0.0;
+        if (T->nm == 1)
+            rate = inside[0] ? T->m[0].mu : T->outside * T->m[0].st_max;
+        else
+            for (int j = 0; j < T->nm; j++)
+                if (inside[j]) rate += T->m[j].mu;
         double t = rate > 0.0 ? -log(1.0 - uniform01(key, ev, D_FLY)) / rate : INFINITY;
-        double tb = box_cross(T, pos, d, inside);
+        double tb = INFINITY;
+        int jb = 0;
+        for (int j = 0; j < T->nm; j++) {
+            double tj = box_cross(&T->m[j], pos, d, inside[j]);
+            if (tj < tb) { tb = tj; jb = j; }
+        }
         double tseg = fmin(t, tb);
         if (T->n_tri > 0) {
             double ts;
@@ -273,112 +372,61 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
         }
         skip = -1;
         if (!(tseg < INFINITY)) return;   /* flies off into empty space */
-        if (tb <= t) {                    /* into or out of the grid: the flight starts again */
+        if (tb <= t) {                    /* into or out of a grid: the flight starts again */
             for (int a = 0; a < 3; a++) pos[a] += tb * d[a];
-            inside = !inside;
+            inside[jb] = !inside[jb];
             continue;
         }
         for (int a = 0; a < 3; a++) pos[a] += t * d[a];
+        int j = 0;
+        if (T->nm > 1) {   /* whose tentative point it is */
+            double u = uniform01(key, ev, D_MEDIUM) * rate, cum = 0.0;
+            for (int q = 0; q < T->nm; q++) {
+                if (!inside[q]) continue;
+                j = q;
+                cum += T->m[q].mu;
+                if (u < cum) break;
+            }
+            rate = T->m[j].mu;
+        }
+        const PathGrid *G = &T->m[j];
         double rho;
-        if (!inside) {
+        if (!inside[j]) {   /* one medium, beyond its grid (the world's fog) */
             double r2 = 0.0;
             for (int a = 0; a < 3; a++) r2 += (pos[a] - T->reach[a]) * (pos[a] - T->reach[a]);
             if (!(r2 <= T->reach[3] * T->reach[3])) return;   /* too far to come back */
             rho = T->outside;
         } else {
-            double idx[3];
-            for (int r = 0; r < 3; r++)
-                idx[r] = T->w2i[4 * r] * pos[0] + T->w2i[4 * r + 1] * pos[1] +
-                         T->w2i[4 * r + 2] * pos[2] + T->w2i[4 * r + 3];
-            Py_ssize_t v[3];
-            for (int a = 0; a < 3; a++) {
-                double f = floor(idx[a] + 0.5);
-                if (!(f >= 0.0)) f = 0.0;   /* on the box's face (or NaN): the edge voxel */
-                if (f > (double)(T->n[a] - 1)) f = (double)(T->n[a] - 1);
-                v[a] = (Py_ssize_t)f;
-            }
-            rho = (double)T->dens[(v[0] * T->n[1] + v[1]) * T->n[2] + v[2]];
-            if (!(rho >= 0.0)) rho = 0.0;   /* NaN or negative density: empty */
-            /* deposit, weighted by the density, on the 8 lattice points round the point
-             * (nothing where the density is 0: an empty voxel adds nothing) */
-            double lat[3], fr[3];
-            Py_ssize_t b[3];
-            for (int a = 0; a < 3; a++) {
-                lat[a] = idx[a] / (double)T->stride;
-                double fl = floor(lat[a]);
-                if (!(fl > -2.0)) fl = -2.0;   /* NaN guard: no corner in range */
-                b[a] = (Py_ssize_t)fl;
-                fr[a] = lat[a] - fl;
-            }
-            for (int corner = 0; rho > 0.0 && corner < 8; corner++) {
-                int o[3] = {(corner >> 2) & 1, (corner >> 1) & 1, corner & 1};
-                Py_ssize_t cc[3];
-                double share = 1.0;
-                int ok = 1;
-                for (int a = 0; a < 3; a++) {
-                    cc[a] = b[a] + o[a];
-                    if (cc[a] < 0 || cc[a] >= T->ls[a]) ok = 0;
-                    share *= o[a] ? fr[a] : 1.0 - fr[a];
-                }
-                if (!ok) continue;
-                Py_ssize_t flat = (cc[0] * T->ls[1] + cc[1]) * T->ls[2] + cc[2];
-                const double *tv = T->tw + 3 * flat;
-                double ph = hg_phase(d[0] * tv[0] + d[1] * tv[1] + d[2] * tv[2], T->g);
-                double *o_pt = T->out + 3 * flat;
-                for (int c = 0; c < 3; c++)
-                    o_pt[c] += (w[c] / T->mu) * rho * share * ph;
-            }
-            if (T->mom && rho > 0.0) {
-                /* the moments, dep / (4 pi) and g d dep / (4 pi), on one corner drawn by the
-                 * trilinear shares with the whole weight: the same mean, an eighth of the
-                 * work (paths.py, "Moments"); one draw picks the corner axis by axis */
-                Py_ssize_t cc[3];
-                int ok = 1;
-                double u = uniform01(key, ev, D_CORNER);
-                for (int a = 0; a < 3; a++) {
-                    int up = u < fr[a];
-                    u = up ? u / fr[a] : (u - fr[a]) / (1.0 - fr[a]);
-                    cc[a] = b[a] + up;
-                    if (cc[a] < 0 || cc[a] >= T->ls[a]) ok = 0;
-                }
-                if (ok) {
-                    double *o_pt = T->mom + 12 * ((cc[0] * T->ls[1] + cc[1]) * T->ls[2] + cc[2]);
-                    for (int c = 0; c < 3; c++) {
-                        double m0 = (w[c] / T->mu) * rho * (1.0 / (4.0 * M_PI)), m1 = m0 * T->g;
-                        o_pt[c] += m0;
-                        for (int j = 0; j < 3; j++) o_pt[3 + 3 * j + c] += m1 * d[j];
-                    }
-                }
-            }
+            rho = deposit(G, pos, w, d, key, ev);
         }
         /* real or null collision; chromatic media use spectral tracking (Kutz et al. 2017),
          * whose null probability stays > 0 while any channel has null density */
         double p_hit;
         int hit;
-        if (T->st_min == T->st_max) {
-            p_hit = rho * T->st_max / rate;
+        if (G->st_min == G->st_max) {
+            p_hit = rho * G->st_max / rate;
             if (p_hit > 1.0) p_hit = 1.0;
             hit = uniform01(key, ev, D_HIT) < p_hit;
             if (!hit) {
                 double den = fmax(1.0 - p_hit, 1e-12);
-                for (int c = 0; c < 3; c++) w[c] *= (1.0 - rho * T->st[c] / rate) / den;
+                for (int c = 0; c < 3; c++) w[c] *= (1.0 - rho * G->st[c] / rate) / den;
             } else {
-                for (int c = 0; c < 3; c++) w[c] *= T->ss[c] / T->st_max;
+                for (int c = 0; c < 3; c++) w[c] *= G->ss[c] / G->st_max;
             }
         } else {
-            double real = rho * T->st_max, nul = fmax(rate - rho * T->st_min, 0.0);
+            double real = rho * G->st_max, nul = fmax(rate - rho * G->st_min, 0.0);
             p_hit = real / fmax(real + nul, 1e-300);
             hit = uniform01(key, ev, D_HIT) < p_hit;
             if (!hit) {
                 for (int c = 0; c < 3; c++)
-                    w[c] *= fmax(rate - rho * T->st[c], 0.0) / fmax(rate * (1.0 - p_hit), 1e-300);
+                    w[c] *= fmax(rate - rho * G->st[c], 0.0) / fmax(rate * (1.0 - p_hit), 1e-300);
             } else {
-                for (int c = 0; c < 3; c++) w[c] *= rho * T->ss[c] / fmax(rate * p_hit, 1e-300);
+                for (int c = 0; c < 3; c++) w[c] *= rho * G->ss[c] / fmax(rate * p_hit, 1e-300);
             }
         }
         if (hit) {
             double nd[3];
-            turn(uniform01(key, ev, D_TURN), uniform01(key, ev, D_TURN + 1), T->g, d, nd);
+            turn(uniform01(key, ev, D_TURN), uniform01(key, ev, D_TURN + 1), G->g, d, nd);
             for (int a = 0; a < 3; a++) d[a] = nd[a];
             hits++;
             if (!survive(T, key, ev, w, w0, hits)) return;
@@ -388,21 +436,122 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
     }
 }
 
+/* Fill grid G (moments mom or NULL); -1 with an exception for bad coefficients. */
+static int set_grid(PathGrid *G, const float *dens, const Py_ssize_t n[3], const double *w2i,
+                    const double *ss, const double *st, double g, double rate, long stride,
+                    const double *tw, const Py_ssize_t ls[3], double *out, double *mom) {
+    G->dens = dens;
+    for (int a = 0; a < 3; a++) { G->n[a] = n[a]; G->ls[a] = ls[a]; }
+    memcpy(G->w2i, w2i, sizeof G->w2i);
+    memcpy(G->ss, ss, sizeof G->ss);
+    memcpy(G->st, st, sizeof G->st);
+    G->st_max = fmax(G->st[0], fmax(G->st[1], G->st[2]));
+    G->st_min = fmin(G->st[0], fmin(G->st[1], G->st[2]));
+    if (!(G->st_max > 0.0) || !isfinite(G->st_max)) {
+        PyErr_SetString(PyExc_ValueError, "trace_paths: sigma_t must be positive and finite");
+        return -1;
+    }
+    if (stride < 1 || !(rate > 0.0) || !isfinite(rate) || !isfinite(g)) {
+        PyErr_SetString(PyExc_ValueError, "trace_paths: bad stride, rate or g");
+        return -1;
+    }
+    G->g = g > G_LIMIT ? G_LIMIT : (g < -G_LIMIT ? -G_LIMIT : g);
+    G->mu = rate;
+    G->stride = stride;
+    G->tw = tw;
+    G->out = out;
+    G->mom = mom;
+    return 0;
+}
+
+/* The rate x the diagonal (m) of a grid of shape n with index steps i2w, or of w2i's inverse
+ * where i2w is NULL: the tentative points a crossing takes, at most MAX_RATE_SPAN. */
+static int span_ok(double rate, const Py_ssize_t n[3], const double *w2i) {
+    /* the diagonal in index space mapped to metres: solve w2i[:, :3] e = n (Cramer) */
+    const double *A = w2i;
+    double a = A[0], b = A[1], c = A[2], d = A[4], e = A[5], f = A[6], gg = A[8], h = A[9],
+           i = A[10];
+    double det = a * (e * i - f * h) - b * (d * i - f * gg) + c * (d * h - e * gg);
+    if (!(fabs(det) > 0.0) || !isfinite(det)) return 0;
+    double y[3] = {(double)n[0], (double)n[1], (double)n[2]};
+    double x0 = (y[0] * (e * i - f * h) - b * (y[1] * i - f * y[2]) + c * (y[1] * h - e * y[2])) / det;
+    double x1 = (a * (y[1] * i - f * y[2]) - y[0] * (d * i - f * gg) + c * (d * y[2] - y[1] * gg)) / det;
+    double x2 = (a * (e * y[2] - y[1] * h) - b * (d * y[2] - y[1] * gg) + y[0] * (d * h - e * gg)) / det;
+    double span = rate * sqrt(x0 * x0 + x1 * x1 + x2 * x2);
+    return span <= MAX_RATE_SPAN;
+}
+
+/* One of the others: (out, moments, density, w2i, sigma_s, sigma_t, g, stride, towards,
+ * rate), its buffers held in b[7] (released by the caller); -1 with an exception. */
+static int other_grid(PyObject *item, Buf b[7], PathGrid *G) {
+    PyObject *po, *pm, *pd, *pw, *pss, *pst, *ptw;
+    double g, rate;
+    long stride;
+    if (!PyTuple_Check(item) ||
+        !PyArg_ParseTuple(item, "OOOOOOdlOd", &po, &pm, &pd, &pw, &pss, &pst, &g, &stride, &ptw,
+                          &rate)) {
+        if (!PyErr_Occurred())
+            PyErr_SetString(PyExc_ValueError, "trace_paths: each other medium is a tuple");
+        return -1;
+    }
+    Py_ssize_t so[4] = {-1, -1, -1, 3}, sd[3] = {-1, -1, -1}, sw[2] = {3, 4}, s3[1] = {3},
+               sm[4] = {-1, -1, -1, 12};
+    if (get_buf_ex(po, &b[0], 'd', 4, so, "other out", PyBUF_WRITABLE) < 0) return -1;
+    if (get_buf_ex(pm, &b[1], 'd', 4, sm, "other moments", PyBUF_WRITABLE) < 0) return -1;
+    if (get_buf(pd, &b[2], 'f', 3, sd, "other density") < 0) return -1;
+    if (get_buf(pw, &b[3], 'd', 2, sw, "other w2i") < 0) return -1;
+    if (get_buf(pss, &b[4], 'd', 1, s3, "other sigma_s") < 0) return -1;
+    s3[0] = 3;
+    if (get_buf(pst, &b[5], 'd', 1, s3, "other sigma_t") < 0) return -1;
+    Py_ssize_t stw[4] = {so[0], so[1], so[2], 3};
+    if (get_buf(ptw, &b[6], 'd', 4, stw, "other towards") < 0) return -1;
+    int has_mom = sm[0] * sm[1] * sm[2] > 0;
+    if (has_mom && (sm[0] != so[0] || sm[1] != so[1] || sm[2] != so[2])) {
+        PyErr_SetString(PyExc_ValueError, "trace_paths: moments must have the lattice's shape");
+        return -1;
+    }
+    if (sd[0] < 1 || sd[1] < 1 || sd[2] < 1) {
+        PyErr_SetString(PyExc_ValueError, "trace_paths: an other medium's grid is empty");
+        return -1;
+    }
+    if (set_grid(G, (const float *)b[2].view.buf, sd, (const double *)b[3].view.buf,
+                 (const double *)b[4].view.buf, (const double *)b[5].view.buf, g, rate, stride,
+                 (const double *)b[6].view.buf, so, (double *)b[0].view.buf,
+                 has_mom ? (double *)b[1].view.buf : NULL) < 0)
+        return -1;
+    if (!span_ok(rate, sd, G->w2i)) {
+        PyErr_SetString(PyExc_ValueError,
+                        "trace_paths: the rate of tentative collisions is too high for the "
+                        "grid (or the grid's size is not finite)");
+        return -1;
+    }
+    return 0;
+}
+
 PyObject *trace_paths(PyObject *self, PyObject *args) {
     PyObject *po, *pd, *pw2i, *pi2w, *pss, *pst, *ptw, *pstarts, *pws, *pdirs, *pcdf, *preach,
-        *ptri, *palb, *psrc, *ppeak, *pmom;
+        *ptri, *palb, *psrc, *ppeak, *pmom, *pothers;
     double g, rate, roulette, jitter, outside;
     long stride, lo, hi, n_paths, max_hits, lobe;
     unsigned long seed;
-    if (!PyArg_ParseTuple(args, "OOOOOOdlOOOOOdlllklddldOOOOOO", &po, &pd, &pw2i, &pi2w, &pss,
+    if (!PyArg_ParseTuple(args, "OOOOOOdlOOOOOdlllklddldOOOOOOO", &po, &pd, &pw2i, &pi2w, &pss,
                           &pst, &g, &stride, &ptw, &pstarts, &pws, &pdirs, &pcdf, &rate, &lo,
                           &hi, &n_paths, &seed, &max_hits, &roulette, &jitter, &lobe, &outside,
-                          &preach, &ptri, &palb, &psrc, &ppeak, &pmom))
+                          &preach, &ptri, &palb, &psrc, &ppeak, &pmom, &pothers))
         return NULL;
+    if (!PyTuple_Check(pothers) || PyTuple_GET_SIZE(pothers) > PATH_MEDIA - 1) {
+        PyErr_SetString(PyExc_ValueError, "trace_paths: others must be a tuple of at most 7 media");
+        return NULL;
+    }
     Buf bo = {0}, bd = {0}, bw = {0}, bi = {0}, bss = {0}, bst = {0}, btw = {0}, bs = {0},
         bws = {0}, bdir = {0}, bc = {0}, br = {0}, bt = {0}, ba = {0}, bq = {0}, bp = {0}, bm = {0};
+    /* per other medium: out, moments, density, w2i, sigma_s, sigma_t, towards */
+    Buf ob[PATH_MEDIA - 1][7];
+    memset(ob, 0, sizeof ob);
+    Py_ssize_t n_others = PyTuple_GET_SIZE(pothers);
     double *boxes = NULL;
     int ok = 0;
+    Tracer T;
     Py_ssize_t so[4] = {-1, -1, -1, 3}, sd[3] = {-1, -1, -1}, sw[2] = {3, 4}, si[2] = {3, 3},
                s3[1] = {3}, stw[4] = {-1, -1, -1, 3}, sn[2] = {-1, 3}, sc[1] = {-1};
     if (get_buf_ex(po, &bo, 'd', 4, so, "out", PyBUF_WRITABLE) < 0) goto done;
@@ -472,26 +621,20 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
             goto done;
         }
     }
-    Tracer T;
-    T.dens = (const float *)bd.view.buf;
+    if (set_grid(&T.m[0], (const float *)bd.view.buf, sd, (const double *)bw.view.buf,
+                 (const double *)bss.view.buf, (const double *)bst.view.buf, g, rate, stride,
+                 (const double *)btw.view.buf, so, (double *)bo.view.buf, NULL) < 0)
+        goto done;
+    T.nm = 1;
+    for (Py_ssize_t k = 0; k < n_others; k++) {
+        if (other_grid(PyTuple_GET_ITEM(pothers, k), ob[k], &T.m[1 + k]) < 0) goto done;
+        T.nm++;
+    }
     T.src = has_src ? (const float *)bq.view.buf : NULL;
     T.peak = has_src ? (const double *)bp.view.buf : NULL;
-    for (int a = 0; a < 3; a++) { T.n[a] = sd[a]; T.ls[a] = so[a]; }
-    memcpy(T.w2i, bw.view.buf, sizeof T.w2i);
     memcpy(T.i2w, bi.view.buf, sizeof T.i2w);
-    memcpy(T.ss, bss.view.buf, sizeof T.ss);
-    memcpy(T.st, bst.view.buf, sizeof T.st);
-    T.st_max = fmax(T.st[0], fmax(T.st[1], T.st[2]));
-    if (!(T.st_max > 0.0) || !isfinite(T.st_max)) {
-        PyErr_SetString(PyExc_ValueError, "trace_paths: sigma_t must be positive and finite");
-        goto done;
-    }
-    T.g = g > G_LIMIT ? G_LIMIT : (g < -G_LIMIT ? -G_LIMIT : g);
-    T.mu = rate;
     T.roulette = roulette;
-    T.stride = stride;
     T.max_hits = max_hits;
-    T.st_min = fmin(T.st[0], fmin(T.st[1], T.st[2]));
     T.jitter = jitter;
     T.lobe = (int)lobe;
     T.outside = outside;
@@ -527,9 +670,7 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
         }
     }
     T.box = boxes;
-    T.tw = (const double *)btw.view.buf;
-    T.out = (double *)bo.view.buf;
-    T.mom = has_mom ? (double *)bm.view.buf : NULL;
+    T.m[0].mom = has_mom ? (double *)bm.view.buf : NULL;
     const double *S = (const double *)bs.view.buf, *W = (const double *)bws.view.buf,
                  *D = (const double *)bdir.view.buf, *C = (const double *)bc.view.buf;
     Py_ssize_t n_starts = sn[0];
@@ -555,6 +696,8 @@ done:
     buf_release(&bst); buf_release(&btw); buf_release(&bs); buf_release(&bws);
     buf_release(&bdir); buf_release(&bc); buf_release(&br); buf_release(&bt); buf_release(&ba);
     buf_release(&bq); buf_release(&bp); buf_release(&bm);
+    for (Py_ssize_t k = 0; k < n_others; k++)
+        for (int q = 0; q < 7; q++) buf_release(&ob[k][q]);
     free(boxes);
     if (!ok) return NULL;
     Py_RETURN_NONE;

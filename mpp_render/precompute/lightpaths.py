@@ -12,7 +12,8 @@ import numpy as np
 from .. import kernels
 from ..camera import towards_camera
 from ..parallel import worker_count
-from ..paths import MAX_COLLISIONS, PATHS_MAX_SPAN, PathInputs, from_power, rate_span
+from ..paths import (MAX_COLLISIONS, PATH_MEDIA, PATHS_MAX_SPAN, PathInputs, PathMedium,
+                     from_power, rate_span)
 from .lattice import lattice_points, paths_lattice
 from .pathstarts import Surroundings, fog_starts, reach, surface_albedo, surface_starts
 from .source import light_direction, near_light_cells, source_and_density, tent_restrict
@@ -27,7 +28,8 @@ FAR_PATHS = 0.25     # the far box's paths, a fraction of the grid's
 
 def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: int,
                     resolution: int, seed: int = 0, threads: int = 0, should_cancel=None,
-                    around: Optional[Surroundings] = None, moments: bool = True):
+                    around: Optional[Surroundings] = None, moments: bool = True,
+                    partners=()):
     """(stride, h, M, far, moments) for ``light`` on medium ``pm`` (its field ``fld``, the light's optical
     depth at ``channel``): M float32 (LX,LY,LZ,3) W/(m^2 sr) on the light pyramid's lattice
     (lattice.walk_lattice at ``resolution``), from ``n_paths`` paths (paths.py; at most
@@ -44,8 +46,13 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     else None.  Returned ``moments``: where ``moments`` is asked for and surfaces are round the
     medium (``around``), whose gathers look through it along other directions than the
     camera's, float32 (LX,LY,LZ,12) M's moments of order 0 and 1 (paths.py, "Moments"), else
-    None.  None where the medium is
-    too dense for paths (paths.PATHS_MAX_SPAN): the caller keeps the walk."""
+    None.  ``partners``: (PreparedMedium, PathLattice) of the other media whose boxes
+    overlap ``pm``'s (``overlapping``, ``partner_lattice``): the paths fly through them too,
+    scatter in them by their own albedo and phase function and deposit on their lattices; a
+    sixth item, per partner, is what they deposited there as M (float32 (LX,LY,LZ,3), with the
+    moments where these are made (LX,LY,LZ,15)), to be added to that medium's M for this
+    light.  None where the medium is too dense for paths (paths.PATHS_MAX_SPAN): the caller
+    keeps the walk."""
     stride, shape, h = paths_lattice(pm, resolution)
     voxels = np.zeros(pm.grid.shape[:3], np.float32)
     base, _, pts = source_and_density(pm, fld, light, channel, stride, voxels=voxels,
@@ -74,22 +81,55 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
             if got is not None:
                 sets.append(got[:3] + (got[3], 1))
     if not sets:
-        return stride, h, np.zeros(tuple(shape) + (3,), np.float32), None, None
+        return stride, h, np.zeros(tuple(shape) + (3,), np.float32), None, None, []
     lat = PathLattice.of(pm, camera, resolution,
                          None if around is None else around.enclosed(pm))
     if lat is None:
         return None
     n_paths = lat.paths(n_paths)
     gathered = moments and around is not None and around.surfaces is not None
-    m = lat.mean(_trace(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
-                        moments=gathered))
+    accs = _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
+                      moments=gathered, partners=partners)
+    m = lat.mean(accs[0])
+    cross = [plat.mean(a) for (_, plat), a in zip(partners, accs[1:])]
     far = None
     if fog and camera is not None:
         far = _far_multiple(pm, sets, camera, n_paths, seed, threads, should_cancel, around)
     if not gathered:
-        return stride, h, m, far, None
+        return stride, h, m, far, None, cross
     return (stride, h, np.ascontiguousarray(m[..., :3]), far,
-            np.ascontiguousarray(m[..., 3:]))
+            np.ascontiguousarray(m[..., 3:]), cross)
+
+
+def overlapping(media) -> list:
+    """Per medium of ``media`` (PreparedMedium), the indices of the others whose boxes in the
+    world overlap its own (at most paths.PATH_MEDIA - 1, the first ones): the media its light
+    paths fly through besides itself.  The world's fog (endless) has none and is none."""
+    boxes = []
+    for pm in media:
+        n = np.asarray(pm.grid.shape[:3], np.float64)
+        corners = np.array([[a, b, c] for a in (-0.5, n[0] - 0.5) for b in (-0.5, n[1] - 0.5)
+                            for c in (-0.5, n[2] - 0.5)])
+        w = pm.to_world(corners)
+        boxes.append((w.min(axis=0), w.max(axis=0)))
+    out = []
+    for i, pm in enumerate(media):
+        got = []
+        for j, other in enumerate(media):
+            if j == i or pm.endless or other.endless:
+                continue
+            (lo1, hi1), (lo2, hi2) = boxes[i], boxes[j]
+            if np.all(lo1 < hi2) and np.all(lo2 < hi1):
+                got.append(j)
+        out.append(got[:PATH_MEDIA - 1])
+    return out
+
+
+def partner_lattice(pm, camera, resolution: int, around: Optional[Surroundings] = None):
+    """The PathLattice other media's paths deposit on in ``pm`` (traced_multiple's
+    ``partners``); None where it is too dense for paths."""
+    return PathLattice.of(pm, camera, resolution,
+                          None if around is None else around.enclosed(pm))
 
 
 def tent_peak(voxels: np.ndarray, stride: int, shape) -> np.ndarray:
@@ -185,6 +225,15 @@ def _trace(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
     ``max_collisions`` real collisions and bounces (1: its first flight alone); with
     ``moments`` (LX,LY,LZ,15), their moments too (paths.py, "Moments"); raises
     cancel.Cancelled on Esc."""
+    return _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
+                      max_collisions, moments)[0]
+
+
+def _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
+               max_collisions: int = MAX_COLLISIONS, moments: bool = False,
+               partners=()) -> list:
+    """``_trace``'s deposits on ``lat``, then on each of the ``partners``' lattices
+    ((PreparedMedium, PathLattice), traced_multiple), which the paths fly through too."""
     density, w2i, i2w = lat.density, lat.w2i, lat.i2w
     surf = around.surfaces if around is not None else None
     centre, radius = reach(pm, (w2i, density.shape))
@@ -193,6 +242,10 @@ def _trace(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
         albedo = surface_albedo(surf) if around.bounce else np.zeros((len(surf.v0), 3))
         extra.update(triangles=np.stack([surf.v0, surf.e1, surf.e2], axis=1), albedo=albedo)
     st = np.asarray(pm.sigma_t, np.float64)
+    others = tuple(PathMedium(plat.density, np.asarray(plat.w2i, np.float64),
+                              np.asarray(opm.sigma_s, np.float64),
+                              np.asarray(opm.sigma_t, np.float64), float(opm.g), plat.stride,
+                              plat.towards, plat.rate) for opm, plat in partners)
     totals = np.array([float(item[1].sum()) for item in sets])
     acc = None
     for k, item in enumerate(sets):
@@ -206,9 +259,11 @@ def _trace(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
                          lat.stride, lat.towards, np.ascontiguousarray(starts), weights,
                          np.ascontiguousarray(dirs), cdf, lat.rate, n_k, int(seed) + 104729 * k,
                          max_collisions=max_collisions, jitter=jitter, lobe=lobe,
-                         start_source=source, start_peak=peak, moments=moments, **extra)
-        got = kernels.trace_paths(inp, threads=worker_count(threads), should_cancel=should_cancel)
-        acc = got if acc is None else acc + got
+                         start_source=source, start_peak=peak, moments=moments,
+                         others=others, **extra)
+        got = kernels.trace_paths_media(inp, threads=worker_count(threads),
+                                        should_cancel=should_cancel)
+        acc = got if acc is None else [a + b for a, b in zip(acc, got)]
     return acc
 
 

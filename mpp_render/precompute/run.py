@@ -18,7 +18,7 @@ from .lightdepth import (SHADOW_TAU, light_optical_depth, near_sharp_surfaces, s
                          split_fog, sweep_light)
 from .flatten import flattened
 from .emissionlight import EMISSION_PATHS, add_lattice, emission_light
-from .lightpaths import traced_multiple
+from .lightpaths import overlapping, partner_lattice, traced_multiple
 from .pathstarts import Surroundings
 from .lightpyramid import MultipleField, multiple_field
 from .source import peak_light
@@ -72,6 +72,23 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
     shadowed = surfaces is not None and not surfaces.empty
     around = Surroundings(solid, fog_st, surfaces, step, bool(surface_bounce),
                           tuning.disc_exact)
+    # traced paths fly through every medium whose box overlaps theirs and deposit on it too
+    # (precompute.lightpaths.overlapping); what one medium's paths leave on another's lattice
+    # is added to that medium's M once every medium is traced
+    traces = multiple and multiple_paths > 0 and camera is not None
+    partners_of = overlapping(media) if traces else [[] for _ in media]
+    partner_lats = {}
+
+    def partners(mi):
+        got = []
+        for j in partners_of[mi]:
+            if j not in partner_lats:
+                partner_lats[j] = partner_lattice(media[j], camera, multiple_resolution, around)
+            if partner_lats[j] is not None:
+                got.append((j, partner_lats[j]))
+        return got
+
+    crossed = {}   # (medium, light) -> M (and moments) deposited there by other media's paths
     fields = []
     n_pts = 0
     n_ambient = 0
@@ -161,12 +178,18 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                     stage = "Light paths" if multiple_paths > 0 else "Light pyramid"
                     progress(0.0, f"{stage}: {light.name} on {pm.medium.name}")
                 traced = None
-                if multiple_paths > 0 and camera is not None:
+                if traces:
                     # light paths traced from the first scatterings (precompute.lightpaths)
+                    near = partners(mi)
                     traced = traced_multiple(pm, f, light, chans[li], camera, multiple_paths,
                                              multiple_resolution, seed=seed + 7919 * mi + li,
                                              threads=threads, should_cancel=should_cancel,
-                                             around=around, moments=tuning.gather_moments)
+                                             around=around, moments=tuning.gather_moments,
+                                             partners=[(media[j], lat) for j, lat in near])
+                    if traced is not None:
+                        for (j, _), m in zip(near, traced[5]):
+                            key = (j, li)
+                            crossed[key] = m if key not in crossed else crossed[key] + m
                 if traced is not None:
                     ms[li] = MultipleField(traced[0], traced[1], [traced[2]], traced=True,
                                            far=traced[3], moments=traced[4])
@@ -188,6 +211,13 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
             ms = flattened(pm, ms, lights, camera, tuning)
         ms_all.append(ms)
         fields.append(f)
+    for (j, li), m in crossed.items():
+        mf = ms_all[j][li]
+        if mf is None or not mf.traced:   # a medium without paths of its own (too dense)
+            continue
+        mf.levels[0] = mf.levels[0] + m[..., :3]
+        if mf.moments is not None and m.shape[-1] > 3:
+            mf.moments = mf.moments + m[..., 3:]
     return Precomputed(fields, layout, ms_all, time.perf_counter() - t_start,
                        {"points": n_pts, "ambient_points": n_ambient,
                         "backend": kernels.backend(), "glowing": n_glow})
