@@ -124,6 +124,7 @@ _D_ACCEPT = 512   # a start's acceptance draw, one dimension per try
 _D_CORNER = 600   # the lattice corner a deposit's moments go to
 _D_MEDIUM = 17    # which medium a tentative collision is in, with several (csrc/paths.c)
 PATH_MEDIA = 8    # media one trace flies through at most: its own and 7 others
+BOX_TIE = 1e-9    # m (relative beyond 1 m): box faces this close are crossed together
 START_TRIES = 64  # offsets drawn for a first scattering until one is accepted
 # deposits with the moments: 3 towards the camera, 3 of order 0, 3 x 3 of order 1 (x, y, z)
 MOMENT_CHANNELS = 15
@@ -445,6 +446,18 @@ def trace_paths_media_np(inp: PathInputs) -> list:
         ev = event[alive] + 1
         event[alive] = ev
         ins = inside[alive]
+        tbs = np.stack([_box_cross(m, pos[alive], d[alive], ins[:, j])
+                        for j, m in enumerate(grids)], axis=1)
+        past = ins & ~(tbs < np.inf)     # no way out ahead: past the face (csrc/paths.c)
+        if np.any(past):
+            for j, m in enumerate(grids):
+                pj = past[:, j]
+                if np.any(pj):
+                    inside[alive[pj], j] = False
+                    tbs[pj, j] = _box_cross(m, pos[alive[pj]], d[alive[pj]],
+                                            np.zeros(int(pj.sum()), bool))
+            ins = inside[alive]
+        tb = tbs.min(axis=1)
         if nm == 1:
             rate = np.where(ins[:, 0], mus[0], outside * float(np.max(sts[0])))
         else:       # each medium's tentative collisions at its own rate inside its box
@@ -454,10 +467,6 @@ def trace_paths_media_np(inp: PathInputs) -> list:
         with np.errstate(divide="ignore"):
             t = np.where(rate > 0.0, -np.log(1.0 - uniform(kk, ev, _D_FLY)) /
                          np.where(rate > 0.0, rate, 1.0), np.inf)
-        tbs = np.stack([_box_cross(m, pos[alive], d[alive], ins[:, j])
-                        for j, m in enumerate(grids)], axis=1)
-        jb = np.argmin(tbs, axis=1)
-        tb = tbs[np.arange(len(alive)), jb]
         tseg = np.minimum(t, tb)
         keep = np.ones(len(alive), bool)
         bounced = np.zeros(len(alive), bool)
@@ -488,7 +497,9 @@ def trace_paths_media_np(inp: PathInputs) -> list:
         if np.any(cross):
             c = alive[cross]
             pos[c] += tb[cross, None] * d[c]
-            inside[c, jb[cross]] = ~inside[c, jb[cross]]
+            # every box whose face is there (boxes that share a face are crossed together)
+            tie = tbs[cross] <= (tb[cross] + BOX_TIE * (1.0 + tb[cross]))[:, None]
+            inside[c] = inside[c] ^ tie
         coll = rest & ~gone & ~cross
         pick = np.zeros(len(alive), np.int64)
         if nm > 1 and np.any(coll):     # whose tentative point it is

@@ -84,7 +84,7 @@ def first_flight_errors(resolution, seed=3):
     m = glowing_cube(sigma_t=1.0, albedo=0.8)
     volume = np.count_nonzero(m.emission_grid[..., 0]) * VOX ** 3 / (4.0 / 3.0 * np.pi * R ** 3)
     pm = prepare(m)
-    stride, once, _ = emission_light(pm, camera(), 400_000, resolution, multiple=False,
+    stride, once, _, _ = emission_light(pm, camera(), 400_000, resolution, multiple=False,
                                      seed=seed)
     assert np.all(np.ptp(once, axis=-1) == 0.0)        # grey medium, grey glow
     idx, y = lattice_point(pm, stride, (0.0, 0.0, 0.0))
@@ -120,7 +120,7 @@ def test_the_absorbed_power_is_the_emitted_power():
     st, albedo = 3.0, 0.6
     pm = prepare(glowing_cube(sigma_t=st, albedo=albedo, radius=0.5))
     lat = PathLattice.of(pm, camera(), 32)
-    stride, once, more = emission_light(pm, camera(), 400_000, 32, multiple=True, seed=5)
+    stride, once, more, _ = emission_light(pm, camera(), 400_000, 32, multiple=True, seed=5)
     mass = lat.tent_mass[..., 0]
     fluence_once = 4.0 * np.pi * np.einsum("xyz,xyzc->c", mass, once.astype(np.float64))
     fluence_all = fluence_once + 4.0 * np.pi * np.einsum("xyz,xyzc->c", mass,
@@ -174,3 +174,24 @@ def test_a_glowing_medium_lights_itself_and_a_dark_one_costs_nothing():
     assert np.all(out.passes["Volume Single"] == 0) and np.all(out.passes["Volume Multiple"] == 0)
     pre = precompute([prepare(dark)], [], World(), camera(), multiple=True, multiple_paths=1000)
     assert pre.layout.ambient_channel is None and pre.stats["glowing"] == 0
+
+
+def test_a_glow_lights_the_medium_it_overlaps():
+    """A glowing cube's density cut into two media on the same grid, the glowing half and a
+    dark half of the same density: the glow's light on the dark half's field (its world
+    channels, E1 and Em) is what it is on the glowing half's, the same medium's light; and
+    without the glowing half the dark one has none."""
+    m = glowing_cube(sigma_t=1.0, albedo=0.8, density=np.full((N, N, N), 0.5, np.float32))
+    dark = dataclasses.replace(m, name="dark", emission_grid=None)
+    pre = precompute([prepare(m), prepare(dark)], [], World(), camera(), multiple=True,
+                     multiple_paths=200_000, multiple_resolution=24, seed=3)
+    a = pre.layout.ambient_channel
+    am = pre.layout.ambient_multiple_channel
+    glow, lit = pre.fields[0], pre.fields[1]
+    centre = (slice(24, 40),) * 3
+    for ch in (a, am):
+        g, d = glow[centre + (ch,)].mean(), lit[centre + (ch,)].mean()
+        assert g > 0.0 and d == pytest.approx(g, rel=0.03), (ch, g, d)
+    alone = precompute([prepare(dark)], [], World(), camera(), multiple=True,
+                       multiple_paths=1000, multiple_resolution=24)
+    assert alone.layout.ambient_channel is None

@@ -157,3 +157,20 @@ def test_spoiled_other_media_finish():
                                                           others=(spoiled,)))
         except ValueError:       # a map the span check refuses
             pass
+
+
+def test_media_on_the_same_box_leave_it_together():
+    """Two halves on the very same grid (boxes whose faces coincide): a path leaves both at
+    once (a path left inside one of them by rounding had flown on outside, colliding with its
+    edge voxels, and deposited there far too much); each half holds half the whole's."""
+    whole, half, _ = whole_and_halves(n_paths=20000)
+    same = PathMedium(half.density, half.w2i, half.sigma_s, half.sigma_t, half.g, half.stride,
+                      half.towards, half.rate)
+    ref = kernels.trace_paths(whole, threads=2)[..., :3].sum()
+    own, other = kernels.trace_paths_media(dataclasses.replace(half, others=(same,)), threads=2)
+    np.testing.assert_allclose(2.0 * own[..., :3].sum(), ref, rtol=0.02)
+    np.testing.assert_allclose(2.0 * other[..., :3].sum(), ref, rtol=0.02)
+    a = trace_paths_media_np(dataclasses.replace(half, others=(same,), n_paths=300))
+    b = kernels.trace_paths_media(dataclasses.replace(half, others=(same,), n_paths=300))
+    for x, y in zip(a, b):
+        assert np.abs(x - y).max() <= 1e-9 * np.abs(x).max()

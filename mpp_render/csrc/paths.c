@@ -36,6 +36,7 @@ const char trace_paths_doc[] =
 #define D_MEDIUM 17    /* which medium a tentative collision is in, with several (event >= 1) */
 #define START_TRIES 64 /* offsets drawn for a first scattering until one is accepted */
 #define PATH_MEDIA 8    /* media one trace flies through: its own and 7 others */
+#define BOX_TIE 1e-9   /* m (relative beyond 1 m): box faces this close are crossed together */
 
 /* The unit direction at cosine c and azimuth 2 pi u2 about the unit vector axis. */
 static inline void about(double c, double u2, const double axis[3], double out[3]) {
@@ -335,6 +336,18 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
         /* with several media each keeps its own tentative collisions at its rate inside its
          * box: their sum is the rate of the whole, and a tentative point is medium j's with
          * probability mu_j over the sum */
+        double tb = INFINITY, tjs[PATH_MEDIA];
+        for (int j = 0; j < T->nm; j++) {
+            double tj = box_cross(&T->m[j], pos, d, inside[j]);
+            if (inside[j] && !(tj < INFINITY)) {
+                /* no way out ahead: the path is past the box's face (rounding where boxes
+                 * share a face it crossed in another's step), so it is outside */
+                inside[j] = 0;
+                tj = box_cross(&T->m[j], pos, d, 0);
+            }
+            tjs[j] = tj;
+            if (tj < tb) tb = tj;
+        }
         double rate = 0.0;
         if (T->nm == 1)
             rate = inside[0] ? T->m[0].mu : T->outside * T->m[0].st_max;
@@ -342,12 +355,6 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
             for (int j = 0; j < T->nm; j++)
                 if (inside[j]) rate += T->m[j].mu;
         double t = rate > 0.0 ? -log(1.0 - uniform01(key, ev, D_FLY)) / rate : INFINITY;
-        double tb = INFINITY;
-        int jb = 0;
-        for (int j = 0; j < T->nm; j++) {
-            double tj = box_cross(&T->m[j], pos, d, inside[j]);
-            if (tj < tb) { tb = tj; jb = j; }
-        }
         double tseg = fmin(t, tb);
         if (T->n_tri > 0) {
             double ts;
@@ -374,7 +381,8 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
         if (!(tseg < INFINITY)) return;   /* flies off into empty space */
         if (tb <= t) {                    /* into or out of a grid: the flight starts again */
             for (int a = 0; a < 3; a++) pos[a] += tb * d[a];
-            inside[jb] = !inside[jb];
+            for (int j = 0; j < T->nm; j++)   /* every box whose face is there (shared faces) */
+                if (tjs[j] <= tb + BOX_TIE * (1.0 + tb)) inside[j] = !inside[j];
             continue;
         }
         for (int a = 0; a < 3; a++) pos[a] += t * d[a];

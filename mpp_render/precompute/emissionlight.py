@@ -21,9 +21,11 @@ difference has no noise of the first flights).  The march reads E1 with the sky'
 interpolated from the lattice to the voxels.  The paths reflect off the surfaces as the
 lights' do; the surfaces' own light from the glow is their gather march's (surfaces.py).
 
-What it leaves out: the glow of one medium scattered in another (paths fly in their own
-medium, as the lights' do), and the world volume's emission (an endless medium: left to the
-march's emission).  A medium that does not glow, or cannot scatter, costs nothing.
+Where media overlap, the glow's paths fly through the others as the lights' do
+(paths.PathInputs.others) and what they deposit on another medium's lattice lights that
+medium (``partners``).  What it leaves out: the world volume's emission (an endless medium:
+left to the march's emission).  A medium that does not glow, or cannot scatter, costs
+nothing.
 """
 from __future__ import annotations
 
@@ -33,7 +35,7 @@ import numpy as np
 
 from .. import kernels
 from ..media import PreparedMedium
-from .lightpaths import PathLattice, _trace
+from .lightpaths import PathLattice, _trace_all
 from .pathstarts import Surroundings
 
 CHUNK = 1 << 20  # voxels interpolated at once when the lattice is added to the field
@@ -44,11 +46,14 @@ EMISSION_PATHS = 250_000
 
 def emission_light(pm: PreparedMedium, camera, n_paths: int, resolution: int,
                    multiple: bool, seed: int = 0, threads: int = 0, should_cancel=None,
-                   around: Optional[Surroundings] = None):
-    """(stride, E1, Em) on the light pyramid's lattice of ``pm`` (module docstring), float32
-    (LX,LY,LZ,3) W/(m^2 sr); Em None without ``multiple``.  ``n_paths`` paths (at most
-    lightpaths.PATHS_PER_POINT per lattice point the medium fills), ``around`` the surfaces
-    they reflect off.  None where nothing glows or the medium is too dense for paths."""
+                   around: Optional[Surroundings] = None, partners=()):
+    """(stride, E1, Em, cross) on the light pyramid's lattice of ``pm`` (module docstring),
+    float32 (LX,LY,LZ,3) W/(m^2 sr); Em None without ``multiple``.  ``n_paths`` paths (at
+    most lightpaths.PATHS_PER_POINT per lattice point the medium fills), ``around`` the
+    surfaces they reflect off, ``partners`` (PreparedMedium, PathLattice) the overlapping
+    media they fly through too (lightpaths.traced_multiple), ``cross`` per partner its
+    (E1, Em) on its lattice.  None where nothing glows or the medium is too dense for
+    paths."""
     e = pm.emitted()
     if e is None or camera is None:
         return None
@@ -60,12 +65,16 @@ def emission_light(pm: PreparedMedium, camera, n_paths: int, resolution: int,
     if sets is None:
         return None
     n = max(1, lat.paths(n_paths))
-    first = _trace(sets, n, seed, threads, should_cancel, pm, lat, around, max_collisions=1)
-    later = None
+    lats = [lat] + [plat for _, plat in partners]
+    first = _trace_all(sets, n, seed, threads, should_cancel, pm, lat, around, max_collisions=1,
+                       partners=partners)
+    later = [None] * len(lats)
     if multiple:
-        every = _trace(sets, n, seed, threads, should_cancel, pm, lat, around)
-        later = lat.mean(np.maximum(every - first, 0.0))
-    return lat.stride, lat.mean(first), later
+        every = _trace_all(sets, n, seed, threads, should_cancel, pm, lat, around,
+                           partners=partners)
+        later = [la.mean(np.maximum(e - f, 0.0)) for la, e, f in zip(lats, every, first)]
+    once = [la.mean(f) for la, f in zip(lats, first)]
+    return lat.stride, once[0], later[0], list(zip(once[1:], later[1:]))
 
 
 def voxel_starts(pm: PreparedMedium, e: np.ndarray, stride: int):

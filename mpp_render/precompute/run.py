@@ -76,7 +76,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
     # (precompute.lightpaths.overlapping); what one medium's paths leave on another's lattice
     # is added to that medium's M once every medium is traced
     traces = multiple and multiple_paths > 0 and camera is not None
-    partners_of = overlapping(media) if traces else [[] for _ in media]
+    partners_of = overlapping(media) if camera is not None else [[] for _ in media]
     partner_lats = {}
 
     def partners(mi):
@@ -89,6 +89,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
         return got
 
     crossed = {}   # (medium, light) -> M (and moments) deposited there by other media's paths
+    glowed = []    # (medium, stride, E1, Em): other media's glow scattered in that medium
     fields = []
     n_pts = 0
     n_ambient = 0
@@ -159,12 +160,15 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
         if glow and layout.ambient_channel is not None and pm.glows:
             if progress:
                 progress(0.0, f"Emitted light on {pm.medium.name}")
+            near = partners(mi)
             got = emission_light(pm, camera, multiple_paths if multiple_paths > 0
                                  else EMISSION_PATHS, multiple_resolution, multiple,
                                  seed=seed + 7919 * mi + 6007, threads=threads,
-                                 should_cancel=should_cancel, around=around)
+                                 should_cancel=should_cancel, around=around,
+                                 partners=[(media[j], lat) for j, lat in near])
             if got is not None:
-                stride, once, more = got
+                stride, once, more, cross = got
+                glowed += [(j, lat.stride) + em for (j, lat), em in zip(near, cross)]
                 add_lattice(f, layout.ambient_channel, once, stride, flat)
                 if more is not None and layout.ambient_multiple_channel is not None:
                     add_lattice(f, layout.ambient_multiple_channel, more, stride, flat)
@@ -211,6 +215,13 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
             ms = flattened(pm, ms, lights, camera, tuning)
         ms_all.append(ms)
         fields.append(f)
+    for j, stride, once, more in glowed:
+        if layout.ambient_channel is None:
+            continue
+        flat = needed_flat(media[j])
+        add_lattice(fields[j], layout.ambient_channel, once, stride, flat)
+        if more is not None and layout.ambient_multiple_channel is not None:
+            add_lattice(fields[j], layout.ambient_multiple_channel, more, stride, flat)
     for (j, li), m in crossed.items():
         mf = ms_all[j][li]
         if mf is None or not mf.traced:   # a medium without paths of its own (too dense)
