@@ -349,7 +349,7 @@ def trace_paths_media(inp, *, threads: int = 1, should_cancel=None, backend=None
              _f64(inp.start_peak).reshape(-1) if inp.start_source is not None else np.zeros(0))
     fixed = [(_f32(m.density), _f64(m.w2i).reshape(3, 4), _f64(m.sigma_s).reshape(3),
               _f64(m.sigma_t).reshape(3), float(m.g), int(m.stride), _f64(m.towards),
-              float(m.rate)) for m in inp.others]
+              float(m.rate), float(m.threshold)) for m in inp.others]
 
     cancelled = []
 
@@ -361,7 +361,7 @@ def trace_paths_media(inp, *, threads: int = 1, should_cancel=None, backend=None
                 return
             _c.trace_paths(outs[i][0], *args, a, min(a + PATH_CHUNK, int(cuts[i + 1])), n,
                            int(inp.seed) & 0xFFFFFFFF, int(inp.max_collisions), float(ROULETTE),
-                           *extra, moms[i][0], others)
+                           *extra, moms[i][0], others, float(inp.threshold))
 
     if workers == 1:
         for i in range(blocks):

@@ -137,7 +137,8 @@ class PathMedium:
     voxel index, ``sigma_s``, ``sigma_t`` (3,) 1/m per unit density, ``g``, ``stride``
     voxels per lattice step, ``towards`` float64 (LX,LY,LZ,3) unit directions from its
     lattice points to the camera, ``rate`` its tentative collisions per metre inside its
-    box (above its largest extinction, as PathInputs.rate)."""
+    box (above its largest extinction, as PathInputs.rate), ``threshold`` as
+    PathInputs.threshold."""
 
     density: np.ndarray
     w2i: np.ndarray
@@ -147,6 +148,7 @@ class PathMedium:
     stride: int
     towards: np.ndarray
     rate: float
+    threshold: float = -1.0
 
 
 @dataclass
@@ -174,7 +176,10 @@ class PathInputs:
     fly through (at most ``PATH_MEDIA`` - 1, none of them the world's fog): each keeps its own
     tentative collisions at its own rate inside its box, so a path meets them all, scatters
     in whichever it collides in with that medium's albedo and phase function, and deposits
-    on that medium's lattice (module docstring, "Several media")."""
+    on that medium's lattice (module docstring, "Several media").  ``threshold``: >= 0 for a
+    sharp surface, the medium being density 1 where ``density``'s trilinear value is >= it
+    (a mesh volume, as the march reads it; ``density_at``), else -1: the nearest voxel's
+    density."""
 
     density: np.ndarray
     w2i: np.ndarray
@@ -203,6 +208,7 @@ class PathInputs:
     start_peak: Optional[np.ndarray] = None
     moments: bool = False
     others: tuple = ()
+    threshold: float = -1.0
 
     @property
     def channels(self) -> int:
@@ -258,7 +264,8 @@ def _to_index(inp, p):
 def source_at(inp, p):
     """What a first scattering's start is weighed by at world points ``p`` (N,3): the
     nearest voxel's ``start_source``, or without it 1 where its density is > 0; 0 outside
-    the grid's box (csrc/paths.c source_at)."""
+    the grid's box, and with a ``threshold`` outside the sharp surface (csrc/paths.c
+    source_at)."""
     f = np.floor(_to_index(inp, p) + 0.5)
     shape = np.array(inp.density.shape)
     ok = np.all((f >= 0) & (f < shape), axis=1)
@@ -267,6 +274,9 @@ def source_at(inp, p):
         q = np.asarray(inp.start_source)[v[:, 0], v[:, 1], v[:, 2]].astype(np.float64)
     else:
         q = (inp.density[v[:, 0], v[:, 1], v[:, 2]] > 0.0).astype(np.float64)
+    if float(inp.threshold) >= 0.0:   # a sharp surface: only inside it, as the march reads it
+        inside = density_at(inp, _to_index(inp, p)) > 0.0
+        q = np.where(inside, q if inp.start_source is not None else 1.0, 0.0)
     return np.where(ok & (q > 0.0), q, 0.0)
 
 
@@ -395,7 +405,32 @@ def trace_paths_np(inp: PathInputs) -> np.ndarray:
 
 def _own_medium(inp: PathInputs) -> PathMedium:
     return PathMedium(inp.density, inp.w2i, inp.sigma_s, inp.sigma_t, inp.g, inp.stride,
-                      inp.towards, inp.rate)
+                      inp.towards, inp.rate, inp.threshold)
+
+
+def density_at(m, idx) -> np.ndarray:
+    """float64 (N,) density of medium ``m`` (PathInputs or PathMedium) at index coordinates
+    ``idx`` (N,3) (csrc/paths.c density_at): with ``m.threshold`` >= 0 its trilinear value
+    (0 outside [0, n-1] per axis, media.trilinear) thresholded to 1 or 0, a mesh volume's
+    sharp surface as the march reads it; else the nearest voxel's (the edge voxel on the
+    box's face); 0 for NaN or below 0."""
+    shape = np.array(m.density.shape)
+    if float(m.threshold) >= 0.0:
+        f = np.floor(idx)
+        ok = np.all((f >= 0.0) & (f < shape - 1), axis=1)
+        i0 = np.where(ok[:, None], f, 0.0).astype(np.int64)
+        fr = idx - f
+        v = np.zeros(len(idx))
+        for corner in range(8):
+            o = np.array([(corner >> 2) & 1, (corner >> 1) & 1, corner & 1])
+            w = np.prod(np.where(o == 1, fr, 1.0 - fr), axis=1)
+            c = i0 + o
+            v = v + w * m.density[c[:, 0], c[:, 1], c[:, 2]].astype(np.float64)
+        return np.where(ok & (v >= float(m.threshold)), 1.0, 0.0)
+    vox = np.floor(idx + 0.5)
+    vox = np.minimum(np.where(vox >= 0.0, vox, 0.0), shape - 1).astype(np.int64)
+    r = m.density[tuple(vox.T)].astype(np.float64)
+    return np.where(r >= 0.0, r, 0.0)
 
 
 def trace_paths_media_np(inp: PathInputs) -> list:
@@ -544,10 +579,7 @@ def _collide(j, m, out, tw, g, st, ss, mu, coll, alive, ins, rate, kk, ev, pos, 
     if np.any(inn):
         pi = ci[inn]
         idx = _to_index(m, pos[pi])
-        vox = np.floor(idx + 0.5)
-        vox = np.minimum(np.where(vox >= 0.0, vox, 0.0), shape - 1).astype(np.int64)
-        r = m.density[tuple(vox.T)].astype(np.float64)
-        r = np.where(r >= 0.0, r, 0.0)
+        r = density_at(m, idx)
         rho[inn] = r
         # deposit, weighted by the density: the 8 lattice points round the point,
         # each with its own phase

@@ -52,7 +52,8 @@ def whole_and_halves(n_paths=40000, sigma_t=2.0, albedo=0.9, g=0.3):
     c2 = lo2[0] + vox2 * np.arange(n2)
     edge = 0.5 * n * vox
     inside = (np.abs(c2) < edge)
-    dens2 = (inside[:, None, None] & inside[None, :, None] & inside[None, None, :]).astype(np.float32)
+    dens2 = (inside[:, None, None] & inside[None, :, None]
+             & inside[None, None, :]).astype(np.float32)
     # the whole's cube is [-1.2, 1.2]; the second grid's voxels straddle its faces, so the
     # second half is on the voxels whose centres lie within it (what a voxeliser would keep)
     other = PathMedium(0.5 * dens2, w2i2, np.full(3, albedo * sigma_t), np.full(3, sigma_t), g, 2,

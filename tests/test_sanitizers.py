@@ -26,7 +26,8 @@ def test_kernels_under_asan_and_ubsan(tmp_path):
                     ignore=shutil.ignore_patterns("*.so", "__pycache__", "blender"))
     (work / "tests").mkdir()
     for name in ("test_fuzz.py", "test_kernels.py", "test_sweep.py", "test_skip.py", "test_pyramid.py",
-                 "test_paths.py", "test_paths_world.py", "test_paths_media.py", "test_moments.py",
+                 "test_paths.py", "test_paths_world.py", "test_paths_media.py",
+                 "test_sharp_surface.py", "test_moments.py",
                  "rays.py"):  # the tests' ray helper (test_kernels imports it)
         shutil.copy(REPO / "tests" / name, work / "tests" / name)
     shutil.copy(REPO / "setup.py", work / "setup.py")
@@ -45,6 +46,7 @@ def test_kernels_under_asan_and_ubsan(tmp_path):
                           "tests/test_fuzz.py", "tests/test_kernels.py", "tests/test_sweep.py",
                           "tests/test_skip.py", "tests/test_pyramid.py", "tests/test_paths.py",
                           "tests/test_paths_world.py", "tests/test_paths_media.py",
+                          "tests/test_sharp_surface.py",
                           "tests/test_moments.py",
                           # the slowest case runs the numpy twins alone: no C to check
                           "--deselect", "tests/test_kernels.py::"

@@ -10,12 +10,15 @@ const char trace_paths_doc[] =
     "trace_paths(out, density, w2i, i2w, sigma_s, sigma_t, g, stride, towards, starts, weights,\n"
     "            dirs, cdf, rate, path_lo, path_hi, n_paths, seed, max_collisions, roulette,\n"
     "            jitter, lobe, outside, reach, triangles, albedo, start_source, start_peak,\n"
-    "            moments, others)\n"
+    "            moments, others, threshold)\n"
     "Twin of mpp_render.paths.trace_paths_np: adds to out (LX,LY,LZ,3) float64 the deposits\n"
     "of paths path_lo..path_hi-1 of n_paths towards the camera, and to moments (LX,LY,LZ,12)\n"
     "float64, unless it is empty, their moments of order 0 and 1 (paths.py, \"Moments\").\n"
     "others: a tuple of (out, moments, density, w2i, sigma_s, sigma_t, g, stride, towards,\n"
-    "rate), the other media the paths fly through, scatter in and deposit on (at most 7).";
+    "rate, threshold), the other media the paths fly through, scatter in and deposit on (at\n"
+    "most 7).  threshold >= 0: the medium is the grid's trilinear value >= threshold\n"
+    "(density 1, a mesh volume's sharp surface, as the march reads it), else the nearest\n"
+    "voxel's density.";
 
 #define MAX_EVENTS 1000000L   /* tentative collisions per path, whatever the medium */
 #define MAX_RATE_SPAN 1e6    /* rate x the grid's diagonal (m): tentative points across it */
@@ -77,6 +80,7 @@ typedef struct {
     const float *dens;
     Py_ssize_t n[3];
     double w2i[12], ss[3], st[3], st_max, st_min, g, mu;
+    double thr;               /* >= 0: density 1 where the trilinear value >= thr, else 0 */
     long stride;
     const double *tw;
     Py_ssize_t ls[3];
@@ -170,6 +174,40 @@ static Py_ssize_t surface_hit(const Tracer *T, const double o[3], const double d
     return found;
 }
 
+/* The density of grid G at index coordinates idx: with a threshold the trilinear value (0
+ * outside [0, n-1] per axis, as media.trilinear) thresholded, as the march reads a mesh
+ * volume; else the nearest voxel's (the edge voxel on the box's face).  0 for NaN or < 0. */
+static double density_at(const PathGrid *G, const double idx[3]) {
+    if (G->thr >= 0.0) {
+        Py_ssize_t i0[3];
+        double fr[3];
+        for (int a = 0; a < 3; a++) {
+            double f = floor(idx[a]);
+            if (!(f >= 0.0 && f < (double)(G->n[a] - 1))) return 0.0;
+            i0[a] = (Py_ssize_t)f;
+            fr[a] = idx[a] - f;
+        }
+        double v = 0.0;
+        for (int corner = 0; corner < 8; corner++) {
+            int o[3] = {(corner >> 2) & 1, (corner >> 1) & 1, corner & 1};
+            double w = 1.0;
+            for (int a = 0; a < 3; a++) w *= o[a] ? fr[a] : 1.0 - fr[a];
+            v += w * (double)G->dens[((i0[0] + o[0]) * G->n[1] + i0[1] + o[1]) * G->n[2] +
+                                     i0[2] + o[2]];
+        }
+        return v >= G->thr ? 1.0 : 0.0;
+    }
+    Py_ssize_t v[3];
+    for (int a = 0; a < 3; a++) {
+        double f = floor(idx[a] + 0.5);
+        if (!(f >= 0.0)) f = 0.0;   /* on the box's face (or NaN): the edge voxel */
+        if (f > (double)(G->n[a] - 1)) f = (double)(G->n[a] - 1);
+        v[a] = (Py_ssize_t)f;
+    }
+    double rho = (double)G->dens[(v[0] * G->n[1] + v[1]) * G->n[2] + v[2]];
+    return rho >= 0.0 ? rho : 0.0;   /* NaN or negative density: empty */
+}
+
 /* What a first scattering's start is weighed by at world point p: the nearest voxel's
  * source T->src, or without it 1 where the voxel's density is > 0; 0 outside the box. */
 static double source_at(const Tracer *TR, const double p[3]) {
@@ -183,6 +221,14 @@ static double source_at(const Tracer *TR, const double p[3]) {
         v[r] = (Py_ssize_t)f;
     }
     Py_ssize_t flat = (v[0] * T->n[1] + v[1]) * T->n[2] + v[2];
+    if (T->thr >= 0.0) {   /* a sharp surface: only inside it, as the march reads it */
+        double idx[3];
+        for (int r = 0; r < 3; r++)
+            idx[r] = T->w2i[4 * r] * p[0] + T->w2i[4 * r + 1] * p[1] +
+                     T->w2i[4 * r + 2] * p[2] + T->w2i[4 * r + 3];
+        if (!(density_at(T, idx) > 0.0)) return 0.0;
+        if (!TR->src) return 1.0;
+    }
     if (TR->src) {
         double q = (double)TR->src[flat];
         return q > 0.0 ? q : 0.0;
@@ -212,8 +258,8 @@ static int in_box(const PathGrid *G, const double p[3]) {
     return 1;
 }
 
-/* A tentative point at world pos inside grid G: its nearest voxel's density (0 for NaN or
- * below 0), which it returns, weighs the deposit w / mu x density x trilinear share x
+/* A tentative point at world pos inside grid G: its density (density_at), which it
+ * returns, weighs the deposit w / mu x density x trilinear share x
  * p(d . v) on the 8 lattice points round the point (nothing where the density is 0: an
  * empty voxel adds nothing), and with G->mom the moments on one of them. */
 static double deposit(const PathGrid *G, const double pos[3], const double w[3], const double d[3],
@@ -222,15 +268,7 @@ static double deposit(const PathGrid *G, const double pos[3], const double w[3],
     for (int r = 0; r < 3; r++)
         idx[r] = G->w2i[4 * r] * pos[0] + G->w2i[4 * r + 1] * pos[1] +
                  G->w2i[4 * r + 2] * pos[2] + G->w2i[4 * r + 3];
-    Py_ssize_t v[3];
-    for (int a = 0; a < 3; a++) {
-        double f = floor(idx[a] + 0.5);
-        if (!(f >= 0.0)) f = 0.0;   /* on the box's face (or NaN): the edge voxel */
-        if (f > (double)(G->n[a] - 1)) f = (double)(G->n[a] - 1);
-        v[a] = (Py_ssize_t)f;
-    }
-    double rho = (double)G->dens[(v[0] * G->n[1] + v[1]) * G->n[2] + v[2]];
-    if (!(rho >= 0.0)) rho = 0.0;   /* NaN or negative density: empty */
+    double rho = density_at(G, idx);
     double lat[3], fr[3];
     Py_ssize_t b[3];
     for (int a = 0; a < 3; a++) {
@@ -447,7 +485,13 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
 /* Fill grid G (moments mom or NULL); -1 with an exception for bad coefficients. */
 static int set_grid(PathGrid *G, const float *dens, const Py_ssize_t n[3], const double *w2i,
                     const double *ss, const double *st, double g, double rate, long stride,
-                    const double *tw, const Py_ssize_t ls[3], double *out, double *mom) {
+                    const double *tw, const Py_ssize_t ls[3], double *out, double *mom,
+                    double thr) {
+    if (isnan(thr) || isinf(thr)) {
+        PyErr_SetString(PyExc_ValueError, "trace_paths: the threshold must be finite");
+        return -1;
+    }
+    G->thr = thr;
     G->dens = dens;
     for (int a = 0; a < 3; a++) { G->n[a] = n[a]; G->ls[a] = ls[a]; }
     memcpy(G->w2i, w2i, sizeof G->w2i);
@@ -482,9 +526,12 @@ static int span_ok(double rate, const Py_ssize_t n[3], const double *w2i) {
     double det = a * (e * i - f * h) - b * (d * i - f * gg) + c * (d * h - e * gg);
     if (!(fabs(det) > 0.0) || !isfinite(det)) return 0;
     double y[3] = {(double)n[0], (double)n[1], (double)n[2]};
-    double x0 = (y[0] * (e * i - f * h) - b * (y[1] * i - f * y[2]) + c * (y[1] * h - e * y[2])) / det;
-    double x1 = (a * (y[1] * i - f * y[2]) - y[0] * (d * i - f * gg) + c * (d * y[2] - y[1] * gg)) / det;
-    double x2 = (a * (e * y[2] - y[1] * h) - b * (d * y[2] - y[1] * gg) + y[0] * (d * h - e * gg)) / det;
+    double x0 = (y[0] * (e * i - f * h) - b * (y[1] * i - f * y[2]) +
+                 c * (y[1] * h - e * y[2])) / det;
+    double x1 = (a * (y[1] * i - f * y[2]) - y[0] * (d * i - f * gg) +
+                 c * (d * y[2] - y[1] * gg)) / det;
+    double x2 = (a * (e * y[2] - y[1] * h) - b * (d * y[2] - y[1] * gg) +
+                 y[0] * (d * h - e * gg)) / det;
     double span = rate * sqrt(x0 * x0 + x1 * x1 + x2 * x2);
     return span <= MAX_RATE_SPAN;
 }
@@ -493,11 +540,11 @@ static int span_ok(double rate, const Py_ssize_t n[3], const double *w2i) {
  * rate), its buffers held in b[7] (released by the caller); -1 with an exception. */
 static int other_grid(PyObject *item, Buf b[7], PathGrid *G) {
     PyObject *po, *pm, *pd, *pw, *pss, *pst, *ptw;
-    double g, rate;
+    double g, rate, thr;
     long stride;
     if (!PyTuple_Check(item) ||
-        !PyArg_ParseTuple(item, "OOOOOOdlOd", &po, &pm, &pd, &pw, &pss, &pst, &g, &stride, &ptw,
-                          &rate)) {
+        !PyArg_ParseTuple(item, "OOOOOOdlOdd", &po, &pm, &pd, &pw, &pss, &pst, &g, &stride, &ptw,
+                          &rate, &thr)) {
         if (!PyErr_Occurred())
             PyErr_SetString(PyExc_ValueError, "trace_paths: each other medium is a tuple");
         return -1;
@@ -525,7 +572,7 @@ static int other_grid(PyObject *item, Buf b[7], PathGrid *G) {
     if (set_grid(G, (const float *)b[2].view.buf, sd, (const double *)b[3].view.buf,
                  (const double *)b[4].view.buf, (const double *)b[5].view.buf, g, rate, stride,
                  (const double *)b[6].view.buf, so, (double *)b[0].view.buf,
-                 has_mom ? (double *)b[1].view.buf : NULL) < 0)
+                 has_mom ? (double *)b[1].view.buf : NULL, thr) < 0)
         return -1;
     if (!span_ok(rate, sd, G->w2i)) {
         PyErr_SetString(PyExc_ValueError,
@@ -539,13 +586,13 @@ static int other_grid(PyObject *item, Buf b[7], PathGrid *G) {
 PyObject *trace_paths(PyObject *self, PyObject *args) {
     PyObject *po, *pd, *pw2i, *pi2w, *pss, *pst, *ptw, *pstarts, *pws, *pdirs, *pcdf, *preach,
         *ptri, *palb, *psrc, *ppeak, *pmom, *pothers;
-    double g, rate, roulette, jitter, outside;
+    double g, rate, roulette, jitter, outside, thr0;
     long stride, lo, hi, n_paths, max_hits, lobe;
     unsigned long seed;
-    if (!PyArg_ParseTuple(args, "OOOOOOdlOOOOOdlllklddldOOOOOOO", &po, &pd, &pw2i, &pi2w, &pss,
+    if (!PyArg_ParseTuple(args, "OOOOOOdlOOOOOdlllklddldOOOOOOOd", &po, &pd, &pw2i, &pi2w, &pss,
                           &pst, &g, &stride, &ptw, &pstarts, &pws, &pdirs, &pcdf, &rate, &lo,
                           &hi, &n_paths, &seed, &max_hits, &roulette, &jitter, &lobe, &outside,
-                          &preach, &ptri, &palb, &psrc, &ppeak, &pmom, &pothers))
+                          &preach, &ptri, &palb, &psrc, &ppeak, &pmom, &pothers, &thr0))
         return NULL;
     if (!PyTuple_Check(pothers) || PyTuple_GET_SIZE(pothers) > PATH_MEDIA - 1) {
         PyErr_SetString(PyExc_ValueError, "trace_paths: others must be a tuple of at most 7 media");
@@ -631,7 +678,7 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
     }
     if (set_grid(&T.m[0], (const float *)bd.view.buf, sd, (const double *)bw.view.buf,
                  (const double *)bss.view.buf, (const double *)bst.view.buf, g, rate, stride,
-                 (const double *)btw.view.buf, so, (double *)bo.view.buf, NULL) < 0)
+                 (const double *)btw.view.buf, so, (double *)bo.view.buf, NULL, thr0) < 0)
         goto done;
     T.nm = 1;
     for (Py_ssize_t k = 0; k < n_others; k++) {

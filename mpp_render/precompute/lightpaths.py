@@ -56,7 +56,8 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     stride, shape, h = paths_lattice(pm, resolution)
     voxels = np.zeros(pm.grid.shape[:3], np.float32)
     base, _, pts = source_and_density(pm, fld, light, channel, stride, voxels=voxels,
-                                      disc=None if around is None else around.disc)
+                                      disc=None if around is None else around.disc,
+                                      depth=None if around is None else around.optical_depth)
     vol = cell_volume(pm, stride)
     power = base * vol
     live = power.sum(axis=1) > 0.0
@@ -153,6 +154,35 @@ def tent_peak(voxels: np.ndarray, stride: int, shape) -> np.ndarray:
     return m[np.ix_(*idx)].astype(np.float64)
 
 
+def sharp_fraction(grid: np.ndarray, threshold: float) -> np.ndarray:
+    """float64 (X,Y,Z): the part of each voxel's cell inside the sharp surface where the
+    trilinear value of ``grid`` is >= ``threshold`` (paths.density_at), from 2 x 2 x 2 points
+    a quarter voxel from its centre, computed only where a voxel or one of its 26
+    neighbours lies on the other side (elsewhere 1 inside, 0 outside): the density the
+    paths fly through, over each cell."""
+    from types import SimpleNamespace
+    from ..paths import density_at
+    inside = np.asarray(grid) >= threshold
+    frac = inside.astype(np.float64)
+    pad = np.pad(inside, 1, mode="edge")
+    n = inside.shape
+    mixed = np.zeros(n, bool)
+    for dx in (-1, 0, 1):
+        for dy in (-1, 0, 1):
+            for dz in (-1, 0, 1):
+                near = pad[1 + dx:1 + dx + n[0], 1 + dy:1 + dy + n[1], 1 + dz:1 + dz + n[2]]
+                mixed |= near != inside
+    idx = np.argwhere(mixed).astype(np.float64)
+    if not len(idx):
+        return frac
+    medium = SimpleNamespace(density=np.asarray(grid, np.float32), threshold=float(threshold))
+    acc = np.zeros(len(idx))
+    for off in ((a, b, c) for a in (-0.25, 0.25) for b in (-0.25, 0.25) for c in (-0.25, 0.25)):
+        acc += density_at(medium, idx + np.asarray(off))
+    frac[mixed] = acc / 8.0
+    return frac
+
+
 def cell_volume(pm, stride: int) -> float:
     """m^3 of a cell of the lattice ``stride`` voxels apart on medium ``pm``."""
     return float(abs(np.linalg.det(np.asarray(pm.i2w[:3, :3], np.float64)))) * stride ** 3
@@ -165,7 +195,10 @@ class PathLattice:
     ``i2w``), the unit directions ``towards`` the camera from its points, the tentative
     collision ``rate`` (1/m), the density under each point's tent times the cell volume
     ``tent_mass`` (m^3, (LX,LY,LZ,1)) that turns deposits into M, and ``cells``, the
-    lattice points the medium fills."""
+    lattice points the medium fills.  ``threshold``: >= 0 for a mesh volume, whose paths fly
+    through its sharp surface as the march reads it (``density`` is then the grid's values,
+    density 1 where their trilinear interpolation is >= it; paths.density_at), else -1
+    (``density`` the voxels' own, read at the nearest voxel)."""
 
     stride: int
     shape: tuple
@@ -177,6 +210,7 @@ class PathLattice:
     rate: float
     tent_mass: np.ndarray
     cells: int
+    threshold: float = -1.0
 
     @classmethod
     def of(cls, pm, camera, resolution: int, enclosed: Optional[np.ndarray] = None):
@@ -196,15 +230,19 @@ class PathLattice:
         # the paths read the nearest voxel's density (paths.py): each voxel's density holds
         # over its whole cell, so the tent is integrated over the cell (a voxel just beyond
         # a point's tent still holds a sliver of it; weighing voxel centres alone gave such
-        # a point no mass and its deposits from that sliver a spike in M)
-        mean_rho = density.astype(np.float64)
+        # a point no mass and its deposits from that sliver a spike in M).  A mesh volume's
+        # paths fly through its sharp surface: each cell holds the part of it inside.
+        sharp = pm.sharp and not pm.endless
+        threshold = float(pm.threshold) if sharp else -1.0
+        mean_rho = sharp_fraction(pm.grid, threshold) if sharp else density.astype(np.float64)
         if enclosed is not None and enclosed.shape == mean_rho.shape:
             mean_rho[enclosed] = 0.0
         for axis in range(3):
             mean_rho = tent_restrict(mean_rho, axis, stride, shape[axis], boxed=True)
-        return cls(stride, tuple(shape), h, density, np.asarray(pm.w2i, np.float64), i2w,
+        grid = np.ascontiguousarray(pm.grid, np.float32) if sharp else density
+        return cls(stride, tuple(shape), h, grid, np.asarray(pm.w2i, np.float64), i2w,
                    towards, rate, mean_rho[..., None] * cell_volume(pm, stride),
-                   int(np.count_nonzero(mean_rho > 0.0)))
+                   int(np.count_nonzero(mean_rho > 0.0)), threshold)
 
     def paths(self, n_paths: int) -> int:
         """``n_paths``, at most ``PATHS_PER_POINT`` per lattice point the medium fills."""
@@ -245,7 +283,8 @@ def _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
     others = tuple(PathMedium(plat.density, np.asarray(plat.w2i, np.float64),
                               np.asarray(opm.sigma_s, np.float64),
                               np.asarray(opm.sigma_t, np.float64), float(opm.g), plat.stride,
-                              plat.towards, plat.rate) for opm, plat in partners)
+                              plat.towards, plat.rate, plat.threshold)
+                   for opm, plat in partners)
     totals = np.array([float(item[1].sum()) for item in sets])
     acc = None
     for k, item in enumerate(sets):
@@ -260,7 +299,7 @@ def _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
                          np.ascontiguousarray(dirs), cdf, lat.rate, n_k, int(seed) + 104729 * k,
                          max_collisions=max_collisions, jitter=jitter, lobe=lobe,
                          start_source=source, start_peak=peak, moments=moments,
-                         others=others, **extra)
+                         others=others, threshold=lat.threshold, **extra)
         got = kernels.trace_paths_media(inp, threads=worker_count(threads),
                                         should_cancel=should_cancel)
         acc = got if acc is None else [a + b for a, b in zip(acc, got)]

@@ -83,6 +83,13 @@ class Surroundings:
         return disc_transmittance(light, x, tau, self.step, depth=self._disc_depth[id(light)],
                                   reach=self.disc_exact)
 
+    def optical_depth(self, light: Light, x) -> np.ndarray:
+        """(N,3) optical depth from points ``x`` (N,3, m) to ``light``'s centre as the
+        light's sweep gives a voxel's: through the solid media, the world fog and the
+        surfaces' shadows (lightdepth.light_optical_depth at ``step``)."""
+        return light_optical_depth(self.solid, light, x, self.step, surfaces=self.surfaces,
+                                   fog_sigma_t=self.fog_sigma_t)
+
     def _depth(self):
         """Callable (points, unit dirs, lengths m) -> (N,3) optical depth through the solid
         media (kernels.optical_depth at ``step``); the media are uneven, so there are some."""

@@ -221,6 +221,79 @@ def cell_mean_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel:
     return q.reshape(len(cells), len(offs), 3).mean(axis=1)
 
 
+# A mesh volume whose optical depth across one voxel exceeds SURFACE_TAU: the voxels by its
+# surface take their first-scattering source from 2 x 2 x 2 points of their cell, each with
+# its own optical depth to the light and inside the sharp surface or not.  The centre's read
+# missed the lit layer's steep exp(-tau) (the field's depth, trilinear between an outside and
+# an inside voxel, is too deep there by up to a third of a voxel's) and the parts of cells
+# whose centre lies outside the surface: p_sphere_thick (density 40, 0.64 per voxel) had its
+# sun's first scatterings at 12.69 W against 13.49 W from a Monte Carlo over the mesh's
+# surface; at 0.125 per voxel (slab_forward) the centres are within 0.1 %.
+SURFACE_TAU = 0.2
+SURFACE_DEEP = 8.0   # surface voxels whose inside neighbours lie deeper are left as they are
+
+
+def surface_band_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int,
+                        depth: Callable, disc=None) -> Optional[tuple]:
+    """(flat voxel indices (N,), Q (N,3) W/m^3, flat indices (M,), factors (M,3)): the
+    first-scattering source of the voxels by a dense mesh volume's surface (see
+    SURFACE_TAU), each the mean over 2 x 2 x 2 points a quarter voxel from its centre of
+    sigma_s rho E exp(-tau) (rho 1 inside the sharp surface, as the march reads it, else 0;
+    tau from ``depth(light, points)``, the optical depth as the light's sweep gives a
+    voxel's, pathstarts.Surroundings.optical_depth; the lamp's disc through ``disc`` as in
+    restricted_source); and for the voxels inside, off the surface and within SURFACE_DEEP,
+    the factor by which exp(-tau) over the cell exceeds its centre's, tau linear across it
+    (``cell_depth_factor``).  None where the medium is not such a mesh volume or no surface
+    voxel lies within SURFACE_DEEP of the light."""
+    if not pm.sharp or pm.endless:
+        return None
+    if not float(np.max(pm.sigma_t)) * float(pm.voxel_size) > SURFACE_TAU:
+        return None
+    inside = density_from(pm.grid, pm.threshold) > 0.0
+    shallow = np.where(inside, fld[..., channel:channel + 3].min(axis=-1), np.inf)
+    for ax in range(3):    # the shallowest inside voxel of each 3 x 3 x 3 neighbourhood
+        shallow = np.minimum(shallow, np.minimum(np.roll(shallow, 1, axis=ax),
+                                                 np.roll(shallow, -1, axis=ax)))
+    surface = dilate(inside) & dilate(~inside)
+    band = surface & (shallow < SURFACE_DEEP)
+    flat = np.flatnonzero(band)
+    if not flat.size:
+        return None
+    deep = np.flatnonzero(inside & ~surface & (shallow < SURFACE_DEEP))
+    from ..media import trilinear
+    ijk = np.stack(np.unravel_index(flat, pm.grid.shape), axis=1).astype(np.float64)
+    offs = np.array([(a, b, c) for a in (-0.25, 0.25) for b in (-0.25, 0.25)
+                     for c in (-0.25, 0.25)])
+    idx = (ijk[:, None, :] + offs[None]).reshape(-1, 3)
+    rho = density_from(trilinear(pm.grid, idx), pm.threshold).astype(np.float64)
+    live = rho > 0.0
+    q = np.zeros((len(idx), 3))
+    if np.any(live):
+        pts = pm.to_world(idx[live])
+        _, e = incident(light, pts)
+        tau = depth(light, pts)
+        q[live] = first_scattering(pm, rho[live], e, tau, None, _disc(disc, light, pts, tau, pm))
+    return (flat, q.reshape(len(flat), len(offs), 3).mean(axis=1), deep,
+            cell_depth_factor(fld[..., channel:channel + 3], deep))
+
+
+def cell_depth_factor(tau: np.ndarray, flat: np.ndarray) -> np.ndarray:
+    """(N,3): the mean over each voxel ``flat``'s cell of exp(-(tau - tau_centre)) for an
+    optical depth ``tau`` (X,Y,Z,3) linear across it, prod over the axes of sinh(d/2) / (d/2)
+    with d the central difference of tau along the axis (the voxels must not lie on the
+    grid's edge).  At 0.64 per voxel (density 40) the centre's read is 1.6 % low."""
+    ijk = np.unravel_index(flat, tau.shape[:3])
+    out = np.ones((len(flat), 3))
+    for ax in range(3):
+        up = list(ijk)
+        dn = list(ijk)
+        up[ax] = np.minimum(ijk[ax] + 1, tau.shape[ax] - 1)
+        dn[ax] = np.maximum(ijk[ax] - 1, 0)
+        half = 0.25 * np.abs(tau[tuple(up)].astype(np.float64) - tau[tuple(dn)])
+        out *= np.where(half > 1e-8, np.sinh(half) / np.maximum(half, 1e-8), 1.0)
+    return out
+
+
 def _disc(disc, light: Light, pts, tau, pm: PreparedMedium) -> np.ndarray:
     """The lamp's disc transmittance at ``pts`` through ``disc`` (see source_and_density) or
     lights.disc_transmittance at the voxel size."""
@@ -270,7 +343,7 @@ def restricted_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel
                    stride: int, shape, chunk: int = 16,
                    should_cancel: Optional[Callable[[], bool]] = None,
                    beam: Optional[int] = None,
-                   voxels: Optional[np.ndarray] = None, disc=None) -> np.ndarray:
+                   voxels: Optional[np.ndarray] = None, disc=None, band=None) -> np.ndarray:
     """The first-scattering source Q = sigma_s E exp(-tau) (W/m^3, (N,3) in the C order of
     the lattice ``shape`` ``stride`` voxels apart) from every voxel of the field ``fld``
     (optical depth at ``channel``), each voxel's power shared among the lattice points
@@ -280,8 +353,11 @@ def restricted_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel
     Stride 1 reads the voxels themselves.  Made ``chunk`` voxel planes at a time; raises
     cancel.Cancelled when ``should_cancel`` says so between them.  ``voxels`` (float32, the
     grid's shape): filled with each voxel's Q summed over its channels (the paths' starts,
-    precompute.lightpaths)."""
+    precompute.lightpaths).  ``band``: None, or surface_band_source's (flat voxel indices,
+    Q (N,3)) that replace those voxels' source and (flat indices, factors (M,3)) that scale
+    theirs."""
     nx = pm.grid.shape[0]
+    plane = int(np.prod(pm.grid.shape[1:]))
     rows = np.zeros((nx, shape[1], shape[2], 3))
     flat_fld = fld.reshape(nx, -1, fld.shape[-1])
     for a in range(0, nx, chunk):
@@ -300,6 +376,11 @@ def restricted_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel
             q[live] = first_scattering(pm, rho[live], e, tau,
                                        None if beam is None else v[live, beam:beam + 3],
                                        _disc(disc, light, pts, tau, pm))
+        if band is not None:
+            here = (band[2] >= a * plane) & (band[2] < b * plane)
+            q[band[2][here] - a * plane] *= band[3][here]
+            here = (band[0] >= a * plane) & (band[0] < b * plane)
+            q[band[0][here] - a * plane] = band[1][here]
         q = q.reshape((b - a,) + tuple(pm.grid.shape[1:]) + (3,))
         if voxels is not None:
             voxels[a:b] = q.sum(axis=-1)
@@ -314,19 +395,24 @@ def restricted_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel
 def source_and_density(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int,
                    stride: int, beam: Optional[int] = None,
                    should_cancel: Optional[Callable[[], bool]] = None,
-                   voxels: Optional[np.ndarray] = None, disc=None):
+                   voxels: Optional[np.ndarray] = None, disc=None, depth=None):
     """(source (N,3) W/m^3, density (N,), points (N,3) m) on the lattice ``stride`` voxels
     apart (C order of ``lattice_shape``): the first-scattering source of ``restricted_source``,
     averaged over the cells round a point or spot light (``cell_mean_source``), and the
     medium's density at the lattice points.  Raises cancel.Cancelled on Esc.  ``voxels``:
     filled with the voxels' own source (``restricted_source``).  ``disc``: callable (light,
     points, tau) -> transmittance (pathstarts.Surroundings.disc), or None for
-    lights.disc_transmittance at the voxel size."""
+    lights.disc_transmittance at the voxel size.  ``depth``: callable (light, points) ->
+    optical depth as the light's sweep gives a voxel's (pathstarts.Surroundings.optical_depth):
+    a dense mesh volume's surface voxels then take their source from points of their cells
+    (surface_band_source; not for the walk's forward peak, ``beam``)."""
     shape = lattice_shape(pm.grid.shape, stride)
     idx, pts = lattice_points(pm, shape, stride)
     rho = density_from(lattice_values(fld[..., 0], idx, stride), pm.threshold)
+    band = None if depth is None or beam is not None else \
+        surface_band_source(pm, fld, light, channel, depth, disc)
     base = restricted_source(pm, fld, light, channel, stride, shape, should_cancel=should_cancel,
-                          beam=beam, voxels=voxels, disc=disc)
+                          beam=beam, voxels=voxels, disc=disc, band=band)
     if light.kind in ("POINT", "SPOT"):
         near = near_light_cells(pm, light, stride, shape)
         if near.size:

@@ -58,7 +58,10 @@ PATHS = 100_000   # multiple scattering's traced paths per light (a tenth of the
 # 0.153 -> 0.142, p_spot_in_fogbox full 0.139 -> 0.111 (measured 0.1145, 0.0879).  Lowered
 # when the traced paths began to fly through every medium whose box overlaps theirs
 # (paths.PathInputs.others): p_overlap full 0.140 -> 0.045, p_vdb_and_fogbox full 0.041 ->
-# 0.022 (measured 0.0304, 0.0103).
+# 0.022 (measured 0.0304, 0.0103).  p_sphere_thick full 0.142 -> 0.099 when a mesh volume's
+# paths began to fly through its sharp surface and a dense one's surface voxels to take their
+# source from points of their cells (paths.density_at, source.surface_band_source; measured
+# 0.0773).
 BOUND = {  # scene: (single, full)
     "p_area_in_box": (0.062, 0.103),
     "p_backlit_slab": (0.079, 0.122),
@@ -75,7 +78,7 @@ BOUND = {  # scene: (single, full)
     "p_point_in_plume": (0.158, 0.223),
     "p_slab_over_ground": (0.035, 0.074),
     "p_sphere_gneg": (0.026, 0.042),
-    "p_sphere_thick": (0.036, 0.142),
+    "p_sphere_thick": (0.036, 0.099),
     "p_spot_in_fogbox": (0.125, 0.111),
     "p_vdb_and_fogbox": (0.012, 0.022),
 }
