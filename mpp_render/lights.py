@@ -282,7 +282,7 @@ def disc_transmittance(light: Light, x, tau, voxel: float, nodes: int = DISC_NOD
         wc = (centre - xs) / dn[:, None]
         t1, t2 = orthonormal_basis(wc)
         tau_c = depth(xs, wc, dn)
-        turn = np.random.default_rng(0).random(len(near))
+        turn = point_jitter(xs)[:, 0]   # the same point, the same turn, whatever the call
         acc = np.zeros((len(near), 3))
         for j in range(nodes):
             c = cos_t[near, j]
