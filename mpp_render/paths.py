@@ -266,7 +266,8 @@ def source_at(inp, p):
     nearest voxel's ``start_source``, or without it 1 where its density is > 0; 0 outside
     the grid's box, and with a ``threshold`` outside the sharp surface (csrc/paths.c
     source_at)."""
-    f = np.floor(_to_index(inp, p) + 0.5)
+    idx = _to_index(inp, p)
+    f = np.floor(idx + 0.5)
     shape = np.array(inp.density.shape)
     ok = np.all((f >= 0) & (f < shape), axis=1)
     v = np.where(ok[:, None], f, 0).astype(np.int64)
@@ -275,7 +276,7 @@ def source_at(inp, p):
     else:
         q = (inp.density[v[:, 0], v[:, 1], v[:, 2]] > 0.0).astype(np.float64)
     if float(inp.threshold) >= 0.0:   # a sharp surface: only inside it, as the march reads it
-        inside = density_at(inp, _to_index(inp, p)) > 0.0
+        inside = density_at(inp, idx) > 0.0
         q = np.where(inside, q if inp.start_source is not None else 1.0, 0.0)
     return np.where(ok & (q > 0.0), q, 0.0)
 
@@ -553,18 +554,17 @@ def trace_paths_media_np(inp: PathInputs) -> list:
             sel = coll & (pick == j)
             if not np.any(sel):
                 continue
-            _collide(j, grids[j], outs[j], tws[j], gs[j], sts[j], sss[j], mus[j], sel, alive,
+            _collide(grids[j], outs[j], tws[j], gs[j], sts[j], sss[j], mus[j], sel, alive,
                      ins[:, j], rate, kk, ev, pos, d, w, w0, hits, keep, nc, lshapes[j],
                      outside, centre, radius, inp.max_collisions)
         alive = alive[keep & (ev < MAX_EVENTS)]
     return [o.reshape(sh + (nc,)) for o, sh in zip(outs, lshapes)]
 
 
-def _collide(j, m, out, tw, g, st, ss, mu, coll, alive, ins, rate, kk, ev, pos, d, w, w0, hits,
+def _collide(m, out, tw, g, st, ss, mu, coll, alive, ins, rate, kk, ev, pos, d, w, w0, hits,
              keep, nc, lshape, outside, centre, radius, max_collisions):
-    """The tentative collisions ``coll`` (a mask over ``alive``) in medium ``m`` (the j-th):
-    their deposits on its lattice ``out``, then real or null collisions (csrc/paths.c)."""
-    shape = np.array(m.density.shape)
+    """The tentative collisions ``coll`` (a mask over ``alive``) in medium ``m``: their
+    deposits on its lattice ``out``, then real or null collisions (csrc/paths.c)."""
     lsh = np.array(lshape)
     st_max, st_min = float(np.max(st)), float(np.min(st))
     ci = alive[coll]

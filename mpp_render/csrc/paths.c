@@ -174,6 +174,13 @@ static Py_ssize_t surface_hit(const Tracer *T, const double o[3], const double d
     return found;
 }
 
+/* World point p in grid G's voxel index coordinates. */
+static inline void grid_index(const PathGrid *G, const double p[3], double idx[3]) {
+    for (int r = 0; r < 3; r++)
+        idx[r] = G->w2i[4 * r] * p[0] + G->w2i[4 * r + 1] * p[1] + G->w2i[4 * r + 2] * p[2] +
+                 G->w2i[4 * r + 3];
+}
+
 /* The density of grid G at index coordinates idx: with a threshold the trilinear value (0
  * outside [0, n-1] per axis, as media.trilinear) thresholded, as the march reads a mesh
  * volume; else the nearest voxel's (the edge voxel on the box's face).  0 for NaN or < 0. */
@@ -212,20 +219,16 @@ static double density_at(const PathGrid *G, const double idx[3]) {
  * source T->src, or without it 1 where the voxel's density is > 0; 0 outside the box. */
 static double source_at(const Tracer *TR, const double p[3]) {
     const PathGrid *T = &TR->m[0];
+    double idx[3];
+    grid_index(T, p, idx);
     Py_ssize_t v[3];
     for (int r = 0; r < 3; r++) {
-        double idx = T->w2i[4 * r] * p[0] + T->w2i[4 * r + 1] * p[1] + T->w2i[4 * r + 2] * p[2] +
-                     T->w2i[4 * r + 3];
-        double f = floor(idx + 0.5);
+        double f = floor(idx[r] + 0.5);
         if (!(f >= 0.0 && f < (double)T->n[r])) return 0.0;
         v[r] = (Py_ssize_t)f;
     }
     Py_ssize_t flat = (v[0] * T->n[1] + v[1]) * T->n[2] + v[2];
     if (T->thr >= 0.0) {   /* a sharp surface: only inside it, as the march reads it */
-        double idx[3];
-        for (int r = 0; r < 3; r++)
-            idx[r] = T->w2i[4 * r] * p[0] + T->w2i[4 * r + 1] * p[1] +
-                     T->w2i[4 * r + 2] * p[2] + T->w2i[4 * r + 3];
         if (!(density_at(T, idx) > 0.0)) return 0.0;
         if (!TR->src) return 1.0;
     }
@@ -249,10 +252,10 @@ static inline int survive(const Tracer *T, uint32_t key, long ev, double w[3], d
 
 /* Whether world point p lies in grid G's box (the nearest-voxel domain). */
 static int in_box(const PathGrid *G, const double p[3]) {
+    double idx[3];
+    grid_index(G, p, idx);
     for (int r = 0; r < 3; r++) {
-        double idx = G->w2i[4 * r] * p[0] + G->w2i[4 * r + 1] * p[1] + G->w2i[4 * r + 2] * p[2] +
-                     G->w2i[4 * r + 3];
-        double f = floor(idx + 0.5);
+        double f = floor(idx[r] + 0.5);
         if (!(f >= 0.0 && f < (double)G->n[r])) return 0;
     }
     return 1;
@@ -265,9 +268,7 @@ static int in_box(const PathGrid *G, const double p[3]) {
 static double deposit(const PathGrid *G, const double pos[3], const double w[3], const double d[3],
                       uint32_t key, long ev) {
     double idx[3];
-    for (int r = 0; r < 3; r++)
-        idx[r] = G->w2i[4 * r] * pos[0] + G->w2i[4 * r + 1] * pos[1] +
-                 G->w2i[4 * r + 2] * pos[2] + G->w2i[4 * r + 3];
+    grid_index(G, pos, idx);
     double rho = density_at(G, idx);
     double lat[3], fr[3];
     Py_ssize_t b[3];

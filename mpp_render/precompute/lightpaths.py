@@ -11,12 +11,14 @@ import numpy as np
 
 from .. import kernels
 from ..camera import towards_camera
+from ..media import density_from, trilinear
 from ..parallel import worker_count
 from ..paths import (MAX_COLLISIONS, PATH_MEDIA, PATHS_MAX_SPAN, PathInputs, PathMedium,
                      from_power, rate_span)
-from .lattice import lattice_points, paths_lattice
+from .lattice import dilate, lattice_points, paths_lattice
 from .pathstarts import Surroundings, fog_starts, reach, surface_albedo, surface_starts
-from .source import light_direction, near_light_cells, source_and_density, tent_restrict
+from .source import (CELL_POINTS, light_direction, near_light_cells, source_and_density,
+                     tent_restrict)
 
 
 # paths per lattice point the medium fills, at most (the Paths setting caps the total): a
@@ -156,30 +158,20 @@ def tent_peak(voxels: np.ndarray, stride: int, shape) -> np.ndarray:
 
 def sharp_fraction(grid: np.ndarray, threshold: float) -> np.ndarray:
     """float64 (X,Y,Z): the part of each voxel's cell inside the sharp surface where the
-    trilinear value of ``grid`` is >= ``threshold`` (paths.density_at), from 2 x 2 x 2 points
-    a quarter voxel from its centre, computed only where a voxel or one of its 26
-    neighbours lies on the other side (elsewhere 1 inside, 0 outside): the density the
-    paths fly through, over each cell."""
-    from types import SimpleNamespace
-    from ..paths import density_at
+    trilinear value of ``grid`` is >= ``threshold`` (media.density_from of media.trilinear,
+    as the march and paths.density_at read it), from the cell's source.CELL_POINTS, computed
+    only where a voxel or one of its 26 neighbours lies on the other side (elsewhere 1
+    inside, 0 outside): the density the paths fly through, over each cell."""
     inside = np.asarray(grid) >= threshold
     frac = inside.astype(np.float64)
-    pad = np.pad(inside, 1, mode="edge")
-    n = inside.shape
-    mixed = np.zeros(n, bool)
-    for dx in (-1, 0, 1):
-        for dy in (-1, 0, 1):
-            for dz in (-1, 0, 1):
-                near = pad[1 + dx:1 + dx + n[0], 1 + dy:1 + dy + n[1], 1 + dz:1 + dz + n[2]]
-                mixed |= near != inside
+    mixed = dilate(inside) & dilate(~inside)
     idx = np.argwhere(mixed).astype(np.float64)
     if not len(idx):
         return frac
-    medium = SimpleNamespace(density=np.asarray(grid, np.float32), threshold=float(threshold))
     acc = np.zeros(len(idx))
-    for off in ((a, b, c) for a in (-0.25, 0.25) for b in (-0.25, 0.25) for c in (-0.25, 0.25)):
-        acc += density_at(medium, idx + np.asarray(off))
-    frac[mixed] = acc / 8.0
+    for off in CELL_POINTS:
+        acc += density_from(trilinear(grid, idx + off), threshold)
+    frac[mixed] = acc / len(CELL_POINTS)
     return frac
 
 
