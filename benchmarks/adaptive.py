@@ -5,9 +5,9 @@ first-round sizes, against every pixel taking all its samples, side by side in o
                                             [--out docs]
 
 Each scene is translated at ``--size`` with its own settings (the defaults an artist gets:
-16 samples, Noise Threshold 0.01); its precompute runs once (timed) and is then shared
+16 samples, the default Noise Threshold); its precompute runs once (timed) and is then shared
 through the cache, so the renders differ only in the march: ``noise_threshold`` 0 (all 16
-samples) and 0.01 (adaptive) once per first-round size of ``--first`` (``Tuning.adaptive_first``:
+samples) and the default (adaptive) once per first-round size of ``--first`` (``Tuning.adaptive_first``:
 the samples every pixel takes before its noise is judged), their order reversed from scene to
 scene.
 Reported: the march seconds of each, the mean samples per pixel the adaptive render took,

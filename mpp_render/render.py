@@ -96,12 +96,21 @@ def render(desc: SceneDescription,
                        fog_pm, far, ctx, step, out)
     t_march = time.perf_counter()
     threads = worker_count(st.threads)
+    pilot_samples = 0.0
+    if frame.wants_pilot:
+        chunks = run_pilot(frame, threads, cancel, progress)
+        if chunks is None:
+            timings["pilot"] = time.perf_counter() - t_march
+            return RenderOutput(out, timings, warnings, True)
+        frame.use_plan(frame.make_plan(chunks))
+        pilot_samples = sum(c[4] for c in chunks)
+        timings["pilot"] = time.perf_counter() - t_march
     (march_samples, camera_samples), cancelled = march_tiles(frame.tile, len(frame.tiles),
                                                              threads, cancel, progress, out)
     timings["march"] = time.perf_counter() - t_march
     stats = {"backend": kernels.backend(), "step": step, "tiles": len(frame.tiles),
              "passes": passes_on,
-             "march_samples": march_samples, "threads": threads,
+             "march_samples": march_samples + pilot_samples, "threads": threads,
              "pixel_samples": camera_samples / max(W * H, 1)}
     if pre is not None:
         stats.update(pre.stats)
@@ -170,6 +179,24 @@ def with_world_fog(desc: SceneDescription, fog, media: list, warnings: List[str]
                         "is infinitely bright in Cycles; that emission beyond "
                         f"{box.depth:.3g} m is left out")
     return world, lights, fog_pm
+
+
+def run_pilot(frame: FrameMarch, threads: int, cancel, progress) -> Optional[list]:
+    """The pilot of adaptive sampling (pilot.py): every chunk of ``frame.pilot_chunk`` on a
+    pool of ``threads`` threads; None when Esc (``cancel()``, polled between chunks)."""
+    n = len(frame.pilot_pixels)
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        futures = [pool.submit(frame.pilot_chunk, j) for j in range(n)]
+        chunks = []
+        for j, f in enumerate(futures):
+            if cancel():
+                for g in futures:
+                    g.cancel()
+                return None
+            chunks.append(f.result())
+            if progress:
+                progress(0.0, f"Pilot {j + 1}/{n}")
+    return chunks
 
 
 def march_tiles(do_tile, n_tiles: int, threads: int, cancel, progress, out) -> tuple:

@@ -218,8 +218,13 @@ class Tuning:
     each tile's Python work is a fixed cost beside the kernels' (16384 marched cloud_vdb at
     1920x1080 1.2x faster, but the noisy scenes' single scattering came out worse on 4 seeds
     out of 4: docs/adaptive.md).
-    ``adaptive_first``: with adaptive sampling, the samples every pixel
-    gets before its noise is judged (at least 2: a variance needs two).
+    ``adaptive_first``: with adaptive sampling, the samples a pixel
+    gets before its own noise is judged (at least 2: a variance needs two); with the pilot,
+    only the pixels it marks get them, the others stop at one.  ``pilot_stride``: the
+    pilot of adaptive sampling looks at one pixel in each square of this side (pixels);
+    ``pilot_samples`` samples each (pilot.py): at 4 and 4, a quarter of a one-sample frame's
+    rays; 0: no pilot, every pixel takes ``adaptive_first`` samples and the threshold is in
+    Cycles' unit (sqrt of the pixel's luminance).
     ``gather_moments``: where surfaces gather the media's light, the traced paths also keep
     their moments, which the gathers read towards the surface (paths.py, "Moments");
     False: the gathers read the camera's M (benchmarks/gathers.py compares the two).
@@ -248,11 +253,20 @@ class Tuning:
     tile_rays: int = 4096
     surface_gathers: int = 4
     adaptive_first: int = 4
+    pilot_stride: int = 4
+    pilot_samples: int = 4
     gather_moments: bool = True
     roulette: float = 0.01
     gather_step: float = 4.0
     disc_exact: float = 2.0
 
+
+# The default Noise Threshold (pilot.py's unit: the standard error over sqrt(I S), S the
+# frame's mean luminance).  Cycles' default, 0.01 over sqrt(I) with I display-referred, is
+# this at a frame of mean luminance S = 0.25 (0.01 / sqrt(0.25) = 0.02): Cycles' noise where
+# a frame is exposed as artists expose it.  Per pixel it keeps a relative noise of 2 % of S,
+# 0.5 % in the metric's 4 x 4 blocks (docs/adaptive.md).
+NOISE_THRESHOLD = 0.02
 
 # light paths per light and medium at the default quality (docs/method.md, "Traced paths")
 MULTIPLE_PATHS = 2_000_000
@@ -263,8 +277,8 @@ MULTIPLE_PATHS = 2_000_000
 # Reference: every sample in every pixel, four times the paths on a lattice twice as fine,
 # for a converged look at 8x the memory per lattice.
 QUALITY_PRESETS = {
-    "PREVIEW": dict(samples=4, noise_threshold=0.01, multiple_paths=0, multiple_resolution=64),
-    "FINAL": dict(samples=16, noise_threshold=0.01, multiple_paths=MULTIPLE_PATHS,
+    "PREVIEW": dict(samples=4, noise_threshold=NOISE_THRESHOLD, multiple_paths=0, multiple_resolution=64),
+    "FINAL": dict(samples=16, noise_threshold=NOISE_THRESHOLD, multiple_paths=MULTIPLE_PATHS,
                   multiple_resolution=64),
     "REFERENCE": dict(samples=16, noise_threshold=0.0, multiple_paths=4 * MULTIPLE_PATHS,
                       multiple_resolution=128),
@@ -276,9 +290,10 @@ class Settings:
     """Render quality settings.
 
     ``samples``: jittered rays per pixel (box filter over the pixel square), at most.
-    ``noise_threshold``: adaptive sampling (tiles.FrameMarch.tile): a pixel stops taking
-    samples once the standard error of its mean radiance is below this many times the square
-    root of that mean (W/(m^2 sr)); 0: every pixel takes ``samples``.
+    ``noise_threshold``: adaptive sampling (tiles.FrameMarch.tile, pilot.py): a pixel stops
+    taking samples once the standard error of its mean luminance is below this many times
+    sqrt(I S), I its mean and S the frame's (W/(m^2 sr)): the relative noise the frame keeps,
+    the same at any exposure; 0: every pixel takes ``samples``.
     ``step_size``: march step in metres; 0 picks half the finest voxel size.
     ``multiple``: compute multiple scattering (MPP).  ``film_transparent``: alpha from
     transmittance instead of 1.  ``seed``: jitter seed (same seed, same image).
@@ -301,7 +316,7 @@ class Settings:
     """
 
     samples: int = 16
-    noise_threshold: float = 0.01
+    noise_threshold: float = NOISE_THRESHOLD
     step_size: float = 0.0
     multiple: bool = True
     film_transparent: bool = False

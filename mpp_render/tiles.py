@@ -16,7 +16,7 @@ from typing import Optional
 
 import numpy as np
 
-from . import kernels, worldfog
+from . import kernels, pilot, worldfog
 from .camera import primary_rays
 from .march import MarchContext, march_rays, ray_keys
 from .media import union_interval
@@ -29,10 +29,11 @@ ROUND_SEED = 0x9E3779B1  # offsets the seed of each adaptive round's gathering r
 GATHER_TAIL_NODES = 4   # Gauss-Legendre points of the fog tail on a gather ray (worldfog.tail)
 
 
-def tile_size(samples: int, largest: int = 64, rays: int = 4096) -> int:
-    """Tile side (pixels) so that a tile holds at most ``rays`` rays (Tuning.tile_rays), 4 to
+def tile_size(samples: float, largest: int = 64, rays: int = 4096) -> int:
+    """Tile side (pixels) so that a tile holds at most ``rays`` rays (Tuning.tile_rays) at
+    ``samples`` rays per pixel (with adaptive sampling, the pilot's expectation), 4 to
     ``largest`` (Tuning.tile).  Esc and progress are served between tiles."""
-    return int(np.clip(int(math.sqrt(max(1, rays) / max(1, samples))), 4, largest))
+    return int(np.clip(int(math.sqrt(max(1, rays) / max(1.0, samples))), 4, largest))
 
 
 @dataclass
@@ -55,14 +56,70 @@ class FrameMarch:
     ctx: Optional[MarchContext]
     step: float
     out: dict
+    plan: Optional[pilot.SamplePlan] = None
 
     def __post_init__(self):
         self.spp = max(1, int(self.st.samples))
-        self.size = tile_size(self.spp, self.st.tuning.tile, self.st.tuning.tile_rays)
         W, H = int(self.cam.width), int(self.cam.height)
-        self.tiles = [(x0, y0) for y0 in range(0, H, self.size) for x0 in range(0, W, self.size)]
+        self.cut(self.spp)
         self.solid = split_fog(self.media)[0]
         self.arrays = kernel_arrays(self.solid)
+        stride = max(1, int(self.st.tuning.pilot_stride))
+        self.pilot_shape, px, py = pilot.grid(W, H, stride)
+        per = max(1, int(self.st.tuning.tile_rays) // max(1, int(self.st.tuning.pilot_samples)))
+        self.pilot_pixels = [(px[i:i + per], py[i:i + per]) for i in range(0, len(px), per)]
+
+    def cut(self, samples: float) -> None:
+        """Cut the frame into tiles (``self.tiles``, their corners; ``self.size``, their side)
+        for ``samples`` rays per pixel (tile_size)."""
+        W, H = int(self.cam.width), int(self.cam.height)
+        self.size = tile_size(samples, self.st.tuning.tile, self.st.tuning.tile_rays)
+        self.tiles = [(x0, y0) for y0 in range(0, H, self.size) for x0 in range(0, W, self.size)]
+
+    def use_plan(self, plan: pilot.SamplePlan) -> None:
+        """Sample by the pilot's ``plan``, the tiles cut for the rays it expects a pixel to
+        take: one, and the rest of the first round where it marks (the outliers, unknown
+        before the tiles, are not counted)."""
+        self.plan = plan
+        first = min(self.spp, max(2, int(self.st.tuning.adaptive_first)))
+        self.cut(1.0 + float(plan.more.mean()) * (first - 1))
+
+    @property
+    def wants_pilot(self) -> bool:
+        """Adaptive sampling with more than one sample a pixel: the pilot plans it (not
+        with ``Tuning.pilot_samples`` 0: every pixel's first round, Cycles' unit)."""
+        return (self.st.noise_threshold > 0.0 and self.spp > 1
+                and self.st.tuning.pilot_samples > 0)
+
+    def pilot_chunk(self, j):
+        """(j, sums of the luminance, of its square, samples, march samples) of chunk ``j``
+        of the pilot's pixels (pilot.py), each with ``Tuning.pilot_samples`` samples.  Its
+        random streams are its own: neither the frame's tiles nor their cut depend on it."""
+        st = self.st
+        ns = max(2, int(st.tuning.pilot_samples))
+        px, py = self.pilot_pixels[j]
+        n = len(px)
+        index = pilot.PILOT_TILE + j          # a stream of its own, apart from the tiles'
+        rng = np.random.default_rng([st.seed + pilot.PILOT_SEED, j])
+        offs = pilot.offsets(ns, n, rng)
+        lens = rng.random((n * ns, 2)) if self.cam.aperture > 0.0 else None
+        o, d, tmin, tmax, axial = primary_rays(self.cam, (px[:, None] + offs[..., 0]).ravel(),
+                                               (py[:, None] + offs[..., 1]).ravel(), lens)
+        bands = np.argsort(rng.random((2, n, ns)), axis=2)
+        keys = ray_keys(st.seed + pilot.PILOT_SEED, index, n * ns)
+        r, hit, behind = self.march(index, 0, rng, o, d, tmin, tmax, axial, keys,
+                                    (bands[0].ravel(), bands[1].ravel(), ns))
+        acc = Accumulator(n, {})
+        acc.add(np.arange(n), ns, r, hit, behind, st.film_transparent)
+        return j, acc.lum, acc.lum2, acc.count, float(r["steps"].sum())
+
+    def make_plan(self, chunks) -> pilot.SamplePlan:
+        """The frame's SamplePlan from every pilot_chunk's result (any order)."""
+        chunks = sorted(chunks, key=lambda c: c[0])
+        lum, lum2, count = (np.concatenate([c[i] for c in chunks]) for i in (1, 2, 3))
+        return pilot.plan(lum, lum2, count, self.pilot_shape, self.st.noise_threshold,
+                          max(1, int(self.st.tuning.pilot_stride)), int(self.cam.width),
+                          int(self.cam.height))
 
     def optical_depth(self, p, d, t_max):
         """RGB optical depth (N,3) through the media from points ``p`` along ``d`` to
@@ -112,12 +169,16 @@ class FrameMarch:
 
         Each pixel has ``samples`` samples drawn up front (their offsets in the pixel, lens
         points, random keys and surface-gather bands), so a sample is the same whichever
-        round takes it.  Adaptive sampling (``Settings.noise_threshold`` > 0): every pixel
-        first takes ``Tuning.adaptive_first`` of them (``sample_order``: spread over the
-        pixel), then rounds each doubling a pixel's samples (up to ``samples``) go to the
-        pixels whose noise (``Accumulator.noise``) is above the threshold.  With the
-        threshold 0, or no more samples than the first round takes, one round of all the
-        samples, drawn as without adaptive sampling."""
+        round takes it.  Adaptive sampling (``Settings.noise_threshold`` > 0): with the
+        pilot's ``plan`` (pilot.py) every pixel first takes one sample, and the pixels the
+        plan marks, the outliers (pilot.outliers) and their neighbours take the rest of
+        ``Tuning.adaptive_first``; without a plan every pixel
+        first takes ``Tuning.adaptive_first``.  Then rounds each doubling a pixel's samples
+        (up to ``samples``) go to the pixels whose noise (pilot.relative_noise, in units of
+        the plan's scale, 1 without one) is above the threshold, and their neighbours
+        (noisy_pixels).  The rounds take each pixel's samples in ``sample_order`` (spread
+        over the pixel).  With the threshold 0, or no more samples than the first round
+        takes, one round of all the samples, drawn as without adaptive sampling."""
         st, spp = self.st, self.spp
         rng = np.random.default_rng([st.seed, index])
         x0, y0 = self.tiles[index]
@@ -126,16 +187,19 @@ class FrameMarch:
         npx = tw * th
         yy, xx = np.mgrid[y0:y0 + th, x0:x0 + tw]
         yy, xx = yy.ravel(), xx.ravel()
-        first = max(2, int(st.tuning.adaptive_first))
+        plan = self.plan if st.noise_threshold > 0.0 else None
+        first = min(spp, max(2, int(st.tuning.adaptive_first)))
         # no round to add when the first holds every sample: the plain draw, as threshold 0
-        adaptive = st.noise_threshold > 0.0 and spp > first
+        adaptive = st.noise_threshold > 0.0 and (spp > first or (plan is not None and spp > 1))
         order = sample_order(spp) if adaptive else np.arange(spp)
         offs = pixel_offsets(spp, npx, rng)
         lens = rng.random((npx * spp, 2)).reshape(npx, spp, 2) if self.cam.aperture > 0.0 \
             else None
         bands = gather_bands(spp, npx, rng, order if adaptive else None)
         keys = ray_keys(st.seed, index, npx * spp).reshape(npx, spp)
-        taken = first if adaptive else spp
+        taken = (1 if plan is not None else first) if adaptive else spp
+        scale = plan.scale if plan is not None else 1.0
+        more = plan.more[y0:y0 + th, x0:x0 + tw].ravel() if plan is not None else None
         acc = Accumulator(npx, self.out)
         active, batch, k, steps = np.arange(npx), order[:taken], 0, 0.0
         while True:
@@ -150,10 +214,16 @@ class FrameMarch:
             steps += float(r["steps"].sum())
             if taken >= spp:
                 break
-            active = noisy_pixels(acc, active, st.noise_threshold, tw, th)
+            if taken < first:   # the plan's pixels and the outliers take the first round
+                odd = pilot.grow(pilot.outliers(acc.lum, tw, th, scale,
+                                                st.noise_threshold).reshape(th, tw)).ravel()
+                active, upto = active[more[active] | odd[active]], first
+            else:
+                active = noisy_pixels(acc, active, st.noise_threshold, tw, th, scale)
+                upto = min(spp, 2 * taken)
             if not len(active):
                 break
-            batch = order[taken:min(spp, 2 * taken)]
+            batch = order[taken:upto]
             taken += len(batch)
             k += 1
         return (index, (x0, y0, tw, th), acc.passes(st.film_transparent),
@@ -192,14 +262,16 @@ class FrameMarch:
         return self.fog_tail(r, o, d, tmin, t_end), hit, behind
 
 
-def noisy_pixels(acc, active, threshold: float, tw: int, th: int) -> np.ndarray:
+def noisy_pixels(acc, active, threshold: float, tw: int, th: int,
+                 scale: float = 1.0) -> np.ndarray:
     """The pixels of ``active`` (indices into a ``tw`` x ``th`` tile, row-major) that take
-    more samples: those whose noise is above ``threshold`` and their active neighbours
+    more samples: those whose noise (Accumulator.noise in units of ``scale``) is above
+    ``threshold`` and their active neighbours
     (3 x 3), as Cycles widens its adaptive sampling's active area: a pixel whose first
     samples happen to agree does not stop beside noisy ones."""
     noisy = np.zeros((th, tw), bool)
     keep = np.zeros((th, tw), bool)
-    noisy.flat[active[acc.noise(active) > threshold]] = True
+    noisy.flat[active[acc.noise(active, scale) > threshold]] = True
     keep.flat[active] = True
     grown = noisy.copy()
     grown[1:, :] |= noisy[:-1, :]
@@ -309,14 +381,12 @@ class Accumulator:
         dep = np.where(r["depth"] < DEPTH_MISS, r["depth"], np.inf).reshape(n, spp).min(axis=1)
         self.depth[pixels] = np.minimum(self.depth[pixels], dep)
 
-    def noise(self, pixels) -> np.ndarray:
-        """The standard error of each pixel's mean radiance over sqrt(mean + 1e-4): Cycles'
-        adaptive sampling's scale (an error relative to the square root of the intensity,
-        so dark pixels are not sampled forever)."""
-        n = self.count[pixels]
-        mean = self.lum[pixels] / n
-        var = np.maximum(self.lum2[pixels] / n - mean * mean, 0.0) * n / np.maximum(n - 1, 1)
-        return np.sqrt(var / n) / np.sqrt(np.maximum(mean, 0.0) + 1e-4)
+    def noise(self, pixels, scale: float = 1.0) -> np.ndarray:
+        """The standard error of each pixel's mean luminance over sqrt((mean + 1e-4 S) S),
+        S = ``scale`` the frame's mean luminance (pilot.relative_noise; with S = 1 Cycles'
+        adaptive sampling's unit, sqrt(mean + 1e-4))."""
+        return pilot.relative_noise(self.lum[pixels], self.lum2[pixels], self.count[pixels],
+                                    scale)
 
     def passes(self, transparent: bool) -> dict:
         """The passes the frame holds, each pixel the mean of its samples."""

@@ -1,13 +1,14 @@
-"""Adaptive sampling (tiles.FrameMarch.tile, Settings.noise_threshold): a pixel stops taking
-samples once its noise is below the threshold; a pixel with nothing noisy in it stops after
-the first round; a lower threshold buys more samples; 0 turns it off; the rounds take each
-pixel's samples in an order whose prefixes stay stratified."""
+"""Adaptive sampling (tiles.FrameMarch.tile, Settings.noise_threshold, pilot.py): a pixel stops
+taking samples once its noise is below the threshold; a pixel the pilot finds nothing noisy
+around stops after one sample; the threshold means the same at any exposure; a lower
+threshold buys more samples; 0 turns it off; the rounds take each pixel's samples in an
+order whose prefixes stay stratified."""
 import dataclasses
 
 import numpy as np
 import pytest
 
-from mpp_render import tiles
+from mpp_render import pilot, tiles
 from mpp_render.render import render
 from mpp_render.tiles import Accumulator, gather_bands, pixel_offsets, sample_order
 
@@ -32,7 +33,11 @@ def test_threshold_zero_takes_every_sample_and_a_quiet_frame_stops_at_the_first_
     away.camera.cam_to_world[:3, :3] = np.diag([1.0, -1.0, -1.0])   # looking up, +Z
     away.surfaces = []
     out = render(variant(away, noise_threshold=0.01))
-    assert out.stats["pixel_samples"] == away.settings.tuning.adaptive_first
+    assert out.stats["pixel_samples"] == 1           # the pilot saw no noise anywhere
+    # and the tiles were cut for one ray a pixel: the 40 x 30 frame is one tile (16 x 16
+    # tiles, six of them, at 16 samples in every pixel)
+    assert out.stats["tiles"] == 1
+    assert render(variant(away, noise_threshold=0.0)).stats["tiles"] == 6
     np.testing.assert_allclose(out.passes["Combined"][..., :3],
                                np.broadcast_to(away.world.color, (30, 40, 3)), rtol=1e-6)
     clear = render(variant(away, noise_threshold=0.01, film_transparent=True)).passes["Combined"]
@@ -50,7 +55,7 @@ def test_a_lower_threshold_takes_more_samples_and_no_worse_an_image():
         err = float(np.sqrt(np.mean((out.passes["Combined"][..., :3] - ref) ** 2)))
         got.append((out.stats["pixel_samples"], err))
     spp = [g[0] for g in got]
-    assert 4 <= spp[0] < spp[1] < spp[2] == 16
+    assert 1 <= spp[0] < spp[1] < spp[2] == 16
     assert got[0][1] > got[2][1]                      # more samples, closer to the converged
     assert got[1][1] < 1.1 * got[2][1]                # the threshold holds the error
 
@@ -64,6 +69,9 @@ def test_the_noise_is_the_standard_error_over_the_root_of_the_mean():
     acc.add(np.arange(2), 2, r, np.zeros(4, bool), np.zeros((4, 3)), False)
     noise = acc.noise(np.arange(2))
     np.testing.assert_allclose(noise, [np.sqrt(2.0 / 2) / np.sqrt(2.0 + 1e-4), 0.0])
+    # in units of a frame's mean luminance S: sqrt((I + 1e-4 S) S)
+    np.testing.assert_allclose(acc.noise(np.arange(2), 4.0),
+                               [np.sqrt(2.0 / 2) / np.sqrt((2.0 + 4e-4) * 4.0), 0.0])
     np.testing.assert_allclose(acc.passes(False)["Combined"][:, :3], [[2.0] * 3, [5.0] * 3])
 
 
@@ -115,10 +123,75 @@ def test_each_pixel_draws_its_own_offsets(spp):
             assert len({(a, b) for a, b in cells[p]}) == spp
 
 
-def test_no_more_samples_than_the_first_round_renders_as_without_adaptive_sampling():
+def test_one_sample_renders_as_without_adaptive_sampling():
     desc = base()
-    for spp in (1, 4):
-        a = render(variant(desc, samples=spp, noise_threshold=0.01)).passes
-        b = render(variant(desc, samples=spp, noise_threshold=0.0)).passes
-        for k in a:
-            np.testing.assert_array_equal(a[k], b[k], err_msg=f"{spp} {k}")
+    a = render(variant(desc, samples=1, noise_threshold=0.01))
+    b = render(variant(desc, samples=1, noise_threshold=0.0))
+    assert "pilot" not in a.timings                   # nothing to plan
+    for k in a.passes:
+        np.testing.assert_array_equal(a.passes[k], b.passes[k], err_msg=k)
+
+
+def test_the_threshold_means_the_same_noise_at_any_exposure():
+    """Every light and the sky 50x brighter: the same samples in the same pixels, the image
+    50x brighter (Cycles' rule, se <= t sqrt(I), would sample the bright frame more)."""
+    def lit(k):
+        desc = base(world=(0.2 * k, 0.25 * k, 0.3 * k), power=150.0 * k)
+        desc.lights[0] = dataclasses.replace(desc.lights[0], strength=desc.lights[0].strength * k)
+        return render(variant(desc, noise_threshold=0.02))
+    dim, bright = lit(1.0), lit(50.0)
+    assert 1.0 < dim.stats["pixel_samples"] < 16.0
+    assert bright.stats["pixel_samples"] == dim.stats["pixel_samples"]
+    np.testing.assert_allclose(bright.passes["Combined"][..., :3],
+                               50.0 * dim.passes["Combined"][..., :3], rtol=1e-6, atol=1e-9)
+
+
+def test_the_plan_marks_the_noisy_cells_and_their_neighbours():
+    # a 5 x 4 grid of cells of 3 x 3 pixels over a 14 x 11 frame (the last row and column
+    # clipped); 4 samples each, luminance 1 everywhere, the cell in row 2, column 1 noisy
+    shape, stride, W, H = (4, 5), 3, 14, 11
+    n = np.full(20, 4.0)
+    lum, lum2 = n * 1.0, n * 1.0
+    lum2[2 * 5 + 1] = 4.0 * 1.01                      # one sample's variance 0.01 * 4 / 3
+    plan = pilot.plan(lum, lum2, n, shape, 0.01, stride, W, H)
+    assert plan.more.shape == (H, W)
+    np.testing.assert_allclose(plan.scale, 1.0)
+    want = np.zeros((H, W), bool)
+    want[3:H, 0:9] = True                             # cells (1..3, 0..2)
+    np.testing.assert_array_equal(plan.more, want)
+    # the same variance 100x brighter (and its variance 10^4x): the same plan
+    again = pilot.plan(100 * lum, 1e4 * lum2, n, shape, 0.01, stride, W, H)
+    np.testing.assert_array_equal(again.more, want)
+    # below the threshold: nothing marked
+    quiet = pilot.plan(lum, lum2, n, shape, 1.0, stride, W, H)
+    assert not quiet.more.any()
+
+
+def test_the_pilot_looks_at_one_pixel_of_each_cell():
+    (gh, gw), x, y = pilot.grid(10, 7, 4)
+    assert (gh, gw) == (2, 3)
+    assert x.tolist() == [2, 6, 9, 2, 6, 9] and y.tolist() == [2, 2, 2, 6, 6, 6]
+    offs = pilot.offsets(4, 1000, np.random.default_rng(1))
+    assert offs.min() >= 0.0 and offs.max() < 1.0
+    rows = np.floor(offs[..., 1] * 4).astype(int)
+    assert all(sorted(r) == [0, 1, 2, 3] for r in rows)   # one sample in each row
+
+
+def test_an_outlier_and_its_neighbours_take_more_samples_and_a_gradient_does_not():
+    th, tw = 6, 7
+    y, x = np.mgrid[0:th, 0:tw]
+    ramp = 1.0 + 0.1 * x + 0.05 * y                   # a smooth gradient: no outlier
+    assert not pilot.outliers(ramp.ravel(), tw, th, 1.0, 0.01).any()
+    spike = ramp.copy()
+    spike[2, 3] += 0.5                                # one sample far off its neighbours'
+    odd = pilot.outliers(spike.ravel(), tw, th, 1.0, 0.01).reshape(th, tw)
+    assert odd[2, 3] and odd.sum() <= 9
+    grown = pilot.grow(odd)
+    assert grown[1:4, 2:5].all()
+    # the same spike 1000x brighter everywhere: the same pixels (the threshold's own unit)
+    np.testing.assert_array_equal(
+        pilot.outliers(1000 * spike.ravel(), tw, th, 1000.0, 0.01).reshape(th, tw), odd)
+    # a spike within the threshold's allowance is no outlier
+    small = ramp.copy()
+    small[2, 3] += 0.001
+    assert not pilot.outliers(small.ravel(), tw, th, 1.0, 0.1).any()

@@ -109,13 +109,17 @@ def reference():
 
 @pytest.mark.parametrize("delay,stage", [(0.3, None), (0.1, "Light attenuation: pt"),
                                          (0.2, "World light"), (0.05, "Light paths"),
-                                         (0.1, "Tiles")])
+                                         (0.1, "Tiles"), (0.0, "Pilot")])
 def test_esc_returns_within_half_a_second(delay, stage, reference):
     esc = Esc(delay, stage)
-    out, latency = cancelled_render(esc, march_scene() if stage == "Tiles" else big_scene())
+    # the pilot plans adaptive sampling: more than one sample a pixel
+    scene = {"Tiles": march_scene, "Pilot": lambda: big_scene(48, 320, 256, 16)}.get(stage,
+                                                                                 big_scene)
+    out, latency = cancelled_render(esc, scene())
     assert latency < LATENCY_S, f"{latency:.3f} s from Esc to return ({esc.stages[-1]})"
     if stage != "Tiles":
-        assert "march" not in out.timings  # stopped in the precompute
+        assert "march" not in out.timings  # stopped in the precompute or the pilot
+        assert ("pilot" in out.timings) == (stage == "Pilot")
     else:
         done = np.all(out.passes["Combined"][..., 3] == 1.0)
         assert not done  # stopped in the march, some tiles unwritten

@@ -10,7 +10,7 @@ ROOT = pathlib.Path(__file__).resolve().parents[1] / "mpp_render"
 # top to bottom; a module not named here is a failure (name it in docs/structure.md first)
 LAYERS = [
     {"cli", "__main__", "package", "blender", "viewport"},              # entry points, glue
-    {"render", "tiles", "cache", "bounce", "budget", "metrics", "exr"},  # the frame; I/O
+    {"render", "tiles", "pilot", "cache", "bounce", "budget", "metrics", "exr"},  # the frame; I/O
     {"precompute", "march", "firstflight", "pyramid", "parallel"},      # the two stages
     {"kernels", "kernels_np", "_kernels", "paths"},                     # C kernels, numpy twins
     {"lights", "surfaces", "principled", "worldfog", "media", "phase", "mpp", "walk", "lightrecord",

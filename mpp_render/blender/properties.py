@@ -32,7 +32,7 @@ class MPPRenderSettings(bpy.types.PropertyGroup):
         name="Quality", default="FINAL", update=_apply_quality,
         items=[("PREVIEW", "Preview", "4 samples and the fast most-probable-path model of "
                 "multiple scattering: smooth, seconds, but biased (docs/accuracy.md)"),
-               ("FINAL", "Final", "16 samples at most (adaptive, Noise Threshold 0.01) and 2 "
+               ("FINAL", "Final", "16 samples at most (adaptive, Noise Threshold 0.02) and 2 "
                 "million traced light paths per light for multiple scattering: the defaults"),
                ("REFERENCE", "Reference", "16 samples in every pixel (Noise Threshold 0), 8 "
                 "million paths per light on a lattice twice as fine: closest to Cycles, "
@@ -47,11 +47,13 @@ class MPPRenderSettings(bpy.types.PropertyGroup):
         description="Camera rays per pixel, jittered over the pixel square (1 px box filter). "
                     "More samples: less noise and aliasing, proportionally longer march")
     noise_threshold: FloatProperty(
-        name="Noise Threshold", default=0.01, min=0.0, soft_max=0.1, precision=4,
+        name="Noise Threshold", default=0.02, min=0.0, soft_max=0.1, precision=4,
         description="Adaptive sampling: a pixel stops taking samples once its noise (the "
-                    "standard error of its mean, over the square root of that mean, as "
-                    "Cycles' threshold) is below this; it first takes 4. Higher: faster, "
-                    "noisier. 0 = every pixel takes all its samples")
+                    "standard error of its mean, over the square root of that mean times "
+                    "the frame's mean brightness) is below this: the relative noise the "
+                    "frame keeps, at any exposure. A pilot finds the noisy places; the rest "
+                    "take 1 sample. Higher: faster, noisier. 0 = every pixel takes all its "
+                    "samples")
     viewport_samples: IntProperty(
         name="Viewport", default=16, min=1, soft_max=1024,
         description="Camera rays per pixel of the Rendered viewport's last picture. The "

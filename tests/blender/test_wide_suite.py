@@ -92,6 +92,9 @@ def render(scenes_dir, name, mode):
     sc.render.resolution_percentage = PERCENT
     batch.set_mpp(sc, SAMPLES[mode], multiple=(mode == "full"), seed=0)
     sc.mpp.multiple_paths = PATHS
+    # every pixel takes SAMPLES: the bounds hold the model at a fixed cost (adaptive sampling
+    # below 4 samples took none away before its pilot; docs/adaptive.md scores it)
+    sc.mpp.noise_threshold = 0.0
     out = frame.render_mpp().output
     return out.passes
 
