@@ -37,12 +37,14 @@ PILOT_TILE = 1 << 24     # offsets the pilot's chunks from the tiles in their ga
 
 @dataclass
 class SamplePlan:
-    """What the pilot found: ``scale`` S (W/(m^2 sr), the frame's mean luminance, > 0) and
+    """What the pilot found: ``scale`` S (W/(m^2 sr), the frame's mean luminance, > 0),
     ``more`` ((H, W) bool), the pixels that take the adaptive first round after their first
-    sample."""
+    sample, and ``expected``, the samples a pixel is expected to take (the mean over the
+    cells of what each needs, in the rounds' steps: 1, the first round, its doublings)."""
 
     scale: float
     more: np.ndarray
+    expected: float = 1.0
 
 
 def relative_noise(lum, lum2, count, scale: float) -> np.ndarray:
@@ -73,16 +75,19 @@ def offsets(samples: int, n: int, rng) -> np.ndarray:
 
 
 def plan(lum, lum2, count, shape, threshold: float, stride: int, width: int,
-         height: int) -> SamplePlan:
+         height: int, samples: int = 16, first: int = 4) -> SamplePlan:
     """The frame's SamplePlan from the pilot's per-cell sums (``lum``, ``lum2``, ``count``,
-    row-major over ``shape`` = (gh, gw)) at Noise Threshold ``threshold``."""
+    row-major over ``shape`` = (gh, gw)) at Noise Threshold ``threshold``, for at most
+    ``samples`` a pixel and a first round of ``first``."""
     mean = lum / count
     scale = float(max(mean.mean(), 1e-12))
     # one sample's variance over the threshold's allowance: the samples a cell needs
     need = (relative_noise(lum, lum2, count, scale) / threshold) ** 2 * count
     grown = grow((need > 1.0).reshape(shape))   # a cell beside a noisy one: noisy too
     more = np.repeat(np.repeat(grown, stride, axis=0), stride, axis=1)[:height, :width]
-    return SamplePlan(scale, np.ascontiguousarray(more))
+    rounds = np.maximum(first, 2.0 ** np.ceil(np.log2(np.maximum(need, 1.0))))
+    takes = np.where(need > 1.0, np.minimum(rounds, samples), 1.0)
+    return SamplePlan(scale, np.ascontiguousarray(more), float(takes.mean()))
 
 
 def grow(mask: np.ndarray) -> np.ndarray:

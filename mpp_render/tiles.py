@@ -78,11 +78,9 @@ class FrameMarch:
 
     def use_plan(self, plan: pilot.SamplePlan) -> None:
         """Sample by the pilot's ``plan``, the tiles cut for the rays it expects a pixel to
-        take: one, and the rest of the first round where it marks (the outliers, unknown
-        before the tiles, are not counted)."""
+        take (``plan.expected``; the outliers, unknown before the tiles, are not counted)."""
         self.plan = plan
-        first = min(self.spp, max(2, int(self.st.tuning.adaptive_first)))
-        self.cut(1.0 + float(plan.more.mean()) * (first - 1))
+        self.cut(plan.expected)
 
     @property
     def wants_pilot(self) -> bool:
@@ -119,7 +117,8 @@ class FrameMarch:
         lum, lum2, count = (np.concatenate([c[i] for c in chunks]) for i in (1, 2, 3))
         return pilot.plan(lum, lum2, count, self.pilot_shape, self.st.noise_threshold,
                           max(1, int(self.st.tuning.pilot_stride)), int(self.cam.width),
-                          int(self.cam.height))
+                          int(self.cam.height), self.spp,
+                          min(self.spp, max(2, int(self.st.tuning.adaptive_first))))
 
     def optical_depth(self, p, d, t_max):
         """RGB optical depth (N,3) through the media from points ``p`` along ``d`` to

@@ -153,8 +153,10 @@ def test_the_plan_marks_the_noisy_cells_and_their_neighbours():
     n = np.full(20, 4.0)
     lum, lum2 = n * 1.0, n * 1.0
     lum2[2 * 5 + 1] = 4.0 * 1.01                      # one sample's variance 0.01 * 4 / 3
-    plan = pilot.plan(lum, lum2, n, shape, 0.01, stride, W, H)
+    plan = pilot.plan(lum, lum2, n, shape, 0.01, stride, W, H, samples=16, first=4)
     assert plan.more.shape == (H, W)
+    # 19 cells take one sample, the noisy one (need 133) all 16: the tiles are cut for this
+    np.testing.assert_allclose(plan.expected, (19 * 1 + 16) / 20)
     np.testing.assert_allclose(plan.scale, 1.0)
     want = np.zeros((H, W), bool)
     want[3:H, 0:9] = True                             # cells (1..3, 0..2)
