@@ -43,10 +43,10 @@ class RenderOutput:
 
 
 def auto_step(desc: SceneDescription, media) -> float:
-    """The march step (m): the user's, or half the finest voxel."""
+    """The march step (m): the user's, or ``Tuning.step_voxels`` of the finest voxel."""
     if desc.settings.step_size > 0:
         return float(desc.settings.step_size)
-    return 0.5 * min(pm.voxel_size for pm in media) if media else 1.0
+    return desc.settings.tuning.step_voxels * min(pm.voxel_size for pm in media) if media else 1.0
 
 
 def render(desc: SceneDescription,
