@@ -80,7 +80,9 @@ def plan(lum, lum2, count, shape, threshold: float, stride: int, width: int,
     row-major over ``shape`` = (gh, gw)) at Noise Threshold ``threshold``, for at most
     ``samples`` a pixel and a first round of ``first``."""
     mean = lum / count
-    scale = float(max(mean.mean(), 1e-12))
+    seen = np.isfinite(mean)          # a non-finite sample is the march's report, not noise
+    scale = float(mean[seen].mean()) if seen.any() else 0.0
+    scale = scale if scale > 1e-12 else 1e-12
     # one sample's variance over the threshold's allowance: the samples a cell needs
     need = (relative_noise(lum, lum2, count, scale) / threshold) ** 2 * count
     grown = grow((need > 1.0).reshape(shape))   # a cell beside a noisy one: noisy too

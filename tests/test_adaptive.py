@@ -164,6 +164,12 @@ def test_the_plan_marks_the_noisy_cells_and_their_neighbours():
     # the same variance 100x brighter (and its variance 10^4x): the same plan
     again = pilot.plan(100 * lum, 1e4 * lum2, n, shape, 0.01, stride, W, H)
     np.testing.assert_array_equal(again.more, want)
+    # a non-finite cell (a kernel's failure, reported elsewhere) leaves the scale finite
+    bad = lum.copy()
+    bad[0] = np.nan
+    np.testing.assert_allclose(pilot.plan(bad, lum2, n, shape, 0.01, stride, W, H).scale, 1.0)
+    dark = pilot.plan(0 * lum, 0 * lum2, n, shape, 0.01, stride, W, H)   # a black frame
+    assert dark.scale > 0.0 and not dark.more.any()
     # below the threshold: nothing marked
     quiet = pilot.plan(lum, lum2, n, shape, 1.0, stride, W, H)
     assert not quiet.more.any()
