@@ -222,8 +222,8 @@ class Tuning:
     gets before its own noise is judged (at least 2: a variance needs two); with the pilot,
     only the pixels it marks get them, the others stop at one.  ``pilot_stride``: the
     pilot of adaptive sampling looks at one pixel in each square of this side (pixels);
-    ``pilot_samples`` samples each (pilot.py): at 4 and 4, a quarter of a one-sample frame's
-    rays; 0: no pilot, every pixel takes ``adaptive_first`` samples and the threshold is in
+    ``pilot_samples`` samples each (pilot.py): at 8 and 4, a sixteenth of a one-sample frame's
+    rays (4: a quarter, and the suite's errors within the seeds' scatter of 8's; docs/adaptive.md); 0: no pilot, every pixel takes ``adaptive_first`` samples and the threshold is in
     Cycles' unit (sqrt of the pixel's luminance).  ``step_voxels``: the march step where
     Step Size is 0, in the finest voxel's sides (1.0 marched cloud_vdb with 0.58 of the
     samples but took the suite's single scattering from 0.029 to 0.054 at the 90th
@@ -257,7 +257,7 @@ class Tuning:
     tile_rays: int = 4096
     surface_gathers: int = 4
     adaptive_first: int = 4
-    pilot_stride: int = 4
+    pilot_stride: int = 8
     step_voxels: float = 0.5
     pilot_samples: int = 4
     gather_moments: bool = True
