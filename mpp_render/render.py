@@ -99,12 +99,11 @@ def render(desc: SceneDescription,
     pilot_samples = 0.0
     if frame.wants_pilot:
         chunks = run_pilot(frame, threads, cancel, progress)
+        timings["pilot"] = time.perf_counter() - t_march
         if chunks is None:
-            timings["pilot"] = time.perf_counter() - t_march
             return RenderOutput(out, timings, warnings, True)
         frame.use_plan(frame.make_plan(chunks))
         pilot_samples = sum(c[4] for c in chunks)
-        timings["pilot"] = time.perf_counter() - t_march
     (march_samples, camera_samples), cancelled = march_tiles(frame.tile, len(frame.tiles),
                                                              threads, cancel, progress, out)
     timings["march"] = time.perf_counter() - t_march

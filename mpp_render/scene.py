@@ -222,9 +222,10 @@ class Tuning:
     gets before its own noise is judged (at least 2: a variance needs two); with the pilot,
     only the pixels it marks get them, the others stop at one.  ``pilot_stride``: the
     pilot of adaptive sampling looks at one pixel in each square of this side (pixels);
-    ``pilot_samples`` samples each (pilot.py): at 8 and 4, a sixteenth of a one-sample frame's
-    rays (4: a quarter, and the suite's errors within the seeds' scatter of 8's; docs/adaptive.md); 0: no pilot, every pixel takes ``adaptive_first`` samples and the threshold is in
-    Cycles' unit (sqrt of the pixel's luminance).  ``step_voxels``: the march step where
+    ``pilot_samples`` samples each (pilot.py; at least 2): at 8 and 4, a sixteenth of a
+    one-sample frame's rays (4: a quarter, and the suite's errors within the seeds' scatter
+    of 8's; docs/adaptive.md); 0: no pilot, every pixel takes ``adaptive_first`` samples and
+    the threshold is in Cycles' unit (sqrt of the pixel's luminance).  ``step_voxels``: the march step where
     Step Size is 0, in the finest voxel's sides (1.0 marched cloud_vdb with 0.58 of the
     samples but took the suite's single scattering from 0.029 to 0.054 at the 90th
     percentile: p_point_in_plume 0.000 -> 0.090, p_sphere_thick 0.020 -> 0.039,
@@ -299,7 +300,8 @@ class Settings:
     taking samples once the standard error of its mean luminance is below this many times
     sqrt(I S), I its mean and S the frame's (W/(m^2 sr)): the relative noise the frame keeps,
     the same at any exposure; 0: every pixel takes ``samples``.
-    ``step_size``: march step in metres; 0 picks half the finest voxel size.
+    ``step_size``: march step in metres; 0 picks ``Tuning.step_voxels`` (half) of the finest
+    voxel's side.
     ``multiple``: compute multiple scattering (MPP).  ``film_transparent``: alpha from
     transmittance instead of 1.  ``seed``: jitter seed (same seed, same image).
     ``ambient_directions``: directions used to integrate the world light's transmittance.

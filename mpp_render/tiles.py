@@ -59,14 +59,18 @@ class FrameMarch:
     plan: Optional[pilot.SamplePlan] = None
 
     def __post_init__(self):
+        tun = self.st.tuning
         self.spp = max(1, int(self.st.samples))
+        # the adaptive first round (at least 2: a variance needs two), never above spp
+        self.first = min(self.spp, max(2, int(tun.adaptive_first)))
         W, H = int(self.cam.width), int(self.cam.height)
         self.cut(self.spp)
         self.solid = split_fog(self.media)[0]
         self.arrays = kernel_arrays(self.solid)
-        stride = max(1, int(self.st.tuning.pilot_stride))
-        self.pilot_shape, px, py = pilot.grid(W, H, stride)
-        per = max(1, int(self.st.tuning.tile_rays) // max(1, int(self.st.tuning.pilot_samples)))
+        self.pilot_stride = max(1, int(tun.pilot_stride))
+        self.pilot_samples = max(2, int(tun.pilot_samples))
+        self.pilot_shape, px, py = pilot.grid(W, H, self.pilot_stride)
+        per = max(1, int(tun.tile_rays) // self.pilot_samples)
         self.pilot_pixels = [(px[i:i + per], py[i:i + per]) for i in range(0, len(px), per)]
 
     def cut(self, samples: float) -> None:
@@ -93,8 +97,7 @@ class FrameMarch:
         """(j, sums of the luminance, of its square, samples, march samples) of chunk ``j``
         of the pilot's pixels (pilot.py), each with ``Tuning.pilot_samples`` samples.  Its
         random streams are its own: neither the frame's tiles nor their cut depend on it."""
-        st = self.st
-        ns = max(2, int(st.tuning.pilot_samples))
+        st, ns = self.st, self.pilot_samples
         px, py = self.pilot_pixels[j]
         n = len(px)
         index = pilot.PILOT_TILE + j          # a stream of its own, apart from the tiles'
@@ -116,9 +119,8 @@ class FrameMarch:
         chunks = sorted(chunks, key=lambda c: c[0])
         lum, lum2, count = (np.concatenate([c[i] for c in chunks]) for i in (1, 2, 3))
         return pilot.plan(lum, lum2, count, self.pilot_shape, self.st.noise_threshold,
-                          max(1, int(self.st.tuning.pilot_stride)), int(self.cam.width),
-                          int(self.cam.height), self.spp,
-                          min(self.spp, max(2, int(self.st.tuning.adaptive_first))))
+                          self.pilot_stride, int(self.cam.width), int(self.cam.height),
+                          self.spp, self.first)
 
     def optical_depth(self, p, d, t_max):
         """RGB optical depth (N,3) through the media from points ``p`` along ``d`` to
@@ -186,10 +188,9 @@ class FrameMarch:
         npx = tw * th
         yy, xx = np.mgrid[y0:y0 + th, x0:x0 + tw]
         yy, xx = yy.ravel(), xx.ravel()
-        plan = self.plan if st.noise_threshold > 0.0 else None
-        first = min(spp, max(2, int(st.tuning.adaptive_first)))
+        plan, first = self.plan, self.first   # a plan only where wants_pilot: spp > 1
         # no round to add when the first holds every sample: the plain draw, as threshold 0
-        adaptive = st.noise_threshold > 0.0 and (spp > first or (plan is not None and spp > 1))
+        adaptive = st.noise_threshold > 0.0 and (spp > first or plan is not None)
         order = sample_order(spp) if adaptive else np.arange(spp)
         offs = pixel_offsets(spp, npx, rng)
         lens = rng.random((npx * spp, 2)).reshape(npx, spp, 2) if self.cam.aperture > 0.0 \
@@ -272,13 +273,7 @@ def noisy_pixels(acc, active, threshold: float, tw: int, th: int,
     keep = np.zeros((th, tw), bool)
     noisy.flat[active[acc.noise(active, scale) > threshold]] = True
     keep.flat[active] = True
-    grown = noisy.copy()
-    grown[1:, :] |= noisy[:-1, :]
-    grown[:-1, :] |= noisy[1:, :]
-    wide = grown.copy()
-    wide[:, 1:] |= grown[:, :-1]
-    wide[:, :-1] |= grown[:, 1:]
-    return np.flatnonzero(wide & keep)
+    return np.flatnonzero(pilot.grow(noisy) & keep)
 
 
 def pixel_offsets(spp: int, npx: int, rng) -> np.ndarray:
