@@ -349,7 +349,9 @@ def trace_paths_media(inp, *, threads: int = 1, should_cancel=None, backend=None
              _f64(inp.start_peak).reshape(-1) if inp.start_source is not None else np.zeros(0))
     fixed = [(_f32(m.density), _f64(m.w2i).reshape(3, 4), _f64(m.sigma_s).reshape(3),
               _f64(m.sigma_t).reshape(3), float(m.g), int(m.stride), _f64(m.towards),
-              float(m.rate), float(m.threshold)) for m in inp.others]
+              float(m.rate), float(m.threshold), cell_classes(m.density, m.threshold))
+             for m in inp.others]
+    cells = cell_classes(inp.density, inp.threshold)
 
     cancelled = []
 
@@ -361,7 +363,7 @@ def trace_paths_media(inp, *, threads: int = 1, should_cancel=None, backend=None
                 return
             _c.trace_paths(outs[i][0], *args, a, min(a + PATH_CHUNK, int(cuts[i + 1])), n,
                            int(inp.seed) & 0xFFFFFFFF, int(inp.max_collisions), float(ROULETTE),
-                           *extra, moms[i][0], others, float(inp.threshold))
+                           *extra, moms[i][0], others, float(inp.threshold), cells)
 
     if workers == 1:
         for i in range(blocks):
@@ -380,6 +382,39 @@ def trace_paths_media(inp, *, threads: int = 1, should_cancel=None, backend=None
             moments += moms[i][g]
         result.append(np.concatenate([total, moments], axis=-1) if inp.moments else total)
     return result
+
+
+# the most cells cell_classes maps (one byte each); a larger grid reads every cell's voxels
+CELL_CLASSES_MAX = 1 << 27
+
+
+def cell_classes(density, threshold: float) -> np.ndarray:
+    """For a grid ``density`` (n0,n1,n2) read as a sharp medium at ``threshold`` > 0 (the
+    trilinear value >= threshold is inside, paths.PathInputs.threshold): (n0-1,n1-1,n2-1)
+    uint8, each cell between 8 voxels 0 where all 8 lie below threshold x (1 - 1e-9), so that
+    any trilinear mix of them is below it, 1 where all lie at or above threshold x
+    (1 + 1e-9), so that any mix is inside, else 2 (non-finite voxels too): the compiled
+    tracer reads the 8 voxels only in cells of class 2 and finds the same values.  Empty
+    (0,0,0) where there is no such threshold, a side has under 2 voxels, or the grid has
+    more than ``CELL_CLASSES_MAX`` cells."""
+    d = np.asarray(density)
+    thr = float(threshold)
+    if not thr > 0.0 or d.ndim != 3 or min(d.shape) < 2 or \
+            int(np.prod(np.asarray(d.shape) - 1)) > CELL_CLASSES_MAX:
+        return np.zeros((0, 0, 0), np.uint8)
+    d = np.asarray(d, np.float32)
+    corners = [d[a:d.shape[0] - 1 + a, b:d.shape[1] - 1 + b, c:d.shape[2] - 1 + c]
+               for a in (0, 1) for b in (0, 1) for c in (0, 1)]
+    lo, hi = corners[0].copy(), corners[0].copy()
+    for v in corners[1:]:
+        np.minimum(lo, v, out=lo)   # NaN propagates: such a cell stays class 2
+        np.maximum(hi, v, out=hi)
+    lo64, hi64 = lo.astype(np.float64), hi.astype(np.float64)
+    ok = np.isfinite(lo64) & np.isfinite(hi64)
+    out = np.full(lo.shape, 2, np.uint8)
+    out[ok & (hi64 <= thr * (1.0 - 1e-9))] = 0
+    out[ok & (lo64 >= thr * (1.0 + 1e-9))] = 1
+    return out
 
 
 PATH_BLOCKS = 4   # trace_paths' blocks of paths (its sums' order, whatever the threads)

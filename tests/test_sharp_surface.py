@@ -95,3 +95,70 @@ def test_a_dense_cube_scatters_the_suns_power(monkeypatch):
     print(totals, exact)
     assert totals["points"] == pytest.approx(exact, rel=0.01)
     assert abs(totals["centres"] / exact - 1.0) > 0.02
+
+
+def sphere_ramp(n=40, vox=0.05, r=0.77):
+    """(n,n,n) float32: 1 inside a sphere of radius r (m), 0 outside, a one-voxel ramp
+    through 0.5 on its surface (a mesh volume's voxelisation)."""
+    c = (np.arange(n) - 0.5 * (n - 1)) * vox
+    x, y, z = np.meshgrid(c, c, c, indexing="ij")
+    return np.clip(0.5 + (r - np.sqrt(x * x + y * y + z * z)) / vox, 0.0, 1.0).astype(np.float32)
+
+
+def test_cell_classes_agree_with_the_trilinear_threshold():
+    rng = np.random.default_rng(11)
+    grid = sphere_ramp()
+    grid[3, 4, 5] = np.nan
+    grid[20, 20, 20] = np.inf
+    grid[30, 20, 20] = 0.5            # a voxel exactly at the threshold
+    cells = kernels.cell_classes(grid, 0.5)
+    assert cells.shape == (39, 39, 39) and cells.dtype == np.uint8
+    assert {0, 1, 2} <= set(np.unique(cells).tolist())
+    for idx in [(3, 4, 5), (2, 3, 4), (20, 20, 20), (19, 19, 19), (29, 19, 19)]:
+        assert cells[idx] == 2, idx   # a non-finite voxel or one at the threshold: read it
+    # at random points of the cells of class 0 and 1 the trilinear value is on that side
+    i0 = np.argwhere(cells < 2)[rng.integers(0, int((cells < 2).sum()), 4000)]
+    fr = rng.random((len(i0), 3))
+    v = np.zeros(len(i0))
+    for o in np.ndindex(2, 2, 2):
+        w = np.prod(np.where(np.asarray(o) == 1, fr, 1.0 - fr), axis=1)
+        v += w * grid[tuple((i0 + np.asarray(o)).T)].astype(np.float64)
+    np.testing.assert_array_equal((v >= 0.5).astype(np.uint8), cells[tuple(i0.T)])
+    # no map where there is no sharp surface, or no cell
+    assert kernels.cell_classes(grid, -1.0).size == 0
+    assert kernels.cell_classes(grid, 0.0).size == 0
+    assert kernels.cell_classes(np.ones((1, 5, 5), np.float32), 0.5).size == 0
+
+
+@pytest.mark.skipif(kernels._c is None, reason="compiled kernels not built")
+def test_the_tracer_finds_the_same_bits_with_and_without_the_cells(monkeypatch):
+    """The cells' classes only spare the tracer reads: its deposits are the same bits with
+    them as without, and the numpy twin (which reads every cell) agrees."""
+    rng = np.random.default_rng(5)
+    n, vox = 40, 0.05
+    grid = sphere_ramp(n, vox)
+    grid[10, 12, 20] = np.nan
+    ls = lattice_shape((n, n, n), 2)
+    tow = rng.normal(size=ls + (3,))
+    tow /= np.linalg.norm(tow, axis=-1, keepdims=True)
+    w2i = np.concatenate([np.eye(3) / vox, np.zeros((3, 1))], 1)
+    w, cdf = from_power(rng.random((5, 3)) + 0.1)
+    d = rng.normal(size=(5, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    other = PathMedium(np.roll(grid, 3, axis=0), w2i, np.full(3, 1.5), np.full(3, 2.0), 0.2, 2,
+                       tow, 20.0, threshold=0.5)
+    inp = PathInputs(grid, w2i, np.eye(3) * vox, np.full(3, 1.6), np.full(3, 2.0), 0.6, 2, tow,
+                     0.6 + rng.random((5, 3)) * 0.8, w, d, cdf, 20.0, 3000, 7, others=(other,),
+                     threshold=0.5)
+    with_cells = kernels.trace_paths_media(inp, threads=2)
+    twin = trace_paths_media_np(inp)
+    monkeypatch.setattr(kernels, "cell_classes", lambda *a: np.zeros((0, 0, 0), np.uint8))
+    without = kernels.trace_paths_media(inp, threads=2)
+    for a, b, t in zip(with_cells, without, twin):
+        assert a.sum() > 0.0
+        np.testing.assert_array_equal(a, b)
+        assert np.abs(a - t).max() <= 1e-9 * np.abs(t).max()
+    # a map of the wrong shape is refused, not read out of bounds
+    monkeypatch.setattr(kernels, "cell_classes", lambda *a: np.zeros((3, 3, 3), np.uint8))
+    with pytest.raises(ValueError, match="cells"):
+        kernels.trace_paths_media(inp, threads=1)

@@ -5,7 +5,8 @@ void buf_release(Buf *b) {
     if (b->held) { PyBuffer_Release(&b->view); b->held = 0; }
 }
 
-/* Acquire a C-contiguous buffer of `fmt` ('d' float64 or 'f' float32) with `ndim` dims.
+/* Acquire a C-contiguous buffer of `fmt` ('d' float64, 'f' float32, 'I' uint32 or 'B' uint8)
+ * with `ndim` dims.
  * shape[i] >= 0 must match; -1 accepts any extent (then written back). */
 int get_buf_ex(PyObject *obj, Buf *b, char fmt, int ndim, Py_ssize_t *shape, const char *what,
                int extra) {
@@ -19,10 +20,11 @@ int get_buf_ex(PyObject *obj, Buf *b, char fmt, int ndim, Py_ssize_t *shape, con
     b->held = 1;
     const char *f = b->view.format ? b->view.format : "B";
     if (f[0] == '<' || f[0] == '=' || f[0] == '@') f++;
-    Py_ssize_t item = (fmt == 'd') ? 8 : 4;
+    Py_ssize_t item = (fmt == 'd') ? 8 : (fmt == 'B' ? 1 : 4);
     if (f[0] != fmt || f[1] != '\0' || b->view.itemsize != item) {
         PyErr_Format(PyExc_ValueError, "%s: expected %s", what,
-                     fmt == 'd' ? "float64" : (fmt == 'f' ? "float32" : "uint32"));
+                     fmt == 'd' ? "float64" : (fmt == 'f' ? "float32" :
+                                               (fmt == 'B' ? "uint8" : "uint32")));
         buf_release(b);
         return -1;
     }

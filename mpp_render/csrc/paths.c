@@ -10,15 +10,17 @@ const char trace_paths_doc[] =
     "trace_paths(out, density, w2i, i2w, sigma_s, sigma_t, g, stride, towards, starts, weights,\n"
     "            dirs, cdf, rate, path_lo, path_hi, n_paths, seed, max_collisions, roulette,\n"
     "            jitter, lobe, outside, reach, triangles, albedo, start_source, start_peak,\n"
-    "            moments, others, threshold)\n"
+    "            moments, others, threshold, cells)\n"
     "Twin of mpp_render.paths.trace_paths_np: adds to out (LX,LY,LZ,3) float64 the deposits\n"
     "of paths path_lo..path_hi-1 of n_paths towards the camera, and to moments (LX,LY,LZ,12)\n"
     "float64, unless it is empty, their moments of order 0 and 1 (paths.py, \"Moments\").\n"
     "others: a tuple of (out, moments, density, w2i, sigma_s, sigma_t, g, stride, towards,\n"
-    "rate, threshold), the other media the paths fly through, scatter in and deposit on (at\n"
-    "most 7).  threshold >= 0: the medium is the grid's trilinear value >= threshold\n"
+    "rate, threshold, cells), the other media the paths fly through, scatter in and deposit on\n"
+    "(at most 7).  threshold >= 0: the medium is the grid's trilinear value >= threshold\n"
     "(density 1, a mesh volume's sharp surface, as the march reads it), else the nearest\n"
-    "voxel's density.";
+    "voxel's density.  cells: empty, or with threshold > 0 (n0-1,n1-1,n2-1) uint8, each cell\n"
+    "of 8 voxels 0 where its trilinear value is below threshold throughout, 1 where it is at\n"
+    "or above it throughout, else 2 (kernels.cell_classes): a read saved, the same result.";
 
 #define MAX_EVENTS 1000000L   /* tentative collisions per path, whatever the medium */
 #define MAX_RATE_SPAN 1e6    /* rate x the grid's diagonal (m): tentative points across it */
@@ -81,6 +83,7 @@ typedef struct {
     Py_ssize_t n[3];
     double w2i[12], ss[3], st[3], st_max, st_min, g, mu;
     double thr;               /* >= 0: density 1 where the trilinear value >= thr, else 0 */
+    const unsigned char *cls; /* NULL, or with thr: each cell's class (0 out, 1 in, 2 read) */
     long stride;
     const double *tw;
     Py_ssize_t ls[3];
@@ -193,6 +196,10 @@ static double density_at(const PathGrid *G, const double idx[3]) {
             if (!(f >= 0.0 && f < (double)(G->n[a] - 1))) return 0.0;
             i0[a] = (Py_ssize_t)f;
             fr[a] = idx[a] - f;
+        }
+        if (G->cls) {   /* a cell wholly in or out of the medium needs no read */
+            unsigned char k = G->cls[(i0[0] * (G->n[1] - 1) + i0[1]) * (G->n[2] - 1) + i0[2]];
+            if (k < 2) return (double)k;
         }
         double v = 0.0;
         for (int corner = 0; corner < 8; corner++) {
@@ -487,12 +494,13 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
 static int set_grid(PathGrid *G, const float *dens, const Py_ssize_t n[3], const double *w2i,
                     const double *ss, const double *st, double g, double rate, long stride,
                     const double *tw, const Py_ssize_t ls[3], double *out, double *mom,
-                    double thr) {
+                    double thr, const unsigned char *cls) {
     if (isnan(thr) || isinf(thr)) {
         PyErr_SetString(PyExc_ValueError, "trace_paths: the threshold must be finite");
         return -1;
     }
     G->thr = thr;
+    G->cls = cls;
     G->dens = dens;
     for (int a = 0; a < 3; a++) { G->n[a] = n[a]; G->ls[a] = ls[a]; }
     memcpy(G->w2i, w2i, sizeof G->w2i);
@@ -537,15 +545,34 @@ static int span_ok(double rate, const Py_ssize_t n[3], const double *w2i) {
     return span <= MAX_RATE_SPAN;
 }
 
+/* The cells' classes (see trace_paths_doc) from obj into b: *cls NULL where obj is empty,
+ * else (n0-1,n1-1,n2-1) uint8 for a grid of shape n thresholded at thr > 0; -1 with an
+ * exception for any other shape, or for cells without such a threshold. */
+static int cell_buf(PyObject *obj, Buf *b, const Py_ssize_t n[3], double thr,
+                    const unsigned char **cls) {
+    Py_ssize_t sc[3] = {-1, -1, -1};
+    *cls = NULL;
+    if (get_buf(obj, b, 'B', 3, sc, "cells") < 0) return -1;
+    if (sc[0] * sc[1] * sc[2] == 0) return 0;
+    if (!(thr > 0.0) || sc[0] != n[0] - 1 || sc[1] != n[1] - 1 || sc[2] != n[2] - 1) {
+        PyErr_SetString(PyExc_ValueError, "trace_paths: cells must be empty, or the grid's "
+                        "cells (one fewer per axis) with a threshold above 0");
+        return -1;
+    }
+    *cls = (const unsigned char *)b->view.buf;
+    return 0;
+}
+
 /* One of the others: (out, moments, density, w2i, sigma_s, sigma_t, g, stride, towards,
- * rate), its buffers held in b[7] (released by the caller); -1 with an exception. */
-static int other_grid(PyObject *item, Buf b[7], PathGrid *G) {
-    PyObject *po, *pm, *pd, *pw, *pss, *pst, *ptw;
+ * rate, threshold, cells), its buffers held in b[8] (released by the caller); -1 with an
+ * exception. */
+static int other_grid(PyObject *item, Buf b[8], PathGrid *G) {
+    PyObject *po, *pm, *pd, *pw, *pss, *pst, *ptw, *pcl;
     double g, rate, thr;
     long stride;
     if (!PyTuple_Check(item) ||
-        !PyArg_ParseTuple(item, "OOOOOOdlOdd", &po, &pm, &pd, &pw, &pss, &pst, &g, &stride, &ptw,
-                          &rate, &thr)) {
+        !PyArg_ParseTuple(item, "OOOOOOdlOddO", &po, &pm, &pd, &pw, &pss, &pst, &g, &stride,
+                          &ptw, &rate, &thr, &pcl)) {
         if (!PyErr_Occurred())
             PyErr_SetString(PyExc_ValueError, "trace_paths: each other medium is a tuple");
         return -1;
@@ -570,10 +597,12 @@ static int other_grid(PyObject *item, Buf b[7], PathGrid *G) {
         PyErr_SetString(PyExc_ValueError, "trace_paths: an other medium's grid is empty");
         return -1;
     }
+    const unsigned char *cls = NULL;
+    if (cell_buf(pcl, &b[7], sd, thr, &cls) < 0) return -1;
     if (set_grid(G, (const float *)b[2].view.buf, sd, (const double *)b[3].view.buf,
                  (const double *)b[4].view.buf, (const double *)b[5].view.buf, g, rate, stride,
                  (const double *)b[6].view.buf, so, (double *)b[0].view.buf,
-                 has_mom ? (double *)b[1].view.buf : NULL, thr) < 0)
+                 has_mom ? (double *)b[1].view.buf : NULL, thr, cls) < 0)
         return -1;
     if (!span_ok(rate, sd, G->w2i)) {
         PyErr_SetString(PyExc_ValueError,
@@ -586,23 +615,25 @@ static int other_grid(PyObject *item, Buf b[7], PathGrid *G) {
 
 PyObject *trace_paths(PyObject *self, PyObject *args) {
     PyObject *po, *pd, *pw2i, *pi2w, *pss, *pst, *ptw, *pstarts, *pws, *pdirs, *pcdf, *preach,
-        *ptri, *palb, *psrc, *ppeak, *pmom, *pothers;
+        *ptri, *palb, *psrc, *ppeak, *pmom, *pothers, *pcells;
     double g, rate, roulette, jitter, outside, thr0;
     long stride, lo, hi, n_paths, max_hits, lobe;
     unsigned long seed;
-    if (!PyArg_ParseTuple(args, "OOOOOOdlOOOOOdlllklddldOOOOOOOd", &po, &pd, &pw2i, &pi2w, &pss,
-                          &pst, &g, &stride, &ptw, &pstarts, &pws, &pdirs, &pcdf, &rate, &lo,
-                          &hi, &n_paths, &seed, &max_hits, &roulette, &jitter, &lobe, &outside,
-                          &preach, &ptri, &palb, &psrc, &ppeak, &pmom, &pothers, &thr0))
+    if (!PyArg_ParseTuple(args, "OOOOOOdlOOOOOdlllklddldOOOOOOOdO", &po, &pd, &pw2i, &pi2w,
+                          &pss, &pst, &g, &stride, &ptw, &pstarts, &pws, &pdirs, &pcdf, &rate,
+                          &lo, &hi, &n_paths, &seed, &max_hits, &roulette, &jitter, &lobe,
+                          &outside, &preach, &ptri, &palb, &psrc, &ppeak, &pmom, &pothers, &thr0,
+                          &pcells))
         return NULL;
     if (!PyTuple_Check(pothers) || PyTuple_GET_SIZE(pothers) > PATH_MEDIA - 1) {
         PyErr_SetString(PyExc_ValueError, "trace_paths: others must be a tuple of at most 7 media");
         return NULL;
     }
     Buf bo = {0}, bd = {0}, bw = {0}, bi = {0}, bss = {0}, bst = {0}, btw = {0}, bs = {0},
-        bws = {0}, bdir = {0}, bc = {0}, br = {0}, bt = {0}, ba = {0}, bq = {0}, bp = {0}, bm = {0};
-    /* per other medium: out, moments, density, w2i, sigma_s, sigma_t, towards */
-    Buf ob[PATH_MEDIA - 1][7];
+        bws = {0}, bdir = {0}, bc = {0}, br = {0}, bt = {0}, ba = {0}, bq = {0}, bp = {0}, bm = {0},
+        bcl = {0};
+    /* per other medium: out, moments, density, w2i, sigma_s, sigma_t, towards, cells */
+    Buf ob[PATH_MEDIA - 1][8];
     memset(ob, 0, sizeof ob);
     Py_ssize_t n_others = PyTuple_GET_SIZE(pothers);
     double *boxes = NULL;
@@ -677,9 +708,11 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
             goto done;
         }
     }
+    const unsigned char *cls0 = NULL;
+    if (cell_buf(pcells, &bcl, sd, thr0, &cls0) < 0) goto done;
     if (set_grid(&T.m[0], (const float *)bd.view.buf, sd, (const double *)bw.view.buf,
                  (const double *)bss.view.buf, (const double *)bst.view.buf, g, rate, stride,
-                 (const double *)btw.view.buf, so, (double *)bo.view.buf, NULL, thr0) < 0)
+                 (const double *)btw.view.buf, so, (double *)bo.view.buf, NULL, thr0, cls0) < 0)
         goto done;
     T.nm = 1;
     for (Py_ssize_t k = 0; k < n_others; k++) {
@@ -751,9 +784,9 @@ done:
     buf_release(&bo); buf_release(&bd); buf_release(&bw); buf_release(&bi); buf_release(&bss);
     buf_release(&bst); buf_release(&btw); buf_release(&bs); buf_release(&bws);
     buf_release(&bdir); buf_release(&bc); buf_release(&br); buf_release(&bt); buf_release(&ba);
-    buf_release(&bq); buf_release(&bp); buf_release(&bm);
+    buf_release(&bq); buf_release(&bp); buf_release(&bm); buf_release(&bcl);
     for (Py_ssize_t k = 0; k < n_others; k++)
-        for (int q = 0; q < 7; q++) buf_release(&ob[k][q]);
+        for (int q = 0; q < 8; q++) buf_release(&ob[k][q]);
     free(boxes);
     if (!ok) return NULL;
     Py_RETURN_NONE;
