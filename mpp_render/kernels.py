@@ -352,6 +352,7 @@ def trace_paths_media(inp, *, threads: int = 1, should_cancel=None, backend=None
               float(m.rate), float(m.threshold), cell_classes(m.density, m.threshold))
              for m in inp.others]
     cells = cell_classes(inp.density, inp.threshold)
+    light = _f64(inp.light).reshape(-1) if inp.light is not None else np.zeros(0)
 
     cancelled = []
 
@@ -363,7 +364,7 @@ def trace_paths_media(inp, *, threads: int = 1, should_cancel=None, backend=None
                 return
             _c.trace_paths(outs[i][0], *args, a, min(a + PATH_CHUNK, int(cuts[i + 1])), n,
                            int(inp.seed) & 0xFFFFFFFF, int(inp.max_collisions), float(ROULETTE),
-                           *extra, moms[i][0], others, float(inp.threshold), cells)
+                           *extra, moms[i][0], others, float(inp.threshold), cells, light)
 
     if workers == 1:
         for i in range(blocks):

@@ -123,6 +123,7 @@ _D_RETRY = 16     # a start's offset drawn again: 6 dimensions per try (csrc/pat
 _D_ACCEPT = 512   # a start's acceptance draw, one dimension per try
 _D_CORNER = 600   # the lattice corner a deposit's moments go to
 _D_MEDIUM = 17    # which medium a tentative collision is in, with several (csrc/paths.c)
+_D_LIGHT = 700    # the emitter point a first scattering's light comes from (csrc/paths.c)
 PATH_MEDIA = 8    # media one trace flies through at most: its own and 7 others
 BOX_TIE = 1e-9    # m (relative beyond 1 m): box faces this close are crossed together
 START_TRIES = 64  # offsets drawn for a first scattering until one is accepted
@@ -179,7 +180,12 @@ class PathInputs:
     on that medium's lattice (module docstring, "Several media").  ``threshold``: >= 0 for a
     sharp surface, the medium being density 1 where ``density``'s trilinear value is >= it
     (a mesh volume, as the march reads it; ``density_at``), else -1: the nearest voxel's
-    density."""
+    density.  ``light``: None, or the packed record (lights.pack_light) of the light whose
+    first scatterings the starts are (``lobe`` 0): each path's incoming direction is then
+    drawn at its start from the light's emitter as the march draws it (lights.light_sample:
+    a point of a sphere light's disc, a direction in an area light's solid angle) instead
+    of ``dirs``, the light's direction at the lattice point (from its centre, or an area
+    light's axis), which near a large emitter is one of many."""
 
     density: np.ndarray
     w2i: np.ndarray
@@ -209,6 +215,7 @@ class PathInputs:
     moments: bool = False
     others: tuple = ()
     threshold: float = -1.0
+    light: Optional[np.ndarray] = None
 
     @property
     def channels(self) -> int:
@@ -434,6 +441,23 @@ def density_at(m, idx) -> np.ndarray:
     return np.where(r >= 0.0, r, 0.0)
 
 
+def start_directions(inp: PathInputs, keys, k, pos) -> np.ndarray:
+    """(N,3) the propagation of the light at each path's start ``pos`` (N,3, m; start ``k``):
+    ``dirs[k]``, or with ``inp.light`` and ``lobe`` 0 the direction drawn from the light's
+    emitter there (lights.light_sample with the path's own jitter, dimensions ``_D_LIGHT``),
+    kept where it is a unit vector that brings light (csrc/paths.c trace_one)."""
+    din = np.asarray(inp.dirs, np.float64)[k]
+    if inp.light is None or int(inp.lobe) != 0:
+        return din
+    from .lights import light_sample
+    dl, el = light_sample(np.asarray(inp.light, np.float64), pos, uniform(keys, 0, _D_LIGHT),
+                          uniform(keys, 0, _D_LIGHT + 1))[:2]
+    n2 = np.einsum("ij,ij->i", dl, dl)
+    ok = (n2 > 0.25) & (n2 < 4.0) & (el.max(axis=1) > 0.0)
+    unit = dl / np.sqrt(np.where(ok, n2, 1.0))[:, None]
+    return np.where(ok[:, None], unit, din)
+
+
 def trace_paths_media_np(inp: PathInputs) -> list:
     """The numpy twin of csrc/paths.c with ``inp.others``: one float64 (LX,LY,LZ,channels)
     array of deposits per medium on its own lattice, the paths' own medium first."""
@@ -453,11 +477,12 @@ def trace_paths_media_np(inp: PathInputs) -> list:
     k = np.minimum(np.searchsorted(inp.cdf, uniform(keys, 0, _D_PICK), side="right"),
                    len(inp.cdf) - 1)
     pos = start_positions(inp, keys, k)
+    din = start_directions(inp, keys, k, pos)
     if int(inp.lobe) == 1:
-        d = _cosine(uniform(keys, 0, _D_DIR), uniform(keys, 0, _D_DIR + 1), inp.dirs[k])
+        d = _cosine(uniform(keys, 0, _D_DIR), uniform(keys, 0, _D_DIR + 1), din)
     else:                       # lobe 2, an emitting voxel: uniform (the phase of g 0)
         d = _turn(uniform(keys, 0, _D_DIR), uniform(keys, 0, _D_DIR + 1),
-                  0.0 if int(inp.lobe) == 2 else g, inp.dirs[k])
+                  0.0 if int(inp.lobe) == 2 else g, din)
     w = inp.weights[k] / n
     w0 = w.max(axis=1)
     event = np.zeros(n, np.int64)

@@ -10,7 +10,7 @@ const char trace_paths_doc[] =
     "trace_paths(out, density, w2i, i2w, sigma_s, sigma_t, g, stride, towards, starts, weights,\n"
     "            dirs, cdf, rate, path_lo, path_hi, n_paths, seed, max_collisions, roulette,\n"
     "            jitter, lobe, outside, reach, triangles, albedo, start_source, start_peak,\n"
-    "            moments, others, threshold, cells)\n"
+    "            moments, others, threshold, cells, light)\n"
     "Twin of mpp_render.paths.trace_paths_np: adds to out (LX,LY,LZ,3) float64 the deposits\n"
     "of paths path_lo..path_hi-1 of n_paths towards the camera, and to moments (LX,LY,LZ,12)\n"
     "float64, unless it is empty, their moments of order 0 and 1 (paths.py, \"Moments\").\n"
@@ -20,7 +20,10 @@ const char trace_paths_doc[] =
     "(density 1, a mesh volume's sharp surface, as the march reads it), else the nearest\n"
     "voxel's density.  cells: empty, or with threshold > 0 (n0-1,n1-1,n2-1) uint8, each cell\n"
     "of 8 voxels 0 where its trilinear value is below threshold throughout, 1 where it is at\n"
-    "or above it throughout, else 2 (kernels.cell_classes): a read saved, the same result.";
+    "or above it throughout, else 2 (kernels.cell_classes): a read saved, the same result.\n"
+    "light: empty, or the light record (LIGHT_FIELDS float64) whose first scatterings the\n"
+    "lobe-0 starts are: each path's incoming direction is drawn from its emitter at the start\n"
+    "(light_sample) instead of dirs.";
 
 #define MAX_EVENTS 1000000L   /* tentative collisions per path, whatever the medium */
 #define MAX_RATE_SPAN 1e6    /* rate x the grid's diagonal (m): tentative points across it */
@@ -39,6 +42,7 @@ const char trace_paths_doc[] =
 #define D_ACCEPT 512   /* a start's acceptance draw, one dimension per try (event 0) */
 #define D_CORNER 600   /* the lattice corner a deposit's moments go to */
 #define D_MEDIUM 17    /* which medium a tentative collision is in, with several (event >= 1) */
+#define D_LIGHT 700    /* the emitter point a first scattering's light comes from (event 0) */
 #define START_TRIES 64 /* offsets drawn for a first scattering until one is accepted */
 #define PATH_MEDIA 8    /* media one trace flies through: its own and 7 others */
 #define BOX_TIE 1e-9   /* m (relative beyond 1 m): box faces this close are crossed together */
@@ -104,6 +108,9 @@ typedef struct {
     const double *tri, *alb;  /* (T,9) corner and two edges; (T,3) diffuse albedo */
     Py_ssize_t n_tri, n_box;
     const double *box;        /* (n_box,6) lo, hi of each TRI_CHUNK triangles */
+    const double *light;      /* NULL, or the light record (LIGHT_FIELDS) whose first
+                                 scatterings the lobe-0 starts are: the light's direction is
+                                 drawn at the start from the emitter (light_sample) */
 } Tracer;
 
 /* Where the ray o + t d (t >= 0) enters (want_exit 0) or leaves (1) the grid's box in index
@@ -365,11 +372,25 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
                 for (int a = 0; a < 3; a++) pos[a] = best[a];
         }
     }
+    double din[3] = {dir[0], dir[1], dir[2]};
+    if (T->lobe == 0 && T->light) {
+        /* the light arriving at the start from one point of the emitter (a sphere's disc, an
+         * area light's solid angle), drawn as the march draws it: near a large emitter the
+         * light comes from many directions, not from its centre or along its axis alone */
+        double dl[3], el[3], wc[3], dc, ds;
+        light_sample(T->light, pos, uniform01(key, 0, D_LIGHT), uniform01(key, 0, D_LIGHT + 1),
+                     dl, el, wc, &dc, &ds);
+        double n2 = dl[0] * dl[0] + dl[1] * dl[1] + dl[2] * dl[2];
+        if (n2 > 0.25 && n2 < 4.0 && fmax(el[0], fmax(el[1], el[2])) > 0.0) {
+            double inv = 1.0 / sqrt(n2);
+            for (int a = 0; a < 3; a++) din[a] = dl[a] * inv;
+        }
+    }
     if (T->lobe == 1)
-        cosine_dir(uniform01(key, 0, D_DIR), uniform01(key, 0, D_DIR + 1), dir, d);
+        cosine_dir(uniform01(key, 0, D_DIR), uniform01(key, 0, D_DIR + 1), din, d);
     else  /* lobe 2, an emitting voxel: uniform over the sphere (the phase function of g 0) */
         turn(uniform01(key, 0, D_DIR), uniform01(key, 0, D_DIR + 1),
-             T->lobe == 2 ? 0.0 : T->m[0].g, dir, d);
+             T->lobe == 2 ? 0.0 : T->m[0].g, din, d);
     for (int c = 0; c < 3; c++) {
         w[c] = w_start[c] * inv_n;
         if (w[c] > w0) w0 = w[c];
@@ -615,15 +636,15 @@ static int other_grid(PyObject *item, Buf b[8], PathGrid *G) {
 
 PyObject *trace_paths(PyObject *self, PyObject *args) {
     PyObject *po, *pd, *pw2i, *pi2w, *pss, *pst, *ptw, *pstarts, *pws, *pdirs, *pcdf, *preach,
-        *ptri, *palb, *psrc, *ppeak, *pmom, *pothers, *pcells;
+        *ptri, *palb, *psrc, *ppeak, *pmom, *pothers, *pcells, *plight;
     double g, rate, roulette, jitter, outside, thr0;
     long stride, lo, hi, n_paths, max_hits, lobe;
     unsigned long seed;
-    if (!PyArg_ParseTuple(args, "OOOOOOdlOOOOOdlllklddldOOOOOOOdO", &po, &pd, &pw2i, &pi2w,
+    if (!PyArg_ParseTuple(args, "OOOOOOdlOOOOOdlllklddldOOOOOOOdOO", &po, &pd, &pw2i, &pi2w,
                           &pss, &pst, &g, &stride, &ptw, &pstarts, &pws, &pdirs, &pcdf, &rate,
                           &lo, &hi, &n_paths, &seed, &max_hits, &roulette, &jitter, &lobe,
                           &outside, &preach, &ptri, &palb, &psrc, &ppeak, &pmom, &pothers, &thr0,
-                          &pcells))
+                          &pcells, &plight))
         return NULL;
     if (!PyTuple_Check(pothers) || PyTuple_GET_SIZE(pothers) > PATH_MEDIA - 1) {
         PyErr_SetString(PyExc_ValueError, "trace_paths: others must be a tuple of at most 7 media");
@@ -631,7 +652,7 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
     }
     Buf bo = {0}, bd = {0}, bw = {0}, bi = {0}, bss = {0}, bst = {0}, btw = {0}, bs = {0},
         bws = {0}, bdir = {0}, bc = {0}, br = {0}, bt = {0}, ba = {0}, bq = {0}, bp = {0}, bm = {0},
-        bcl = {0};
+        bcl = {0}, bli = {0};
     /* per other medium: out, moments, density, w2i, sigma_s, sigma_t, towards, cells */
     Buf ob[PATH_MEDIA - 1][8];
     memset(ob, 0, sizeof ob);
@@ -719,6 +740,16 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
         if (other_grid(PyTuple_GET_ITEM(pothers, k), ob[k], &T.m[1 + k]) < 0) goto done;
         T.nm++;
     }
+    {
+        Py_ssize_t sl[1] = {-1};
+        if (get_buf(plight, &bli, 'd', 1, sl, "light") < 0) goto done;
+        if (sl[0] != 0 && sl[0] != LIGHT_FIELDS) {
+            PyErr_Format(PyExc_ValueError, "trace_paths: light must be empty or hold %d values",
+                         LIGHT_FIELDS);
+            goto done;
+        }
+        T.light = sl[0] ? (const double *)bli.view.buf : NULL;
+    }
     T.src = has_src ? (const float *)bq.view.buf : NULL;
     T.peak = has_src ? (const double *)bp.view.buf : NULL;
     memcpy(T.i2w, bi.view.buf, sizeof T.i2w);
@@ -785,6 +816,7 @@ done:
     buf_release(&bst); buf_release(&btw); buf_release(&bs); buf_release(&bws);
     buf_release(&bdir); buf_release(&bc); buf_release(&br); buf_release(&bt); buf_release(&ba);
     buf_release(&bq); buf_release(&bp); buf_release(&bm); buf_release(&bcl);
+    buf_release(&bli);
     for (Py_ssize_t k = 0; k < n_others; k++)
         for (int q = 0; q < 8; q++) buf_release(&ob[k][q]);
     free(boxes);
