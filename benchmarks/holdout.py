@@ -45,6 +45,11 @@ VARIANTS = {
                       [("volume", dict(color=0.7, anisotropy=0.5))]),
     "v_plume_lamp2": ("p_point_in_plume", "the lamp 80 W, radius 0.1 m, moved to (0.3, 0.2, -0.2)",
                       [("lamp", dict(energy=80.0, radius=0.1, location=(0.3, 0.2, -0.2)))]),
+    "v_plume_lamp3": ("p_point_in_plume", "the lamp 60 W, radius 0.05 m, moved to (-0.3, 0, 0.3)",
+                      [("lamp", dict(energy=60.0, radius=0.05, location=(-0.3, 0.0, 0.3)))]),
+    "v_smoke_lamp": ("smoke_plume", "its point light (200 W, radius 0.15 m) inside the plume, "
+                     "at 30 % of the grid's height",
+                     [("lamp_in_volume", dict(energy=200.0, radius=0.15, height=0.3))]),
 }
 
 
@@ -85,6 +90,16 @@ def apply(sc, step: str, kw: dict) -> None:
         ob.data.shadow_soft_size = kw.get("radius", ob.data.shadow_soft_size)
         if "location" in kw:
             ob.location = kw["location"]
+    elif step == "lamp_in_volume":
+        import mathutils
+        vol = next(o for o in sc.objects if o.type == "VOLUME")
+        cs = [vol.matrix_world @ mathutils.Vector(c) for c in vol.bound_box]
+        lo = [min(c[i] for c in cs) for i in range(3)]
+        hi = [max(c[i] for c in cs) for i in range(3)]
+        ob = next(o for o in sc.objects if o.type == "LIGHT" and o.data.type == "POINT")
+        ob.data.energy, ob.data.shadow_soft_size = kw["energy"], kw["radius"]
+        ob.location = (0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]),
+                       lo[2] + kw["height"] * (hi[2] - lo[2]))
     elif step == "lift":
         for o in _volume_objects(sc):
             o.location.z += kw["dz"]

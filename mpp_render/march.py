@@ -101,7 +101,8 @@ class MarchContext:
     def __post_init__(self):
         self.packed = pack_lights(self.lights, self.layout)
         # per light, where the disc points' optical depth is marched (media.disc_reaches)
-        self.disc_reach = disc_reaches(self.media, self.lights, self.tuning.disc_exact)
+        self.disc_reach = disc_reaches(self.media, self.lights, self.tuning.disc_exact,
+                                       self.tuning.disc_voxels)
         self.multiple = None
         if self.multiple_fields is not None:
             amb = self.layout.ambient_multiple_channel

@@ -365,13 +365,17 @@ def uneven_within(media, centre, radius: float) -> bool:
     return False
 
 
-def disc_reaches(media, lights, disc_exact: float) -> list:
+def disc_reaches(media, lights, disc_exact: float, disc_voxels: float = 0.0) -> list:
     """Per light, the distance (m) within which the march corrects a lamp's disc points'
-    optical depth (kernels_np.disc_correction): ``disc_exact`` (Tuning) times the radius of a
-    point or spot light whose surroundings within it are uneven (``uneven_within``), else 0."""
+    optical depth (kernels_np.disc_correction): for a point or spot light with a radius
+    whose surroundings within it are uneven (``uneven_within``), ``disc_exact`` (Tuning)
+    times its radius or ``disc_voxels`` (Tuning) times the finest voxel of ``media``,
+    whichever is longer; else 0."""
     out = []
+    finest = min((float(pm.voxel_size) for pm in media), default=0.0)
     for light in lights:
         r = float(getattr(light, "radius", 0.0) or 0.0)
-        reach = disc_exact * r if light.kind in ("POINT", "SPOT") and r > 0.0 else 0.0
+        reach = max(disc_exact * r, disc_voxels * finest) \
+            if light.kind in ("POINT", "SPOT") and r > 0.0 else 0.0
         out.append(reach if reach > 0.0 and uneven_within(media, light.position, reach) else 0.0)
     return out

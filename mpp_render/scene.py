@@ -244,7 +244,13 @@ class Tuning:
     uneven (media.disc_reaches).  Beyond it the disc subtends under atan(1/2) = 27 degrees.
     p_point_in_plume's single scattering: 0.138 at 0, within the references' noise at 1.5
     and above (bias -0.0057 at 1.5, -0.0049 at 2, -0.0024 at 4, -0.0017 at 8); its march
-    1.22x slower at 2 (1.41x with steps of one voxel), 1.84x at 4 (960x540, side by side)."""
+    1.22x slower at 2 (1.41x with steps of one voxel), 1.84x at 4 (960x540, side by side).
+    ``disc_voxels``: that reach is at least this many of the finest voxel of the media: the
+    disc points' paths part over most of their length whatever the lamp's size, and a lamp
+    of 0.05-0.15 m in smoke needs the same reach as one of 0.3 m (hold-out variants of
+    p_point_in_plume: a 0.1 m lamp's single scattering 0.121 at 2 radii, 0.038 at 16 voxels;
+    docs/method.md §10); 16 is what 2 radii of the public plume's 0.3 m lamp are in its
+    voxels, so that scene is unchanged."""
 
     skip_min_voxels: int = 1 << 20
     spot_cull: bool = True
@@ -265,6 +271,7 @@ class Tuning:
     roulette: float = 0.01
     gather_step: float = 4.0
     disc_exact: float = 2.0
+    disc_voxels: float = 16.0
 
 
 # The default Noise Threshold (pilot.py's unit: the standard error over sqrt(I S), S the

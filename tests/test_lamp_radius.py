@@ -206,6 +206,14 @@ def test_the_disc_points_are_marched_only_where_the_media_round_the_lamp_are_une
     assert disc_reaches([lumpy], [lamp_at([5.0, 5.0, 5.0])], 2.0) == [0.0]
     # the box's own edge is uneven too: a lamp by its face
     assert disc_reaches([flat], [lamp_at([0.95, 0.0, 0.0])], 2.0) == [pytest.approx(0.2)]
+    # at least disc_voxels of the finest voxel (0.05 m here): a small lamp reaches as far
+    # as a large one would, and a reach that now takes in the step at x = 0 is uneven
+    assert disc_reaches([lumpy], [near_step], 2.0, 16.0) == [pytest.approx(0.8)]
+    assert disc_reaches([lumpy], [lamp_at([0.05, 0.0, 0.0], radius=0.5)], 2.0, 16.0) == \
+        [pytest.approx(1.0)]
+    assert disc_reaches([lumpy], [inside], 2.0) == [0.0]
+    assert disc_reaches([lumpy], [inside], 2.0, 16.0) == [pytest.approx(0.8)]
+    assert disc_reaches([lumpy], [lamp_at([0.05, 0.0, 0.0], radius=0.0)], 2.0, 16.0) == [0.0]
 
 
 def test_a_spots_irradiance_without_jitter_carries_the_marchs_flux():

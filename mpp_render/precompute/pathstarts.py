@@ -47,7 +47,8 @@ class Surroundings:
     step (m) of the light's optical depth, ``bounce`` whether the surfaces reflect light
     (Settings.surface_bounce; else they only absorb it), ``disc_exact`` the lamp radii within
     which a lamp's disc points get their own optical depth (Tuning.disc_exact,
-    lights.disc_transmittance; 0: off)."""
+    lights.disc_transmittance; 0: off), at least ``disc_voxels`` of the finest voxel
+    (Tuning.disc_voxels; media.disc_reaches)."""
 
     solid: List
     fog_sigma_t: Optional[np.ndarray]
@@ -55,6 +56,7 @@ class Surroundings:
     step: float
     bounce: bool = True
     disc_exact: float = 0.0
+    disc_voxels: float = 0.0
 
     def __post_init__(self):
         if self.surfaces is not None and self.surfaces.empty:
@@ -74,14 +76,16 @@ class Surroundings:
 
     def disc(self, light: Light, x, tau) -> np.ndarray:
         """lights.disc_transmittance of ``light`` at points ``x`` (N,3, m) from the optical
-        depth ``tau`` (N,3) to its centre, the disc points within ``disc_exact`` radii of the
+        depth ``tau`` (N,3) to its centre, the disc points within media.disc_reaches of the
         lamp marched through the solid media (the world fog, homogeneous, needs no
         correction)."""
         if id(light) not in self._disc_depth:   # asked once per chunk of voxels: decide once
-            reach = disc_reaches(self.solid, [light], self.disc_exact)[0]
-            self._disc_depth[id(light)] = self._depth() if reach else None
-        return disc_transmittance(light, x, tau, self.step, depth=self._disc_depth[id(light)],
-                                  reach=self.disc_exact)
+            reach = disc_reaches(self.solid, [light], self.disc_exact, self.disc_voxels)[0]
+            radius = float(getattr(light, "radius", 0.0) or 0.0)
+            self._disc_depth[id(light)] = (self._depth(), reach / radius) \
+                if reach and radius > 0.0 else (None, 0.0)
+        depth, radii = self._disc_depth[id(light)]
+        return disc_transmittance(light, x, tau, self.step, depth=depth, reach=radii)
 
     def optical_depth(self, light: Light, x) -> np.ndarray:
         """(N,3) optical depth from points ``x`` (N,3, m) to ``light``'s centre as the

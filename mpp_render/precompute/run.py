@@ -71,7 +71,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
     fog_delta = None if fog is None else delta_of[id(fog)].sigma_t
     shadowed = surfaces is not None and not surfaces.empty
     around = Surroundings(solid, fog_st, surfaces, step, bool(surface_bounce),
-                          tuning.disc_exact)
+                          tuning.disc_exact, tuning.disc_voxels)
     # traced paths fly through every medium whose box overlaps theirs and deposit on it too
     # (precompute.lightpaths.overlapping); what one medium's paths leave on another's lattice
     # is added to that medium's M once every medium is traced
