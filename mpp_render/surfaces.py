@@ -227,7 +227,7 @@ def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, r
     samples: a pixel's gathers are then a Latin hypercube over (r^2, phi) that shares out
     the hemisphere instead of drawing it independently, and each sample's band is uniform,
     so the estimate stays unbiased where only some of a pixel's samples hit the surface."""
-    from .lights import incident, is_dark, towards_light
+    from .lights import is_dark, light_sample, pack_light
     from .phase import orthonormal_basis
 
     n_pts = len(p)
@@ -238,13 +238,18 @@ def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, r
     for light in lights:
         if is_dark(light):
             continue
-        wi, e = incident(light, po, rng.random((n_pts, 2)))
+        u = rng.random((n_pts, 2))
+        # the emitter point drawn (a lamp's disc, an area light's solid angle) and its
+        # distance: the shadow ray and its optical depth run to that point, not as far as
+        # the centre along the drawn direction (in smoke round a lamp, or fog under a large
+        # area light, the centre's distance leaves out or adds medium)
+        wi, e, _, _, reach = light_sample(pack_light(light), po, u[:, 0], u[:, 1])
         to_l = -wi
         cos = np.einsum("ij,ij->i", nrm, to_l)
         lit = np.flatnonzero(cos > 0)
         if not lit.size:
             continue
-        dist = towards_light(light, po[lit])[1]
+        dist = reach[lit]
         vis = ~occluded(ss, po[lit], to_l[lit], dist)
         lit, dist = lit[vis], dist[vis]
         if not lit.size:

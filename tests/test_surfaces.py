@@ -370,3 +370,44 @@ def test_gathers_and_the_pixels_latin_hypercube_keep_the_mean_and_cut_the_noise(
         assert per_pixel.mean() == pytest.approx(expect, rel=0.03), (gathers, strata)
         spreads.append(per_pixel.std())
     assert spreads[1] < 0.6 * spreads[0] and spreads[2] < 0.6 * spreads[0], spreads
+
+
+@pytest.mark.parametrize("kind", ["AREA", "POINT"])
+def test_a_surfaces_shadow_ray_runs_to_the_emitter_point_drawn(kind):
+    """surfaces.shade: the light's optical depth and visibility are taken along the drawn
+    direction as far as the emitter point drawn (an area light's solid angle, a lamp's
+    disc), not as far as the light's centre: in fog under a large area light the centre's
+    distance along a slanted direction counts the wrong length of fog."""
+    ground = quad(0.0, 10.0)
+    ss = prepare_surfaces([ground])
+    n = 2000
+    p = np.tile([[0.3, -0.2, 0.0]], (n, 1))
+    d = np.tile([[0.0, 0.0, -1.0]], (n, 1))
+    _, tri = intersect(ss, p + 2 * np.array([0.0, 0.0, 1.0]), d, np.full(n, 5.0))
+    m = np.eye(4)
+    m[:3, 3] = [0.0, 0.0, 1.0]
+    if kind == "AREA":
+        light = Light("AREA", "a", np.full(3, 100.0), matrix=m, shape="SQUARE", size_x=3.0,
+                      size_y=3.0, direction=np.array([0.0, 0.0, -1.0]))
+    else:
+        light = Light("POINT", "p", np.full(3, 100.0), position=m[:3, 3].copy(), matrix=m,
+                      radius=0.6)
+    seen = []
+
+    def media(pts, dirs, t):
+        seen.append((pts.copy(), dirs.copy(), np.asarray(t, float).copy()))
+        return np.zeros((len(pts), 3))
+    surfaces.shade(ss, tri, p, d, [light], np.zeros(3), media, np.random.default_rng(2), None,
+                   bounces=0)
+    pts, dirs, t = seen[0]
+    end = pts + dirs * t[:, None]
+    if kind == "AREA":   # every shadow ray ends on the emitter's plane, inside the square
+        np.testing.assert_allclose(end[:, 2], 1.0, atol=1e-9)
+        assert np.all(np.abs(end[:, :2]) <= 1.5 + 1e-9)
+    else:                # on the lamp's disc facing the point, at most 0.6 m from its centre
+        w = m[:3, 3] - pts
+        w /= np.linalg.norm(w, axis=1)[:, None]
+        np.testing.assert_allclose(np.einsum("ij,ij->i", end - m[:3, 3], w), 0.0, atol=1e-9)
+        assert np.all(np.linalg.norm(end - m[:3, 3], axis=1) <= 0.6 + 1e-9)
+    # and not all of the same length as the centre's
+    assert np.ptp(t) > 0.05
