@@ -45,6 +45,8 @@ VARIANTS = {
                       [("volume", dict(color=0.7, anisotropy=0.5))]),
     "v_plume_lamp2": ("p_point_in_plume", "the lamp 80 W, radius 0.1 m, moved to (0.3, 0.2, -0.2)",
                       [("lamp", dict(energy=80.0, radius=0.1, location=(0.3, 0.2, -0.2)))]),
+    "v_plume_lamp2_r3": ("p_point_in_plume", "v_plume_lamp2 with the lamp's radius 0.3 m",
+                         [("lamp", dict(energy=80.0, radius=0.3, location=(0.3, 0.2, -0.2)))]),
     "v_plume_lamp3": ("p_point_in_plume", "the lamp 60 W, radius 0.05 m, moved to (-0.3, 0, 0.3)",
                       [("lamp", dict(energy=60.0, radius=0.05, location=(-0.3, 0.0, 0.3)))]),
     "v_smoke_lamp": ("smoke_plume", "its point light (200 W, radius 0.15 m) inside the plume, "
