@@ -43,6 +43,10 @@ VARIANTS = {
                      [("volume", dict(anisotropy=0.9, color=0.99))]),
     "v_area_lowalb": ("p_area_in_box", "albedo 0.7, g 0.5",
                       [("volume", dict(color=0.7, anisotropy=0.5))]),
+    "v_smoke_lamp_abs": ("smoke_plume", "v_smoke_lamp with the smoke absorbing only (Color 0: "
+                         "the same extinction, no scattering)",
+                         [("lamp_in_volume", dict(energy=200.0, radius=0.15, height=0.3)),
+                          ("volume", dict(color=0.0))]),
     "v_plume_lamp2": ("p_point_in_plume", "the lamp 80 W, radius 0.1 m, moved to (0.3, 0.2, -0.2)",
                       [("lamp", dict(energy=80.0, radius=0.1, location=(0.3, 0.2, -0.2)))]),
     "v_plume_lamp2_r3": ("p_point_in_plume", "v_plume_lamp2 with the lamp's radius 0.3 m",
