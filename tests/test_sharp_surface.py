@@ -23,9 +23,10 @@ def ortho_camera():
     return Camera("ORTHO", c2w, 16, 16, (-1.0, 1.0, -1.0, 1.0))
 
 
-def test_twins_agree_through_a_sharp_surface():
-    rng = np.random.default_rng(3)
-    n, vox = 16, 0.1
+def random_paths_setup(rng, n, vox):
+    """(towards, w2i, weights, cdf, dirs) of a random trace on an n^3 grid of voxel ``vox``
+    (m) at the origin: random unit directions to the camera on its stride-2 lattice, and 5
+    starts' powers and directions, drawn from ``rng`` in that order."""
     ls = lattice_shape((n, n, n), 2)
     tow = rng.normal(size=ls + (3,))
     tow /= np.linalg.norm(tow, axis=-1, keepdims=True)
@@ -33,6 +34,13 @@ def test_twins_agree_through_a_sharp_surface():
     w, cdf = from_power(rng.random((5, 3)) + 0.1)
     d = rng.normal(size=(5, 3))
     d /= np.linalg.norm(d, axis=1)[:, None]
+    return tow, w2i, w, cdf, d
+
+
+def test_twins_agree_through_a_sharp_surface():
+    rng = np.random.default_rng(3)
+    n, vox = 16, 0.1
+    tow, w2i, w, cdf, d = random_paths_setup(rng, n, vox)
     other = PathMedium(rng.random((n, n, n)).astype(np.float32), w2i, np.full(3, 1.5),
                        np.full(3, 2.0), 0.2, 2, tow, 4.0, threshold=0.4)
     inp = PathInputs(rng.random((n, n, n)).astype(np.float32), w2i, np.eye(3) * vox,
@@ -52,10 +60,7 @@ def test_twins_agree_through_a_sharp_surface():
 
 def test_the_cells_inside_parts_hold_a_spheres_volume():
     n, vox, r = 40, 0.05, 0.77
-    c = (np.arange(n) - 0.5 * (n - 1)) * vox
-    x, y, z = np.meshgrid(c, c, c, indexing="ij")
-    dist = np.sqrt(x * x + y * y + z * z)
-    grid = np.clip(0.5 + (r - dist) / vox, 0.0, 1.0).astype(np.float32)  # 0.5 on the sphere
+    grid = sphere_ramp(n, vox, r)   # 0.5 on the sphere
     frac = sharp_fraction(grid, 0.5)
     assert frac.min() >= 0.0 and frac.max() <= 1.0
     assert np.any((frac > 0.0) & (frac < 1.0))
@@ -138,13 +143,7 @@ def test_the_tracer_finds_the_same_bits_with_and_without_the_cells(monkeypatch):
     n, vox = 40, 0.05
     grid = sphere_ramp(n, vox)
     grid[10, 12, 20] = np.nan
-    ls = lattice_shape((n, n, n), 2)
-    tow = rng.normal(size=ls + (3,))
-    tow /= np.linalg.norm(tow, axis=-1, keepdims=True)
-    w2i = np.concatenate([np.eye(3) / vox, np.zeros((3, 1))], 1)
-    w, cdf = from_power(rng.random((5, 3)) + 0.1)
-    d = rng.normal(size=(5, 3))
-    d /= np.linalg.norm(d, axis=1)[:, None]
+    tow, w2i, w, cdf, d = random_paths_setup(rng, n, vox)
     other = PathMedium(np.roll(grid, 3, axis=0), w2i, np.full(3, 1.5), np.full(3, 2.0), 0.2, 2,
                        tow, 20.0, threshold=0.5)
     inp = PathInputs(grid, w2i, np.eye(3) * vox, np.full(3, 1.6), np.full(3, 2.0), 0.6, 2, tow,

@@ -279,8 +279,8 @@ def _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
                partners=(), light=None) -> list:
     """``_trace``'s deposits on ``lat``, then on each of the ``partners``' lattices
     ((PreparedMedium, PathLattice), traced_multiple), which the paths fly through too.
-    ``light``: None, or the packed light record the first scatterings (lobe 0 sets) draw
-    their incoming direction from (``start_light``)."""
+    ``light``: None, or the packed light record the first scatterings (the tracer reads it
+    for lobe 0 sets only) draw their incoming direction from (``start_light``)."""
     density, w2i, i2w = lat.density, lat.w2i, lat.i2w
     surf = around.surfaces if around is not None else None
     centre, radius = reach(pm, (w2i, density.shape))
@@ -308,8 +308,7 @@ def _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
                          np.ascontiguousarray(dirs), cdf, lat.rate, n_k, int(seed) + 104729 * k,
                          max_collisions=max_collisions, jitter=jitter, lobe=lobe,
                          start_source=source, start_peak=peak, moments=moments,
-                         others=others, threshold=lat.threshold,
-                         light=light if int(lobe) == 0 else None, **extra)
+                         others=others, threshold=lat.threshold, light=light, **extra)
         got = kernels.trace_paths_media(inp, threads=worker_count(threads),
                                         should_cancel=should_cancel)
         acc = got if acc is None else [a + b for a, b in zip(acc, got)]
