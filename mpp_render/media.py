@@ -344,6 +344,19 @@ def union_interval(media: List[PreparedMedium], origins, dirs, t_lo, t_hi):
     return np.maximum(t0, t_lo), np.minimum(t1, t_hi)
 
 
+def surrounds(media: List[PreparedMedium], point) -> bool:
+    """Whether ``point`` (3,) m lies inside one of the prepared ``media``: within a grid's
+    sampling box, or anywhere for an endless one (the world's fog)."""
+    p = np.asarray(point, np.float64).reshape(1, 3)
+    for pm in media:
+        if pm.endless:
+            return True
+        idx = to_index(pm, p)[0]
+        if np.all(idx >= 0.0) and np.all(idx <= np.array(pm.grid.shape, np.float64) - 1.0):
+            return True
+    return False
+
+
 def uneven_within(media, centre, radius: float) -> bool:
     """Whether any of the prepared ``media`` may change its density within ``radius`` (m) of
     ``centre`` (3,): a brick of its brick_bounds overlapping the ball's box holds density

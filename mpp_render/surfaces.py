@@ -27,6 +27,7 @@ from typing import Dict, List
 
 import numpy as np
 
+from .gathers import directions as gather_directions
 from .principled import Principled
 from .scene import Surface
 
@@ -201,7 +202,8 @@ def facing_normals(ss: SurfaceSet, tri, d):
 
 
 def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, rng,
-          media_radiance=None, bounces: int = 1, gathers: int = 1, strata=None):
+          media_radiance=None, bounces: int = 1, gathers: int = 1, strata=None,
+          guides=None, guided: float = 0.5):
     """Outgoing radiance (N,3) W/(m^2 sr) of surface points ``p`` hit by rays ``d``.
 
     ``media_optical_depth(points, dirs, t_max)`` -> (N,3) optical depth through the media
@@ -226,7 +228,10 @@ def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, r
     one of ``count``, given by the caller as two random permutations per pixel over its
     samples: a pixel's gathers are then a Latin hypercube over (r^2, phi) that shares out
     the hemisphere instead of drawing it independently, and each sample's band is uniform,
-    so the estimate stays unbiased where only some of a pixel's samples hit the surface."""
+    so the estimate stays unbiased where only some of a pixel's samples hit the surface.
+    ``guides`` (gathers.Guides): lamps inside the media, about which a share ``guided`` of
+    the gathers that read ``media_radiance`` are drawn (gathers.directions, weighed by the
+    balance heuristic); None: all cosine-weighted."""
     from .lights import is_dark, light_sample, pack_light
     from .phase import orthonormal_basis
 
@@ -264,15 +269,17 @@ def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, r
             count = max(int(strata[2]), 1)
             u[..., 0] = (np.asarray(strata[0])[:, None] + u[..., 0]) / count
             u[..., 1] = (np.asarray(strata[1])[:, None] + u[..., 1]) / count
-        u[..., 0] = (np.arange(k)[None, :] + u[..., 0]) / k    # stratified in r^2
-        r = np.sqrt(u[..., 0]).reshape(-1)
-        phi = 2 * np.pi * u[..., 1].reshape(-1)
-        nk, pk = np.repeat(nrm, k, axis=0), np.repeat(po, k, axis=0)
-        t1, t2 = orthonormal_basis(nk)
-        w = (t1 * (r * np.cos(phi))[:, None] + t2 * (r * np.sin(phi))[:, None]
-             + nk * np.sqrt(np.maximum(0.0, 1 - r * r))[:, None])
+        if media_radiance is None or k * guided < 1.0:
+            guides = None
+        choose = rng.random((n_pts, k)) if guides is not None else None
+        w, weight = gather_directions(nrm, po, u, k, guides, choose, guided)
+        w, weight = w.reshape(-1, 3), weight.reshape(-1)
+        pk = np.repeat(po, k, axis=0)
+        # a guided direction below the surface gathers nothing: not traced
+        live = np.flatnonzero(weight > 0.0)
+        pk, w = pk[live], w[live]
         t_hit, tri_hit = intersect(ss, pk, w, np.full(len(pk), np.inf))
-        albedo = np.repeat(bsdf.albedo(), k, axis=0) / k
+        albedo = np.repeat(bsdf.albedo(), k, axis=0)[live] * weight[live, None]
         acc = np.zeros((len(pk), 3))
         if bounces > 0:
             hit = np.flatnonzero(tri_hit >= 0)
@@ -291,5 +298,7 @@ def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, r
                 acc[sky] += albedo[sky] * wc * np.exp(-tau)
         if media_radiance is not None:
             acc += albedo * media_radiance(pk, w, t_hit)
-        out += acc.reshape(n_pts, k, 3).sum(axis=1)
+        full = np.zeros((n_pts * k, 3))
+        full[live] = acc
+        out += full.reshape(n_pts, k, 3).sum(axis=1)
     return out

@@ -19,7 +19,8 @@ import numpy as np
 from . import kernels, pilot, worldfog
 from .camera import primary_rays
 from .march import MarchContext, march_rays, ray_keys
-from .media import union_interval
+from .gathers import Guides
+from .media import surrounds, union_interval
 from .passes import DEPTH_MISS
 from .precompute.lightdepth import kernel_arrays, split_fog
 from .surfaces import SurfaceSet, intersect, shade
@@ -67,6 +68,9 @@ class FrameMarch:
         self.cut(self.spp)
         self.solid = split_fog(self.media)[0]
         self.arrays = kernel_arrays(self.solid)
+        # the lamps inside the media, towards which the surfaces' gathers are also drawn
+        self.guides = Guides.of_lights(self.lights, lambda c: surrounds(self.media, c)) \
+            if self.media else None
         self.pilot_stride = max(1, int(tun.pilot_stride))
         self.pilot_samples = max(2, int(tun.pilot_samples))
         self.pilot_shape, px, py = pilot.grid(W, H, self.pilot_stride)
@@ -255,7 +259,8 @@ class FrameMarch:
             behind[hit] = shade(self.surf, tri[hit], ph, d[hit], self.lights, self.bg,
                                 self.optical_depth, rng, self.radiance_towards(index, k),
                                 gathers=st.tuning.surface_gathers,
-                                strata=(strata[0][hit], strata[1][hit], strata[2]))
+                                strata=(strata[0][hit], strata[1][hit], strata[2]),
+                                guides=self.guides, guided=st.tuning.guided_gathers)
             dh = t_hit[hit] * axial[hit]
             r["depth"][hit] = np.minimum(r["depth"][hit], dh)
         # the homogeneous fog beyond its grid, seen through the march

@@ -13,7 +13,8 @@ LAYERS = [
     {"render", "tiles", "pilot", "cache", "bounce", "budget", "metrics", "exr"},  # the frame; I/O
     {"precompute", "march", "firstflight", "pyramid", "parallel"},      # the two stages
     {"kernels", "kernels_np", "_kernels", "paths"},                     # C kernels, numpy twins
-    {"lights", "surfaces", "principled", "worldfog", "media", "phase", "mpp", "walk", "lightrecord",
+    {"lights", "surfaces", "gathers", "principled", "worldfog", "media", "phase", "mpp", "walk",
+     "lightrecord",
      "camera", "blackbody", "passes", "textures", "rng"},                                # physics, media, model
     {"scene", "cancel"},                                                # the description; Esc
 ]
