@@ -357,6 +357,38 @@ def surrounds(media: List[PreparedMedium], point) -> bool:
     return False
 
 
+def box_distance(pm: PreparedMedium, point) -> float:
+    """A lower bound (m) of the distance from ``point`` (3,) to the medium's grid box: the
+    distance in index space to the box of voxel centres times the map's smallest stretch
+    (0 inside it)."""
+    idx = to_index(pm, np.asarray(point, np.float64).reshape(1, 3))[0]
+    hi = np.array(pm.grid.shape, np.float64) - 1.0
+    gap = np.linalg.norm(idx - np.clip(idx, 0.0, hi))
+    stretch = np.linalg.svd(np.asarray(pm.i2w, np.float64)[:3, :3], compute_uv=False).min()
+    return float(gap * stretch)
+
+
+def smooth_light(media: List[PreparedMedium], lights, reach: float) -> bool:
+    """Whether the light in every one of ``media`` changes no faster than its voxels, so that
+    the march may step a voxel at a time: every medium a density grid (no mesh volume's sharp
+    surface, no world fog, whose lamps are in it), no spot light (its cone's edge crosses
+    the media wherever it goes), and every point and area light farther than ``reach`` (m)
+    from every medium's box (its 1 / r^2 then changes by under 2 h / reach over a voxel h;
+    the sun's and the sky's light is read from voxel grids)."""
+    if any(pm.kind != "grid" for pm in media):
+        return False
+    for light in lights:
+        if light.kind == "SUN":
+            continue
+        if light.kind == "SPOT":
+            return False
+        centre = np.asarray(light.matrix, np.float64)[:3, 3] if light.kind == "AREA" \
+            else np.asarray(light.position, np.float64)
+        if any(box_distance(pm, centre) <= reach for pm in media):
+            return False
+    return True
+
+
 def uneven_within(media, centre, radius: float) -> bool:
     """Whether any of the prepared ``media`` may change its density within ``radius`` (m) of
     ``centre`` (3,): a brick of its brick_bounds overlapping the ball's box holds density

@@ -20,7 +20,8 @@ import numpy as np
 
 from . import cache, kernels, worldfog
 from .march import MarchContext
-from .media import prepare
+from .lights import is_dark
+from .media import prepare, smooth_light
 from .cancel import Cancelled
 from .parallel import worker_count
 from .passes import DEPTH_MISS, enabled_passes
@@ -42,11 +43,19 @@ class RenderOutput:
     stats: dict = field(default_factory=dict)
 
 
-def auto_step(desc: SceneDescription, media) -> float:
-    """The march step (m): the user's, or ``Tuning.step_voxels`` of the finest voxel."""
+def auto_step(desc: SceneDescription, media, lights=()) -> float:
+    """The march step (m): the user's Step Size, or of the finest voxel
+    ``Tuning.smooth_step_voxels`` where the light in the media changes no faster than their
+    voxels (media.smooth_light: density grids, no lamp within ``Tuning.disc_voxels`` voxels
+    of them, no spot) and ``Tuning.step_voxels`` elsewhere."""
     if desc.settings.step_size > 0:
         return float(desc.settings.step_size)
-    return desc.settings.tuning.step_voxels * min(pm.voxel_size for pm in media) if media else 1.0
+    if not media:
+        return 1.0
+    tun = desc.settings.tuning
+    finest = min(pm.voxel_size for pm in media)
+    smooth = smooth_light(media, [lt for lt in lights if not is_dark(lt)], tun.disc_voxels * finest)
+    return (tun.smooth_step_voxels if smooth else tun.step_voxels) * finest
 
 
 def render(desc: SceneDescription,
@@ -78,7 +87,7 @@ def render(desc: SceneDescription,
     fog = worldfog.active(desc.world)
     world, lights, fog_pm = with_world_fog(desc, fog, media, warnings)
     t_pre = time.perf_counter()
-    step = auto_step(desc, media)
+    step = auto_step(desc, media, lights)
     try:
         pre, media_lights = precompute_frame(desc, media, lights, world, surf, fog_pm, step,
                                              cancel, progress, any_camera)

@@ -256,7 +256,15 @@ class Tuning:
     (gathers.py; 0: all cosine-weighted).  Round a lamp in fog or smoke its glow on a ground
     is peaked towards the lamp: at 0.5, p_fog_point's per-sample noise (4 gathers, 160x90,
     4 seeds) 0.078 -> 0.056 of the frame's mean, the hold-out v_smoke_lamp's single
-    scattering 0.076 -> 0.046 (docs/gathers.md)."""
+    scattering 0.076 -> 0.046 (docs/guided_gathers.md).
+    ``smooth_step_voxels``: the march step where Step Size is 0 and the light in the media
+    changes no faster than their voxels (media.smooth_light: density grids only, no spot, no
+    lamp within ``disc_voxels`` voxels of them), in the finest voxel's sides; a jittered point
+    per step stays unbiased, and what a longer step costs is noise where the integrand
+    changes within it, which these scenes do not have.  1.0 left the suite's six such scenes
+    as they were (cloud_vdb, p_backlit_vdb, p_dragon, p_noise_cloud, smoke_plume,
+    p_glowing_smoke; single scattering within 0.0001, full renders within 0.002) with about
+    0.6 of the march samples (docs/performance.md)."""
 
     skip_min_voxels: int = 1 << 20
     spot_cull: bool = True
@@ -279,6 +287,7 @@ class Tuning:
     disc_exact: float = 2.0
     disc_voxels: float = 16.0
     guided_gathers: float = 0.5
+    smooth_step_voxels: float = 1.0
 
 
 # The default Noise Threshold (pilot.py's unit: the standard error over sqrt(I S), S the

@@ -1,5 +1,6 @@
 """The march step (render.auto_step): Step Size when the user sets one, else
-``Tuning.step_voxels`` of the finest voxel's side."""
+``Tuning.step_voxels`` of the finest voxel's side, or ``Tuning.smooth_step_voxels`` where the
+light in the media is as smooth as their voxels (media.smooth_light)."""
 import dataclasses
 
 import numpy as np
@@ -14,10 +15,57 @@ def test_the_step_is_a_share_of_the_finest_voxel_unless_the_user_sets_one():
     media = prepare_media(desc.media, [])
     voxel = min(pm.voxel_size for pm in media)
     assert np.isclose(voxel, 2.0 / 18)                       # the test cloud: 18 voxels over 2 m
-    assert np.isclose(auto_step(desc, media), 0.5 * voxel)   # the default: half a voxel
+    # the default with its lamp 6 voxels from the cloud: half a voxel
+    assert np.isclose(auto_step(desc, media, desc.lights), 0.5 * voxel)
     tuned = dataclasses.replace(desc, settings=dataclasses.replace(
         desc.settings, tuning=dataclasses.replace(desc.settings.tuning, step_voxels=1.0)))
-    assert np.isclose(auto_step(tuned, media), voxel)
+    assert np.isclose(auto_step(tuned, media, desc.lights), voxel)
     user = dataclasses.replace(desc, settings=dataclasses.replace(desc.settings, step_size=0.03))
     assert auto_step(user, media) == 0.03
     assert auto_step(desc, []) == 1.0                         # nothing to march
+
+
+def with_lights(desc, lights, **media_kw):
+    media = [dataclasses.replace(m, **media_kw) for m in desc.media]
+    return dataclasses.replace(desc, lights=lights, media=media)
+
+
+def test_a_voxel_a_step_only_where_the_light_is_as_smooth_as_the_voxels():
+    """The test cloud (a density grid, 18 voxels over 2 m) steps a whole voxel under a sun,
+    and under a lamp farther than Tuning.disc_voxels voxels from its box; half a voxel with
+    a lamp nearer (its 1 / r^2 changes within a voxel), with any spot (its cone's edge), and
+    for a mesh volume's sharp surface."""
+    from mpp_render.scene import Light
+    desc = scene()
+    voxel = 2.0 / 18
+    reach = desc.settings.tuning.disc_voxels * voxel            # 1.78 m
+    sun = Light("SUN", "sun", np.full(3, 2.0), direction=np.array([0.3, 0.2, -0.93]))
+
+    def step(lights, **kw):
+        d = with_lights(desc, lights, **kw)
+        media = prepare_media(d.media, [])
+        return auto_step(d, media, d.lights) / voxel
+
+    def lamp(x, kind="POINT"):
+        return Light(kind, "lamp", np.full(3, 100.0), position=np.array([x, 0.0, 0.0]), radius=0.1)
+
+    assert np.isclose(step([sun]), 1.0)
+    assert np.isclose(step([sun, lamp(1.0 + reach + 0.1)]), 1.0)     # beyond the reach
+    assert np.isclose(step([sun, lamp(1.0 + reach - 0.1)]), 0.5)     # within it
+    assert np.isclose(step([sun, lamp(0.0)]), 0.5)                   # inside the cloud
+    assert np.isclose(step([sun, lamp(50.0, "SPOT")]), 0.5)          # a spot's cone edge
+    assert np.isclose(step([sun, Light("POINT", "off", np.zeros(3))]), 1.0)   # a dark lamp
+    assert np.isclose(step([sun], source="MESH"), 0.5)              # a sharp surface
+
+
+def test_the_distance_to_a_grid_box_is_a_lower_bound():
+    """media.box_distance: 0 inside, the distance to the voxel centres' box outside (exact
+    for a uniform scale, a lower bound for a stretched one)."""
+    from mpp_render.media import box_distance
+    desc = scene()
+    pm = prepare_media(desc.media, [])[0]
+    lo = pm.to_world(np.zeros((1, 3)))[0]
+    hi = pm.to_world(np.array(pm.grid.shape, float)[None] - 1.0)[0]
+    assert box_distance(pm, (lo + hi) / 2) == 0.0
+    assert np.isclose(box_distance(pm, hi + [0.5, 0.0, 0.0]), 0.5)
+    assert np.isclose(box_distance(pm, hi + [0.3, 0.4, 0.0]), 0.5)
