@@ -371,11 +371,13 @@ def box_distance(pm: PreparedMedium, point) -> float:
 def smooth_light(media: List[PreparedMedium], lights, reach: float) -> bool:
     """Whether the light in every one of ``media`` changes no faster than its voxels, so that
     the march may step a voxel at a time: every medium a density grid (no mesh volume's sharp
-    surface, no world fog, whose lamps are in it), no spot light (its cone's edge crosses
+    surface, no world fog, whose lamps are in it) that does not glow (its emission changes
+    at its own grid's scale, and the march's longer steps in thin smoke follow the density
+    alone: a fire's glow moved by a voxel), no spot light (its cone's edge crosses
     the media wherever it goes), and every point and area light farther than ``reach`` (m)
     from every medium's box (its 1 / r^2 then changes by under 2 h / reach over a voxel h;
     the sun's and the sky's light is read from voxel grids)."""
-    if any(pm.kind != "grid" for pm in media):
+    if any(pm.kind != "grid" or pm.glows for pm in media):
         return False
     for light in lights:
         if light.kind == "SUN":

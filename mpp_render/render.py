@@ -47,15 +47,21 @@ def auto_step(desc: SceneDescription, media, lights=()) -> float:
     """The march step (m): the user's Step Size, or of the finest voxel
     ``Tuning.smooth_step_voxels`` where the light in the media changes no faster than their
     voxels (media.smooth_light: density grids, no lamp within ``Tuning.disc_voxels`` voxels
-    of them, no spot) and ``Tuning.step_voxels`` elsewhere."""
+    of them, no spot), but no longer than ``Tuning.smooth_step_tau`` of optical depth in the
+    densest voxel, and ``Tuning.step_voxels`` elsewhere."""
     if desc.settings.step_size > 0:
         return float(desc.settings.step_size)
     if not media:
         return 1.0
     tun = desc.settings.tuning
     finest = min(pm.voxel_size for pm in media)
-    smooth = smooth_light(media, [lt for lt in lights if not is_dark(lt)], tun.disc_voxels * finest)
-    return (tun.smooth_step_voxels if smooth else tun.step_voxels) * finest
+    step = tun.step_voxels * finest
+    if smooth_light(media, [lt for lt in lights if not is_dark(lt)], tun.disc_voxels * finest):
+        # no longer than the densest voxel's optical depth allows (Tuning.smooth_step_tau)
+        densest = max(float(pm.grid.max()) * float(np.max(pm.sigma_t)) for pm in media)
+        longest = tun.smooth_step_tau / densest if densest > 0.0 else np.inf
+        step = max(step, min(tun.smooth_step_voxels * finest, longest))
+    return step
 
 
 def render(desc: SceneDescription,

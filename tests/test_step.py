@@ -33,8 +33,10 @@ def with_lights(desc, lights, **media_kw):
 def test_a_voxel_a_step_only_where_the_light_is_as_smooth_as_the_voxels():
     """The test cloud (a density grid, 18 voxels over 2 m) steps a whole voxel under a sun,
     and under a lamp farther than Tuning.disc_voxels voxels from its box; half a voxel with
-    a lamp nearer (its 1 / r^2 changes within a voxel), with any spot (its cone's edge), and
-    for a mesh volume's sharp surface."""
+    a lamp nearer (its 1 / r^2 changes within a voxel), with any spot (its cone's edge), for
+    a mesh volume's sharp surface and for a glowing grid.  The longer step keeps to Tuning.smooth_step_tau of
+    optical depth in the densest voxel (this cloud's: 0.7), and a cloud ten times as dense
+    steps half a voxel."""
     from mpp_render.scene import Light
     desc = scene()
     voxel = 2.0 / 18
@@ -49,13 +51,19 @@ def test_a_voxel_a_step_only_where_the_light_is_as_smooth_as_the_voxels():
     def lamp(x, kind="POINT"):
         return Light(kind, "lamp", np.full(3, 100.0), position=np.array([x, 0.0, 0.0]), radius=0.1)
 
-    assert np.isclose(step([sun]), 1.0)
-    assert np.isclose(step([sun, lamp(1.0 + reach + 0.1)]), 1.0)     # beyond the reach
+    tau = float(np.max(desc.media[0].density)) * 4.4 * voxel
+    assert 0.6 < tau < 0.8
+    smooth = 0.5 / tau                                                # voxels
+    assert np.isclose(step([sun]), smooth)
+    assert np.isclose(step([sun], density=desc.media[0].density * 0.5), 1.0)
+    assert np.isclose(step([sun], density=desc.media[0].density * 10.0), 0.5)
+    assert np.isclose(step([sun, lamp(1.0 + reach + 0.1)]), smooth)  # beyond the reach
     assert np.isclose(step([sun, lamp(1.0 + reach - 0.1)]), 0.5)     # within it
     assert np.isclose(step([sun, lamp(0.0)]), 0.5)                   # inside the cloud
     assert np.isclose(step([sun, lamp(50.0, "SPOT")]), 0.5)          # a spot's cone edge
-    assert np.isclose(step([sun, Light("POINT", "off", np.zeros(3))]), 1.0)   # a dark lamp
+    assert np.isclose(step([sun, Light("POINT", "off", np.zeros(3))]), smooth)   # a dark lamp
     assert np.isclose(step([sun], source="MESH"), 0.5)              # a sharp surface
+    assert np.isclose(step([sun], emission=np.full(3, 0.1)), 0.5)   # a glow
 
 
 def test_the_distance_to_a_grid_box_is_a_lower_bound():

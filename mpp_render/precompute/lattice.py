@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..media import PAD, PreparedMedium
+from ..media import PAD, PreparedMedium, box_distance
 
 
 MULTIPLE_RESOLUTION = 64  # lattice points along the longest side for the light pyramid
@@ -54,6 +54,29 @@ def paths_lattice(pm: PreparedMedium, resolution: int = MULTIPLE_RESOLUTION):
     ``walk_lattice`` does, put a mesh volume of 128 voxels, 130 with its padding, on 44
     points for a Resolution of 64, not 64.)"""
     return _lattice_along(pm, max(max(pm.grid.shape) - 2 * PAD, 1), resolution)
+
+
+def lamp_resolution(pm: PreparedMedium, lights, resolution: int = MULTIPLE_RESOLUTION) -> int:
+    """The traced paths' Resolution on ``pm`` (``paths_lattice``): ``resolution``, raised
+    where a point or spot light of radius r sits inside the medium's box until the lattice's
+    spacing h is at most r / 2, one voxel at the finest.  Round such a lamp the multiply
+    scattered light has a core about as wide as the lamp (the first scatterings' source,
+    ~ 1 / max(d, r)^2, and what it scatters), over which the lattice's splat and read smooth
+    M with a tent of half-width h on each side; with h <= r / 2 the smoothing's standard
+    deviation (h / sqrt(3) per pass, about 0.8 h for both) stays under half the core's
+    radius.  A pure point light (r = 0) asks for the voxels themselves."""
+    voxels = max(max(pm.grid.shape) - 2 * PAD, 1)
+    voxel = float(np.cbrt(abs(np.linalg.det(pm.i2w[:3, :3]))))
+    res = int(resolution)
+    for light in lights:
+        if light.kind not in ("POINT", "SPOT") or not np.any(np.asarray(light.strength) > 0):
+            continue
+        if box_distance(pm, light.position) > 0.0:
+            continue
+        finest = max(1, int(np.floor(0.5 * float(light.radius) / voxel + 1e-9)))
+        if int(np.ceil(voxels / max(res, 2))) > finest:
+            res = max(res, int(np.ceil(voxels / finest)))
+    return res
 
 
 def _lattice_along(pm: PreparedMedium, voxels: int, resolution: int):

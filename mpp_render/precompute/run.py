@@ -12,7 +12,7 @@ from .. import kernels
 from ..media import PreparedMedium, delta_scaled, density_from
 from ..parallel import check
 from ..scene import Camera, Light, Tuning, World
-from .lattice import MULTIPLE_RESOLUTION, grid_points, needed_flat
+from .lattice import MULTIPLE_RESOLUTION, grid_points, lamp_resolution, needed_flat
 from .layout import FieldLayout, field_layout
 from .lightdepth import (SHADOW_TAU, light_optical_depth, near_sharp_surfaces, soft_visibility,
                          split_fog, sweep_light)
@@ -72,6 +72,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
     shadowed = surfaces is not None and not surfaces.empty
     around = Surroundings(solid, fog_st, surfaces, step, bool(surface_bounce),
                           tuning.disc_exact, tuning.disc_voxels)
+    # the traced paths' lattice of each medium, finer round a lamp inside it
+    path_res = [lamp_resolution(pm, lights, multiple_resolution) for pm in media]
     # traced paths fly through every medium whose box overlaps theirs and deposit on it too
     # (precompute.lightpaths.overlapping); what one medium's paths leave on another's lattice
     # is added to that medium's M once every medium is traced
@@ -83,7 +85,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
         got = []
         for j in partners_of[mi]:
             if j not in partner_lats:
-                partner_lats[j] = partner_lattice(media[j], camera, multiple_resolution, around)
+                partner_lats[j] = partner_lattice(media[j], camera, path_res[j], around)
             if partner_lats[j] is not None:
                 got.append((j, partner_lats[j]))
         return got
@@ -162,7 +164,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                 progress(0.0, f"Emitted light on {pm.medium.name}")
             near = partners(mi)
             got = emission_light(pm, camera, multiple_paths if multiple_paths > 0
-                                 else EMISSION_PATHS, multiple_resolution, multiple,
+                                 else EMISSION_PATHS, path_res[mi], multiple,
                                  seed=seed + 7919 * mi + 6007, threads=threads,
                                  should_cancel=should_cancel, around=around,
                                  partners=[(media[j], lat) for j, lat in near])
@@ -186,7 +188,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                     # light paths traced from the first scatterings (precompute.lightpaths)
                     near = partners(mi)
                     traced = traced_multiple(pm, f, light, chans[li], camera, multiple_paths,
-                                             multiple_resolution, seed=seed + 7919 * mi + li,
+                                             path_res[mi], seed=seed + 7919 * mi + li,
                                              threads=threads, should_cancel=should_cancel,
                                              around=around, moments=tuning.gather_moments,
                                              partners=[(media[j], lat) for j, lat in near])
