@@ -155,18 +155,29 @@ def fit_media(media: Sequence[Medium], lights: Sequence[Light], budget_mb: float
         warnings.append(f"medium '{m.name}': grid {_describe(shape)} downsampled by {f} to fit "
                         f"the memory budget of {budget_mb:g} MB; now {_describe(small.shape)}")
         out.append(dataclasses.replace(m, density=small, index_to_world=downsampled_transform(
-            m.index_to_world, shape, small.shape), emission_grid=_downsampled_emission(m, f)))
+            m.index_to_world, shape, small.shape), emission_grid=_downsampled_rgb(
+                m, m.emission_grid, f), scatter_grid=_downsampled_rgb(m, m.scatter_grid, f,
+                                                                      weighted=True)))
     return out
 
 
-def _downsampled_emission(m: Medium, factor: int):
-    """``m.emission_grid`` box-downsampled like its density (NaN and negatives first set to
-    0, so they do not spread over a block; prepare() warns about them), or None."""
-    e = m.emission_grid
+def _downsampled_rgb(m: Medium, e, factor: int, weighted: bool = False):
+    """``e``, one of ``m``'s RGB grids, box-downsampled like its density (NaN and negatives
+    first set to 0, so they do not spread over a block; prepare() warns about them), or None.
+    ``weighted``: each block's mean weighted by the density (a scatter colour's factor: the
+    block then scatters what its voxels did together; 1 where the block is empty)."""
     if e is None or np.shape(e) != tuple(np.shape(m.density)) + (3,):
         return e  # None, or a mismatch that prepare() reports
     e = sanitise(e)[0]
-    return np.stack([box_downsample(e[..., c], factor) for c in range(3)], axis=-1)
+    w = sanitise(m.density)[0] if weighted else None
+    out = []
+    for c in range(3):
+        if w is None:
+            out.append(box_downsample(e[..., c], factor))
+            continue
+        num, den = box_downsample(e[..., c] * w, factor), box_downsample(w, factor)
+        out.append(np.where(den > 0, num / np.where(den > 0, den, 1.0), 1.0))
+    return np.stack(out, axis=-1).astype(np.float32)
 
 
 def apply_budget(desc: SceneDescription, warnings: List[str]) -> SceneDescription:

@@ -216,9 +216,11 @@ def clear() -> int:
 
 def media_key(media) -> str:
     """Content key of prepared media (precompute reads their grids, maps, coefficients,
-    anisotropy, sharpness and emission: the emission grid's channels and the glow's light)."""
+    anisotropy, sharpness and emission: the emission grid's channels and the glow's light; the
+    scatter colour grid's channels)."""
     return digest([(pm.grid, pm.w2i, pm.sigma_s, pm.sigma_a, float(pm.g), float(pm.threshold),
-                    np.asarray(pm.medium.emission, np.float64), pm.emission_grid)
+                    np.asarray(pm.medium.emission, np.float64), pm.emission_grid,
+                    pm.scatter_grid)
                    for pm in media])
 
 
@@ -347,7 +349,7 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
         fields = []
         for fl, fo in zip(part.fields, old.fields):
             f = np.empty(fo.shape, np.float32)
-            f[..., :first] = fl
+            f[..., :first] = fl[..., :first]   # its own grids' channels are the donor's too
             f[..., first:] = fo[..., first:]
             fields.append(f)
         pre = pre_mod.Precomputed(fields, old.layout, part.multiple, part.seconds,

@@ -452,7 +452,8 @@ def light_varies(lights, origins, dirs, s_a, s_b, g):
 
 def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs, thresholds,
           voxels, lights, ambient, step, depth_opacity, depth_miss, multiple=None, emissions=None,
-          bricks=None, adapt_tau=0.0, emission_channels=None, roulette=0.0, disc_reach=None):
+          bricks=None, adapt_tau=0.0, emission_channels=None, roulette=0.0, disc_reach=None,
+          scatter_channels=None):
     """March camera rays through media fields: the numpy twin of ``_kernels.march``.
 
     Rays ``origins + t dirs`` (N,3), t in [t0, t1] (N,) metres; ``axial`` (N,) turns t into
@@ -473,6 +474,9 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
     ``emission_channels``: None or per medium the first of 3 field channels holding its
     emission grid (W/(m^3 sr), read with the same trilinear fetch and given off wherever it
     is non-zero, whatever the density), or -1 for none.
+    ``scatter_channels``: None or per medium the first of 3 field channels holding its
+    scatter colour grid (media.PreparedMedium.scatter_grid: the factor on ``sigma_ss``,
+    negative values read as 0), or -1 for none.
 
     Super-step K covers [t0 + SUPER K h, t0 + SUPER (K + 1) h] (the last one ends at t1) and
     is cut into n_sub equal steps of length H, step j read at one jittered point (random
@@ -616,10 +620,14 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
                         beam_inc += hg(cos, gs[mi])[:, None] * np.maximum(v[:, cb:cb + 3], 0.0)
                 if ambient >= 0:
                     inc += v[:, ambient:ambient + 3]
-                src += rho[:, None] * sigma_ss[mi][None, :] * inc
-                src_ms += rho[:, None] * sigma_ss[mi][None, :] * ind_inc
+                ss = rho[:, None] * sigma_ss[mi][None, :]
+                if scatter_channels is not None and scatter_channels[mi] >= 0:
+                    sc = scatter_channels[mi]
+                    ss = ss * np.maximum(v[:, sc:sc + 3], 0.0)
+                src += ss * inc
+                src_ms += ss * ind_inc
                 if multiple is not None:
-                    src_ms += rho[:, None] * sigma_ss[mi][None, :] * beam_inc
+                    src_ms += ss * beam_inc
                     amb_ms, per_medium, tables = multiple
                     ms_fields = per_medium[mi]
                     live = np.flatnonzero(rho > 0)
@@ -631,7 +639,7 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
                                                  d[live])
                         if amb_ms >= 0:
                             ms_inc += v[live, amb_ms:amb_ms + 3]
-                        src_ms[live] += rho[live, None] * sigma_ss[mi][None, :] * ms_inc
+                        src_ms[live] += ss[live] * ms_inc
             x_t = sig_t * hl[:, None]
             frac = np.where(x_t > 1e-7, -np.expm1(-x_t) / np.maximum(x_t, 1e-300), 1.0 - 0.5 * x_t)
             T_before = trans[alive]

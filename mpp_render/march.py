@@ -14,7 +14,9 @@ homogeneous media and stable at any optical depth.
 In-scattered radiance at x, per medium m with density rho_m(x):
   S = sum_m rho_m sigma_s,m [ sum_lights p_m(w_l . -d) E_l(x) exp(-tau_l,m(x)) + A_m(x) ]
 with E_l the light's irradiance (lights.py), tau the precomputed optical depth to the light
-and A the precomputed world light (mpp_render/precompute/).  Rays stop when T < ``T_MIN``.
+and A the precomputed world light (mpp_render/precompute/); where a medium's scattering
+colour varies (PreparedMedium.scatter_grid) sigma_s,m is times its factor c_m(x), read from
+the field's scatter colour channels.  Rays stop when T < ``T_MIN``.
 
 Emission (the Emission pass) is a medium's constant ``emission`` wherever its density is > 0
 plus, for a medium with an emission grid, the grid's value read from the field's emission
@@ -164,12 +166,20 @@ FLAT_TABLE = np.concatenate([np.full((1, len(RHO_TABLE), 3), 4.0 * np.pi),
                              np.zeros((1, len(RHO_TABLE), 3))], axis=2)
 
 
+def _channels(per_medium):
+    """A layout's per-medium channels (None: none) as the kernel takes them: None when no
+    medium has one, else -1 for none."""
+    if not per_medium or all(c is None for c in per_medium):
+        return None
+    return [-1 if c is None else c for c in per_medium]
+
+
 def march_rays(ctx: MarchContext, origins, dirs, t0, t1, axial, keys):
     """March rays; returns dict of per-ray arrays: 'single' (N,3), 'T' (N,3), 'depth' (N,)."""
     amb = ctx.layout.ambient_channel
     em = [np.maximum(np.asarray(m.medium.emission, np.float64).reshape(3), 0.0) for m in ctx.media]
-    ec = ctx.layout.emission_channels if ctx.layout is not None else None
-    ec = None if not ec or all(c is None for c in ec) else [-1 if c is None else c for c in ec]
+    ec, sc = (_channels(ctx.layout.emission_channels), _channels(ctx.layout.scatter_channels)) \
+        if ctx.layout is not None else (None, None)
     r = kernels.march(MarchInputs(
         origins, dirs, t0, t1, axial, keys, ctx.fields, [m.w2i for m in ctx.media],
         [m.sigma_s for m in ctx.media], [m.sigma_t for m in ctx.media],
@@ -179,6 +189,6 @@ def march_rays(ctx: MarchContext, origins, dirs, t0, t1, axial, keys):
         em if any(np.any(e > 0) for e in em) else None,
         [m.march_bricks for m in ctx.media] if ctx.tuning.skip_empty else None,
         adapt_tau=ctx.tuning.adapt_tau, emission_channels=ec, roulette=ctx.tuning.roulette,
-        disc_reach=ctx.disc_reach))
+        disc_reach=ctx.disc_reach, scatter_channels=sc))
     return {"single": r.single, "T": r.T, "depth": r.depth, "multiple": r.multiple,
             "steps": r.steps, "emission": r.emission}

@@ -26,6 +26,8 @@ class PreparedMedium:
     ``i2w``: (4, 4) padded index -> world.  ``sigma_s``, ``sigma_a``, ``sigma_t``: RGB 1/m
     per unit density.  ``voxel_size``: the shortest world length of a voxel edge (m).
     ``emission_grid``: None or float32 (X, Y, Z, 3) padded emission grid (W/(m^3 sr)).
+    ``scatter_grid``: None or float32 (X, Y, Z, 3) padded factor on ``sigma_s`` per voxel
+    (Medium.scatter_grid; the padding repeats the edge voxels, where the density fades).
     """
 
     medium: Medium
@@ -39,6 +41,7 @@ class PreparedMedium:
     voxel_size: float
     threshold: float = -1.0
     emission_grid: Optional[np.ndarray] = None
+    scatter_grid: Optional[np.ndarray] = None
 
     @property
     def kind(self) -> str:
@@ -65,6 +68,17 @@ class PreparedMedium:
     def uniform(self) -> bool:
         """Whether the medium has one density wherever it has any (a mesh volume)."""
         return self.sharp and not self.endless
+
+    def scatter_at(self, flat=None, idx=None) -> Optional[np.ndarray]:
+        """float64 (N,3) the factor on ``sigma_s`` (``scatter_grid``) at the voxels ``flat``
+        (flat indices into ``grid``) or, trilinear, at index coordinates ``idx`` (N,3); None
+        where the medium has one colour."""
+        if self.scatter_grid is None:
+            return None
+        if flat is not None:
+            return self.scatter_grid.reshape(-1, 3)[np.asarray(flat)].astype(np.float64)
+        return np.asarray(trilinear(self.scatter_grid, np.asarray(idx, np.float64)),
+                          np.float64)
 
     @property
     def outside_density(self) -> float:
@@ -193,31 +207,35 @@ def prepare(medium: Medium, warnings=None) -> PreparedMedium:
     thr = SHARP_THRESHOLD if medium.source == "MESH" else -1.0
     return PreparedMedium(medium, np.ascontiguousarray(grid), np.ascontiguousarray(w2i), i2w,
                           ss, sa, ss + sa, clamp_g(float(medium.g)), voxel, thr,
-                          _emission_grid(medium, d.shape, warnings))
+                          _colour_grid(medium, medium.emission_grid, "emission", d.shape,
+                                       warnings),
+                          _colour_grid(medium, medium.scatter_grid, "scatter colour", d.shape,
+                                       warnings, edge=True))
 
 
-def _emission_grid(medium: Medium, shape, warnings):
-    """The padded float32 (X, Y, Z, 3) copy of ``medium.emission_grid`` (NaN, inf and
-    negative values set to 0 with a warning), or None when it has none, is all zero, or does
-    not match the density's shape (warned; the medium then renders without it)."""
-    e = medium.emission_grid
+def _colour_grid(medium: Medium, e, what: str, shape, warnings, edge: bool = False):
+    """The padded float32 (X, Y, Z, 3) copy of the medium's grid ``e`` (its ``what`` in
+    messages; NaN, inf and negative values set to 0 with a warning), or None when it has none,
+    does not match the density's shape (warned; the medium then renders without it), or is
+    all zero (an emission; ``edge`` False) or all one (a scatter colour's factor; ``edge``
+    True).  The padding is zero, or with ``edge`` the edge voxels repeated."""
     if e is None:
         return None
     e = np.asarray(e)
     if e.shape != tuple(shape) + (3,):
         if warnings is not None:
-            warnings.append(f"medium '{medium.name}': emission grid of shape {e.shape} does not "
+            warnings.append(f"medium '{medium.name}': {what} grid of shape {e.shape} does not "
                             f"match the density {tuple(shape)} (+ 3 colours); ignored")
         return None
     e, bad = sanitise(e)
     if bad and warnings is not None:
-        warnings.append(f"medium '{medium.name}': {bad} emission values were NaN, infinite or "
+        warnings.append(f"medium '{medium.name}': {bad} {what} values were NaN, infinite or "
                         "negative and were set to 0")
-    if not np.any(e > 0):
+    if not np.any(e != (1.0 if edge else 0.0)):
         return None
-    out = np.zeros(tuple(s + 2 * PAD for s in shape) + (3,), np.float32)
-    out[PAD:-PAD, PAD:-PAD, PAD:-PAD] = e
-    return out
+    pad = ((PAD, PAD),) * 3 + ((0, 0),)
+    return np.ascontiguousarray(np.pad(e, pad, mode="edge" if edge else "constant"),
+                                np.float32)
 
 
 # A mesh volume's surface is where its interpolated occupancy crosses one half.  The test is

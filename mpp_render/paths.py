@@ -138,8 +138,8 @@ class PathMedium:
     voxel index, ``sigma_s``, ``sigma_t`` (3,) 1/m per unit density, ``g``, ``stride``
     voxels per lattice step, ``towards`` float64 (LX,LY,LZ,3) unit directions from its
     lattice points to the camera, ``rate`` its tentative collisions per metre inside its
-    box (above its largest extinction, as PathInputs.rate), ``threshold`` as
-    PathInputs.threshold."""
+    box (above its largest extinction, as PathInputs.rate), ``threshold`` and ``scatter``
+    as PathInputs'."""
 
     density: np.ndarray
     w2i: np.ndarray
@@ -150,6 +150,7 @@ class PathMedium:
     towards: np.ndarray
     rate: float
     threshold: float = -1.0
+    scatter: Optional[np.ndarray] = None
 
 
 @dataclass
@@ -185,7 +186,12 @@ class PathInputs:
     drawn at its start from the light's emitter as the march draws it (lights.light_sample:
     a point of a sphere light's disc, a direction in an area light's solid angle) instead
     of ``dirs``, the light's direction at the lattice point (from its centre, or an area
-    light's axis), which near a large emitter is one of many."""
+    light's axis), which near a large emitter is one of many.  ``scatter``: None, or float32
+    (X,Y,Z,3) each voxel's factor on ``sigma_s`` (media.PreparedMedium.scatter_grid without
+    its padding's meaning: the grid's own voxels), applied to a path's weight at each real
+    collision, read at the nearest voxel (``_colour_factor``): the paths scatter with each
+    point's colour, as the march does, and converge to the multiple scattering of the
+    coloured medium."""
 
     density: np.ndarray
     w2i: np.ndarray
@@ -216,6 +222,7 @@ class PathInputs:
     others: tuple = ()
     threshold: float = -1.0
     light: Optional[np.ndarray] = None
+    scatter: Optional[np.ndarray] = None
 
     @property
     def channels(self) -> int:
@@ -413,7 +420,25 @@ def trace_paths_np(inp: PathInputs) -> np.ndarray:
 
 def _own_medium(inp: PathInputs) -> PathMedium:
     return PathMedium(inp.density, inp.w2i, inp.sigma_s, inp.sigma_t, inp.g, inp.stride,
-                      inp.towards, inp.rate, inp.threshold)
+                      inp.towards, inp.rate, inp.threshold, inp.scatter)
+
+
+def _nearest_voxel(m, idx) -> np.ndarray:
+    """int64 (N,3) the voxel of medium ``m`` nearest to index coordinates ``idx`` (N,3): the
+    edge voxel on the box's face and for NaN (csrc/paths.c nearest_voxel)."""
+    vox = np.floor(idx + 0.5)
+    return np.minimum(np.where(vox >= 0.0, vox, 0.0),
+                      np.array(m.density.shape) - 1).astype(np.int64)
+
+
+def _colour_factor(m, idx) -> np.ndarray:
+    """float64 (N,3) the factor on ``m.sigma_s`` at index coordinates ``idx`` (N,3): its
+    scatter grid's nearest voxel (negative and NaN read as 0), or 1 without one
+    (csrc/paths.c apply_colour)."""
+    if m.scatter is None:
+        return np.ones((len(idx), 3))
+    f = np.asarray(m.scatter)[tuple(_nearest_voxel(m, idx).T)].astype(np.float64)
+    return np.where(f > 0.0, f, 0.0)
 
 
 def density_at(m, idx) -> np.ndarray:
@@ -435,9 +460,7 @@ def density_at(m, idx) -> np.ndarray:
             c = i0 + o
             v = v + w * m.density[c[:, 0], c[:, 1], c[:, 2]].astype(np.float64)
         return np.where(ok & (v >= float(m.threshold)), 1.0, 0.0)
-    vox = np.floor(idx + 0.5)
-    vox = np.minimum(np.where(vox >= 0.0, vox, 0.0), shape - 1).astype(np.int64)
-    r = m.density[tuple(vox.T)].astype(np.float64)
+    r = m.density[tuple(_nearest_voxel(m, idx).T)].astype(np.float64)
     return np.where(r >= 0.0, r, 0.0)
 
 
@@ -661,6 +684,10 @@ def _collide(m, out, tw, g, st, ss, mu, coll, alive, ins, rate, kk, ev, pos, d, 
         wc = wc * np.where(hit[:, None], w_real, w_null)
     if np.any(hit):
         hi = ci[hit]
+        if m.scatter is not None:    # the scattering colour of the point (inside only)
+            col = hit & inn
+            if np.any(col):
+                wc[col] = wc[col] * _colour_factor(m, _to_index(m, pos[ci[col]]))
         d[hi] = _turn(uniform(kc[hit], ec[hit], _D_TURN),
                       uniform(kc[hit], ec[hit], _D_TURN + 1), g, d[hi])
         hits[hi] += 1

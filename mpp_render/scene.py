@@ -111,6 +111,11 @@ class Medium:
     temperature grid, blackbody.py), interpolated trilinearly and given off wherever it is
     non-zero (not gated by density: Cycles emits wherever the shader is evaluated); added to
     ``emission``.  NaN, inf and negative values are set to 0 with a warning.
+    ``scatter_grid``: None, or float32 (nx, ny, nz, 3), dimensionless: per voxel the factor on
+    ``sigma_s`` where the scattering colour varies in space (a node tree into a Principled
+    Volume's Color), so sigma_s(x) = sigma_s * scatter_grid(x) * density(x), both grids
+    interpolated trilinearly; ``sigma_s`` is then the density-weighted mean.  The extinction
+    stays ``sigma_t`` * density(x).  NaN, inf and negative values are set to 0 with a warning.
     ``source``: 'MESH' (a mesh volume: one density with a sharp surface), 'MESH_FIELD' (a
     mesh volume whose density a shader node tree varies: interpolated like a grid), 'VDB',
     'FLUID' or 'WORLD' (for messages and tests).  A 'WORLD'
@@ -128,6 +133,7 @@ class Medium:
     emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
     source: str = "VDB"
     emission_grid: Optional[np.ndarray] = None
+    scatter_grid: Optional[np.ndarray] = None
 
     @property
     def sigma_t(self) -> np.ndarray:

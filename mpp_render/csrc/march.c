@@ -189,6 +189,8 @@ typedef struct {
     Bricks bks[MAX_MEDIA];
     double sig_s[MAX_MEDIA][3], gg[MAX_MEDIA], voxel[MAX_MEDIA], emit[MAX_MEDIA][3];
     int emc[MAX_MEDIA];                    /* first channel of each medium's emission grid, or -1 */
+    int scc[MAX_MEDIA];                    /* first channel of each medium's scatter colour grid
+                                            * (its factor on sig_s), or -1 */
     int use_em;
     const double *LR;                      /* light records (nl, LIGHT_FIELDS) */
     Py_ssize_t nl;
@@ -240,10 +242,32 @@ static int parse_rgb_list(PyObject *list, int ng, double (*out)[3], const char *
     return 0;
 }
 
-/* The per-medium lists: scattering coefficients, anisotropies, voxel sizes, emissions and
- * emission channels. */
+/* Per medium the first of 3 field channels of one of its grids (`what` in messages), or -1,
+ * from None (all -1) or a list of ints; each range must lie after the density and inside the
+ * medium's fields. */
+static int parse_channels(const March *c, PyObject *list, int *out, const char *what) {
+    for (int m = 0; m < c->ng; m++) out[m] = -1;
+    if (list == Py_None) return 0;
+    if (!PyList_Check(list) || PyList_GET_SIZE(list) != c->ng) {
+        PyErr_Format(PyExc_ValueError, "%s: one int per medium", what);
+        return -1;
+    }
+    for (int m = 0; m < c->ng; m++) {
+        long ch = PyLong_AsLong(PyList_GET_ITEM(list, m));
+        if (ch == -1 && PyErr_Occurred()) return -1;
+        if (ch >= 0 && (ch < 1 || ch + 3 > c->g[m].nc)) {
+            PyErr_Format(PyExc_ValueError, "%s: channel outside the fields", what);
+            return -1;
+        }
+        out[m] = ch < 0 ? -1 : (int)ch;
+    }
+    return 0;
+}
+
+/* The per-medium lists: scattering coefficients, anisotropies, voxel sizes, emissions,
+ * emission channels and scatter colour channels. */
 static int parse_media(March *c, PyObject *sss, PyObject *gsl, PyObject *vox, PyObject *pem,
-                       PyObject *pec) {
+                       PyObject *pec, PyObject *psc) {
     int ng = c->ng;
     if (parse_rgb_list(sss, ng, c->sig_s, "sigma_ss: one RGB array per medium", "sigma_s") < 0)
         return -1;
@@ -267,22 +291,9 @@ static int parse_media(March *c, PyObject *sss, PyObject *gsl, PyObject *vox, Py
         }
         c->use_em = 1;
     }
-    for (int m = 0; m < ng; m++) c->emc[m] = -1;
-    if (pec != Py_None) {
-        if (!PyList_Check(pec) || PyList_GET_SIZE(pec) != ng) {
-            PyErr_SetString(PyExc_ValueError, "emission_channels: one int per medium");
-            return -1;
-        }
-        for (int m = 0; m < ng; m++) {
-            long ch = PyLong_AsLong(PyList_GET_ITEM(pec, m));
-            if (ch == -1 && PyErr_Occurred()) return -1;
-            if (ch >= 0 && (ch < 1 || ch + 3 > c->g[m].nc)) {
-                PyErr_SetString(PyExc_ValueError, "emission_channels: channel outside the fields");
-                return -1;
-            }
-            c->emc[m] = ch < 0 ? -1 : (int)ch;
-        }
-    }
+    if (parse_channels(c, pec, c->emc, "emission_channels") < 0 ||
+        parse_channels(c, psc, c->scc, "scatter_channels") < 0)
+        return -1;
     for (int m = 0; m < ng; m++) {
         if (!(c->gg[m] > -1.0 && c->gg[m] < 1.0) || !(c->voxel[m] > 0.0) || !isfinite(c->voxel[m])) {
             PyErr_SetString(PyExc_ValueError, "gs must lie in (-1, 1) and voxels be positive");
@@ -423,13 +434,14 @@ static int parse_multiple(March *c, PyObject *pms) {
 static int march_parse(March *c, PyObject *args) {
     PyObject *po, *pd, *pt0, *pt1, *pax, *pk, *fields, *w2is, *sss, *sts, *gsl, *thrs, *vox, *plights;
     PyObject *pms = Py_None, *pem = Py_None, *pbk = Py_None, *pec = Py_None, *pdr = Py_None;
+    PyObject *psc = Py_None;
     int brick = 4;
     c->adapt_tau = 0.0;
     c->roulette = 0.0;
-    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOiddd|OOOidOdO", &po, &pd, &pt0, &pt1, &pax, &pk, &fields,
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOiddd|OOOidOdOO", &po, &pd, &pt0, &pt1, &pax, &pk, &fields,
                           &w2is, &sss, &sts, &gsl, &thrs, &vox, &plights, &c->ambient, &c->step,
                           &c->depth_opacity, &c->depth_miss, &pms, &pem, &pbk, &brick, &c->adapt_tau,
-                          &pec, &c->roulette, &pdr))
+                          &pec, &c->roulette, &pdr, &psc))
         return -1;
     if (!(c->roulette >= 0.0 && c->roulette < 1.0)) {
         PyErr_SetString(PyExc_ValueError, "roulette must be in [0, 1)");
@@ -455,7 +467,7 @@ static int march_parse(March *c, PyObject *args) {
     if (parse_grids(fields, w2is, sts, thrs, c->g, c->gb, &c->ng, 1) < 0) return -1;
     if (parse_bricks(pbk, brick, c->g, c->ng, c->bks, c->kb, &c->nkb) < 0) return -1;
     c->skip = pbk != Py_None;
-    if (parse_media(c, sss, gsl, vox, pem, pec) < 0) return -1;
+    if (parse_media(c, sss, gsl, vox, pem, pec, psc) < 0) return -1;
     if (parse_lights(c, plights) < 0) return -1;
     for (Py_ssize_t l = 0; l < c->nl; l++) c->disc_reach[l] = 0.0;
     if (pdr != Py_None) {
@@ -610,8 +622,11 @@ static void medium_sources(const March *c, int m, const double x[3], const doubl
     }
     if (c->ambient >= 0)
         for (int a = 0; a < 3; a++) inc[a] += v[c->ambient + a];
-    for (int a = 0; a < 3; a++) s->src[a] += rho * c->sig_s[m][a] * inc[a];
-    for (int a = 0; a < 3; a++) s->src_ms[a] += rho * c->sig_s[m][a] * ind_inc[a];
+    double ss[3] = {rho * c->sig_s[m][0], rho * c->sig_s[m][1], rho * c->sig_s[m][2]};
+    if (c->scc[m] >= 0)  /* the scattering colour of this point (Medium.scatter_grid) */
+        for (int a = 0; a < 3; a++) ss[a] *= v[c->scc[m] + a] > 0.0 ? v[c->scc[m] + a] : 0.0;
+    for (int a = 0; a < 3; a++) s->src[a] += ss[a] * inc[a];
+    for (int a = 0; a < 3; a++) s->src_ms[a] += ss[a] * ind_inc[a];
     if (c->use_ms) {
         double cosl[MAX_LIGHTS], msi[3];
         for (Py_ssize_t l = 0; l < c->nl; l++) {
@@ -621,7 +636,7 @@ static void medium_sources(const March *c, int m, const double x[3], const doubl
         multiple_source_c(&c->ms, c->lv, m, (int)c->nl, cosl, rho, x, d, g->w2i, msi);
         if (c->ms.amb >= 0)
             for (int a = 0; a < 3; a++) msi[a] += v[c->ms.amb + a];
-        for (int a = 0; a < 3; a++) s->src_ms[a] += rho * c->sig_s[m][a] * (msi[a] + beam_inc[a]);
+        for (int a = 0; a < 3; a++) s->src_ms[a] += ss[a] * (msi[a] + beam_inc[a]);
     }
 }
 

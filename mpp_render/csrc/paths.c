@@ -10,12 +10,12 @@ const char trace_paths_doc[] =
     "trace_paths(out, density, w2i, i2w, sigma_s, sigma_t, g, stride, towards, starts, weights,\n"
     "            dirs, cdf, rate, path_lo, path_hi, n_paths, seed, max_collisions, roulette,\n"
     "            jitter, lobe, outside, reach, triangles, albedo, start_source, start_peak,\n"
-    "            moments, others, threshold, cells, light)\n"
+    "            moments, others, threshold, cells, light, colour)\n"
     "Twin of mpp_render.paths.trace_paths_np: adds to out (LX,LY,LZ,3) float64 the deposits\n"
     "of paths path_lo..path_hi-1 of n_paths towards the camera, and to moments (LX,LY,LZ,12)\n"
     "float64, unless it is empty, their moments of order 0 and 1 (paths.py, \"Moments\").\n"
     "others: a tuple of (out, moments, density, w2i, sigma_s, sigma_t, g, stride, towards,\n"
-    "rate, threshold, cells), the other media the paths fly through, scatter in and deposit on\n"
+    "rate, threshold, cells, colour), the other media the paths fly through, scatter in and deposit on\n"
     "(at most 7).  threshold >= 0: the medium is the grid's trilinear value >= threshold\n"
     "(density 1, a mesh volume's sharp surface, as the march reads it), else the nearest\n"
     "voxel's density.  cells: empty, or with threshold > 0 (n0-1,n1-1,n2-1) uint8, each cell\n"
@@ -23,11 +23,13 @@ const char trace_paths_doc[] =
     "or above it throughout, else 2 (kernels.cell_classes): a read saved, the same result.\n"
     "light: empty, or the light record (LIGHT_FIELDS float64) whose first scatterings the\n"
     "lobe-0 starts are: each path's incoming direction is drawn from its emitter at the start\n"
-    "(light_sample) instead of dirs.";
+    "(light_sample) instead of dirs.  colour: (0,0,0,3) float32, or the density's shape x 3:\n"
+    "each voxel's factor on sigma_s, applied at a real collision (the nearest voxel's).";
 
 #define MAX_EVENTS 1000000L   /* tentative collisions per path, whatever the medium */
 #define MAX_RATE_SPAN 1e6    /* rate x the grid's diagonal (m): tentative points across it */
 #define TRI_CHUNK 64         /* triangles per culling box */
+#define OTHER_BUFS 9         /* buffers held per other medium (other_grid) */
 #define T_MIN 1e-9           /* m: a surface closer than this along a segment is not hit */
 #define FAR 1e30             /* m: how far a segment into empty space is tested */
 #define D_PICK 0
@@ -93,6 +95,8 @@ typedef struct {
     Py_ssize_t ls[3];
     double *out;
     double *mom;              /* NULL, or (LX,LY,LZ,12) the deposits' moments */
+    const float *col;         /* NULL, or (X,Y,Z,3) each voxel's factor on ss (the scattering
+                                 colour, Medium.scatter_grid) */
 } PathGrid;
 
 typedef struct {
@@ -191,6 +195,16 @@ static inline void grid_index(const PathGrid *G, const double p[3], double idx[3
                  G->w2i[4 * r + 3];
 }
 
+/* The nearest voxel to index coordinates idx (the edge voxel on the box's face, or for NaN). */
+static void nearest_voxel(const PathGrid *G, const double idx[3], Py_ssize_t v[3]) {
+    for (int a = 0; a < 3; a++) {
+        double f = floor(idx[a] + 0.5);
+        if (!(f >= 0.0)) f = 0.0;
+        if (f > (double)(G->n[a] - 1)) f = (double)(G->n[a] - 1);
+        v[a] = (Py_ssize_t)f;
+    }
+}
+
 /* The density of grid G at index coordinates idx: with a threshold the trilinear value (0
  * outside [0, n-1] per axis, as media.trilinear) thresholded, as the march reads a mesh
  * volume; else the nearest voxel's (the edge voxel on the box's face).  0 for NaN or < 0. */
@@ -219,12 +233,7 @@ static double density_at(const PathGrid *G, const double idx[3]) {
         return v >= G->thr ? 1.0 : 0.0;
     }
     Py_ssize_t v[3];
-    for (int a = 0; a < 3; a++) {
-        double f = floor(idx[a] + 0.5);
-        if (!(f >= 0.0)) f = 0.0;   /* on the box's face (or NaN): the edge voxel */
-        if (f > (double)(G->n[a] - 1)) f = (double)(G->n[a] - 1);
-        v[a] = (Py_ssize_t)f;
-    }
+    nearest_voxel(G, idx, v);
     double rho = (double)G->dens[(v[0] * G->n[1] + v[1]) * G->n[2] + v[2]];
     return rho >= 0.0 ? rho : 0.0;   /* NaN or negative density: empty */
 }
@@ -279,6 +288,19 @@ static int in_box(const PathGrid *G, const double p[3]) {
  * returns, weighs the deposit w / mu x density x trilinear share x
  * p(d . v) on the 8 lattice points round the point (nothing where the density is 0: an
  * empty voxel adds nothing), and with G->mom the moments on one of them. */
+/* A real collision's weight at pos times the scattering colour's factor there (G->col: the
+ * nearest voxel's, negative or NaN read as 0); nothing without a colour grid.  Twin of
+ * paths._colour_factor. */
+static void apply_colour(const PathGrid *G, const double pos[3], double w[3]) {
+    if (!G->col) return;
+    double idx[3];
+    Py_ssize_t v[3];
+    grid_index(G, pos, idx);
+    nearest_voxel(G, idx, v);
+    const float *f = G->col + 3 * ((v[0] * G->n[1] + v[1]) * G->n[2] + v[2]);
+    for (int c = 0; c < 3; c++) w[c] *= f[c] > 0.0f ? (double)f[c] : 0.0;
+}
+
 static double deposit(const PathGrid *G, const double pos[3], const double w[3], const double d[3],
                       uint32_t key, long ev) {
     double idx[3];
@@ -501,6 +523,7 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
         }
         if (hit) {
             double nd[3];
+            if (inside[j]) apply_colour(G, pos, w);
             turn(uniform01(key, ev, D_TURN), uniform01(key, ev, D_TURN + 1), G->g, d, nd);
             for (int a = 0; a < 3; a++) d[a] = nd[a];
             hits++;
@@ -584,16 +607,32 @@ static int cell_buf(PyObject *obj, Buf *b, const Py_ssize_t n[3], double thr,
     return 0;
 }
 
+/* A medium's scattering colour grid: (0,0,0,3) for none (*col NULL), else the density's
+ * shape sd and 3 channels; -1 with an exception. */
+static int colour_buf(PyObject *obj, Buf *b, const Py_ssize_t sd[3], const float **col) {
+    Py_ssize_t s[4] = {-1, -1, -1, 3};
+    *col = NULL;
+    if (get_buf(obj, b, 'f', 4, s, "scatter colour") < 0) return -1;
+    if (s[0] * s[1] * s[2] == 0) return 0;
+    if (s[0] != sd[0] || s[1] != sd[1] || s[2] != sd[2]) {
+        PyErr_SetString(PyExc_ValueError, "trace_paths: the scatter colour grid must have the "
+                        "density's shape (and 3 channels), or be empty");
+        return -1;
+    }
+    *col = (const float *)b->view.buf;
+    return 0;
+}
+
 /* One of the others: (out, moments, density, w2i, sigma_s, sigma_t, g, stride, towards,
- * rate, threshold, cells), its buffers held in b[8] (released by the caller); -1 with an
- * exception. */
-static int other_grid(PyObject *item, Buf b[8], PathGrid *G) {
-    PyObject *po, *pm, *pd, *pw, *pss, *pst, *ptw, *pcl;
+ * rate, threshold, cells, colour), its buffers held in b[OTHER_BUFS] (released by the
+ * caller); -1 with an exception. */
+static int other_grid(PyObject *item, Buf b[OTHER_BUFS], PathGrid *G) {
+    PyObject *po, *pm, *pd, *pw, *pss, *pst, *ptw, *pcl, *pcol;
     double g, rate, thr;
     long stride;
     if (!PyTuple_Check(item) ||
-        !PyArg_ParseTuple(item, "OOOOOOdlOddO", &po, &pm, &pd, &pw, &pss, &pst, &g, &stride,
-                          &ptw, &rate, &thr, &pcl)) {
+        !PyArg_ParseTuple(item, "OOOOOOdlOddOO", &po, &pm, &pd, &pw, &pss, &pst, &g, &stride,
+                          &ptw, &rate, &thr, &pcl, &pcol)) {
         if (!PyErr_Occurred())
             PyErr_SetString(PyExc_ValueError, "trace_paths: each other medium is a tuple");
         return -1;
@@ -625,6 +664,7 @@ static int other_grid(PyObject *item, Buf b[8], PathGrid *G) {
                  (const double *)b[6].view.buf, so, (double *)b[0].view.buf,
                  has_mom ? (double *)b[1].view.buf : NULL, thr, cls) < 0)
         return -1;
+    if (colour_buf(pcol, &b[8], sd, &G->col) < 0) return -1;
     if (!span_ok(rate, sd, G->w2i)) {
         PyErr_SetString(PyExc_ValueError,
                         "trace_paths: the rate of tentative collisions is too high for the "
@@ -636,15 +676,15 @@ static int other_grid(PyObject *item, Buf b[8], PathGrid *G) {
 
 PyObject *trace_paths(PyObject *self, PyObject *args) {
     PyObject *po, *pd, *pw2i, *pi2w, *pss, *pst, *ptw, *pstarts, *pws, *pdirs, *pcdf, *preach,
-        *ptri, *palb, *psrc, *ppeak, *pmom, *pothers, *pcells, *plight;
+        *ptri, *palb, *psrc, *ppeak, *pmom, *pothers, *pcells, *plight, *pcol;
     double g, rate, roulette, jitter, outside, thr0;
     long stride, lo, hi, n_paths, max_hits, lobe;
     unsigned long seed;
-    if (!PyArg_ParseTuple(args, "OOOOOOdlOOOOOdlllklddldOOOOOOOdOO", &po, &pd, &pw2i, &pi2w,
+    if (!PyArg_ParseTuple(args, "OOOOOOdlOOOOOdlllklddldOOOOOOOdOOO", &po, &pd, &pw2i, &pi2w,
                           &pss, &pst, &g, &stride, &ptw, &pstarts, &pws, &pdirs, &pcdf, &rate,
                           &lo, &hi, &n_paths, &seed, &max_hits, &roulette, &jitter, &lobe,
                           &outside, &preach, &ptri, &palb, &psrc, &ppeak, &pmom, &pothers, &thr0,
-                          &pcells, &plight))
+                          &pcells, &plight, &pcol))
         return NULL;
     if (!PyTuple_Check(pothers) || PyTuple_GET_SIZE(pothers) > PATH_MEDIA - 1) {
         PyErr_SetString(PyExc_ValueError, "trace_paths: others must be a tuple of at most 7 media");
@@ -652,9 +692,9 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
     }
     Buf bo = {0}, bd = {0}, bw = {0}, bi = {0}, bss = {0}, bst = {0}, btw = {0}, bs = {0},
         bws = {0}, bdir = {0}, bc = {0}, br = {0}, bt = {0}, ba = {0}, bq = {0}, bp = {0}, bm = {0},
-        bcl = {0}, bli = {0};
-    /* per other medium: out, moments, density, w2i, sigma_s, sigma_t, towards, cells */
-    Buf ob[PATH_MEDIA - 1][8];
+        bcl = {0}, bli = {0}, bcol = {0};
+    /* per other medium: out, moments, density, w2i, sigma_s, sigma_t, towards, cells, colour */
+    Buf ob[PATH_MEDIA - 1][OTHER_BUFS];
     memset(ob, 0, sizeof ob);
     Py_ssize_t n_others = PyTuple_GET_SIZE(pothers);
     double *boxes = NULL;
@@ -735,6 +775,7 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
                  (const double *)bss.view.buf, (const double *)bst.view.buf, g, rate, stride,
                  (const double *)btw.view.buf, so, (double *)bo.view.buf, NULL, thr0, cls0) < 0)
         goto done;
+    if (colour_buf(pcol, &bcol, sd, &T.m[0].col) < 0) goto done;
     T.nm = 1;
     for (Py_ssize_t k = 0; k < n_others; k++) {
         if (other_grid(PyTuple_GET_ITEM(pothers, k), ob[k], &T.m[1 + k]) < 0) goto done;
@@ -816,9 +857,9 @@ done:
     buf_release(&bst); buf_release(&btw); buf_release(&bs); buf_release(&bws);
     buf_release(&bdir); buf_release(&bc); buf_release(&br); buf_release(&bt); buf_release(&ba);
     buf_release(&bq); buf_release(&bp); buf_release(&bm); buf_release(&bcl);
-    buf_release(&bli);
+    buf_release(&bli); buf_release(&bcol);
     for (Py_ssize_t k = 0; k < n_others; k++)
-        for (int q = 0; q < 8; q++) buf_release(&ob[k][q]);
+        for (int q = 0; q < OTHER_BUFS; q++) buf_release(&ob[k][q]);
     free(boxes);
     if (!ok) return NULL;
     Py_RETURN_NONE;

@@ -5,8 +5,10 @@ In order: channel 0 the density; per lit light 3 channels of RGB optical depth t
 multiple scattering in a forward-scattering medium per lit light 3 channels of its forward
 peak's light; with a lit world or a medium that glows (PreparedMedium.glows) 3 channels of
 world light, then with multiple scattering 3 of its multiply scattered part (the glow's light
-scattered once and more is added to them, precompute.emissionlight); last, for a medium with an emission grid only, 3 channels of its
-emitted radiance.  The world's and the emission's channels run to the end of the field
+scattered once and more is added to them, precompute.emissionlight); then, for a medium with
+an emission grid only, 3 channels of its emitted radiance; last, for a medium with a scatter
+colour grid only (PreparedMedium.scatter_grid), 3 channels of its factor on sigma_s.  The
+world's, the emission's and the scatter colour's channels run to the end of the field
 (``world_first``).
 """
 from __future__ import annotations
@@ -25,7 +27,9 @@ class FieldLayout:
     """Channel offsets in a medium's field array.  ``light_channels[i]`` is the offset of
     light i's optical depth, or None when the light is skipped (dark).  ``channels``: the
     channels every medium's field has; ``emission_channels[m]``: the offset of medium m's
-    emission grid (its field then has ``channels + 3``), or None.  ``beam_channels[i]``
+    emission grid (its field then has ``channels + 3``), or None; ``scatter_channels[m]``:
+    that of its scatter colour grid (3 more channels, after the emission's), or None.
+    ``beam_channels[i]``
     (multiple scattering on, some medium with a forward peak): the offset of light i's
     forward peak's light (W/m^2, ``peak_light``: what has scattered into the peak and not
     out of it, spread sideways), first the optical depth through the delta-scaled media
@@ -37,6 +41,13 @@ class FieldLayout:
     ambient_multiple_channel: Optional[int] = None
     emission_channels: Optional[List[Optional[int]]] = None
     beam_channels: Optional[List[Optional[int]]] = None
+    scatter_channels: Optional[List[Optional[int]]] = None
+
+    def medium_channels(self, m: int) -> int:
+        """The channels of medium m's field: ``channels`` and its own grids' after them."""
+        return self.channels + 3 * sum(
+            ch is not None and ch[m] is not None
+            for ch in (self.emission_channels, self.scatter_channels))
 
     @property
     def world_first(self) -> Optional[int]:
@@ -84,6 +95,8 @@ def field_layout(media: Sequence[PreparedMedium], lights, world_color, multiple:
         if multiple:
             amb_ms = c
             c += 3
-    return FieldLayout(chans, amb, c, amb_ms,
-                       [c if pm.emission_grid is not None else None for pm in media],
-                       beams if any(b is not None for b in beams) else None)
+    emission = [c if pm.emission_grid is not None else None for pm in media]
+    scatter = [None if pm.scatter_grid is None else c + (3 if e is not None else 0)
+               for pm, e in zip(media, emission)]
+    return FieldLayout(chans, amb, c, amb_ms, emission,
+                       beams if any(b is not None for b in beams) else None, scatter)

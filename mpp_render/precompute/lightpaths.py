@@ -292,7 +292,8 @@ def _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
     others = tuple(PathMedium(plat.density, np.asarray(plat.w2i, np.float64),
                               np.asarray(opm.sigma_s, np.float64),
                               np.asarray(opm.sigma_t, np.float64), float(opm.g), plat.stride,
-                              plat.towards, plat.rate, plat.threshold)
+                              plat.towards, plat.rate, plat.threshold,
+                              _scatter(opm, plat))
                    for opm, plat in partners)
     totals = np.array([float(item[1].sum()) for item in sets])
     acc = None
@@ -308,11 +309,21 @@ def _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
                          np.ascontiguousarray(dirs), cdf, lat.rate, n_k, int(seed) + 104729 * k,
                          max_collisions=max_collisions, jitter=jitter, lobe=lobe,
                          start_source=source, start_peak=peak, moments=moments,
-                         others=others, threshold=lat.threshold, light=light, **extra)
+                         others=others, threshold=lat.threshold, light=light,
+                         scatter=_scatter(pm, lat), **extra)
         got = kernels.trace_paths_media(inp, threads=worker_count(threads),
                                         should_cancel=should_cancel)
         acc = got if acc is None else [a + b for a, b in zip(acc, got)]
     return acc
+
+
+def _scatter(pm, lat) -> Optional[np.ndarray]:
+    """The scatter colour grid (PreparedMedium.scatter_grid) the paths of ``pm`` read on
+    its path lattice ``lat``, whose density is the medium's own voxels; None without one."""
+    sg = pm.scatter_grid
+    if sg is None or sg.shape[:3] != lat.density.shape:
+        return None
+    return sg
 
 
 def _far_multiple(pm, sets, camera, n_paths, seed, threads, should_cancel, around,

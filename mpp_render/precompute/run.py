@@ -97,11 +97,13 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
     n_ambient = 0
     n_glow = 0
     for mi, pm in enumerate(media):
-        cm = c if pm.emission_grid is None else c + 3
+        cm = layout.medium_channels(mi)
         f = np.zeros(pm.grid.shape + (cm,), np.float32)
         f[..., 0] = pm.grid
-        if pm.emission_grid is not None:
-            f[..., c:c + 3] = pm.emission_grid
+        for chans_of, grid in ((layout.emission_channels, pm.emission_grid),
+                               (layout.scatter_channels, pm.scatter_grid)):
+            if grid is not None:
+                f[..., chans_of[mi]:chans_of[mi] + 3] = grid
         flat = needed_flat(pm)
         n_pts += len(flat)
         pts = grid_points(pm, flat) if shadowed or fog is not None else None

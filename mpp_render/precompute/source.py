@@ -39,17 +39,21 @@ def near_light_cells(pm: PreparedMedium, light: Light, stride: int, shape) -> np
     return np.ravel_multi_index(tuple(g.reshape(-1, 3).T), shape)
 
 
-def first_scattering(pm: PreparedMedium, rho, e, tau, peak=None, trans=None) -> np.ndarray:
+def first_scattering(pm: PreparedMedium, rho, e, tau, peak=None, trans=None,
+                     colour=None) -> np.ndarray:
     """The power per volume (W/m^3, (N,3)) the light's unscattered beam scatters at points of
     density ``rho`` (N,), irradiance ``e`` (N,3, W/m^2) and optical depth ``tau`` (N,3) from
     the light: Q = rho sigma_s E exp(-tau), where every multiply scattered path starts; with
     the forward peak's light ``peak`` (N,3, W/m^2, ``peak_light``) beside the unscattered
     light, Q = rho sigma_s (E exp(-tau) + peak) (``pm`` then the delta-scaled medium).
     ``trans`` (N,3): the transmittance to use instead of exp(-tau) (a lamp's disc mean,
-    lights.disc_transmittance)."""
+    lights.disc_transmittance).  ``colour`` (N,3): the factor on sigma_s at the points
+    (PreparedMedium.scatter_at), or None for the medium's one colour."""
     light = e * (np.exp(-np.asarray(tau, np.float64)) if trans is None else trans)
     if peak is not None:
         light = light + np.asarray(peak, np.float64)
+    if colour is not None:
+        light = light * np.maximum(np.asarray(colour, np.float64), 0.0)
     return (np.asarray(rho)[:, None] * pm.sigma_s[None, :]) * light
 
 
@@ -217,7 +221,7 @@ def cell_mean_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel:
              / point_falloff(r2, light.radius))[:, None]
     tau = v[:, channel:channel + 3]
     q = first_scattering(pm, rho, e, tau, None if beam is None else v[:, beam:beam + 3],
-                         _disc(disc, light, pts, tau, pm))
+                         _disc(disc, light, pts, tau, pm), pm.scatter_at(flat=flat))
     return q.reshape(len(cells), len(offs), 3).mean(axis=1)
 
 
@@ -273,7 +277,8 @@ def surface_band_source(pm: PreparedMedium, fld: np.ndarray, light: Light, chann
         pts = pm.to_world(idx[live])
         _, e = incident(light, pts)
         tau = depth(light, pts)
-        q[live] = first_scattering(pm, rho[live], e, tau, None, _disc(disc, light, pts, tau, pm))
+        q[live] = first_scattering(pm, rho[live], e, tau, None, _disc(disc, light, pts, tau, pm),
+                                   pm.scatter_at(idx=idx[live]))
     return (flat, q.reshape(len(flat), len(CELL_POINTS), 3).mean(axis=1), deep,
             cell_depth_factor(fld[..., channel:channel + 3], deep))
 
@@ -376,7 +381,8 @@ def restricted_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel
             tau = v[live, channel:channel + 3]
             q[live] = first_scattering(pm, rho[live], e, tau,
                                        None if beam is None else v[live, beam:beam + 3],
-                                       _disc(disc, light, pts, tau, pm))
+                                       _disc(disc, light, pts, tau, pm),
+                                       pm.scatter_at(flat=a * plane + np.flatnonzero(live)))
         if band is not None:
             here = (band[2] >= a * plane) & (band[2] < b * plane)
             q[band[2][here] - a * plane] *= band[3][here]

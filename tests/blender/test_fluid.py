@@ -163,7 +163,13 @@ def medium_record(m):
             "origin_world": (m.index_to_world @ [0, 0, 0, 1])[:3].tolist(),
             "cell": np.linalg.norm(m.index_to_world[:3, :3], axis=0).tolist(),
             "sigma_s": np.asarray(m.sigma_s).tolist(), "sigma_a": np.asarray(m.sigma_a).tolist(),
-            "emission": np.asarray(m.emission).tolist()}
+            "emission": np.asarray(m.emission).tolist(),
+            "scatter": None if m.scatter_grid is None else {
+                # the factor on sigma_s (Medium.scatter_grid) at the densest cell, and its
+                # density-weighted mean (1: sigma_s is the mean)
+                "peak": m.scatter_grid[peak].tolist(),
+                "mean": (np.einsum("xyz,xyzc->c", d.astype(np.float64), m.scatter_grid)
+                         / d.sum(dtype=np.float64)).tolist()}}
 
 
 def report(tag, desc):
@@ -364,6 +370,37 @@ def test_noise_flame_heat_temperature_and_colour(tmp_path):
     lo_res = only(r["no_noise_file"])
     np.testing.assert_allclose(lo_res["peak_world"], cell_centre((8, 8, 8)), atol=1e-9)
     warned(r["no_noise_file"], "'Smoke'", "fluid_noise_0001.vdb", "not found")
+
+
+def test_smoke_colour_varies_per_voxel(tmp_path):
+    """Color Attribute 'color' multiplies the Color by the smoke colour voxel by voxel
+    (Medium.scatter_grid over the density-weighted mean): two puffs, orange and blue."""
+    body = """
+        mat = t.volume_material(color=(1.0, 1.0, 1.0), color_attribute="color")
+        ob = t.domain(CACHE, mat)
+        a = t.plume(t.RES, (8, 8, 8))
+        b = t.plume(t.RES, (24, 8, 8))
+        dens = a + b
+        t.write_frame(CACHE + "/data/fluid_data_0001.vdb",
+                      {"density": dens, "color_r": 0.9 * a + 0.1 * b,
+                       "color_g": 0.5 * a + 0.4 * b, "color_b": 0.1 * a + 0.8 * b})
+        t.report("two", t.translate(1))
+    """
+    r = run(body, tmp_path)
+    rec = r["two"]
+    assert not [w for w in rec["warnings"] if "colour" in w or "Color" in w], rec["warnings"]
+    m = only(rec)
+    sc = m["scatter"]
+    assert sc is not None
+    np.testing.assert_allclose(sc["mean"], [1.0, 1.0, 1.0], rtol=1e-4)
+    # sigma_s: 5 x the mean colour; the puffs are alike, so the mean is about the average
+    np.testing.assert_allclose(m["sigma_s"], 5.0 * np.array([0.5, 0.45, 0.45]), rtol=0.05)
+    # the densest cell lies in one puff: its colour over the mean, orange or blue
+    colour = np.array(sc["peak"]) * np.array(m["sigma_s"]) / 5.0
+    assert (np.allclose(colour, [0.9, 0.5, 0.1], atol=0.02)
+            or np.allclose(colour, [0.1, 0.4, 0.8], atol=0.02)), colour
+    # the extinction is the density's, whatever the colour (a black Absorption Color)
+    np.testing.assert_allclose(np.add(m["sigma_s"], m["sigma_a"]), 5.0, rtol=1e-5)
 
 
 def test_domain_shading_without_material_with_uniform_shaders_and_emission(tmp_path):

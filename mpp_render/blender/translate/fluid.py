@@ -40,8 +40,8 @@ copied):
   fill the hull of the grids the material reads (Cycles builds the volume's bounds from
   them), approximated by the non-zero cells of the first; a material that reads no grid
   renders nothing.  Only the grids the material needs are read.  A Principled Volume's Color
-  Attribute 'color' tints its scattering colour by the smoke colour averaged over the density
-  (one colour per domain: a warning says when it varies).  Without a material, or without a
+  Attribute 'color' multiplies its Color by the smoke colour per voxel (materials.py,
+  Medium.scatter_grid).  Without a material, or without a
   volume shader, a domain renders nothing (Cycles gives a mesh domain the default *surface*
   shader).  Inputs node trees drive (fields) are evaluated at the medium's cells by
   ``vdb.block_medium``, Generated mapping the texture space to [0, 1]^3 and Attribute /
@@ -79,11 +79,8 @@ from ...scene import Medium
 from .fluidcache import (DATA_GRIDS, NOISE_GRIDS, cache_file, cache_frame, place,
                          read_cache_file)
 from .vdb import block_medium, emission_grids, missing_strength_grids, translation
-from .convert import scalar
-from .materials import (ClosureInputs, VolumeCoefficients, field_grids, merge_by_field,
-                        principled_volume, volume_shading)
-from .shadergraph import Field, FieldContext
-from .nodes import closures, output_node
+from .materials import VolumeCoefficients, field_grids, merge_by_field, volume_shading
+from .shadergraph import FieldContext
 
 STANDARD_GRIDS = ("density", "flame", "heat", "temperature", "color")
 SCALAR_GRIDS = ("density", "flame", "heat", "temperature")
@@ -92,7 +89,6 @@ FILE_GRIDS_FOR = {"density": {"density"}, "flame": {"flame"}, "temperature": {"f
                   "heat": {"heat"}, "color": {"color_r", "color_g", "color_b", "density"}}
 FLAME_CUTOFF = 0.01      # flame below this has no temperature (rna_fluid.cc)
 HEAT_SCALE = 0.5         # heat_grid = Mantaflow heat x 0.5 (rna_fluid.cc)
-COLOUR_SPREAD = 0.05     # relative spread of the smoke colour above which a warning is given
 
 
 def fluid_domain(ob):
@@ -244,23 +240,20 @@ class FluidTranslator:
             self.warnings.append(f"{where}: frame {self.frame} is outside its cache frames "
                                  f"{start}..{end}; nothing rendered (as Cycles)")
             return []
-        colour_nodes = principled_colour_attributes(mat)
         wanted = {co.attribute for co in shading if co.attribute in STANDARD_GRIDS}
         wanted |= {n for n in emission_grids(shading) + field_grids(shading)
-                   if n in SCALAR_GRIDS}
-        if colour_nodes:
-            wanted.add("color")
+                   if n in STANDARD_GRIDS}
         grids = self._grids(ob, dse, where, wanted)
         if grids is None:
             return []
-        if colour_nodes:  # handled here: drop materials.py's "not supported" for them
-            local = [w for w in local if not ("Color Attribute" in w and "is not supported" in w)]
+        if "color" in field_grids(shading) and "color" not in grids.grids:
+            self.warnings.append(f"{mwhere}: Color Attribute 'color': the domain has no colour "
+                                 "grids at this frame; using the Color input")
         self.warnings.extend(local)
         for attr, socket in missing_strength_grids(shading, lambda n: n in SCALAR_GRIDS):
             self.warnings.append(f"{mwhere}: the domain has no scalar grid '{attr}' (its grids: "
                                  + ", ".join(SCALAR_GRIDS) + f") for the attribute linked into "
                                  f"'{socket}'; that emission is 0 (as in Cycles)")
-        shading = self._tint(shading, colour_nodes, grids, mwhere)
         lo, hi = texture_box(ob.data)
         self._fields = FieldContext((lo, hi), self.frame)
         return self._media(ob, shading, grids, lo, hi, np.asarray(world_matrix, np.float64),
@@ -371,38 +364,6 @@ class FluidTranslator:
                                      "an adaptive domain?); only the part inside is used")
         return blocks
 
-    def _tint(self, shading, colour_nodes, grids: DomainGrids, where):
-        """Scattering colour x the mean smoke colour for the Principled Volumes whose Color
-        Attribute is 'color' (see ``principled_colour_attributes``)."""
-        if not colour_nodes:
-            return shading
-        colour = grids.grids.get("color")
-        density = grids.grids.get("density")
-        if colour is None or density is None or not np.any(density > 0):
-            self.warnings.append(f"{where}: Color Attribute 'color': the domain has no colour "
-                                 "grids at this frame; using the Color input")
-            return shading
-        w = np.where(np.isfinite(density) & (density > 0), density, 0.0).astype(np.float64)
-        c = np.nan_to_num(colour.astype(np.float64), nan=0.0, posinf=0.0, neginf=0.0)
-        mean = np.einsum("xyz,xyzc->c", w, c) / w.sum()
-        spread = np.sqrt(np.einsum("xyz,xyzc->c", w, (c - mean) ** 2) / w.sum())
-        if np.max(spread) > COLOUR_SPREAD * max(float(np.max(mean)), 1e-6):
-            self.warnings.append(f"{where}: the smoke colour varies across the domain; its "
-                                 "density-weighted mean (" + ", ".join(f"{v:.3f}" for v in mean)
-                                 + ") is used everywhere")
-        by_attr = {(co.attribute, co.from_attribute_node): co for co in shading}
-        for weight, base, attr, linked in colour_nodes:
-            co = by_attr.get((attr, linked))
-            if co is None:
-                continue
-            tinted = principled_volume(base["color"] * mean, base["density"], base["g"],
-                                       base["absorption"], attribute=attr)
-            plain = principled_volume(base["color"], base["density"], base["g"],
-                                      base["absorption"], attribute=attr)
-            co.sigma_s = np.maximum(co.sigma_s + weight * (tinted.sigma_s - plain.sigma_s), 0.0)
-            co.sigma_a = np.maximum(co.sigma_a + weight * (tinted.sigma_a - plain.sigma_a), 0.0)
-        return shading
-
     def _media(self, ob, shading: List[VolumeCoefficients], grids: DomainGrids, lo, hi,
                world_matrix, clip, where) -> List[Medium]:
         media: List[Medium] = []
@@ -441,7 +402,7 @@ class FluidTranslator:
             base_name, block = media[0].name, lattices[0]
         else:
             found = [n for n in emission_grids(uniform) + field_grids(uniform)
-                     if blocks.get(n) is not None]
+                     if n in SCALAR_GRIDS and blocks.get(n) is not None]
             if not found:
                 self.warnings.append(f"{where}: its material reads no smoke grid (density, flame, "
                                      "heat or temperature) that holds data at this frame; "
@@ -495,7 +456,8 @@ class FluidTranslator:
 
 
 class _Blocks:
-    """The scalar grids of one domain frame as vdb.py's grid blocks (values, ijk origin 0,
+    """The smoke grids of one domain frame ('color' (X, Y, Z, 3) where the frame has it) as
+    vdb.py's grid blocks (values, ijk origin 0,
     index->object 4x4 of their cells in the texture space), sanitised and clipped once each,
     with warnings.  A domain has every smoke grid (Cycles reads one it lacks as zeros), so a
     grid missing from the frame -- e.g. flame without fire, or an empty grid the cache file
@@ -513,8 +475,8 @@ class _Blocks:
         return block if block is not None and np.any(block[0] > 0) else None
 
     def lattice(self, name):
-        if name not in SCALAR_GRIDS:
-            return None
+        if name not in STANDARD_GRIDS or (name == "color" and "color" not in self.grids.grids):
+            return None   # no colour grids: Cycles leaves the Color as it is
         if name in self._done:
             return self._done[name]
         warn = self.owner.warnings.append
@@ -529,7 +491,7 @@ class _Blocks:
             if bad:
                 warn(f"{self.where}: {bad} voxels of grid '{name}' in {src} were NaN, infinite or "
                      "negative; set to 0")
-            if self.clip > 0.0:
+            if self.clip > 0.0 and name != "color":
                 values = np.where(values < self.clip, np.float32(0.0), values)
         if not np.any(values > 0):
             warn(f"{self.where}: grid '{name}' holds no data at frame {frame} ({src}); it "
@@ -569,33 +531,3 @@ def _support_box(src, dst):
     if np.any(last < first):
         return None
     return first, last
-
-
-def principled_colour_attributes(material) -> list:
-    """The Principled Volume closures of ``material`` whose Color Attribute is 'color':
-    ``(weight, inputs, density attribute, from an Attribute node)`` with ``inputs`` the
-    constant values {color, density, g, absorption} as materials.py reads them."""
-    tree = getattr(material, "node_tree", None)
-    out_node = output_node(tree) if tree is not None else None
-    if out_node is None or out_node.inputs.get("Volume") is None:
-        return []
-    found = []
-    for c in closures(out_node.inputs["Volume"]):
-        node = c.node
-        if node.bl_idname != "ShaderNodeVolumePrincipled":
-            continue
-        quiet: List[str] = []
-        inp = ClosureInputs(c, "", quiet)
-        if inp.raw("Color Attribute")[0] != "color":
-            continue
-        dens, linked = inp.raw("Density", allow_attribute=True, allow_field=True)
-        if isinstance(dens, Field):
-            dens = 1.0  # materials.py: coefficients per unit of the density field
-        attr = inp.raw("Density Attribute")[0] or None
-        if linked is not None and attr is not None:
-            linked = None  # materials.py then uses Density 1 with the Density Attribute
-            dens = 1.0
-        base = {"color": inp.color("Color"), "density": scalar(dens),
-                "g": inp.number("Anisotropy"), "absorption": inp.color("Absorption Color")}
-        found.append((c.weight, base, linked or attr, linked is not None))
-    return found

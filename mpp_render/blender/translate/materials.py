@@ -36,9 +36,15 @@ needed, at a medium's voxels, by ``realise``):
   :class:`FieldEmissionTerm`, colour x strength per voxel; Temperature (with Blackbody
   Intensity > 0): a :class:`FieldBlackbodyTerm`, T = field x the Temperature Attribute grid
   where it exists.
-* Color / Absorption Color: the MPP medium has one set of coefficients, so a
-  :class:`ColourMean` computes them from the fields' density-weighted means over the voxels
-  (with a warning giving the mean).
+* Color / Absorption Color: a :class:`ColourMean` evaluates the closure's coefficients at
+  every voxel.  The medium's coefficients are their density-weighted means; the scattering
+  varies per voxel through its factor on that mean (``Realised.scatter_grid``,
+  Medium.scatter_grid), the extinction does not: where it varies (an Absorption Color field,
+  a Volume Scatter's or Absorption's colour field) a warning gives the mean the medium
+  uses.  A Principled Volume's Color field with a constant black Absorption Color leaves the
+  extinction the density itself, so it renders exactly.  Its Color Attribute (a grid, e.g.
+  a smoke domain's 'color') multiplies Color the same way, per voxel, where the object has
+  that grid.
 * Any other input (Anisotropy, Blackbody Intensity, a surface's inputs, ...) driven by a
   field that varies in space takes the socket's own value, with a warning.  A field that
   does not vary (Math on constants) is a constant; nodes a field cannot evaluate are named
@@ -51,7 +57,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Callable, Dict, List, Optional, Tuple
+from typing import Callable, Dict, List, NamedTuple, Optional, Tuple
 
 import numpy as np
 
@@ -67,16 +73,20 @@ HG = "HENYEY_GREENSTEIN"
 
 @dataclass
 class ColourMean:
-    """A closure whose Color or Absorption Color a node tree drives.  The medium has one set
-    of coefficients, so ``build(means)`` -> (sigma_s, sigma_a) per unit density (1/m) is
-    called with ``means`` (input name -> RGB) the density-weighted means of ``fields`` (input
-    name -> Field) over the voxels (``realise``).  ``g``: the closure's anisotropy;
-    ``weight``: the Mix Shader factors."""
+    """A closure whose Color or Absorption Color varies in space: ``build(colours)`` ->
+    (sigma_s, sigma_a) per unit density (1/m) with ``colours`` (every input name -> RGB, or
+    (N, 3) per voxel): the constants ``consts``, the values of ``fields`` (input name ->
+    Field), each times the grid ``attributes`` names for it where that grid exists (a
+    Principled Volume's Color Attribute: Cycles multiplies Color by it, and leaves Color as
+    it is where the object has no such grid) (``realise``).  ``g``: the closure's
+    anisotropy; ``weight``: the Mix Shader factors."""
 
     fields: Dict[str, Field]
     build: Callable[[Dict[str, np.ndarray]], Tuple[np.ndarray, np.ndarray]]
     g: float = 0.0
     weight: float = 1.0
+    consts: Dict[str, np.ndarray] = field(default_factory=dict)
+    attributes: Dict[str, str] = field(default_factory=dict)
 
     def scaled(self, w: float) -> "ColourMean":
         return dataclasses.replace(self, weight=self.weight * w)
@@ -108,15 +118,21 @@ class VolumeCoefficients:
     colour_means: List[ColourMean] = field(default_factory=list)
 
 
+def principled_coefficients(color, density: float, absorption_color):
+    """(sigma_s, sigma_a) 1/m of Cycles' Principled Volume for RGB ``color`` and
+    ``absorption_color`` (arrays (..., 3), broadcast) and a density >= 0."""
+    c = np.asarray(color, np.float64)
+    ac = np.sqrt(np.maximum(np.asarray(absorption_color, np.float64), 0.0))
+    absorption = np.maximum(1.0 - c, 0.0) * np.maximum(1.0 - ac, 0.0)
+    return np.maximum(c * density, 0.0), absorption * density
+
+
 def principled_volume(color, density, anisotropy, absorption_color, emission=(0.0, 0.0, 0.0),
                       attribute: Optional[str] = "density") -> VolumeCoefficients:
     """Cycles' Principled Volume coefficients (see the module docstring)."""
-    c = rgb(color)
-    d = max(float(density), 0.0)
-    ac = np.sqrt(np.maximum(rgb(absorption_color), 0.0))
-    absorption = np.maximum(1.0 - c, 0.0) * np.maximum(1.0 - ac, 0.0)
-    return VolumeCoefficients(attribute, np.maximum(c * d, 0.0), absorption * d,
-                              float(anisotropy), rgb(emission))
+    ss, sa = principled_coefficients(rgb(color), max(float(density), 0.0),
+                                     rgb(absorption_color))
+    return VolumeCoefficients(attribute, ss, sa, float(anisotropy), rgb(emission))
 
 
 def default_volume() -> VolumeCoefficients:
@@ -206,13 +222,16 @@ def _colours(inp: "ClosureInputs", names) -> Tuple[Dict[str, np.ndarray], Dict[s
     return consts, fields
 
 
-def _with_colours(co: "VolumeCoefficients", consts, fields, build, g: float):
+def _with_colours(co: "VolumeCoefficients", consts, fields, build, g: float,
+                  attributes: Optional[Dict[str, str]] = None):
     """``co`` with the coefficients ``build(colours)`` -> (sigma_s, sigma_a): now when every
-    colour is constant, else deferred to the fields' means (:class:`ColourMean`)."""
-    if not fields:
+    colour is constant and no grid multiplies one (``attributes``: input name -> grid name),
+    else deferred to the voxels (:class:`ColourMean`)."""
+    if not fields and not attributes:
         co.sigma_s, co.sigma_a = build(consts)
         return co
-    co.colour_means = [ColourMean(fields, lambda means: build({**consts, **means}), g)]
+    co.colour_means = [ColourMean(fields, build, g, consts=consts,
+                                  attributes=dict(attributes or {}))]
     return co
 
 
@@ -230,19 +249,17 @@ def _volume_closure(c: Closure, where, warnings):
                             f"Attribute '{attr}'; using Density 1")
             linked_attr = None
         color_attr = inp.raw("Color Attribute")[0]
-        if color_attr:
-            warnings.append(f"{where}: Color Attribute '{color_attr}' of {describe(node)} is not "
-                            "supported; using its Color")
         emission, terms = _emission(inp, "Emission Color", "Emission Strength")
         g = inp.number("Anisotropy")
         consts, fields = _colours(inp, ("Color", "Absorption Color"))
 
         def build(colours):
-            pv = principled_volume(colours["Color"], d, g, colours["Absorption Color"])
-            return pv.sigma_s, pv.sigma_a
+            return principled_coefficients(colours["Color"], max(float(d), 0.0),
+                                           colours["Absorption Color"])
 
         co = _with_colours(VolumeCoefficients(linked_attr or attr, g=g, emission=rgb(emission)),
-                           consts, fields, build, g)
+                           consts, fields, build, g,
+                           {"Color": color_attr} if color_attr else None)
         co.from_attribute_node = linked_attr is not None
         co.density_field = dfield
         co.emission_terms = terms
@@ -429,6 +446,7 @@ def field_grids(shading: List[VolumeCoefficients]) -> List[str]:
         fields = [co.density_field] if co.density_field is not None else []
         for m in co.colour_means:
             fields += list(m.fields.values())
+            names += list(m.attributes.values())
         for t in co.emission_terms:
             if isinstance(t, FIELD_TERMS):
                 fields += t.fields()
@@ -436,6 +454,13 @@ def field_grids(shading: List[VolumeCoefficients]) -> List[str]:
         for f in fields:
             names += f.attributes()
     return list(dict.fromkeys(names))
+
+
+def colour_grids(shading: List[VolumeCoefficients]) -> List[str]:
+    """The grids that multiply colours in ``shading`` (Color Attributes), in order, once
+    each: a reader may give them as vector grids (X, Y, Z, 3)."""
+    return list(dict.fromkeys(a for co in shading for m in co.colour_means
+                              for a in m.attributes.values()))
 
 
 def weighted_mean(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
@@ -447,18 +472,35 @@ def weighted_mean(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
     return (w @ v) / total if total > 0.0 else v.mean(axis=0)
 
 
+class Realised(NamedTuple):
+    """Closures on a lattice (``realise``): ``density`` float32 (shape), ``coefficients``
+    (no fields left), ``emission_grid`` None or float32 shape + (3,) (W/(m^3 sr)) and
+    ``scatter_grid`` None or float32 shape + (3,), the factor on ``coefficients.sigma_s``
+    per point (Medium.scatter_grid)."""
+    density: np.ndarray
+    coefficients: VolumeCoefficients
+    emission_grid: Optional[np.ndarray]
+    scatter_grid: Optional[np.ndarray]
+
+
+# Relative spread of the extinction over the voxels above which realise warns that a colour
+# field's extinction is taken as its mean (float32 rounding of the fields is far below it).
+EXTINCTION_SPREAD = 1e-3
+
+
 def realise(co: VolumeCoefficients, base, sample, grid_of, where: str, warnings: List[str],
-            how: Optional[str] = "density-weighted mean"):
-    """Closures ``co`` on a lattice: ``(density, coefficients, emission grid or None)``.
+            how: Optional[str] = "density-weighted mean") -> Realised:
+    """Closures ``co`` on a lattice (:class:`Realised`).
 
     ``base``: the density before the fields (a mesh's inside mask, a grid's values), float32;
     ``sample(field)``: the field's values at the lattice points (``shadergraph.Sampler``);
     ``grid_of(name)``: a grid's values there or None.  The density is ``base`` x max(density
-    field, 0); the coefficients add the colour means (:class:`ColourMean`, means weighted by
-    that density, each varying colour named in a warning with its ``how`` unless that is
-    None); the emission grid
-    (shape + (3,), W/(m^3 sr)) sums the field emission terms.  The coefficients returned have
-    no fields left."""
+    field, 0).  The colour fields (:class:`ColourMean`) give each point's coefficients; the
+    medium's are their means weighted by that density, the scattering's factor on its mean
+    per point the scatter grid (None where it is 1 everywhere); the extinction is the mean
+    (each colour field that changes it beyond EXTINCTION_SPREAD named in a warning with its
+    ``how``, unless that is None).  The emission grid (shape + (3,), W/(m^3 sr)) sums the
+    field emission terms."""
     density = np.asarray(base, np.float32)
     if co.density_field is not None:
         f = np.maximum(np.nan_to_num(np.asarray(sample(co.density_field), np.float64)), 0.0)
@@ -466,27 +508,66 @@ def realise(co: VolumeCoefficients, base, sample, grid_of, where: str, warnings:
     out = dataclasses.replace(co, density_field=None, colour_means=[],
                               emission_terms=[t for t in co.emission_terms
                                               if not isinstance(t, FIELD_TERMS)])
+    scatter = None
     if co.colour_means:
-        sw = float(np.mean(out.sigma_s))
-        g_sum = out.g * sw
-        for m in co.colour_means:
-            means = {}
-            for name, f in m.fields.items():
-                means[name] = weighted_mean(sample(f), density)
-                if how is not None:
-                    warnings.append(f"{where}: {f.describe()} varies per voxel; the MPP "
-                                    f"engine uses its {how} {fmt(tuple(means[name]))}")
-            ss, sa = m.build(means)
-            out.sigma_s = out.sigma_s + m.weight * np.maximum(ss, 0.0)
-            out.sigma_a = out.sigma_a + m.weight * np.maximum(sa, 0.0)
-            s = m.weight * float(np.mean(ss))
-            g_sum += s * m.g
-            sw += s
-        out.g = g_sum / sw if sw > 0.0 else out.g
+        out, scatter = _colour_fields(co, out, density, sample, grid_of, where, warnings, how)
     grid = None
     for t in co.emission_terms:
         if isinstance(t, FIELD_TERMS):
             per = t.per_voxel(sample, grid_of)
             per = np.broadcast_to(per, density.shape + (3,))
             grid = per.astype(np.float32) if grid is None else grid + per
-    return density, out, grid
+    return Realised(density, out, grid, scatter)
+
+
+def _per_point(values, shape) -> np.ndarray:
+    """float64 (N, 3) of a colour's ``values`` at the lattice points of ``shape``: RGB, a
+    value per point (grey), or per point an RGB (NaN and inf read as 0)."""
+    v = np.nan_to_num(np.asarray(values, np.float64), posinf=0.0, neginf=0.0)
+    if v.shape == tuple(shape):   # a value into a colour: grey
+        v = v[..., None]
+    return np.broadcast_to(v, tuple(shape) + (3,)).reshape(-1, 3)
+
+
+def _colour_fields(co: VolumeCoefficients, out: VolumeCoefficients, density, sample, grid_of,
+                   where: str, warnings: List[str], how: Optional[str]):
+    """(``out`` with the colour fields' mean coefficients and anisotropy added, the scatter
+    grid or None) for ``realise``."""
+    n = density.size
+    weights = density.reshape(-1)
+    ss = np.broadcast_to(out.sigma_s, (n, 3)).astype(np.float64)
+    sa = np.broadcast_to(out.sigma_a, (n, 3)).astype(np.float64)
+    sw = float(np.mean(out.sigma_s))
+    g_sum = out.g * sw
+    for m in co.colour_means:
+        colours = dict(m.consts)
+        for name, f in m.fields.items():
+            colours[name] = _per_point(sample(f), density.shape)
+        for name, attr in m.attributes.items():
+            grid = grid_of(attr)
+            if grid is not None:
+                colours[name] = colours[name] * _per_point(grid, density.shape)
+        ssm, sam = m.build(colours)
+        ssm = m.weight * np.maximum(np.broadcast_to(ssm, (n, 3)), 0.0)
+        ss += ssm
+        sa += m.weight * np.maximum(np.broadcast_to(sam, (n, 3)), 0.0)
+        s = float(np.mean(weighted_mean(ssm, weights)))
+        g_sum += s * m.g
+        sw += s
+    out.sigma_s, out.sigma_a = weighted_mean(ss, weights), weighted_mean(sa, weights)
+    out.g = g_sum / sw if sw > 0.0 else out.g
+    if how is not None:
+        st, mean_st = (ss + sa)[weights > 0], out.sigma_s + out.sigma_a
+        if st.size and np.max(np.abs(st - mean_st)) > EXTINCTION_SPREAD * max(
+                float(np.max(mean_st)), 1e-30):
+            names = ", ".join([f.describe() for m in co.colour_means for f in m.fields.values()]
+                              + [f"Color Attribute '{a}'" for m in co.colour_means
+                                 for a in m.attributes.values()])
+            warnings.append(f"{where}: the extinction that {names} gives varies per voxel; "
+                            f"the MPP engine uses its {how} {fmt(tuple(mean_st))} /m per unit "
+                            "density (the scattering colour varies per voxel)")
+    mean = np.where(out.sigma_s > 0.0, out.sigma_s, 1.0)
+    factor = np.where(out.sigma_s > 0.0, ss / mean, 1.0)
+    if np.all(np.abs(factor - 1.0) <= 1e-6):
+        return out, None
+    return out, factor.reshape(density.shape + (3,)).astype(np.float32)

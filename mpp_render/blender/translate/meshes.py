@@ -3,8 +3,8 @@
 A volume mesh's medium is its interior on a voxel lattice in object space (voxelise.py).
 Closures whose inputs node trees drive (fields, materials.py) are evaluated at the voxel
 centres (materials.realise): the density grid is the inside mask x the density field, the
-emission fields give ``Medium.emission_grid`` (inside the mesh only), varying colours their
-density-weighted means.  A mesh has no grids, so Attribute and Volume Info nodes read 0 (as
+emission fields give ``Medium.emission_grid`` (inside the mesh only), a varying scattering
+colour ``Medium.scatter_grid``.  A mesh has no grids, so Attribute and Volume Info nodes read 0 (as
 in Cycles).  Generated coordinates map the mesh's texture space (its bounding box unless set
 otherwise) to [0, 1]^3.  Closures with different density fields become one medium each.
 
@@ -144,11 +144,11 @@ class MeshTranslator:
         sampler = fields.sampler(shape, i2o, world_matrix)
         media = []
         for i, coeff in enumerate(groups):
-            density, grid, fielded = mask, None, has_fields(coeff)
+            density, grid, scatter, fielded = mask, None, None, has_fields(coeff)
             varies = coeff.density_field is not None
             if fielded:
-                density, coeff, grid = realise(coeff, mask, sampler, lambda name: None, where,
-                                               self.warnings)
+                density, coeff, grid, scatter = realise(coeff, mask, sampler, lambda name: None,
+                                                        where, self.warnings)
                 if grid is not None:
                     grid = (grid * mask[..., None]).astype(np.float32)
                     if not np.any(grid > 0):
@@ -160,7 +160,8 @@ class MeshTranslator:
                                 density=density, index_to_world=world_matrix @ i2o,
                                 sigma_s=coeff.sigma_s, sigma_a=coeff.sigma_a,
                                 g=float(coeff.g), emission=coeff.emission,
-                                source=FIELD_SOURCE if varies else "MESH", emission_grid=grid))
+                                source=FIELD_SOURCE if varies else "MESH", emission_grid=grid,
+                                scatter_grid=scatter))
         return media
 
     def _surfaces(self, ob, verts, tris, slot_of, per_slot, world_matrix) -> List[Surface]:

@@ -47,11 +47,13 @@ from ...cache import CACHE, digest
 from ...media import sanitise
 from ...scene import Medium
 from .convert import matrix
-from .materials import (VolumeCoefficients, default_volume, field_grids, has_fields,
-                        merge_by_field, realise, volume_shading)
+from .materials import (VolumeCoefficients, colour_grids, default_volume, field_grids,
+                        has_fields, merge_by_field, realise, volume_shading)
 from .shadergraph import FieldContext
 
 SCALAR_TYPES = {"FLOAT": np.float32, "DOUBLE": np.float64}
+# vector grids, read only where a colour wants them (a Principled Volume's Color Attribute)
+VECTOR_TYPES = {"VECTOR_FLOAT": np.float32, "VECTOR_DOUBLE": np.float64}
 
 
 def openvdb_module():
@@ -124,9 +126,13 @@ def resample(src, dst):
     """Values of grid block ``src`` at the lattice points of block ``dst`` (blocks as read by
     VolumeTranslator: (values, ijk origin, index->object 4x4)), trilinear, 0 outside ``src``'s
     active box: ``(float32 array of dst's shape, fraction of src's sum outside dst's box)``.
-    Both grids belong to one object, so only their index->object maps matter."""
+    Both grids belong to one object, so only their index->object maps matter.  A vector
+    grid (values (X, Y, Z, 3), a colour) is resampled channel by channel."""
     from ...media import trilinear
     values, origin, i2o = src
+    if np.ndim(values) == 4:
+        parts = [resample((values[..., c], origin, i2o), dst) for c in range(values.shape[3])]
+        return np.stack([p[0] for p in parts], axis=-1), max(p[1] for p in parts)
     shape = dst[0].shape
     a = (np.linalg.inv(np.asarray(i2o) @ translation(origin)) @ np.asarray(dst[2])
          @ translation(dst[1]))
@@ -204,7 +210,7 @@ def block_medium(name, coeff, block, blocks, world_matrix, source, zero=(), unif
     ``where`` in ``warnings``); the grids they read are resampled onto the block."""
     values, origin, index_to_object = block
     density = (values > 0).astype(np.float32) if uniform else values
-    extra = None
+    extra = scatter = None
     if has_fields(coeff):
         def grid_of(name):
             src = blocks.get(name)
@@ -212,8 +218,8 @@ def block_medium(name, coeff, block, blocks, world_matrix, source, zero=(), unif
         ctx = fields if fields is not None else FieldContext()
         sampler = ctx.sampler(values.shape, np.asarray(index_to_object) @ translation(origin),
                               world_matrix, grid_of)
-        density, coeff, extra = realise(coeff, density, sampler, grid_of, where,
-                                        warnings if warnings is not None else [])
+        density, coeff, extra, scatter = realise(coeff, density, sampler, grid_of, where,
+                                                 warnings if warnings is not None else [])
         if extra is not None:
             extra = (extra * (values > 0)[..., None]).astype(np.float32)
     emission, grid, lost = lattice_emission(coeff, block, blocks, zero=zero)
@@ -222,7 +228,8 @@ def block_medium(name, coeff, block, blocks, world_matrix, source, zero=(), unif
     medium = Medium(name=name, density=density,
                     index_to_world=np.asarray(world_matrix) @ np.asarray(index_to_object)
                     @ translation(origin), sigma_s=coeff.sigma_s, sigma_a=coeff.sigma_a,
-                    g=float(coeff.g), emission=emission, source=source, emission_grid=grid)
+                    g=float(coeff.g), emission=emission, source=source, emission_grid=grid,
+                    scatter_grid=scatter)
     return medium, lost
 
 
@@ -301,11 +308,13 @@ class VolumeTranslator:
         names = [co.attribute for co in shading if co.attribute in grids]
         names += [n for n in emission_grids(shading) + field_grids(shading) if n in grids]
         wanted = [grids[n] for n in dict.fromkeys(names)]
+        colours = set(colour_grids(shading))
         for attr, socket in missing_strength_grids(shading, lambda n: n in grids):
             self.warnings.append(f"{where}: the volume has no grid '{attr}' for the attribute "
                                  f"linked into '{socket}'; that emission is 0 (as in Cycles)")
         # grids straight from a file (no modifier changes them) are kept between renders
-        blocks = self._blocks(vol, wanted, where, reusable=len(ob.modifiers) == 0)
+        blocks = self._blocks(vol, wanted, where, reusable=len(ob.modifiers) == 0,
+                              vectors=colours)
         self._fields = FieldContext(bounding_box(ob), self.frame, CACHE.store("voxels"))
         media: List[Medium] = []
         lattices: List[tuple] = []
@@ -313,6 +322,9 @@ class VolumeTranslator:
         for co in shading:
             if co.attribute not in grids:
                 uniform.append(co)
+            elif blocks.get(co.attribute) is not None and np.ndim(blocks[co.attribute][0]) == 4:
+                self.warnings.append(f"{where}: grid '{co.attribute}' is a vector grid; only "
+                                     "float grids can be used as density; skipped")
             elif blocks.get(co.attribute) is not None:
                 block = blocks[co.attribute]
                 media.append(self._medium(ob, co, block, grids[co.attribute], world_matrix,
@@ -362,12 +374,13 @@ class VolumeTranslator:
         return f"{where}: no grids could be loaded from '{path}'" + (f" ({err})" if err else "") \
             + "; skipped"
 
-    def _blocks(self, vol, wanted, where, reusable=False) -> dict:
+    def _blocks(self, vol, wanted, where, reusable=False, vectors=()) -> dict:
         """``{grid name: (values, ijk origin, index->object 4x4) or None}`` for the grids in
         ``wanted``, read once per volume datablock: the evaluated grids are saved to one
         scratch file and each wanted grid is read back, sanitised and clipped.  With
         ``reusable`` the grids read from an unchanged .vdb (same path, size and modification
-        time) are taken from ``mpp_render.cache`` (kind 'vdb') with their warnings."""
+        time) are taken from ``mpp_render.cache`` (kind 'vdb') with their warnings.  Vector
+        grids are read (values (X, Y, Z, 3)) when named in ``vectors`` (colours)."""
         out, todo = {}, []
         for g in wanted:
             key = (vol.as_pointer(), g.name)
@@ -401,7 +414,7 @@ class VolumeTranslator:
                 return out
             for g in todo:
                 before = len(self.warnings)
-                block = self._read(vdb, path, vol, g, where)
+                block = self._read(vdb, path, vol, g, where, g.name in vectors)
                 out[g.name] = self._cache[(vol.as_pointer(), g.name)] = block
                 if block is not None and file_keys.get(g.name):
                     CACHE.put("vdb", file_keys[g.name], (block, self.warnings[before:]))
@@ -419,9 +432,13 @@ class VolumeTranslator:
         return digest(path, st.st_mtime_ns, st.st_size, g.name, str(g.data_type),
                       float(getattr(vol.render, "clipping", 0.0)))
 
-    def _read(self, vdb, path, vol, g, where):
-        """The sanitised, clipped dense block of grid ``g`` from the scratch file, or None."""
+    def _read(self, vdb, path, vol, g, where, vector=False):
+        """The sanitised, clipped dense block of grid ``g`` from the scratch file, or None;
+        with ``vector`` a vector grid's too (not clipped: a colour)."""
         dtype = SCALAR_TYPES.get(g.data_type)
+        is_vector = vector and g.data_type in VECTOR_TYPES
+        if is_vector:
+            dtype = VECTOR_TYPES[g.data_type]
         if dtype is None:
             self.warnings.append(f"{where}: grid '{g.name}' has type {g.data_type}; only float "
                                  "grids can be used as density; skipped")
@@ -449,11 +466,11 @@ class VolumeTranslator:
             self.warnings.append(f"{where}: {bad} voxels of grid '{g.name}'{self._in_file(vol)} "
                                  "were NaN, infinite or negative; set to 0")
         clip = float(getattr(vol.render, "clipping", 0.0))
-        if clip > 0.0:
+        if clip > 0.0 and not is_vector:
             values = np.where(values < clip, np.float32(0.0), values)
-        if background != 0.0:
-            self.warnings.append(f"{where}: the background value {background:g} of grid "
-                                 f"'{g.name}' is ignored (0 outside the active voxels)")
+        if np.any(np.asarray(background) != 0.0):
+            self.warnings.append(f"{where}: the background value {np.asarray(background)} of "
+                                 f"grid '{g.name}' is ignored (0 outside the active voxels)")
         return values, origin, matrix(g.matrix_object)
 
     def _file_problem(self, vol, g) -> str:
