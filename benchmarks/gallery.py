@@ -135,12 +135,12 @@ def add_mesh(kind, material, **kw):
 
 
 def write_grids(path, grids, voxel_size):
-    """Write float grids (name -> array [x, y, z]) on one lattice with a uniform voxel size in
-    metres; index (0, 0, 0) at the object's origin."""
+    """Write float grids (name -> array [x, y, z], or [x, y, z, 3] for a vector grid) on one
+    lattice with a uniform voxel size in metres; index (0, 0, 0) at the object's origin."""
     vdb = demo.openvdb_module()
     out = []
     for name, a in grids.items():
-        g = vdb.FloatGrid()
+        g = vdb.Vec3SGrid() if np.ndim(a) == 4 else vdb.FloatGrid()   # (x, y, z, 3): a colour
         g.copyFromArray(np.ascontiguousarray(a, np.float32))
         g.transform = vdb.createLinearTransform(voxelSize=voxel_size)
         g.name = name
@@ -265,6 +265,26 @@ def build_fire(directory, width=WIDTH, height=HEIGHT):
     add_light(sc, 'SUN', 1.5, rotation=(math.radians(50), 0.0, math.radians(-60)),
               color=(0.6, 0.75, 1.0))
     add_camera(sc, (0.0, -5.5, 1.0), (0.0, 0.0, 0.9), 45.0, width, height)
+    return sc
+
+
+def build_coloured_smoke(directory, width=WIDTH, height=HEIGHT):
+    """The smoke plume .vdb (64^3, 3 m) with a vector grid 'color' read by the Principled
+    Volume's Color Attribute: warm orange at the bottom turning to a cool blue at the top,
+    under a white sun and a dim sky."""
+    sc = new_file()
+    set_world(sc, (0.03, 0.035, 0.05))
+    path = os.path.abspath(os.path.join(directory, "gallery_coloured.vdb"))
+    n, size = 64, 3.0
+    dens = plume_density(n)
+    z = np.clip(((np.arange(n) + 0.5) / n - 0.2) / 0.5, 0.0, 1.0)[None, None, :, None]
+    colour = (1.0 - z) * np.array([1.0, 0.55, 0.15]) + z * np.array([0.25, 0.5, 1.0])
+    write_grids(path, {"density": dens, "color": colour * np.ones((n, n, n, 1))}, size / n)
+    add_vdb(sc, path, volume_material("Tinted smoke", Color=(1.0, 1.0, 1.0, 1.0),
+                                      Color_Attribute="color", Density=6.0, Anisotropy=0.3),
+            (-size / 2, -size / 2, 0.0))
+    add_light(sc, 'SUN', 3.0, rotation=(math.radians(55), 0.0, math.radians(35)))
+    add_camera(sc, (0.0, -9.5, 1.5), (0.0, 0.0, 1.5), 50.0, width, height)
     return sc
 
 
@@ -516,6 +536,12 @@ def feature_smoke_ground(tmp, args):
     yield rec, pic
 
 
+def feature_coloured_smoke(tmp, args):
+    rec, pic, _, _ = compare_feature("coloured_smoke", build_coloured_smoke,
+                                     "Smoke coloured per voxel by a VDB 'color' grid", tmp, args)
+    yield rec, pic
+
+
 def feature_fire(tmp, args):
     """The fire (ours | Cycles) and the passes of our render of it."""
     rec, pic, ours, _ = compare_feature("fire", build_fire,
@@ -580,6 +606,7 @@ FEATURES = {
     "mesh_volume": feature_mesh_volume,
     "god_rays": feature_god_rays,
     "fire": feature_fire,              # also writes passes
+    "coloured_smoke": feature_coloured_smoke,
     "smoke_ground": feature_smoke_ground,
     "lights": feature_lights,
 }
@@ -598,10 +625,11 @@ def main(argv=None):
     batch.register()
     os.makedirs(os.path.join(args.out, "images"), exist_ok=True)
     json_path = os.path.join(args.out, "gallery.json")
-    records = {}
+    records, before = {}, None
     if args.only and os.path.exists(json_path):  # a partial run keeps the other scenes
         with open(json_path) as f:
-            records = {r["feature"]: r for r in json.load(f)["scenes"]}
+            before = json.load(f)
+        records = {r["feature"]: r for r in before["scenes"]}
     t0 = time.perf_counter()
     load_before = os.getloadavg()[0]
     with tempfile.TemporaryDirectory(prefix="mpp_gallery_") as tmp:
@@ -614,7 +642,7 @@ def main(argv=None):
                 records[rec["feature"]] = rec
                 print(json.dumps(rec), flush=True)
     order = ["cloud", "single_multiple", "mesh_volume", "god_rays", "fire", "passes",
-             "smoke_ground", "lights"]
+             "coloured_smoke", "smoke_ground", "lights"]
     doc = {"generated": time.strftime("%Y-%m-%d"), "cores": os.cpu_count(),
            # other jobs on the machine slow both renderers; the 1-minute load at the start
            # and the end of the run say how busy it was
@@ -627,6 +655,14 @@ def main(argv=None):
                    "out; cycles_noise_4: that noise (metrics floor_4)",
            "scenes": sorted(records.values(), key=lambda r: order.index(r["feature"])
                             if r["feature"] in order else len(order))}
+    if before is not None:   # a partial run: the full run's date and load, and what changed
+        doc["generated"], doc["load_average"] = before["generated"], before["load_average"]
+        doc["updated"] = dict(before.get("updated", {}))
+        for name in names:
+            for feature in [name] + (["single_multiple"] if name == "cloud" else []) \
+                    + (["passes"] if name == "fire" else []):
+                doc["updated"][feature] = (time.strftime("%Y-%m-%d")
+                                           + f" (gallery.py --only {name})")
     with open(json_path, "w") as f:
         json.dump(doc, f, indent=1)
     print(json.dumps({"total_seconds": round(time.perf_counter() - t0, 1)}), flush=True)

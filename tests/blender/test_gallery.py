@@ -69,3 +69,24 @@ def test_fire_scene_renders_every_pass(tmp_path):
     # below its label box (the top 18 rows) panel c (row 0, column 2) is the image itself
     expect = (np.clip(panels[2], 0, 1) * 255 + 0.5).astype(np.uint8)
     np.testing.assert_array_equal(px[19:24, 64:96], expect[19:24])
+
+
+def test_coloured_smoke_scene_colours_each_voxel(tmp_path):
+    """The coloured smoke (a .vdb with a vector grid 'color' read by Color Attribute): the
+    medium scatters with each voxel's colour (Medium.scatter_grid), orange at the bottom
+    and blue at the top, and nothing is warned."""
+    from mpp_render.blender.translate import scene_from_depsgraph
+    from mpp_render.scene import Settings
+    g = load_gallery()
+    batch.register()
+    g.build_coloured_smoke(str(tmp_path), 32, 18)
+    desc = scene_from_depsgraph(bpy.context.evaluated_depsgraph_get(), Settings())
+    assert not desc.warnings, desc.warnings
+    (m,) = desc.media
+    assert m.scatter_grid is not None and m.scatter_grid.shape == m.density.shape + (3,)
+    colour = m.scatter_grid * np.asarray(m.sigma_s) / 6.0   # Density 6, Color 1 x the grid
+    rho = m.density.astype(np.float64)
+    low = (colour[:, :, :12] * rho[:, :, :12, None]).sum((0, 1, 2)) / rho[:, :, :12].sum()
+    high = (colour[:, :, -20:] * rho[:, :, -20:, None]).sum((0, 1, 2)) / rho[:, :, -20:].sum()
+    np.testing.assert_allclose(low, [1.0, 0.55, 0.15], atol=0.02)
+    np.testing.assert_allclose(high, [0.25, 0.5, 1.0], atol=0.02)

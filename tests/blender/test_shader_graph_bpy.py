@@ -616,6 +616,12 @@ def tinted_scene(sc, size=(40, 24)):
     nt.links.new(outp(sep, "X"), ramp.inputs[0])
     nt.links.new(outp(ramp, "Color"), inp(vol, "Color"))
     add_cube(sc, "Box", mat=mat)
+    sun_and_camera(sc, size)
+
+
+def sun_and_camera(sc, size):
+    """The tinted scenes' light and view: a sun from the upper left, a black world, the
+    camera 6 m off along -Y (lens 55) at ``size`` pixels."""
     sun = link(sc, bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN")))
     sun.data.energy = 4.0
     sun.data.angle = 0.0
@@ -733,15 +739,7 @@ def test_colour_attribute_single_scattering_matches_cycles(empty_scene, tmp_path
     vol.materials.append(mat)
     ob = link(sc, bpy.data.objects.new("Tinted", vol))
     ob.location = (-1.0, -1.0, -1.0)
-    sun = link(sc, bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN")))
-    sun.data.energy = 4.0
-    sun.data.angle = 0.0
-    sun.rotation_euler = (0.0, -0.9, 0.3)
-    inp(sc.world.node_tree.nodes["Background"], "Color").default_value = (0.0, 0.0, 0.0, 1.0)
-    cam = add_camera(sc, distance=6.0)
-    cam.data.lens = 55.0
-    sc.render.resolution_x, sc.render.resolution_y = 40, 24
-    sc.render.resolution_percentage = 100
+    sun_and_camera(sc, (40, 24))
     cycles = render_cycles(sc, tmp_path, spp=1024)
     batch.register()
     batch.set_mpp(sc, 16, multiple=False, seed=0)
