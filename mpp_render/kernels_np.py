@@ -479,7 +479,8 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
     negative values read as 0), or -1 for none.
 
     Super-step K covers [t0 + SUPER K h, t0 + SUPER (K + 1) h] (the last one ends at t1) and
-    is cut into n_sub equal steps of length H, step j read at one jittered point (random
+    is cut into n_sub equal steps of length H (the ray's last one cut at t1), step j read at
+    one point drawn uniformly on it (random
     numbers of step index SUPER K + j): n_sub = SUPER without ``bricks``; with ``bricks``
     (media.brick_bounds per medium) n_sub = 0 where every medium is empty on the super-step
     (``segment_majorant``) and, with ``adapt_tau`` > 0, the fewest steps (at least 1) that keep
@@ -560,7 +561,7 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
             o, d = origins[alive], dirs[alive]
             ka = keys[alive]
             hl = np.minimum(Hs, t1[alive] - seg)
-            ts = np.minimum(seg + uniform(ka, k, DIM_JITTER) * Hs, seg + hl)
+            ts = seg + uniform(ka, k, DIM_JITTER) * hl   # uniform on the step, the last one too
             x = o + d * ts[:, None]
             m = len(alive)
             sig_t = np.zeros((m, 3))

@@ -699,9 +699,8 @@ static long march_ray(const March *c, Py_ssize_t r, RaySums *sums) {
             long k = SUPER * K + jj;
             double seg = s_lo + (double)jj * H;
             if (!(seg < t1)) break;
-            double hl = t1 - seg < H ? t1 - seg : H;
-            double t = seg + uniform01(key, k, DIM_JITTER) * H;
-            double ts = t < seg + hl ? t : seg + hl, x[3];
+            double hl = t1 - seg < H ? t1 - seg : H;   /* the last step may end early, at t1 */
+            double ts = seg + uniform01(key, k, DIM_JITTER) * hl, x[3];  /* uniform on it */
             for (int q = 0; q < 3; q++) x[q] = o[q] + d[q] * ts;
             LightsAt la;
             sample_lights(c, x, key, k, &la);
