@@ -44,10 +44,12 @@ def big_scene(n=N, width=80, height=64, samples=1):
 
 
 def march_scene():
-    """A quick precompute (48^3) and a march of about two seconds (320 x 256 pixels, 1 sample:
-    a tile of 32 x 32 pixels takes a few hundredths of a second; Esc waits for the tiles being
-    marched, so at many samples per pixel it waits longer, see docs/robustness.md)."""
-    return big_scene(48, 320, 256, 1)
+    """A quick precompute (48^3) and a march of a second or more (640 x 512 pixels, 1 sample,
+    80 tiles of 64 x 64 pixels, each a few hundredths of a second), so that Esc 0.1 s into the
+    march finds most tiles unwritten on any machine (at 320 x 256 an idle machine, the cloud
+    stepping a voxel at a time, had marched all 20 first).  Esc waits for the tiles being
+    marched, so at many samples per pixel it waits longer, see docs/robustness.md."""
+    return big_scene(48, 640, 512, 1)
 
 
 class Esc:
