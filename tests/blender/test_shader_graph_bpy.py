@@ -696,6 +696,43 @@ def test_colour_field_multiple_scattering_matches_cycles(empty_scene, tmp_path):
         assert np.all(np.abs(ratio - 1.0) < 0.03), (name, ratio)
 
 
+def test_grey_colour_field_into_volume_scatter_matches_cycles(empty_scene, tmp_path):
+    """Volume Scatter's Color is its scattering coefficient, so a colour field changes the
+    extinction too: a grey ramp (0.25 to 1.5 along x) makes the cube four times as dense on
+    the right.  Its brightness goes into the density (materials._colour_fields), so it
+    renders without a warning and as Cycles does."""
+    from mpp_render.blender import batch, frame
+    sc = empty_scene
+    mat = bpy.data.materials.new("GreyScatter")
+    nt = mat.node_tree
+    nt.nodes.clear()
+    vol = nt.nodes.new("ShaderNodeVolumeScatter")
+    nt.links.new(vol.outputs[0], inp(nt.nodes.new("ShaderNodeOutputMaterial"), "Volume"))
+    inp(vol, "Density").default_value = 1.0
+    tc = nt.nodes.new("ShaderNodeTexCoord")
+    sep = nt.nodes.new("ShaderNodeSeparateXYZ")
+    ma = nt.nodes.new("ShaderNodeMath")
+    ma.operation = "MULTIPLY_ADD"
+    ma.inputs[1].default_value, ma.inputs[2].default_value = 1.25, 0.25
+    nt.links.new(outp(tc, "Generated"), sep.inputs[0])
+    nt.links.new(outp(sep, "X"), ma.inputs[0])
+    nt.links.new(ma.outputs[0], inp(vol, "Color"))
+    add_cube(sc, "Box", mat=mat)
+    sun_and_camera(sc, (40, 24))
+    cycles = render_cycles(sc, tmp_path, spp=1024)
+    batch.register()
+    batch.set_mpp(sc, 16, multiple=False, seed=0)
+    sc.mpp.voxel_resolution = 64
+    out = frame.render_mpp().output
+    assert not out.warnings, out.warnings
+    ours = out.passes["Combined"][..., :3]
+    half = cycles.shape[1] // 2
+    for name, sl in (("left", np.s_[:, :half]), ("right", np.s_[:, half:])):
+        ratio = ours[sl].reshape(-1, 3).sum(0) / cycles[sl].reshape(-1, 3).sum(0)
+        print("grey Volume Scatter colour field, ours / Cycles,", name, ratio)
+        assert np.all(np.abs(ratio - 1.0) < 0.02), (name, ratio)
+
+
 def test_colour_attribute_single_scattering_matches_cycles(empty_scene, tmp_path):
     """A Volume object whose Principled Volume reads a vector grid 'color' (Color
     Attribute): Cycles multiplies Color by it per voxel, and so do we

@@ -39,8 +39,9 @@ needed, at a medium's voxels, by ``realise``):
 * Color / Absorption Color: a :class:`ColourMean` evaluates the closure's coefficients at
   every voxel.  The medium's coefficients are their density-weighted means; the scattering
   varies per voxel through its factor on that mean (``Realised.scatter_grid``,
-  Medium.scatter_grid), the extinction does not: where it varies (an Absorption Color field,
-  a Volume Scatter's or Absorption's colour field) a warning gives the mean the medium
+  Medium.scatter_grid), and the extinction's brightness per voxel goes into the density;
+  the extinction's colour does not vary: where it would (a coloured Absorption Color field, a
+  Volume Scatter's or Absorption's coloured field) a warning gives the mean the medium
   uses.  A Principled Volume's Color field with a constant black Absorption Color leaves the
   extinction the density itself, so it renders exactly.  Its Color Attribute (a grid, e.g.
   a smoke domain's 'color') multiplies Color the same way, per voxel, where the object has
@@ -495,11 +496,12 @@ def realise(co: VolumeCoefficients, base, sample, grid_of, where: str, warnings:
     ``base``: the density before the fields (a mesh's inside mask, a grid's values), float32;
     ``sample(field)``: the field's values at the lattice points (``shadergraph.Sampler``);
     ``grid_of(name)``: a grid's values there or None.  The density is ``base`` x max(density
-    field, 0).  The colour fields (:class:`ColourMean`) give each point's coefficients; the
-    medium's are their means weighted by that density, the scattering's factor on its mean
-    per point the scatter grid (None where it is 1 everywhere); the extinction is the mean
-    (each colour field that changes it beyond EXTINCTION_SPREAD named in a warning with its
-    ``how``, unless that is None).  The emission grid (shape + (3,), W/(m^3 sr)) sums the
+    field, 0).  The colour fields (:class:`ColourMean`) give each point's coefficients:
+    where they change the extinction's brightness, the density is times it
+    (``_colour_fields``); the medium's coefficients are their means weighted by the density,
+    the scattering's factor on its mean per point the scatter grid (None where it is 1
+    everywhere); the extinction's colour is the mean (each colour field that changes it
+    beyond EXTINCTION_SPREAD named in a warning with its ``how``, unless that is None).  The emission grid (shape + (3,), W/(m^3 sr)) sums the
     field emission terms."""
     density = np.asarray(base, np.float32)
     if co.density_field is not None:
@@ -510,7 +512,8 @@ def realise(co: VolumeCoefficients, base, sample, grid_of, where: str, warnings:
                                               if not isinstance(t, FIELD_TERMS)])
     scatter = None
     if co.colour_means:
-        out, scatter = _colour_fields(co, out, density, sample, grid_of, where, warnings, how)
+        out, scatter, density = _colour_fields(co, out, density, sample, grid_of, where,
+                                               warnings, how)
     grid = None
     for t in co.emission_terms:
         if isinstance(t, FIELD_TERMS):
@@ -532,9 +535,13 @@ def _per_point(values, shape) -> np.ndarray:
 def _colour_fields(co: VolumeCoefficients, out: VolumeCoefficients, density, sample, grid_of,
                    where: str, warnings: List[str], how: Optional[str]):
     """(``out`` with the colour fields' mean coefficients and anisotropy added, the scatter
-    grid or None) for ``realise``."""
+    grid or None, the density) for ``realise``.  Where the colours change the extinction,
+    its grey part per point (the least-squares scale k of the mean extinction's colour) goes
+    into the density, so an extinction that varies in brightness only (a grey colour field
+    into Volume Scatter or Volume Absorption, a grey Absorption Color field) renders exactly;
+    what is left (a change of its colour) takes the mean, with a warning."""
     n = density.size
-    weights = density.reshape(-1)
+    d = density.reshape(-1).astype(np.float64)
     ss = np.broadcast_to(out.sigma_s, (n, 3)).astype(np.float64)
     sa = np.broadcast_to(out.sigma_a, (n, 3)).astype(np.float64)
     sw = float(np.mean(out.sigma_s))
@@ -551,11 +558,22 @@ def _colour_fields(co: VolumeCoefficients, out: VolumeCoefficients, density, sam
         ssm = m.weight * np.maximum(np.broadcast_to(ssm, (n, 3)), 0.0)
         ss += ssm
         sa += m.weight * np.maximum(np.broadcast_to(sam, (n, 3)), 0.0)
-        s = float(np.mean(weighted_mean(ssm, weights)))
+        s = float(np.mean(weighted_mean(ssm, d)))
         g_sum += s * m.g
         sw += s
-    out.sigma_s, out.sigma_a = weighted_mean(ss, weights), weighted_mean(sa, weights)
     out.g = g_sum / sw if sw > 0.0 else out.g
+    st = ss + sa
+    ref = weighted_mean(st, d)
+    norm = float(ref @ ref)
+    k = np.maximum(st @ ref / norm, 0.0) if norm > 0.0 else np.ones(n)
+    if np.all(np.abs(k - 1.0) <= 1e-6):
+        k = np.ones(n)
+    else:   # the extinction's brightness per point into the density
+        density = (d * k).reshape(density.shape).astype(np.float32)
+    per = np.where(k > 0.0, 1.0 / np.where(k > 0.0, k, 1.0), 0.0)[:, None]
+    ss, sa = ss * per, sa * per
+    weights = d * k
+    out.sigma_s, out.sigma_a = weighted_mean(ss, weights), weighted_mean(sa, weights)
     if how is not None:
         st, mean_st = (ss + sa)[weights > 0], out.sigma_s + out.sigma_a
         if st.size and np.max(np.abs(st - mean_st)) > EXTINCTION_SPREAD * max(
@@ -563,11 +581,12 @@ def _colour_fields(co: VolumeCoefficients, out: VolumeCoefficients, density, sam
             names = ", ".join([f.describe() for m in co.colour_means for f in m.fields.values()]
                               + [f"Color Attribute '{a}'" for m in co.colour_means
                                  for a in m.attributes.values()])
-            warnings.append(f"{where}: the extinction that {names} gives varies per voxel; "
-                            f"the MPP engine uses its {how} {fmt(tuple(mean_st))} /m per unit "
-                            "density (the scattering colour varies per voxel)")
+            warnings.append(f"{where}: the colour of the extinction that {names} gives varies "
+                            f"per voxel; the MPP engine uses its {how} {fmt(tuple(mean_st))} "
+                            "/m per unit density (its brightness and the scattering colour "
+                            "vary per voxel)")
     mean = np.where(out.sigma_s > 0.0, out.sigma_s, 1.0)
     factor = np.where(out.sigma_s > 0.0, ss / mean, 1.0)
     if np.all(np.abs(factor - 1.0) <= 1e-6):
-        return out, None
-    return out, factor.reshape(density.shape + (3,)).astype(np.float32)
+        return out, None, density
+    return out, factor.reshape(density.shape + (3,)).astype(np.float32), density

@@ -8,7 +8,8 @@ colour ``Medium.scatter_grid``.  A mesh has no grids, so Attribute and Volume In
 in Cycles).  Generated coordinates map the mesh's texture space (its bounding box unless set
 otherwise) to [0, 1]^3.  Closures with different density fields become one medium each.
 
-A medium whose density a field varies has the source ``FIELD_SOURCE`` rather than 'MESH':
+A medium whose density a field varies (or whose colour fields vary its extinction's
+brightness, materials.realise) has the source ``FIELD_SOURCE`` rather than 'MESH':
 the renderer (media.py) gives a 'MESH' medium a sharp surface of *one* density (its grid
 thresholded at one half), so a varying density is rendered as a grid, interpolated
 trilinearly (the surface then blurs over a voxel).
@@ -149,6 +150,8 @@ class MeshTranslator:
             if fielded:
                 density, coeff, grid, scatter = realise(coeff, mask, sampler, lambda name: None,
                                                         where, self.warnings)
+                # a field may have varied the density (its colours the extinction's brightness)
+                varies = varies or not np.array_equal(density, mask)
                 if grid is not None:
                     grid = (grid * mask[..., None]).astype(np.float32)
                     if not np.any(grid > 0):
