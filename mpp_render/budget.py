@@ -169,15 +169,13 @@ def _downsampled_rgb(m: Medium, e, factor: int, weighted: bool = False):
     if e is None or np.shape(e) != tuple(np.shape(m.density)) + (3,):
         return e  # None, or a mismatch that prepare() reports
     e = sanitise(e)[0]
-    w = sanitise(m.density)[0] if weighted else None
-    out = []
-    for c in range(3):
-        if w is None:
-            out.append(box_downsample(e[..., c], factor))
-            continue
-        num, den = box_downsample(e[..., c] * w, factor), box_downsample(w, factor)
-        out.append(np.where(den > 0, num / np.where(den > 0, den, 1.0), 1.0))
-    return np.stack(out, axis=-1).astype(np.float32)
+    if not weighted:
+        return np.stack([box_downsample(e[..., c], factor) for c in range(3)], axis=-1)
+    w = sanitise(m.density)[0]
+    den = box_downsample(w, factor)
+    safe = np.where(den > 0, den, 1.0)
+    return np.stack([np.where(den > 0, box_downsample(e[..., c] * w, factor) / safe, 1.0)
+                     for c in range(3)], axis=-1).astype(np.float32)
 
 
 def apply_budget(desc: SceneDescription, warnings: List[str]) -> SceneDescription:

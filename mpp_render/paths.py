@@ -187,8 +187,8 @@ class PathInputs:
     a point of a sphere light's disc, a direction in an area light's solid angle) instead
     of ``dirs``, the light's direction at the lattice point (from its centre, or an area
     light's axis), which near a large emitter is one of many.  ``scatter``: None, or float32
-    (X,Y,Z,3) each voxel's factor on ``sigma_s`` (media.PreparedMedium.scatter_grid without
-    its padding's meaning: the grid's own voxels), applied to a path's weight at each real
+    (X,Y,Z,3) each voxel's factor on ``sigma_s`` on the voxels of ``density``
+    (media.PreparedMedium.scatter_grid), applied to a path's weight at each real
     collision, read at the nearest voxel (``_colour_factor``): the paths scatter with each
     point's colour, as the march does, and converge to the multiple scattering of the
     coloured medium."""

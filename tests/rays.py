@@ -1,5 +1,5 @@
-"""Random rays for the march-kernel tests, and the twins' agreement on them (shared by
-test_kernels, test_emission_grid and test_scatter_grid)."""
+"""Random rays for the march-kernel tests, the march's inputs along them, and the twins'
+agreement on them (shared by test_kernels, test_emission_grid and test_scatter_grid)."""
 import numpy as np
 
 
@@ -28,3 +28,18 @@ def march_twins(inputs):
         assert np.all(np.isfinite(y)), name
         assert np.all(np.abs(x - y) <= 1e-4 * np.maximum(np.abs(x), 1e-6)), name
     return a, b
+
+
+def march_inputs(rng, media, lights, pre, n, half_width, step, **optional):
+    """kernels.MarchInputs for ``n`` of ``downward_rays`` (``half_width`` m, spread 0.2,
+    t0 up to 2 m) through the prepared ``media`` lit by ``lights`` with the precompute
+    ``pre``'s fields, no world light, a step of ``step`` m; ``optional``: the record's
+    optional fields (emissions, bricks, channels ...)."""
+    from mpp_render.kernels import MarchInputs
+    from mpp_render.march import pack_lights
+    o, d, t0, t1 = downward_rays(rng, n, half_width, 0.2, 2.0)
+    return MarchInputs(o, d, t0, t1, np.ones(n), rng.integers(0, 2**32, n, dtype=np.uint32),
+                       pre.fields, [m.w2i for m in media], [m.sigma_s for m in media],
+                       [m.sigma_t for m in media], [m.g for m in media],
+                       [m.threshold for m in media], [m.voxel_size for m in media],
+                       pack_lights(lights, pre.layout), -1, step, 0.01, 1e10, **optional)

@@ -5,13 +5,11 @@ import pytest
 
 from mpp_render import kernels
 from mpp_render.budget import fit_media
-from mpp_render.kernels import MarchInputs
-from mpp_render.march import pack_lights
 from mpp_render.media import prepare
 from mpp_render.precompute import precompute
 from mpp_render.render import render
 from mpp_render.scene import Camera, Light, Medium, SceneDescription, Settings, World
-from rays import downward_rays, march_twins
+from rays import march_inputs, march_twins
 
 needs_c = pytest.mark.skipif(kernels._c is None, reason="compiled kernels not built")
 
@@ -56,14 +54,8 @@ def test_field_layout_puts_the_scatter_grid_after_the_emission():
 
 
 def march_args(rng, media, lights, pre, n=2000):
-    o, d, t0, t1 = downward_rays(rng, n, 1.2, 0.2, 2.0)
     sc = [-1 if c is None else c for c in pre.layout.scatter_channels]
-    return MarchInputs(o, d, t0, t1, np.ones(n), rng.integers(0, 2**32, n, dtype=np.uint32),
-                       pre.fields, [m.w2i for m in media], [m.sigma_s for m in media],
-                       [m.sigma_t for m in media], [m.g for m in media],
-                       [m.threshold for m in media], [m.voxel_size for m in media],
-                       pack_lights(lights, pre.layout), -1, 0.05, 0.01, 1e10,
-                       scatter_channels=sc)
+    return march_inputs(rng, media, lights, pre, n, 1.2, 0.05, scatter_channels=sc)
 
 
 @needs_c

@@ -295,6 +295,7 @@ def _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
                               plat.towards, plat.rate, plat.threshold,
                               _scatter(opm, plat))
                    for opm, plat in partners)
+    scatter = _scatter(pm, lat)
     totals = np.array([float(item[1].sum()) for item in sets])
     acc = None
     for k, item in enumerate(sets):
@@ -310,7 +311,7 @@ def _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
                          max_collisions=max_collisions, jitter=jitter, lobe=lobe,
                          start_source=source, start_peak=peak, moments=moments,
                          others=others, threshold=lat.threshold, light=light,
-                         scatter=_scatter(pm, lat), **extra)
+                         scatter=scatter, **extra)
         got = kernels.trace_paths_media(inp, threads=worker_count(threads),
                                         should_cancel=should_cancel)
         acc = got if acc is None else [a + b for a, b in zip(acc, got)]

@@ -81,12 +81,13 @@ def mpp_output(scene, width, height, samples=4, voxels=16):
     return scene
 
 
-def render_cycles(scene, tmp_path, spp=16, seed=0):
-    """Cycles' single scattering (Volume Bounces 0, the reference settings, 2 threads) of
-    ``scene``: the Combined RGB (H,W,3), written through ``tmp_path/cycles_<seed>.exr``."""
+def render_cycles(scene, tmp_path, spp=16, seed=0, multiple=False):
+    """Cycles' single scattering (Volume Bounces 0; with ``multiple`` every bounce; the
+    reference settings, 2 threads) of ``scene``: the Combined RGB (H,W,3), written through
+    ``tmp_path/cycles_<seed>.exr``."""
     from mpp_render import exr
     from mpp_render.blender import batch
-    batch.set_cycles_reference(scene, spp, multiple=False, seed=seed)
+    batch.set_cycles_reference(scene, spp, multiple=multiple, seed=seed)
     scene.render.threads_mode = 'FIXED'
     scene.render.threads = 2
     path = str(tmp_path / f"cycles_{seed}.exr")

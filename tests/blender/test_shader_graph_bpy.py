@@ -24,7 +24,7 @@ from mpp_render.blender.translate import scene_from_depsgraph  # noqa: E402
 from mpp_render.blender.translate.shadergraph import build  # noqa: E402
 from mpp_render.scene import Settings  # noqa: E402
 from mpp_render.textures import graph as tg  # noqa: E402
-from parts import add_camera, add_cube, link, render_cycles  # noqa: E402
+from parts import add_camera, add_cube, link, node_material, render_cycles  # noqa: E402
 
 # -- (a) the same nodes in Geometry Nodes -------------------------------------------------------
 
@@ -598,14 +598,9 @@ def tinted_scene(sc, size=(40, 24)):
     """A 2 m cube of Principled Volume (density 1.5 /m, anisotropy 0.3) whose Color a Color
     Ramp of the Generated x coordinate turns from orange to blue, under a sun from the upper
     left, against a black world."""
-    mat = bpy.data.materials.new("Tinted")
+    mat, vol = node_material("Tinted", "ShaderNodeVolumePrincipled", Density=1.5,
+                             Anisotropy=0.3)
     nt = mat.node_tree
-    nt.nodes.clear()
-    vol = nt.nodes.new("ShaderNodeVolumePrincipled")
-    out = nt.nodes.new("ShaderNodeOutputMaterial")
-    nt.links.new(vol.outputs[0], inp(out, "Volume"))
-    inp(vol, "Density").default_value = 1.5
-    inp(vol, "Anisotropy").default_value = 0.3
     tc = nt.nodes.new("ShaderNodeTexCoord")
     sep = nt.nodes.new("ShaderNodeSeparateXYZ")
     ramp = nt.nodes.new("ShaderNodeValToRGB")
@@ -633,19 +628,36 @@ def sun_and_camera(sc, size):
     sc.render.resolution_percentage = 100
 
 
+def mpp_combined(sc, spp, multiple, voxels=None):
+    """Our Combined RGB of ``sc`` at ``spp`` (seed 0; ``voxels`` the mesh voxelisation's
+    resolution, else the scene's), asserted free of warnings."""
+    from mpp_render.blender import batch, frame
+    batch.register()
+    batch.set_mpp(sc, spp, multiple=multiple, seed=0)
+    if voxels is not None:
+        sc.mpp.voxel_resolution = voxels
+    out = frame.render_mpp().output
+    assert not out.warnings, out.warnings
+    return out.passes["Combined"][..., :3]
+
+
+def assert_halves_match(ours, cycles, what, tol):
+    """Our light over Cycles', per channel, in the image's left and right halves: within
+    ``tol`` of 1 (printed with ``what``)."""
+    half = cycles.shape[1] // 2
+    for name, sl in (("left", np.s_[:, :half]), ("right", np.s_[:, half:])):
+        ratio = ours[sl].reshape(-1, 3).sum(0) / cycles[sl].reshape(-1, 3).sum(0)
+        print(f"{what}, ours / Cycles,", name, ratio)
+        assert np.all(np.abs(ratio - 1.0) < tol), (name, ratio)
+
+
 def test_colour_field_single_scattering_matches_cycles(empty_scene, tmp_path):
     """The scattering colour per voxel (Medium.scatter_grid): orange on the left, blue on the
     right, as Cycles renders it with Volume Bounces 0.  Measured: see the assertion."""
-    from mpp_render.blender import batch, frame
     sc = empty_scene
     tinted_scene(sc)
     cycles = render_cycles(sc, tmp_path, spp=1024)
-    batch.register()
-    batch.set_mpp(sc, 16, multiple=False, seed=0)
-    sc.mpp.voxel_resolution = 64
-    out = frame.render_mpp().output
-    assert not out.warnings, out.warnings
-    ours = out.passes["Combined"][..., :3]
+    ours = mpp_combined(sc, 16, False, voxels=64)
     assert ours.shape == cycles.shape
     lit = cycles.sum(axis=2) > 0.05 * cycles.sum(axis=2).max()
     left, right = lit.copy(), lit.copy()
@@ -671,29 +683,11 @@ def test_colour_field_multiple_scattering_matches_cycles(empty_scene, tmp_path):
     times and the other channels die out as in Cycles.  With the medium's mean colour at
     every order instead (the paths before), the left half's indirect red was 0.42 and blue
     2.25 of Cycles' (80 x 48, 1024 spp; with the colour 0.998-1.002)."""
-    from mpp_render import exr
-    from mpp_render.blender import batch, frame
     sc = empty_scene
     tinted_scene(sc)
-    batch.set_cycles_reference(sc, 512, multiple=True, seed=0)
-    sc.render.threads_mode = 'FIXED'
-    sc.render.threads = 2
-    path = str(tmp_path / "full.exr")
-    batch.set_multilayer_exr(sc)
-    bpy.ops.render.render()
-    bpy.data.images["Render Result"].save_render(filepath=path, scene=sc)
-    cycles = exr.read_passes(path, layer=bpy.context.view_layer.name)["Combined"][..., :3]
-    batch.register()
-    batch.set_mpp(sc, 4, multiple=True, seed=0)
-    sc.mpp.voxel_resolution = 32
-    out = frame.render_mpp().output
-    assert not out.warnings, out.warnings
-    ours = out.passes["Combined"][..., :3]
-    half = cycles.shape[1] // 2
-    for name, sl in (("left", np.s_[:, :half]), ("right", np.s_[:, half:])):
-        ratio = ours[sl].reshape(-1, 3).sum(0) / cycles[sl].reshape(-1, 3).sum(0)
-        print("colour-field full render, ours / Cycles,", name, ratio)
-        assert np.all(np.abs(ratio - 1.0) < 0.03), (name, ratio)
+    cycles = render_cycles(sc, tmp_path, spp=512, multiple=True)
+    ours = mpp_combined(sc, 4, True, voxels=32)
+    assert_halves_match(ours, cycles, "colour-field full render", 0.03)
 
 
 def test_grey_colour_field_into_volume_scatter_matches_cycles(empty_scene, tmp_path):
@@ -701,14 +695,9 @@ def test_grey_colour_field_into_volume_scatter_matches_cycles(empty_scene, tmp_p
     extinction too: a grey ramp (0.25 to 1.5 along x) makes the cube four times as dense on
     the right.  Its brightness goes into the density (materials._colour_fields), so it
     renders without a warning and as Cycles does."""
-    from mpp_render.blender import batch, frame
     sc = empty_scene
-    mat = bpy.data.materials.new("GreyScatter")
+    mat, vol = node_material("GreyScatter", "ShaderNodeVolumeScatter", Density=1.0)
     nt = mat.node_tree
-    nt.nodes.clear()
-    vol = nt.nodes.new("ShaderNodeVolumeScatter")
-    nt.links.new(vol.outputs[0], inp(nt.nodes.new("ShaderNodeOutputMaterial"), "Volume"))
-    inp(vol, "Density").default_value = 1.0
     tc = nt.nodes.new("ShaderNodeTexCoord")
     sep = nt.nodes.new("ShaderNodeSeparateXYZ")
     ma = nt.nodes.new("ShaderNodeMath")
@@ -720,17 +709,8 @@ def test_grey_colour_field_into_volume_scatter_matches_cycles(empty_scene, tmp_p
     add_cube(sc, "Box", mat=mat)
     sun_and_camera(sc, (40, 24))
     cycles = render_cycles(sc, tmp_path, spp=1024)
-    batch.register()
-    batch.set_mpp(sc, 16, multiple=False, seed=0)
-    sc.mpp.voxel_resolution = 64
-    out = frame.render_mpp().output
-    assert not out.warnings, out.warnings
-    ours = out.passes["Combined"][..., :3]
-    half = cycles.shape[1] // 2
-    for name, sl in (("left", np.s_[:, :half]), ("right", np.s_[:, half:])):
-        ratio = ours[sl].reshape(-1, 3).sum(0) / cycles[sl].reshape(-1, 3).sum(0)
-        print("grey Volume Scatter colour field, ours / Cycles,", name, ratio)
-        assert np.all(np.abs(ratio - 1.0) < 0.02), (name, ratio)
+    ours = mpp_combined(sc, 16, False, voxels=64)
+    assert_halves_match(ours, cycles, "grey Volume Scatter colour field", 0.02)
 
 
 def test_colour_attribute_single_scattering_matches_cycles(empty_scene, tmp_path):
@@ -741,7 +721,6 @@ def test_colour_attribute_single_scattering_matches_cycles(empty_scene, tmp_path
     the same in red and blue column by column; the columns at the smoke's faint edge are
     brighter than Cycles' in all channels alike (a matter of the grid's edge, not of the
     colour)."""
-    from mpp_render.blender import batch, frame
     from mpp_render.blender.translate.vdb import openvdb_module
     vdb = openvdb_module()
     n = 24
@@ -764,32 +743,19 @@ def test_colour_attribute_single_scattering_matches_cycles(empty_scene, tmp_path
     sc = empty_scene
     vol = bpy.data.volumes.new("Tinted")
     vol.filepath = path
-    mat = bpy.data.materials.new("TintedVDB")
-    nt = mat.node_tree
-    nt.nodes.clear()
-    pv = nt.nodes.new("ShaderNodeVolumePrincipled")
-    nt.links.new(pv.outputs[0], inp(nt.nodes.new("ShaderNodeOutputMaterial"), "Volume"))
-    inp(pv, "Density").default_value = 1.5
-    inp(pv, "Anisotropy").default_value = 0.3
-    inp(pv, "Color").default_value = (1.0, 1.0, 1.0, 1.0)
-    inp(pv, "Color Attribute").default_value = "color"
+    mat, _ = node_material("TintedVDB", "ShaderNodeVolumePrincipled", Density=1.5,
+                           Anisotropy=0.3, Color=(1.0, 1.0, 1.0, 1.0),
+                           **{"Color Attribute": "color"})
     vol.materials.append(mat)
     ob = link(sc, bpy.data.objects.new("Tinted", vol))
     ob.location = (-1.0, -1.0, -1.0)
     sun_and_camera(sc, (40, 24))
     cycles = render_cycles(sc, tmp_path, spp=1024)
-    batch.register()
-    batch.set_mpp(sc, 16, multiple=False, seed=0)
-    out = frame.render_mpp().output
-    assert not out.warnings, out.warnings
-    ours = out.passes["Combined"][..., :3]
+    ours = mpp_combined(sc, 16, False)
     half = cycles.shape[1] // 2
     assert cycles[:, :half, 0].sum() > 2 * cycles[:, :half, 2].sum()    # the colour shows
     assert cycles[:, half:, 2].sum() > 1.5 * cycles[:, half:, 0].sum()
-    for name, sl in (("left", np.s_[:, :half]), ("right", np.s_[:, half:])):
-        ratio = ours[sl].reshape(-1, 3).sum(0) / cycles[sl].reshape(-1, 3).sum(0)
-        print("Color Attribute single scattering, ours / Cycles,", name, ratio)
-        assert np.all(np.abs(ratio - 1.0) < 0.02), (name, ratio)
+    assert_halves_match(ours, cycles, "Color Attribute single scattering", 0.02)
 
 
 # -- (e) the public scene -----------------------------------------------------------------------
