@@ -28,6 +28,7 @@ render per seed 0.04841 / 0.04855 and 0.05009 / 0.04988); ours 0.01945, 1.064x t
 0.982x the second; the single scattering 0.03019 / 0.03018 / ours 0.02999.  In the dense
 cube 0.02970 / 0.03485 / ours 0.03511 (1.182x and 1.008x); our full render's rel_rmse_4 is
 0.469 against Cycles' default and 0.034 (floor_4 0.085, bias +0.008) against it without MIS.
+With Cycles' light tree off (MIS on) the plume's is 0.01794, so the tree is not the cause.
 So Cycles' default render loses 7-15 % of the multiply scattered light of a lamp with a radius
 inside a medium (the more, the denser and whiter the medium) against its own render without
 MIS, and ours follows the latter within 2 %.  Round the plume's lamp that difference is
