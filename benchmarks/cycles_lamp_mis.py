@@ -56,9 +56,9 @@ CASES = ("plume", "cube")
 def _open(case: str):
     """Open the case's scene and set it up (module docstring); returns the scene."""
     import bpy
+    from mpp_render.blender import batch
     name = "p_point_in_plume" if case == "plume" else "p_point_in_cube"
-    bpy.ops.wm.open_mainfile(filepath=os.path.join(SCENES, name, "scene.blend"))
-    sc = bpy.context.scene
+    sc = batch.open_blend(os.path.join(SCENES, name, "scene.blend"))
     if case == "cube":
         for mat in bpy.data.materials:
             for node in (mat.node_tree.nodes if mat.node_tree else []):
@@ -78,18 +78,13 @@ def _open(case: str):
 
 def cycles(case: str, samples: int, seed: int, multiple: bool, mis: bool, out: str):
     """Cycles' Combined (H, W, 3) of ``case``."""
-    import bpy
     from mpp_render.blender import batch
-    from mpp_render.exr import read_passes
     sc = _open(case)
     batch.set_cycles_reference(sc, samples, multiple=multiple, seed=seed)
     for ob in sc.objects:
         if ob.type == "LIGHT":
             ob.data.cycles.use_multiple_importance_sampling = mis
-    batch.set_multilayer_exr(sc)
-    bpy.ops.render.render()
-    bpy.data.images["Render Result"].save_render(filepath=out, scene=sc)
-    return read_passes(out)["Combined"][..., :3]
+    return batch.render_current(sc, out)["_passes"]["Combined"][..., :3]
 
 
 def ours(case: str, out: str):
@@ -107,9 +102,9 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, default=2)
     ap.add_argument("--cases", default=",".join(CASES))
     args = ap.parse_args(argv)
+    if args.seeds < 2:
+        ap.error("--seeds must be at least 2: the metric takes the references' noise from them")
     from mpp_render import metrics
-    from mpp_render.blender import batch
-    batch.register()
     tmp = tempfile.mkdtemp(prefix="lamp_mis_")
     for case in args.cases.split(","):
         seeds = range(1, args.seeds + 1)
