@@ -95,10 +95,10 @@ class PreparedMedium:
 
     @property
     def glows(self) -> bool:
-        """Whether the medium gives off light that it scatters (``emitted`` is not None):
-        emission somewhere, sigma_s > 0, and not the endless world fog (whose own emission
-        is the march's alone, precompute.emissionlight)."""
-        if self.endless or not np.any(np.asarray(self.sigma_s) > 0.0):
+        """Whether the medium gives off light that it scatters: emission somewhere and
+        sigma_s > 0 (the endless world fog's glow: precompute.fogglow; any other medium's:
+        ``emitted``, precompute.emissionlight)."""
+        if not np.any(np.asarray(self.sigma_s) > 0.0):
             return False
         if np.any(np.asarray(self.medium.emission) > 0.0):
             return True
@@ -107,8 +107,9 @@ class PreparedMedium:
     def emitted(self) -> Optional[np.ndarray]:
         """float64 (X,Y,Z,3) emitted radiance per metre of every voxel of the padded grid,
         W/(m^3 sr): the constant ``emission`` where the density is > 0 plus the emission
-        grid (negative values as 0); None where the medium does not ``glow``."""
-        if not self.glows:
+        grid (negative values as 0); None where the medium does not ``glow`` or is the
+        endless fog (whose glow has no voxels of its own: precompute.fogglow)."""
+        if not self.glows or self.endless:
             return None
         const = np.maximum(np.asarray(self.medium.emission, np.float64).reshape(3), 0.0)
         e = np.zeros(self.grid.shape + (3,))

@@ -230,10 +230,14 @@ class PathInputs:
         return MOMENT_CHANNELS if self.moments else 3
 
 
-def from_power(power: np.ndarray):
+def from_power(power: np.ndarray, bias: Optional[np.ndarray] = None):
     """(weights (N,3), cdf (N,)) for starts of first-scattering power ``power`` (N,3) W > 0:
-    each drawn with probability proportional to its power summed over channels."""
+    each drawn with probability proportional to its power summed over channels, times
+    ``bias`` (N,) > 0 where given (a start more likely to matter drawn more often), its
+    weight its power over that probability (so the estimate is the same)."""
     lum = power.sum(axis=1)
+    if bias is not None:
+        lum = lum * np.asarray(bias, np.float64)
     total = float(lum.sum())
     return power * (total / lum)[:, None], np.cumsum(lum) / total
 

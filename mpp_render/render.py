@@ -192,6 +192,11 @@ def with_world_fog(desc: SceneDescription, fog, media: list, warnings: List[str]
         warnings.append("world volume: it emits in a colour without extinction, which "
                         "is infinitely bright in Cycles; that emission beyond "
                         f"{box.depth:.3g} m is left out")
+    if desc.settings.multiple and worldfog.lossless_glow(fog):
+        warnings.append("world volume: it glows and scatters without absorbing in some "
+                        "colour, where its light scattered again and again would be "
+                        "infinitely bright (in Cycles as bright as Volume Bounces allow); "
+                        "there its glow is scattered once")
     return world, lights, fog_pm
 
 

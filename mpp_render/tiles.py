@@ -67,6 +67,9 @@ class FrameMarch:
         W, H = int(self.cam.width), int(self.cam.height)
         self.cut(self.spp)
         self.solid = split_fog(self.media)[0]
+        # the fog's own glow scattered beyond its grid (worldfog.glow_radiance)
+        self.fog_glow = None if self.fog is None or not np.any(self.fog.emission) else \
+            worldfog.glow_radiance(self.fog, bool(self.st.multiple))
         self.arrays = kernel_arrays(self.solid)
         # the lamps inside the media, towards which the surfaces' gathers are also drawn
         self.guides = Guides.of_lights(self.lights, lambda c: surrounds(self.media, c)) \
@@ -163,7 +166,8 @@ class FrameMarch:
             return r
         s0 = np.maximum(worldfog.tail_start(self.fog_pm, o, d), tmin)
         t_single, t_emit, t_trans, t_multi = worldfog.tail(self.fog, self.lights, o, d, s0,
-                                                           t_end, nodes=nodes, far=self.far)
+                                                           t_end, nodes=nodes, far=self.far,
+                                                           glow=self.fog_glow)
         return dict(r, single=r["single"] + r["T"] * t_single,
                     multiple=r["multiple"] + r["T"] * t_multi,
                     emission=r["emission"] + r["T"] * t_emit, T=r["T"] * t_trans)

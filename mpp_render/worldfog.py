@@ -237,14 +237,17 @@ def far_field(fields) -> Optional[FarField]:
 
 
 def tail(fog: Medium, lights: List[Light], origins, dirs, s0, s1, nodes: int = TAIL_NODES,
-         far: Optional[FarField] = None):
+         far: Optional[FarField] = None, glow=None):
     """What the homogeneous fog adds to rays o + s d over s in [s0, s1] (s1 may be inf;
     nothing where s1 <= s0), as seen from s0: ``(single (N,3), emission (N,3),
     transmittance (N,3), multiple (N,3))``, radiance in W/(m^2 sr).  Single scattering of the
     POINT, SPOT and AREA ``lights`` through the fog alone (no shadows), by ``nodes``-point
     Gauss-Legendre quadrature in u = 1 - exp(-sigma (s - s0)), sigma the smallest positive
     extinction; multiple scattering sigma_s M at the same nodes, M read from ``far`` (0
-    without it).  Emission in channels without extinction over an infinite stretch would be
+    without it).  ``glow``: None, or the fog's own glow ``glow_radiance`` (E1, Em), scattered
+    towards the camera along the stretch as sigma_s E1 (into single) and sigma_s Em (into
+    multiple), exactly as in the endless fog (the surfaces' shade on it is left out beyond
+    the grid).  Emission in channels without extinction over an infinite stretch would be
     infinite; it is left out there (the caller warns)."""
     o = np.asarray(origins, np.float64)
     d = np.asarray(dirs, np.float64)
@@ -262,6 +265,13 @@ def tail(fog: Medium, lights: List[Light], origins, dirs, s0, s1, nodes: int = T
                            np.where(finite, em * np.where(finite, L, 0.0), 0.0))
     single = np.zeros((n, 3))
     multiple = np.zeros((n, 3))
+    if glow is not None:
+        # sigma_s E int_0^L e^(-sigma_t s) ds = sigma_s E (1 - e^(-sigma_t L)) / sigma_t
+        with np.errstate(invalid="ignore", over="ignore"):
+            span = np.where(st > 0, -np.expm1(-st * np.where(finite, L, 1e300))
+                            / np.where(st > 0, st, 1.0), 0.0)
+        single += ss * glow[0] * span
+        multiple += ss * glow[1] * span
     used = [li for li in lights if li.kind != "SUN" and np.any(np.asarray(li.strength) > 0)]
     pos = st[st > 0]
     live = np.flatnonzero(length > 0)
@@ -288,6 +298,33 @@ def tail(fog: Medium, lights: List[Light], origins, dirs, s0, s1, nodes: int = T
             m = far.read(x).reshape(len(live), nodes, 3)
             multiple[live] = ss * np.sum(att * m * w[..., None], axis=1)
     return single, emitted, trans, multiple
+
+
+def glow_radiance(fog: Medium, multiple: bool):
+    """``(E1, Em)`` (3,) each, W/(m^2 sr): the fog's own glow that a point of the endless,
+    homogeneous fog receives from every direction, away from anything else (so the same
+    after any phase function): E1 = e / sigma_t unscattered, and Em = e sigma_s / (sigma_a
+    sigma_t) after scattering once or more (with ``multiple``; else 0), so that E1 + Em =
+    e / sigma_a, the radiance of an endless medium that emits e and absorbs sigma_a.  0 in
+    channels without extinction, and Em 0 where the fog absorbs nothing (it would be
+    infinite; ``lossless_glow`` warns).  e the emission (W/(m^3 sr)), sigma in 1/m."""
+    st = np.asarray(fog.sigma_s, np.float64) + np.asarray(fog.sigma_a, np.float64)
+    ss = np.asarray(fog.sigma_s, np.float64)
+    sa = np.asarray(fog.sigma_a, np.float64)
+    em = np.maximum(np.asarray(fog.emission, np.float64), 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        e1 = np.where(st > 0, em / np.where(st > 0, st, 1.0), 0.0)
+        em_ = np.where((sa > 0) & (st > 0), e1 * ss / np.where(sa > 0, sa, 1.0), 0.0)
+    return e1, (em_ if multiple else np.zeros(3))
+
+
+def lossless_glow(fog: Medium) -> bool:
+    """Whether the fog glows and scatters, without absorbing, in some colour channel: its
+    multiply scattered glow is infinite there (in Cycles as bright as its Volume Bounces
+    allow)."""
+    em = np.asarray(fog.emission, np.float64)
+    return bool(np.any((em > 0) & (np.asarray(fog.sigma_s, np.float64) > 0)
+                       & (np.asarray(fog.sigma_a, np.float64) <= 0)))
 
 
 def infinite_emission(fog: Medium) -> bool:

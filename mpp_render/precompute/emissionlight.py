@@ -23,9 +23,8 @@ lights' do; the surfaces' own light from the glow is their gather march's (surfa
 
 Where media overlap, the glow's paths fly through the others as the lights' do
 (paths.PathInputs.others) and what they deposit on another medium's lattice lights that
-medium (``partners``).  What it leaves out: the world volume's emission (an endless medium:
-left to the march's emission).  A medium that does not glow, or cannot scatter, costs
-nothing.
+medium (``partners``).  The world fog's glow, an endless medium's, is fogglow.py's.  A
+medium that does not glow, or cannot scatter, costs nothing.
 """
 from __future__ import annotations
 
@@ -35,6 +34,7 @@ import numpy as np
 
 from .. import kernels
 from ..media import PreparedMedium
+from .fogglow import fog_glow
 from .lightpaths import PathLattice, _trace_all
 from .pathstarts import Surroundings
 
@@ -54,6 +54,9 @@ def emission_light(pm: PreparedMedium, camera, n_paths: int, resolution: int,
     media they fly through too (lightpaths.traced_multiple), ``cross`` per partner its
     (E1, Em) on its lattice.  None where nothing glows or the medium is too dense for
     paths."""
+    if pm.endless:   # the world fog glows everywhere: its own estimate (fogglow.py)
+        return fog_glow(pm, camera, n_paths, resolution, multiple, seed=seed, threads=threads,
+                        should_cancel=should_cancel, around=around)
     e = pm.emitted()
     if e is None or camera is None:
         return None

@@ -278,7 +278,9 @@ def _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
                max_collisions: int = MAX_COLLISIONS, moments: bool = False,
                partners=(), light=None) -> list:
     """``_trace``'s deposits on ``lat``, then on each of the ``partners``' lattices
-    ((PreparedMedium, PathLattice), traced_multiple), which the paths fly through too.
+    ((PreparedMedium, PathLattice), traced_multiple), which the paths fly through too.  Each
+    set of ``sets``: (points, power W, directions, jitter, lobe[, (start source, peaks) or
+    None[, bias]]), bias (N,) the relative odds of drawing each start (paths.from_power).
     ``light``: None, or the packed light record the first scatterings (the tracer reads it
     for lobe 0 sets only) draw their incoming direction from (``start_light``)."""
     density, w2i, i2w = lat.density, lat.w2i, lat.i2w
@@ -304,7 +306,7 @@ def _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
         if source is not None and source.shape != density.shape:
             source, peak = None, None
         n_k = max(1, int(round(n_paths * totals[k] / totals.sum())))
-        weights, cdf = from_power(pw)
+        weights, cdf = from_power(pw, item[6] if len(item) > 6 else None)
         inp = PathInputs(density, w2i, i2w, np.asarray(pm.sigma_s, np.float64), st, float(pm.g),
                          lat.stride, lat.towards, np.ascontiguousarray(starts), weights,
                          np.ascontiguousarray(dirs), cdf, lat.rate, n_k, int(seed) + 104729 * k,

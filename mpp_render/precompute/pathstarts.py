@@ -179,35 +179,81 @@ def surface_albedo(ss) -> np.ndarray:
     return np.ascontiguousarray(base[ss.surface], np.float64)
 
 
+def surface_points(ss, centre, radius: float, m: int, rng, albedo_min: float = -1.0):
+    """(points (N,3) m, triangles (N,) int, area (N,) m^2): about ``m`` points spread
+    uniformly over the parts of the SurfaceSet ``ss``'s triangles inside the sphere
+    (``centre``, ``radius``), each standing for ``area`` of them (the estimate of the
+    integral of f over those parts is sum f(point) area).  A triangle smaller than the disc
+    the sphere cuts from its plane is drawn over whole, else that disc is, and the draws
+    outside the triangle or the sphere are dropped: a ground far wider than the sphere gets
+    its points where the sphere is, not over all of it.  Triangles whose largest diffuse
+    albedo is not above ``albedo_min`` (surface_albedo) are left out; None where nothing
+    remains."""
+    centre = np.asarray(centre, np.float64)
+    corners = np.stack([ss.v0, ss.v0 + ss.e1, ss.v0 + ss.e2], axis=1)
+    lo, hi = corners.min(axis=1), corners.max(axis=1)
+    gap = np.linalg.norm(np.maximum(np.maximum(lo - centre, centre - hi), 0.0), axis=1)
+    dist = np.einsum("ij,ij->i", centre[None, :] - ss.v0, ss.normal)   # to the plane
+    cand = np.flatnonzero((gap <= radius) & (np.abs(dist) < radius) &
+                          (surface_albedo(ss).max(axis=1) > albedo_min))
+    if not cand.size:
+        return None
+    area = 0.5 * np.linalg.norm(np.cross(ss.e1[cand], ss.e2[cand]), axis=1)
+    disc_r = np.sqrt(np.maximum(radius * radius - dist[cand] ** 2, 0.0))
+    disc = np.pi * disc_r ** 2
+    whole = area <= disc
+    domain = np.where(whole, area, disc)
+    total = float(domain.sum())
+    if not (total > 0.0):
+        return None
+    pick = np.minimum(np.searchsorted(np.cumsum(domain) / total, rng.random(m), side="right"),
+                      len(cand) - 1)
+    drawn = np.bincount(pick, minlength=len(cand))
+    tri = cand[pick]
+    a, b = rng.random(m), rng.random(m)
+    flip = a + b > 1.0
+    a, b = np.where(flip, 1.0 - a, a), np.where(flip, 1.0 - b, b)
+    p = ss.v0[tri] + a[:, None] * ss.e1[tri] + b[:, None] * ss.e2[tri]
+    big = ~whole[pick]
+    if np.any(big):      # uniform in the plane's disc, kept where inside the triangle
+        from ..phase import orthonormal_basis
+        nb = ss.normal[tri[big]]
+        t1, t2 = orthonormal_basis(nb)
+        r = disc_r[pick[big]] * np.sqrt(rng.random(int(big.sum())))
+        phi = 2.0 * np.pi * rng.random(int(big.sum()))
+        q = (centre - dist[tri[big]][:, None] * nb) + \
+            t1 * (r * np.cos(phi))[:, None] + t2 * (r * np.sin(phi))[:, None]
+        p[big] = q
+    rel = p - ss.v0[tri]
+    e1, e2 = ss.e1[tri], ss.e2[tri]
+    d11, d12, d22 = (np.einsum("ij,ij->i", x, y) for x, y in ((e1, e1), (e1, e2), (e2, e2)))
+    r1, r2 = np.einsum("ij,ij->i", rel, e1), np.einsum("ij,ij->i", rel, e2)
+    det = d11 * d22 - d12 * d12
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = (d22 * r1 - d12 * r2) / det
+        v = (d11 * r2 - d12 * r1) / det
+    inside = (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0)
+    keep = (inside | ~big) & (np.linalg.norm(p - centre, axis=1) <= radius)
+    if not np.any(keep):
+        return None
+    share = domain[pick] / drawn[pick]
+    return p[keep], tri[keep], share[keep]
+
+
 def surface_starts(pm, light: Light, around: Surroundings, seed: int):
     """(points, power, normals, jitter m) of the light ``light`` reflects off the surfaces
-    within ``reach(pm)`` (module docstring), or None when they reflect none."""
+    within ``reach(pm)`` (module docstring; the points: ``surface_points``), or None when
+    they reflect none."""
     ss = around.surfaces
     if ss is None or not around.bounce:
         return None
     centre, radius = reach(pm)
-    corners = np.stack([ss.v0, ss.v0 + ss.e1, ss.v0 + ss.e2], axis=1)
-    lo, hi = corners.min(axis=1), corners.max(axis=1)
-    gap = np.linalg.norm(np.maximum(np.maximum(lo - centre, centre - hi), 0.0), axis=1)
-    albedo = surface_albedo(ss)
-    cand = np.flatnonzero((gap <= radius) & (albedo.max(axis=1) > 0.0))
-    if not cand.size:
-        return None
-    area = 0.5 * np.linalg.norm(np.cross(ss.e1[cand], ss.e2[cand]), axis=1)
-    total = float(area.sum())
-    if not (total > 0.0):
-        return None
     rng = np.random.default_rng(seed)
-    pick = cand[np.minimum(np.searchsorted(np.cumsum(area) / total, rng.random(SURFACE_POINTS),
-                                           side="right"), len(cand) - 1)]
-    a, b = rng.random(SURFACE_POINTS), rng.random(SURFACE_POINTS)
-    flip = a + b > 1.0
-    a, b = np.where(flip, 1.0 - a, a), np.where(flip, 1.0 - b, b)
-    p = ss.v0[pick] + a[:, None] * ss.e1[pick] + b[:, None] * ss.e2[pick]
-    near = np.linalg.norm(p - centre, axis=1) <= radius
-    if not np.any(near):
+    got = surface_points(ss, centre, radius, SURFACE_POINTS, rng, albedo_min=0.0)
+    if got is None:
         return None
-    p, pick = p[near], pick[near]
+    p, pick, share = got
+    albedo = surface_albedo(ss)
     d, e = incident(light, p)
     n = ss.normal[pick]
     cos = -np.einsum("ij,ij->i", d, n)
@@ -219,9 +265,8 @@ def surface_starts(pm, light: Light, around: Surroundings, seed: int):
     tau = light_optical_depth(around.solid, light, p, around.step, surfaces=ss,
                               fog_sigma_t=around.fog_sigma_t)
     power = albedo[pick[lit]] * e[lit] * np.abs(cos[lit])[:, None] * \
-        around.disc(light, p, tau) * \
-        (total / SURFACE_POINTS)
+        around.disc(light, p, tau) * share[lit][:, None]
     live = np.all(np.isfinite(power), axis=1) & (power.sum(axis=1) > 0.0)
     if not np.any(live):
         return None
-    return p[live], power[live], n[lit][live], float(np.sqrt(total / SURFACE_POINTS))
+    return p[live], power[live], n[lit][live], float(np.sqrt(np.mean(share)))
