@@ -16,7 +16,8 @@ the slowest; Cycles at ``--cycles-samples`` (64; four times that for the small l
 
 Features (``FEATURES``): a VDB cloud under sun and sky; a coloured mesh volume; world fog with
 a spot light and an occluder (god rays, single scattering in both renderers: Cycles' endless
-fog with many bounces is too slow for a gallery); blackbody fire from a VDB temperature grid;
+fog with many bounces is too slow for a gallery); world fog that glows, its light scattered
+in itself round a ground and two boxes (every bounce in both); blackbody fire from a VDB temperature grid;
 a smoke plume lighting the ground under it; each light type on a fog box; single against
 multiple scattering of the cloud (our Volume Single / Volume Multiple beside Cycles' Volume
 Direct / Volume Indirect of the same run); the passes of the fire render.  Fluid domains are
@@ -246,6 +247,28 @@ def build_god_rays(directory, width=WIDTH, height=HEIGHT):
               spot_blend=0.15, shadow_soft_size=0.0)
     add_camera(sc, (0.0, -9.0, 2.0), (0.0, 2.0, 2.0 - 11.0 * math.tan(math.radians(5))),
                36.0, width, height)
+    return sc
+
+
+def build_glowing_fog(directory, width=WIDTH, height=HEIGHT):
+    """World fog that glows and scatters (Principled Volume: density 0.2 /m, albedo 0.8,
+    anisotropy 0.3, warm emission) over a grey ground, with a white box and a grey pillar; no
+    lamps: the fog lights itself, less so beside the ground and the objects."""
+    sc = new_file()
+    world = set_world(sc, (0.0, 0.0, 0.0))
+    nt = world.node_tree
+    fog = nt.nodes.new("ShaderNodeVolumePrincipled")
+    for k, v in (("Color", (0.8, 0.8, 0.8, 1.0)), ("Density", 0.2), ("Anisotropy", 0.3),
+                 ("Emission Strength", 1.0), ("Emission Color", (1.0, 0.8, 0.6, 1.0))):
+        fog.inputs[k].default_value = v
+    nt.links.new(fog.outputs["Volume"], nt.get_output_node("CYCLES").inputs["Volume"])
+    add_mesh("plane", surface_material("Ground", (0.5, 0.5, 0.5)), size=80.0,
+             location=(0.0, 0.0, 0.0))
+    add_mesh("cube", surface_material("Box", (0.8, 0.8, 0.8)), size=1.5,
+             location=(0.6, 1.5, 0.75))
+    add_mesh("cube", surface_material("Pillar", (0.3, 0.3, 0.3)), size=1.0,
+             location=(-1.8, 3.5, 1.5), scale=(0.5, 0.5, 3.0))
+    add_camera(sc, (0.0, -5.0, 1.2), (0.0, 4.0, 0.8), 30.0, width, height)
     return sc
 
 
@@ -529,6 +552,13 @@ def feature_god_rays(tmp, args):
     yield rec, pic
 
 
+def feature_glowing_fog(tmp, args):
+    rec, pic, _, _ = compare_feature("glowing_fog", build_glowing_fog,
+                                     "World fog that glows: its light scattered in itself",
+                                     tmp, args, ours_samples=max(1, args.samples // 2))
+    yield rec, pic
+
+
 def feature_smoke_ground(tmp, args):
     rec, pic, _, _ = compare_feature("smoke_ground", build_smoke_ground,
                                      "Smoke plume over a Principled ground, point light",
@@ -605,6 +635,7 @@ FEATURES = {
     "cloud": feature_cloud,            # also writes single_multiple
     "mesh_volume": feature_mesh_volume,
     "god_rays": feature_god_rays,
+    "glowing_fog": feature_glowing_fog,
     "fire": feature_fire,              # also writes passes
     "coloured_smoke": feature_coloured_smoke,
     "smoke_ground": feature_smoke_ground,
@@ -641,7 +672,8 @@ def main(argv=None):
                 rec["png_bytes"] = os.path.getsize(path)
                 records[rec["feature"]] = rec
                 print(json.dumps(rec), flush=True)
-    order = ["cloud", "single_multiple", "mesh_volume", "god_rays", "fire", "passes",
+    order = ["cloud", "single_multiple", "mesh_volume", "god_rays", "glowing_fog", "fire",
+             "passes",
              "coloured_smoke", "smoke_ground", "lights"]
     doc = {"generated": time.strftime("%Y-%m-%d"), "cores": os.cpu_count(),
            # other jobs on the machine slow both renderers; the 1-minute load at the start

@@ -208,7 +208,6 @@ def surface_points(ss, centre, radius: float, m: int, rng, albedo_min: float = -
         return None
     pick = np.minimum(np.searchsorted(np.cumsum(domain) / total, rng.random(m), side="right"),
                       len(cand) - 1)
-    drawn = np.bincount(pick, minlength=len(cand))
     tri = cand[pick]
     a, b = rng.random(m), rng.random(m)
     flip = a + b > 1.0
@@ -236,8 +235,9 @@ def surface_points(ss, centre, radius: float, m: int, rng, albedo_min: float = -
     keep = (inside | ~big) & (np.linalg.norm(p - centre, axis=1) <= radius)
     if not np.any(keep):
         return None
-    share = domain[pick] / drawn[pick]
-    return p[keep], tri[keep], share[keep]
+    # each draw stands for total / m of the domains (their expected share; a triangle's
+    # realised count would lose the small triangles that no draw falls on)
+    return p[keep], tri[keep], np.full(int(keep.sum()), total / m)
 
 
 def surface_starts(pm, light: Light, around: Surroundings, seed: int):
