@@ -13,7 +13,8 @@
 * **Lit surfaces** (``surface_starts``).  A diffuse surface sends back R E cos(theta) of the
   light it receives (R its diffuse albedo, base colour x (1 - metallic), W/m^2), a cosine
   lobe about its normal on the lit side.  Points are drawn uniformly over the area A of the
-  triangles within reach of the medium, each with power R E cos(theta) e^(-tau) A / M (W).
+  triangles within reach of the medium (``surface_points``), each with power
+  R E cos(theta) e^(-tau) A / M (W).
 
 Both return (points (N,3) m, power (N,3) W, directions (N,3) unit): the light's propagation
 for fog points, the lit side's normal for surface points.  All lengths in metres.
