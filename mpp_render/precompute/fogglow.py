@@ -70,7 +70,8 @@ def fog_glow(pm, camera, n_paths: int, resolution: int, multiple: bool, seed: in
     if around is None or around.surfaces is None:
         return lat.stride, e1, em, []
     h0, h1 = surface_view(pm, lat, around, n_dirs, seed, threads, should_cancel)
-    e1 = (e1_inf * (1.0 - h0)).astype(np.float32)
+    seen = lat.tent_mass[..., 0] > 0.0
+    e1 = fill_hidden((e1_inf * (1.0 - h0)).astype(np.float32), seen)
     st = np.asarray(pm.sigma_t, np.float64)
     absorbs = (np.asarray(pm.sigma_a, np.float64) > 0.0) & (st > 0.0)
     if not (multiple and np.any(absorbs)):
@@ -88,7 +89,23 @@ def fog_glow(pm, camera, n_paths: int, resolution: int, multiple: bool, seed: in
         every = _trace_all(sets, n, seed, threads, should_cancel, pm, lat, around)[0]
         later = lat.mean(np.maximum(every - first, 0.0))
     em = np.where(absorbs, np.maximum(total * (1.0 - h1) - later - e1, 0.0), 0.0)
-    return lat.stride, e1, em.astype(np.float32), []
+    return lat.stride, e1, fill_hidden(em.astype(np.float32), seen), []
+
+
+def fill_hidden(values: np.ndarray, seen: np.ndarray) -> np.ndarray:
+    """``values`` (LX,LY,LZ,3) with each lattice point that sees no fog (``seen`` False: its
+    tent lies wholly inside a closed mesh or under a ground, PathLattice.tent_mass) set to
+    the mean of its neighbours (3x3x3) that do, else 0.  Such a point's own value means
+    nothing (inside a white box its directions all meet the box: its glow came out as the
+    box's albedo times the endless fog's), yet the voxels beside the box read it through
+    their trilinear interpolation."""
+    w = seen.astype(np.float32)[..., None]
+    acc, cnt = values * w, w.copy()
+    for ax in range(3):
+        acc = acc + np.roll(acc, 1, axis=ax) + np.roll(acc, -1, axis=ax)
+        cnt = cnt + np.roll(cnt, 1, axis=ax) + np.roll(cnt, -1, axis=ax)
+    near = np.divide(acc, cnt, out=np.zeros_like(acc), where=cnt > 0.0)
+    return np.where(seen[..., None], values, near).astype(np.float32)
 
 
 def nearness(pm, points) -> np.ndarray:
