@@ -35,7 +35,6 @@ from typing import Optional
 import numpy as np
 
 from ..parallel import run_chunks
-from ..phase import sample_hg
 from ..surfaces import intersect
 from ..worldfog import glow_radiance
 from .lattice import lattice_points
@@ -43,7 +42,7 @@ from .lightdepth import density_lengths
 from .lightpaths import PathLattice, _trace_all
 from .pathstarts import (LIFT, SURFACE_POINTS, Surroundings, reach, surface_albedo,
                          surface_points)
-from .worldlight import _block_uniforms, world_chunk
+from .worldlight import phase_directions, world_chunk
 
 # the deficit's paths, a fraction of the Paths setting: they carry only its light scattered
 # before (the first flights are surface_view's), smooth and a few percent of the glow
@@ -152,16 +151,10 @@ def surface_view(pm, lat, around: Surroundings, n_dirs: int, seed: int, threads:
     far = 2.0 * far
     h0 = np.zeros((n, 3))
     h1 = np.zeros((n, 3))
-    j = np.arange(n_dirs)
-    golden = 0.6180339887498949
 
     def work(a, b):
         m = b - a
-        r = _block_uniforms(seed + 31, a, b)
-        u1 = np.mod((j[None, :] + 0.5) / n_dirs + r[:, :1], 1.0).ravel()
-        u2 = np.mod(j[None, :] * golden + r[:, 1:], 1.0).ravel()
-        w_in = sample_hg(u1, u2, pm.g, np.repeat(towards[a:b], n_dirs, axis=0))
-        d = -w_in
+        d = -phase_directions(seed + 31, a, b, n_dirs, pm.g, towards[a:b])
         pp = np.repeat(pts[a:b], n_dirs, axis=0)
         t, tri = intersect(ss, pp, d, np.full(len(pp), far))
         hit = tri >= 0

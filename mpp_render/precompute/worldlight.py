@@ -26,6 +26,7 @@ from .lightdepth import SHADOW_TAU, density_lengths
 AMBIENT_RESOLUTION = 32  # lattice points along the longest side for the world light
 WORLD_RNG_BLOCK = 1 << 11  # points sharing one random stream in world_light
 WORLD_CHUNK_RAYS = 1 << 14  # rays (points x directions) per world-light chunk, for a quick Esc
+GOLDEN = 0.6180339887498949  # the golden ratio's fraction: the directions' azimuth sequence
 
 
 def world_chunk(n_dirs: int) -> int:
@@ -52,6 +53,18 @@ def _block_uniforms(seed, a, b):
     return parts[0] if len(parts) == 1 else np.concatenate(parts)
 
 
+def phase_directions(seed: int, a: int, b: int, n_dirs: int, g: float, to_cam) -> np.ndarray:
+    """((b - a) * n_dirs, 3) unit propagation directions of light arriving at points a..b-1
+    and scattered towards the camera (``to_cam`` (b - a, 3) unit), ``n_dirs`` per point drawn
+    from the HG lobe of ``g``: stratified in the cosine, a golden-ratio sequence in the
+    azimuth, each point's pair shifted by its own uniforms (``_block_uniforms``)."""
+    j = np.arange(n_dirs)
+    r = _block_uniforms(seed, a, b)
+    u1 = np.mod((j[None, :] + 0.5) / n_dirs + r[:, :1], 1.0).ravel()
+    u2 = np.mod(j[None, :] * GOLDEN + r[:, 1:], 1.0).ravel()
+    return sample_hg(u1, u2, g, np.repeat(np.asarray(to_cam, np.float64), n_dirs, axis=0))
+
+
 def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, camera: Camera,
                 points, n_dirs, step, seed=0, chunk=None, should_cancel=None, surfaces=None,
                 threads=0, multiple=False, tuning: Tuning = Tuning()):
@@ -72,19 +85,13 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
     sig_s = np.stack([m.sigma_s for m in media]) if media else np.zeros((0, 3))
     out = np.zeros((n, 3))
     out_ms = np.zeros((n, 3))
-    golden = 0.6180339887498949
-    j = np.arange(n_dirs)
     chunk = world_chunk(n_dirs) if chunk is None else int(chunk)
 
     def work(a, b):
         p = points[a:b]
         m = len(p)
         to_cam = towards_camera(camera, p)
-        r = _block_uniforms(seed, a, b)
-        u1 = np.mod((j[None, :] + 0.5) / n_dirs + r[:, :1], 1.0).ravel()
-        u2 = np.mod(j[None, :] * golden + r[:, 1:], 1.0).ravel()
-        axis = np.repeat(to_cam, n_dirs, axis=0)
-        w_in = sample_hg(u1, u2, pm.g, axis)  # propagation directions of the arriving light
+        w_in = phase_directions(seed, a, b, n_dirs, pm.g, to_cam)  # the arriving light's
         d = -w_in  # march towards where the light comes from
         pp = np.repeat(p, n_dirs, axis=0)
         lengths = density_lengths(media, pp, d, np.full(len(pp), np.inf), step, tuning) \
