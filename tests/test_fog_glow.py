@@ -132,3 +132,23 @@ def test_the_glow_beside_a_ground_converges_to_the_endless_answer_far_from_it():
     assert total_b[high].mean() > total_b[low].mean()
     assert total_a[low].mean() == pytest.approx(total_b[low].mean(), rel=0.03)
     assert np.all(a[1] <= f.emission[0] / st[0] * 1.0001)
+
+
+@pytest.mark.parametrize("sigma_s, sigma_a, g, expect", [
+    ((1e4,) * 3, (1e2,) * 3, 0.0, (1e-2, 5e-3, 2.5e-3)),       # optical depth 1e4 per metre
+    ((0.5,) * 3, (0.0, 0.1, 0.2), 0.99, (4.0, 5.0, 1.25)),      # lossless red: scattered once
+    ((0.2,) * 3, (0.05,) * 3, -0.99, (20.0, 10.0, 5.0)),        # backward scattering
+])
+def test_stiff_glowing_fogs_give_finite_sensible_images(sigma_s, sigma_a, g, expect):
+    """A glowing fog at optical depth 1e4 per metre, with anisotropy near +1 and -1, and one
+    that absorbs nothing in red (its glow there scattered once, 2 e / sigma_t, with a
+    warning): finite, and the endless answer within 1 % in the image's mean."""
+    f = fog(sigma_s=sigma_s, sigma_a=sigma_a, emission=(1.0, 0.5, 0.25), g=g)
+    out = render(SceneDescription(camera(8, 6), world=World(volume=f),
+                                  settings=Settings(samples=2, voxel_resolution=16,
+                                                    multiple_paths=20000)))
+    img = out.passes["Combined"][..., :3].reshape(-1, 3)
+    assert np.all(np.isfinite(img))
+    np.testing.assert_allclose(img.mean(axis=0), expect, rtol=0.01)
+    assert any("glows and scatters without absorbing" in w for w in out.warnings) == \
+        (min(sigma_a) == 0.0)
