@@ -150,11 +150,15 @@ def bounded_medium(desc: SceneDescription, fog: Medium, media=(),
                    resolution: int = 128) -> FogBox:
     """The fog as a grid on the camera-aligned box described in the module docstring, with
     ``resolution`` voxels along its longest side (at least 8).  ``media``: the other prepared
-    media (they only locate the content)."""
+    media (they only locate the content).  A fog that glows and scatters is its own content
+    everywhere (the glow it scatters falls beside the surfaces in view, however far from the
+    lights: precompute.fogglow): its grid runs to D_view."""
     cam = desc.camera
     near = max(float(cam.clip_start), 0.0)
     d_view = view_depth(desc, fog)
     d_content = content_depth(desc, media) * CONTENT_MARGIN
+    if glows(fog) and np.isfinite(d_view):
+        d_content = d_view
     depth = min(d_view, d_content) if d_content > near else d_view
     if not np.isfinite(depth):   # emission only, nothing to bound it: the content, or 10 m
         depth = max(d_content, near + 10.0)
@@ -316,6 +320,12 @@ def glow_radiance(fog: Medium, multiple: bool):
         e1 = np.where(st > 0, em / np.where(st > 0, st, 1.0), 0.0)
         em_ = np.where((sa > 0) & (st > 0), e1 * ss / np.where(sa > 0, sa, 1.0), 0.0)
     return e1, (em_ if multiple else np.zeros(3))
+
+
+def glows(fog: Medium) -> bool:
+    """Whether the fog emits and scatters in some colour channel (its glow lights it)."""
+    return bool(np.any((np.asarray(fog.emission, np.float64) > 0)
+                       & (np.asarray(fog.sigma_s, np.float64) > 0)))
 
 
 def lossless_glow(fog: Medium) -> bool:

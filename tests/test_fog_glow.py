@@ -152,3 +152,32 @@ def test_stiff_glowing_fogs_give_finite_sensible_images(sigma_s, sigma_a, g, exp
     np.testing.assert_allclose(img.mean(axis=0), expect, rtol=0.01)
     assert any("glows and scatters without absorbing" in w for w in out.warnings) == \
         (min(sigma_a) == 0.0)
+
+
+def test_a_volume_in_the_glowing_fog_is_lit_by_its_glow():
+    """glow_on_medium: a faint cube in the glowing fog (no surfaces) receives the endless
+    fog's E1_inf and Em_inf from every side; a dense one (20 / m) is dark at its centre and
+    lit at its faces, where more of the glow has scattered in it on its way than not."""
+    from mpp_render.precompute.fogglow import glow_on_medium
+    from mpp_render.scene import Medium
+    f = fog(sigma_s=(0.16,) * 3, sigma_a=(0.04,) * 3, emission=(1.0, 0.5, 0.25), g=0.3)
+    cam = camera(16, 12)
+    desc = SceneDescription(cam, world=World(volume=f))
+    fog_pm = prepare(worldfog.bounded_medium(desc, f, resolution=24).medium)
+    e1_inf, em_inf = worldfog.glow_radiance(f, True)
+    n = 24
+    i2w = np.eye(4) * 0.1
+    i2w[:3, 3] = -1.15
+    i2w[3, 3] = 1.0
+    for density, centre_e1 in ((1e-4, 1.0), (20.0, 0.0)):
+        cube = prepare(Medium("cube", np.ones((n, n, n), np.float32), i2w,
+                              np.full(3, 0.9 * density), np.full(3, 0.1 * density), 0.0))
+        stride, e1, em = glow_on_medium(fog_pm, [cube], cube, cam, 64, 0.05, True, seed=3)
+        mid = tuple(s // 2 for s in e1.shape[:3])
+        np.testing.assert_allclose(e1[mid], centre_e1 * e1_inf, atol=0.02 * e1_inf[0])
+        if density < 1:
+            np.testing.assert_allclose(em[mid], em_inf, rtol=0.01)
+        else:
+            face = e1[1, mid[1], mid[2]]         # a voxel inside a face: lit from outside
+            assert np.all(face > 0.05 * e1_inf) and np.all(face > 10.0 * e1[mid] + 1e-6)
+            assert np.all(em[1, mid[1], mid[2]] > face)    # scattered on its way in, mostly

@@ -24,9 +24,10 @@ sigma_t, the first flights of paths from the same points.  On the fog's lattice:
     Em = E1_inf + Em_inf - D - E1                        (Volume Multiple)
 
 both at least 0, added to the fog's world channels as a glowing medium's are
-(precompute.emissionlight).  Exact without surfaces; converges with the paths.  Left out:
-the other media's shade on the fog's glow, and the fog's glow in the other media.  Where the
-fog absorbs nothing in a channel its multiply scattered glow is infinite: only E1 there.
+(precompute.emissionlight).  Exact without surfaces; converges with the paths.  The other
+media in the fog are lit by its glow as by a sky (``glow_on_medium``).  Left out: the other
+media's shade on the fog's glow.  Where the fog absorbs nothing in a channel its multiply
+scattered glow is infinite: only E1 there.
 """
 from __future__ import annotations
 
@@ -36,13 +37,14 @@ import numpy as np
 
 from ..parallel import run_chunks
 from ..surfaces import intersect
+from ..scene import World
 from ..worldfog import glow_radiance
-from .lattice import lattice_points
+from .lattice import coarse_lattice, lattice_points
 from .lightdepth import density_lengths
 from .lightpaths import PathLattice, _trace_all
 from .pathstarts import (LIFT, SURFACE_POINTS, Surroundings, reach, surface_albedo,
                          surface_points)
-from .worldlight import phase_directions, world_chunk
+from .worldlight import AMBIENT_RESOLUTION, phase_directions, world_chunk, world_light
 
 # the deficit's paths, a fraction of the Paths setting: they carry only its light scattered
 # before (the first flights are surface_view's), smooth and a few percent of the glow
@@ -89,6 +91,33 @@ def fog_glow(pm, camera, n_paths: int, resolution: int, multiple: bool, seed: in
         later = lat.mean(np.maximum(every - first, 0.0))
     em = np.where(absorbs, np.maximum(total * (1.0 - h1) - later - e1, 0.0), 0.0)
     return lat.stride, e1, fill_hidden(em.astype(np.float32), seen), []
+
+
+def glow_on_medium(fog, solid, pm, camera, n_dirs: int, step: float, multiple: bool,
+                   seed: int = 0, surfaces=None, threads: int = 0, should_cancel=None,
+                   tuning=None):
+    """(stride, E1, Em) (LX,LY,LZ,3) float32 W/(m^2 sr) on the world light's coarse lattice of
+    the medium ``pm`` (another medium than the endless ``fog``, among ``solid``): the fog's
+    glow that it scatters, from every direction the endless fog's E1_inf and Em_inf
+    (glow_radiance) attenuated through the media (``solid``) and hidden by a surface only
+    where the fog lies behind it (worldlight.world_light's ``fog_sigma_t``).  E1 = E1_inf U
+    (Volume Single), Em = E1_inf C + Em_inf (U + C) (Volume Multiple; None without
+    ``multiple``), U the mean transmittance and C the part collided on the way in, as for
+    the sky (§7, §9.8).  Left out: the fog's deficit round the surfaces (its first flight,
+    which ``fog_glow`` gives the fog itself) and the medium's shade on the fog round it."""
+    e1_inf, em_inf = glow_radiance(fog.medium, multiple)
+    stride = max(1, int(round(max(pm.grid.shape) / AMBIENT_RESOLUTION)))
+    cshape, cflat, cpts = coarse_lattice(pm, stride)
+    kw = {} if tuning is None else {"tuning": tuning}
+    u, c = world_light(solid, pm, World(np.ones(3)), camera, cpts, n_dirs, step, seed=seed,
+                       should_cancel=should_cancel, surfaces=surfaces, threads=threads,
+                       multiple=True, fog_sigma_t=np.asarray(fog.sigma_t, np.float64), **kw)
+    out = []
+    for vals in (e1_inf * u, e1_inf * c + em_inf * (u + c)):
+        lattice = np.zeros((int(np.prod(cshape)), 3), np.float32)
+        lattice[cflat] = vals
+        out.append(lattice.reshape(tuple(cshape) + (3,)))
+    return stride, out[0], (out[1] if multiple else None)
 
 
 def fill_hidden(values: np.ndarray, seen: np.ndarray) -> np.ndarray:

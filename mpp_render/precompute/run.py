@@ -17,6 +17,7 @@ from .layout import FieldLayout, field_layout
 from .lightdepth import (SHADOW_TAU, light_optical_depth, near_sharp_surfaces, soft_visibility,
                          split_fog, sweep_light)
 from .flatten import flattened
+from .fogglow import glow_on_medium
 from .emissionlight import EMISSION_PATHS, add_lattice, emission_light
 from .lightpaths import overlapping, partner_lattice, traced_multiple
 from .pathstarts import Surroundings
@@ -177,6 +178,16 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                 if more is not None and layout.ambient_multiple_channel is not None:
                     add_lattice(f, layout.ambient_multiple_channel, more, stride, flat)
                 n_glow += 1
+        if glow and layout.ambient_channel is not None and fog is not None and fog.glows \
+                and pm is not fog and camera is not None and np.any(pm.sigma_s > 0):
+            # the world fog's glow lights this medium too (precompute.fogglow.glow_on_medium)
+            stride, once, more = glow_on_medium(fog, solid, pm, camera, n_dirs, 2.0 * step,
+                                                multiple, seed=seed + mi + 4001,
+                                                surfaces=surfaces, threads=threads,
+                                                should_cancel=should_cancel, tuning=tuning)
+            add_lattice(f, layout.ambient_channel, once, stride, flat)
+            if more is not None and layout.ambient_multiple_channel is not None:
+                add_lattice(f, layout.ambient_multiple_channel, more, stride, flat)
         ms = [None] * len(lights)
         if multiple and np.any(pm.sigma_s > 0):
             for li, light in enumerate(lights):

@@ -18,7 +18,7 @@ from ..media import PreparedMedium
 from ..parallel import run_chunks
 from ..phase import sample_hg
 from ..scene import Camera, Tuning, World
-from ..surfaces import occluded
+from ..surfaces import intersect, occluded
 from .lattice import coarse_lattice
 from .lightdepth import SHADOW_TAU, density_lengths
 
@@ -67,14 +67,17 @@ def phase_directions(seed: int, a: int, b: int, n_dirs: int, g: float, to_cam) -
 
 def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, camera: Camera,
                 points, n_dirs, step, seed=0, chunk=None, should_cancel=None, surfaces=None,
-                threads=0, multiple=False, tuning: Tuning = Tuning()):
+                threads=0, multiple=False, tuning: Tuning = Tuning(), fog_sigma_t=None):
     """A(x) (N,3): world radiance scattered towards the camera per unit sigma_s, attenuated;
     with ``multiple`` also A_ms(x) (N,3), the same for the sky light that has scattered on
     its way in (the collided part exp(-tau_a) (1 - exp(-tau_s)), see docs/method.md), and the
     pair is returned.  Points draw their jitter from streams seeded by (seed, block of
     ``WORLD_RNG_BLOCK`` points), so the result depends on neither the thread count nor the
     chunk size (by default ``world_chunk(n_dirs)``, short enough to serve Esc quickly).
-    Raises cancel.Cancelled on Esc."""
+    ``fog_sigma_t``: None for the sky (the surfaces cut it off), or the RGB extinction (1/m)
+    of the endless fog whose glow ``world.color`` is (precompute.fogglow.glow_on_medium): a
+    surface at t metres along a direction hides only the fog behind it, the glow from there
+    scaled by 1 - exp(-sigma t).  Raises cancel.Cancelled on Esc."""
     colour = np.asarray(world.color, np.float64)
     n = len(points)
     if n == 0 or not np.any(colour > 0):
@@ -94,15 +97,23 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
         w_in = phase_directions(seed, a, b, n_dirs, pm.g, to_cam)  # the arriving light's
         d = -w_in  # march towards where the light comes from
         pp = np.repeat(p, n_dirs, axis=0)
-        lengths = density_lengths(media, pp, d, np.full(len(pp), np.inf), step, tuning) \
+        t_max = np.full(len(pp), np.inf)
+        seen = 1.0
+        walled = surfaces is not None and not surfaces.empty
+        if walled and fog_sigma_t is not None:   # the fog before the surface still glows
+            t, tri = intersect(surfaces, pp, d, t_max)
+            t_max = np.where(tri >= 0, t, np.inf)
+            seen = np.where((tri >= 0)[:, None],
+                            -np.expm1(-np.asarray(fog_sigma_t)[None, :] * t[:, None]), 1.0)
+        lengths = density_lengths(media, pp, d, t_max, step, tuning) \
             if media else np.zeros((len(pp), 0))
         tau = lengths @ sig_t
-        if surfaces is not None and not surfaces.empty:
-            tau += SHADOW_TAU * occluded(surfaces, pp, d, np.full(len(pp), np.inf))[:, None]
-        out[a:b] = np.exp(-tau).reshape(m, n_dirs, 3).mean(axis=1) * colour
+        if walled and fog_sigma_t is None:
+            tau += SHADOW_TAU * occluded(surfaces, pp, d, t_max)[:, None]
+        out[a:b] = (np.exp(-tau) * seen).reshape(m, n_dirs, 3).mean(axis=1) * colour
         if multiple:
             tau_s = np.minimum(lengths @ sig_s, tau)
-            collided = np.exp(-(tau - tau_s)) * -np.expm1(-tau_s)
+            collided = np.exp(-(tau - tau_s)) * -np.expm1(-tau_s) * seen
             out_ms[a:b] = collided.reshape(m, n_dirs, 3).mean(axis=1) * colour
 
     run_chunks(n, chunk, work, threads, should_cancel)

@@ -144,13 +144,18 @@ def test_suns_are_dark_and_emission_fills_the_fog(empty_scene, tmp_path):
                for w in ours_out.warnings)
 
 
-def glowing_fog(sc):
-    """A glowing, scattering world fog (Principled Volume: density 0.2 / m, albedo 0.8,
+def glowing_fog(sc, density=0.2, smoke=False):
+    """A glowing, scattering world fog (Principled Volume: ``density`` / m, albedo 0.8,
     anisotropy 0.3, emission (1, 0.8, 0.6)) over a grey ground 80 m wide with a white box on
-    it; no lamps: all the light is the fog's own."""
+    it; no lamps: all the light is the fog's own.  ``smoke``: a 2 m cube of smoke (density
+    2, albedo 0.9) floats beside the box."""
     new_scene(sc, (48, 36), location=(0, -5, 1.2), tilt=82.0)
+    if smoke:
+        bpy.ops.mesh.primitive_cube_add(size=2.0, location=(-0.8, 3.0, 1.6))
+        bpy.context.active_object.data.materials.append(node_material(
+            "smoke", "ShaderNodeVolumePrincipled", Density=2.0, Color=(0.9, 0.9, 0.9, 1))[0])
     world(sc, kind="ShaderNodeVolumePrincipled",
-          **{"Color": (0.8, 0.8, 0.8, 1), "Density": 0.2, "Anisotropy": 0.3,
+          **{"Color": (0.8, 0.8, 0.8, 1), "Density": density, "Anisotropy": 0.3,
              "Emission Strength": 1.0, "Emission Color": (1.0, 0.8, 0.6, 1)})
     for add, colour in ((lambda: bpy.ops.mesh.primitive_plane_add(size=80, location=(0, 0, 0)),
                          0.5),
@@ -185,4 +190,26 @@ def test_a_glowing_fog_lights_itself_as_in_cycles(empty_scene, tmp_path, multipl
     print("glowing fog", "full" if multiple else "single", m)
     assert not m["failed"]
     assert m["rel_rmse_4"] < 0.035, m
+    assert abs(m["bias"]) < 0.03, m
+
+
+def test_smoke_in_a_glowing_fog_is_lit_by_it(empty_scene, tmp_path):
+    """A smoke cube in a thinner glowing fog (0.1 / m) is lit by the fog's glow as by a sky
+    (precompute.fogglow.glow_on_medium), and the fog's grid runs to its view depth (the glow
+    is everywhere, not only round the smoke).  Measured (2 cores, ours 4 spp, Cycles 2 x
+    128 spp, every bounce): rel_rmse_4 0.045, bias -0.006 (Cycles' floor_4 0.010); without
+    the glow on the smoke 0.120, bias -0.058.  Over the smoke ours is 2-6 % brighter than
+    Cycles (the ground's shade on the glow it receives is left out), over the white box 10 %
+    darker (no light bounced between surfaces)."""
+    sc = empty_scene
+    glowing_fog(sc, density=0.1, smoke=True)
+    refs = [render_cycles(sc, tmp_path, 128, seed, multiple=True) for seed in (1, 2)]
+    batch.register()
+    batch.set_mpp(sc, 4, multiple=True, seed=0)
+    out = frame.render_mpp().output
+    ours = out.passes["Combined"][..., :3]
+    m = compare(ours, refs)
+    print("smoke in glowing fog", m)
+    assert not m["failed"]
+    assert m["rel_rmse_4"] < 0.07, m
     assert abs(m["bias"]) < 0.03, m
