@@ -30,6 +30,7 @@ from ..lights import disc_transmittance, incident
 from ..scene import Light
 from .. import kernels
 from ..media import disc_reaches
+from ..phase import orthonormal_basis
 from .lightdepth import kernel_arrays, light_optical_depth, light_position
 from .source import light_direction
 
@@ -148,7 +149,6 @@ def fog_starts(pm, light: Light, around: Surroundings, seed: int):
     c = 1.0 - u[:, 0] * (1.0 - cmin)
     s = np.sqrt(np.maximum(0.0, 1.0 - c * c))
     phi = 2.0 * np.pi * u[:, 1]
-    from ..phase import orthonormal_basis
     t1, t2 = orthonormal_basis(axis[None, :])
     d = t1 * (s * np.cos(phi))[:, None] + t2 * (s * np.sin(phi))[:, None] + axis * c[:, None]
     r = -np.log1p(-u[:, 2]) / sig
@@ -216,7 +216,6 @@ def surface_points(ss, centre, radius: float, m: int, rng, albedo_min: float = -
     p = ss.v0[tri] + a[:, None] * ss.e1[tri] + b[:, None] * ss.e2[tri]
     big = ~whole[pick]
     if np.any(big):      # uniform in the plane's disc, kept where inside the triangle
-        from ..phase import orthonormal_basis
         nb = ss.normal[tri[big]]
         t1, t2 = orthonormal_basis(nb)
         r = disc_r[pick[big]] * np.sqrt(rng.random(int(big.sum())))
