@@ -19,10 +19,10 @@ a spot light and an occluder (god rays, single scattering in both renderers: Cyc
 fog with many bounces is too slow for a gallery); world fog that glows, its light scattered
 in itself round a ground and two boxes (every bounce in both); blackbody fire from a VDB
 temperature grid; a smoke plume lighting the ground under it; each light type on a fog box;
-single against multiple scattering of the cloud (our Volume Single / Volume Multiple beside Cycles' Volume
-Direct / Volume Indirect of the same run); the passes of the fire render.  Fluid domains are
-left out: the bpy module cannot simulate or load a Mantaflow cache, so Cycles would render an
-empty domain there.
+single against multiple scattering of the cloud (our Volume Single / Volume Multiple beside
+Cycles' Volume Direct / Volume Indirect of the same run); the passes of the fire render.
+Fluid domains are left out: the bpy module cannot simulate or load a Mantaflow cache, so
+Cycles would render an empty domain there.
 
 Every builder (``build_<feature>(directory, width, height)``) replaces the current file's
 contents, writes any grid it needs into ``directory`` and returns the scene; the tests import

@@ -17,8 +17,9 @@ so D is the light of the surfaces themselves glowing with radiance S = (1 - rho)
 sigma_a and reflecting with their albedo: traced with the lamps' light paths (paths.py,
 lobe 1), started on the front of the surfaces within the fog's reach (pathstarts.reach).
 The unscattered glow alone (what Cycles scatters with Volume Bounces 0, whose paths end at
-the first surface after a scattering) misses, beside a surface, what lies behind it: its deficit D0 is the unscattered light of the surfaces glowing with e /
-sigma_t, the first flights of paths from the same points.  On the fog's lattice:
+the first surface after a scattering) misses, beside a surface, what lies behind it: its
+deficit D0 is the unscattered light of the surfaces glowing with e / sigma_t (cast from
+each lattice point, ``surface_view``).  On the fog's lattice:
 
     E1 = E1_inf - D0                                     (Volume Single)
     Em = E1_inf + Em_inf - D - E1                        (Volume Multiple)
