@@ -68,8 +68,8 @@ class FrameMarch:
         self.cut(self.spp)
         self.solid = split_fog(self.media)[0]
         # the fog's own glow scattered beyond its grid (worldfog.glow_radiance)
-        self.fog_glow = None if self.fog is None or not np.any(self.fog.emission) else \
-            worldfog.glow_radiance(self.fog, bool(self.st.multiple))
+        self.fog_glow = worldfog.glow_radiance(self.fog, bool(self.st.multiple)) \
+            if self.fog is not None and worldfog.glows(self.fog) else None
         self.arrays = kernel_arrays(self.solid)
         # the lamps inside the media, towards which the surfaces' gathers are also drawn
         self.guides = Guides.of_lights(self.lights, lambda c: surrounds(self.media, c)) \

@@ -96,6 +96,16 @@ def voxel_starts(pm: PreparedMedium, e: np.ndarray, stride: int):
     return [(pm.to_world(ijk), power, up, 1.0 / stride, 2)]
 
 
+def add_glow(f: np.ndarray, layout, stride: int, once: np.ndarray, more, flat: np.ndarray):
+    """Add a glow's light on a lattice ``stride`` voxels apart to the field ``f`` at the voxels
+    ``flat``: ``once`` (E1) to the world light's channels of ``layout``
+    (layout.FieldLayout), ``more`` (Em, or None) to its multiply scattered part where the
+    layout has one."""
+    add_lattice(f, layout.ambient_channel, once, stride, flat)
+    if more is not None and layout.ambient_multiple_channel is not None:
+        add_lattice(f, layout.ambient_multiple_channel, more, stride, flat)
+
+
 def add_lattice(f: np.ndarray, channel: int, lattice: np.ndarray, stride: int,
                 flat: np.ndarray) -> None:
     """Add the trilinear values of ``lattice`` (LX,LY,LZ,3; point k at voxel k ``stride``)

@@ -40,12 +40,12 @@ from ..parallel import run_chunks
 from ..surfaces import intersect
 from ..scene import World
 from ..worldfog import glow_radiance
-from .lattice import coarse_lattice, lattice_points
+from .lattice import lattice_points
 from .lightdepth import density_lengths
 from .lightpaths import PathLattice, _trace_all
 from .pathstarts import (LIFT, SURFACE_POINTS, Surroundings, reach, surface_albedo,
                          surface_points)
-from .worldlight import AMBIENT_RESOLUTION, phase_directions, world_chunk, world_light
+from .worldlight import on_lattice, phase_directions, world_chunk, world_lattice, world_light
 
 # the deficit's paths, a fraction of the Paths setting: they carry only its light scattered
 # before (the first flights are surface_view's), smooth and a few percent of the glow
@@ -107,18 +107,13 @@ def glow_on_medium(fog, solid, pm, camera, n_dirs: int, step: float, multiple: b
     the sky (§7, §9.8).  Left out: the fog's deficit round the surfaces (its first flight,
     which ``fog_glow`` gives the fog itself) and the medium's shade on the fog round it."""
     e1_inf, em_inf = glow_radiance(fog.medium, multiple)
-    stride = max(1, int(round(max(pm.grid.shape) / AMBIENT_RESOLUTION)))
-    cshape, cflat, cpts = coarse_lattice(pm, stride)
+    stride, cshape, cflat, cpts = world_lattice(pm)
     kw = {} if tuning is None else {"tuning": tuning}
     u, c = world_light(solid, pm, World(np.ones(3)), camera, cpts, n_dirs, step, seed=seed,
                        should_cancel=should_cancel, surfaces=surfaces, threads=threads,
                        multiple=True, fog_sigma_t=np.asarray(fog.sigma_t, np.float64), **kw)
-    out = []
-    for vals in (e1_inf * u, e1_inf * c + em_inf * (u + c)):
-        lattice = np.zeros((int(np.prod(cshape)), 3), np.float32)
-        lattice[cflat] = vals
-        out.append(lattice.reshape(tuple(cshape) + (3,)))
-    return stride, out[0], (out[1] if multiple else None)
+    more = on_lattice(cshape, cflat, e1_inf * c + em_inf * (u + c)) if multiple else None
+    return stride, on_lattice(cshape, cflat, e1_inf * u), more
 
 
 def fill_hidden(values: np.ndarray, seen: np.ndarray) -> np.ndarray:
@@ -219,5 +214,5 @@ def deficit_starts(pm, around: Optional[Surroundings], seed: int):
     p, tri, share = got
     n = ss.normal[tri]
     albedo = surface_albedo(ss)[tri] if around.bounce else np.zeros((len(tri), 3))
-    return (p + n * (LIFT * ss.scale), np.ascontiguousarray(n), np.pi * share[:, None], albedo,
-            float(np.sqrt(np.mean(share))))
+    return (p + n * (LIFT * ss.scale), np.ascontiguousarray(n),
+            np.full((len(tri), 1), np.pi * share), albedo, float(np.sqrt(share)))

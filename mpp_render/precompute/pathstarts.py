@@ -181,10 +181,10 @@ def surface_albedo(ss) -> np.ndarray:
 
 
 def surface_points(ss, centre, radius: float, m: int, rng, albedo_min: float = -1.0):
-    """(points (N,3) m, triangles (N,) int, area (N,) m^2): about ``m`` points spread
-    uniformly over the parts of the SurfaceSet ``ss``'s triangles inside the sphere
-    (``centre``, ``radius``), each standing for ``area`` of them (the estimate of the
-    integral of f over those parts is sum f(point) area).  A triangle smaller than the disc
+    """(points (N,3) m, triangles (N,) int, area m^2): about ``m`` points spread uniformly
+    over the parts of the SurfaceSet ``ss``'s triangles inside the sphere (``centre``,
+    ``radius``), each standing for ``area`` of them (the estimate of the integral of f over
+    those parts is area x the sum of f over the points).  A triangle smaller than the disc
     the sphere cuts from its plane is drawn over whole, else that disc is, and the draws
     outside the triangle or the sphere are dropped: a ground far wider than the sphere gets
     its points where the sphere is, not over all of it.  Triangles whose largest diffuse
@@ -237,7 +237,7 @@ def surface_points(ss, centre, radius: float, m: int, rng, albedo_min: float = -
         return None
     # each draw stands for total / m of the domains (their expected share; a triangle's
     # realised count would lose the small triangles that no draw falls on)
-    return p[keep], tri[keep], np.full(int(keep.sum()), total / m)
+    return p[keep], tri[keep], total / m
 
 
 def surface_starts(pm, light: Light, around: Surroundings, seed: int):
@@ -265,8 +265,8 @@ def surface_starts(pm, light: Light, around: Surroundings, seed: int):
     tau = light_optical_depth(around.solid, light, p, around.step, surfaces=ss,
                               fog_sigma_t=around.fog_sigma_t)
     power = albedo[pick[lit]] * e[lit] * np.abs(cos[lit])[:, None] * \
-        around.disc(light, p, tau) * share[lit][:, None]
+        around.disc(light, p, tau) * share
     live = np.all(np.isfinite(power), axis=1) & (power.sum(axis=1) > 0.0)
     if not np.any(live):
         return None
-    return p[live], power[live], n[lit][live], float(np.sqrt(np.mean(share)))
+    return p[live], power[live], n[lit][live], float(np.sqrt(share))

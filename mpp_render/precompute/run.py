@@ -18,7 +18,7 @@ from .lightdepth import (SHADOW_TAU, light_optical_depth, near_sharp_surfaces, s
                          split_fog, sweep_light)
 from .flatten import flattened
 from .fogglow import glow_on_medium
-from .emissionlight import EMISSION_PATHS, add_lattice, emission_light
+from .emissionlight import EMISSION_PATHS, add_glow, emission_light
 from .lightpaths import overlapping, partner_lattice, traced_multiple
 from .pathstarts import Surroundings
 from .lightpyramid import MultipleField, multiple_field
@@ -174,9 +174,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
             if got is not None:
                 stride, once, more, cross = got
                 glowed += [(j, lat.stride) + em for (j, lat), em in zip(near, cross)]
-                add_lattice(f, layout.ambient_channel, once, stride, flat)
-                if more is not None and layout.ambient_multiple_channel is not None:
-                    add_lattice(f, layout.ambient_multiple_channel, more, stride, flat)
+                add_glow(f, layout, stride, once, more, flat)
                 n_glow += 1
         if glow and layout.ambient_channel is not None and fog is not None and fog.glows \
                 and pm is not fog and camera is not None and np.any(pm.sigma_s > 0):
@@ -185,9 +183,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                                 multiple, seed=seed + mi + 4001,
                                                 surfaces=surfaces, threads=threads,
                                                 should_cancel=should_cancel, tuning=tuning)
-            add_lattice(f, layout.ambient_channel, once, stride, flat)
-            if more is not None and layout.ambient_multiple_channel is not None:
-                add_lattice(f, layout.ambient_multiple_channel, more, stride, flat)
+            add_glow(f, layout, stride, once, more, flat)
         ms = [None] * len(lights)
         if multiple and np.any(pm.sigma_s > 0):
             for li, light in enumerate(lights):
@@ -233,10 +229,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
     for j, stride, once, more in glowed:
         if layout.ambient_channel is None:
             continue
-        flat = needed_flat(media[j])
-        add_lattice(fields[j], layout.ambient_channel, once, stride, flat)
-        if more is not None and layout.ambient_multiple_channel is not None:
-            add_lattice(fields[j], layout.ambient_multiple_channel, more, stride, flat)
+        add_glow(fields[j], layout, stride, once, more, needed_flat(media[j]))
     for (j, li), m in crossed.items():
         mf = ms_all[j][li]
         if mf is None or not mf.traced:   # a medium without paths of its own (too dense)

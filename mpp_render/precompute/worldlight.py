@@ -128,14 +128,25 @@ def fill_world_light(f: np.ndarray, channels, media: List[PreparedMedium], pm: P
     ``channels`` = (A's first channel, A_ms's or None).  Returns the number of lattice
     points."""
     amb, amb_ms = channels
-    stride = max(1, int(round(max(pm.grid.shape) / AMBIENT_RESOLUTION)))
-    cshape, cflat, cpts = coarse_lattice(pm, stride)
+    stride, cshape, cflat, cpts = world_lattice(pm)
     a = world_light(media, pm, world, camera, cpts, n_dirs, step, seed=seed,
                     should_cancel=should_cancel, surfaces=surfaces, threads=threads,
                     multiple=amb_ms is not None, tuning=tuning)
     up = kernels.upsample_into
     for ch, vals in zip((amb, amb_ms), a if amb_ms is not None else (a,)):
-        coarse = np.zeros((int(np.prod(cshape)), 3), np.float32)
-        coarse[cflat] = vals
-        up(f, ch, coarse.reshape(cshape + (3,)), stride, flat)
+        up(f, ch, on_lattice(cshape, cflat, vals), stride, flat)
     return len(cpts)
+
+
+def world_lattice(pm: PreparedMedium):
+    """(stride, shape, flat, points) of the world light's coarse lattice on ``pm``: about
+    ``AMBIENT_RESOLUTION`` points along the grid's longest side (lattice.coarse_lattice)."""
+    stride = max(1, int(round(max(pm.grid.shape) / AMBIENT_RESOLUTION)))
+    return (stride,) + tuple(coarse_lattice(pm, stride))
+
+
+def on_lattice(shape, flat, values) -> np.ndarray:
+    """float32 (shape + (3,)): ``values`` (N,3) at the lattice points ``flat``, 0 elsewhere."""
+    out = np.zeros((int(np.prod(shape)), 3), np.float32)
+    out[flat] = values
+    return out.reshape(tuple(shape) + (3,))
