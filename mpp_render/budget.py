@@ -157,15 +157,17 @@ def fit_media(media: Sequence[Medium], lights: Sequence[Light], budget_mb: float
         out.append(dataclasses.replace(m, density=small, index_to_world=downsampled_transform(
             m.index_to_world, shape, small.shape), emission_grid=_downsampled_rgb(
                 m, m.emission_grid, f), scatter_grid=_downsampled_rgb(m, m.scatter_grid, f,
-                                                                      weighted=True)))
+                                                                      weighted=True),
+            extinction_grid=_downsampled_rgb(m, m.extinction_grid, f, weighted=True)))
     return out
 
 
 def _downsampled_rgb(m: Medium, e, factor: int, weighted: bool = False):
     """``e``, one of ``m``'s RGB grids, box-downsampled like its density (NaN and negatives
     first set to 0, so they do not spread over a block; prepare() warns about them), or None.
-    ``weighted``: each block's mean weighted by the density (a scatter colour's factor: the
-    block then scatters what its voxels did together; 1 where the block is empty)."""
+    ``weighted``: each block's mean weighted by the density (a scatter colour's or an
+    extinction colour's factor: the block then scatters and attenuates what its voxels did
+    together; 1 where the block is empty)."""
     if e is None or np.shape(e) != tuple(np.shape(m.density)) + (3,):
         return e  # None, or a mismatch that prepare() reports
     e = sanitise(e)[0]

@@ -217,10 +217,10 @@ def clear() -> int:
 def media_key(media) -> str:
     """Content key of prepared media (precompute reads their grids, maps, coefficients,
     anisotropy, sharpness and emission: the emission grid's channels and the glow's light; the
-    scatter colour grid's channels)."""
+    scatter colour grid's channels; the extinction density's)."""
     return digest([(pm.grid, pm.w2i, pm.sigma_s, pm.sigma_a, float(pm.g), float(pm.threshold),
                     np.asarray(pm.medium.emission, np.float64), pm.emission_grid,
-                    pm.scatter_grid)
+                    pm.scatter_grid, pm.extinction_density)
                    for pm in media])
 
 

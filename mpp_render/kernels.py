@@ -218,7 +218,9 @@ class MarchInputs:
     ``roulette`` (> 0: Russian roulette below that transmittance) and ``disc_reach`` (per
     light, the distance in metres within which a point or spot light's disc point gets its
     optical depth corrected by a march, kernels_np.disc_correction; None or 0: off) and
-    ``scatter_channels`` (per medium the first channel of its scatter colour grid, or -1)."""
+    ``scatter_channels`` (per medium the first channel of its scatter colour grid, or -1) and
+    ``extinction_channels`` (per medium the first channel of its extinction density, or -1:
+    its extinction reads the density)."""
     origins: np.ndarray
     dirs: np.ndarray
     t0: np.ndarray
@@ -245,6 +247,7 @@ class MarchInputs:
     roulette: float = 0.0
     disc_reach: Optional[list] = None
     scatter_channels: Optional[list] = None
+    extinction_channels: Optional[list] = None
 
     def replace(self, **changes) -> "MarchInputs":
         return dataclasses.replace(self, **changes)
@@ -269,7 +272,8 @@ def march(inputs: MarchInputs, *, backend=None) -> MarchResult:
             a.origins, a.dirs, a.t0, a.t1, a.axial, a.keys, a.fields, a.w2is, a.sigma_ss,
             a.sigma_ts, a.gs, a.thresholds, a.voxels, a.lights, a.ambient, a.step,
             a.depth_opacity, a.depth_miss, a.multiple, a.emissions, a.bricks, a.adapt_tau,
-            a.emission_channels, a.roulette, a.disc_reach, a.scatter_channels))
+            a.emission_channels, a.roulette, a.disc_reach, a.scatter_channels,
+            a.extinction_channels))
     n = len(a.origins)
     nl = len(np.asarray(a.lights).reshape(-1, LIGHT_FIELDS))
     packed = None
@@ -299,7 +303,8 @@ def march(inputs: MarchInputs, *, backend=None) -> MarchResult:
         None if a.emission_channels is None else [int(c) for c in a.emission_channels],
         float(a.roulette),
         None if a.disc_reach is None else [float(x) for x in a.disc_reach],
-        None if a.scatter_channels is None else [int(c) for c in a.scatter_channels])
+        None if a.scatter_channels is None else [int(c) for c in a.scatter_channels],
+        None if a.extinction_channels is None else [int(c) for c in a.extinction_channels])
     return MarchResult(np.frombuffer(s, np.float64).reshape(n, 3),
                        np.frombuffer(t, np.float64).reshape(n, 3),
                        np.frombuffer(d, np.float64).reshape(n),
@@ -308,10 +313,10 @@ def march(inputs: MarchInputs, *, backend=None) -> MarchResult:
                        np.frombuffer(e, np.float64).reshape(n, 3))
 
 
-def _colour(scatter) -> np.ndarray:
-    """A medium's scatter colour grid as trace_paths takes it: float32 (X,Y,Z,3), or
-    (0,0,0,3) for none."""
-    return _f32(scatter) if scatter is not None else np.zeros((0, 0, 0, 3), np.float32)
+def _colour(grid) -> np.ndarray:
+    """A medium's 3-channel grid (scatter colour, extinction density) as trace_paths takes
+    it: float32 (X,Y,Z,3), or (0,0,0,3) for none."""
+    return _f32(grid) if grid is not None else np.zeros((0, 0, 0, 3), np.float32)
 
 
 def trace_paths(inp, *, threads: int = 1, should_cancel=None, backend=None):
@@ -359,9 +364,9 @@ def trace_paths_media(inp, *, threads: int = 1, should_cancel=None, backend=None
     fixed = [(_f32(m.density), _f64(m.w2i).reshape(3, 4), _f64(m.sigma_s).reshape(3),
               _f64(m.sigma_t).reshape(3), float(m.g), int(m.stride), _f64(m.towards),
               float(m.rate), float(m.threshold), cell_classes(m.density, m.threshold),
-              _colour(m.scatter))
+              _colour(m.scatter), _colour(m.extinction))
              for m in inp.others]
-    colour = _colour(inp.scatter)
+    colour, extinction = _colour(inp.scatter), _colour(inp.extinction)
     cells = cell_classes(inp.density, inp.threshold)
     light = _f64(inp.light).reshape(-1) if inp.light is not None else np.zeros(0)
 
@@ -376,7 +381,7 @@ def trace_paths_media(inp, *, threads: int = 1, should_cancel=None, backend=None
             _c.trace_paths(outs[i][0], *args, a, min(a + PATH_CHUNK, int(cuts[i + 1])), n,
                            int(inp.seed) & 0xFFFFFFFF, int(inp.max_collisions), float(ROULETTE),
                            *extra, moms[i][0], others, float(inp.threshold), cells, light,
-                           colour)
+                           colour, extinction)
 
     if workers == 1:
         for i in range(blocks):

@@ -281,9 +281,21 @@ def _fetch(field, w2i, x, c0, nc):
     return v[:, c0:c0 + nc]
 
 
-def _refined_tau(fields, w2is, thrs, sig_ts, mi, c, x, w, dist, delta):
+def _extinction(field, w2i, thr, sig_t, xc, x):
+    """(N,3) extinction (1/m) of one medium at world points ``x``: its density
+    (``density_from``) times ``sig_t``, or with an extinction channel ``xc`` >= 0 (None: none)
+    channel c of the field's extinction density times ``sig_t[c]`` (csrc/march.c
+    extinction_at)."""
+    st = np.asarray(sig_t, np.float64)[None, :]
+    if xc is not None and xc >= 0:
+        return _fetch(field, w2i, x, xc, 3) * st
+    return density_from(_fetch(field, w2i, x, 0, 1)[:, 0], thr)[:, None] * st
+
+
+def _refined_tau(fields, w2is, thrs, sig_ts, mi, c, x, w, dist, delta, xcs=None):
     """Optical depth from points x near medium mi's sharp surface towards a light: exact over
-    up to REFINE_STEPS half-voxel steps, then medium mi's precomputed field channel c."""
+    up to REFINE_STEPS half-voxel steps, then medium mi's precomputed field channel c.
+    ``xcs``: None or per medium its extinction channel (``_extinction``)."""
     n = len(x)
     tau = np.zeros((n, 3))
     end = x.copy()
@@ -294,9 +306,9 @@ def _refined_tau(fields, w2is, thrs, sig_ts, mi, c, x, w, dist, delta):
             break
         seg = np.clip(dist[todo] - (k - 1) * delta, 0.0, delta)
         mid = x[todo] + w[todo] * ((k - 1) * delta + 0.5 * seg)[:, None]
-        for f, w2i, thr, st in zip(fields, w2is, thrs, sig_ts):
-            rho = density_from(_fetch(f, w2i, mid, 0, 1)[:, 0], thr)
-            tau[todo] += (rho * seg)[:, None] * st[None, :]
+        for j, (f, w2i, thr, st) in enumerate(zip(fields, w2is, thrs, sig_ts)):
+            xc = None if xcs is None else xcs[j]
+            tau[todo] += seg[:, None] * _extinction(f, w2i, thr, st, xc, mid)
         pk = x[todo] + w[todo] * ((k - 1) * delta + seg)[:, None]
         occ = _fetch(fields[mi], w2is[mi], pk, 0, 1)[:, 0]
         end[todo] = pk
@@ -312,13 +324,14 @@ DISC_STEPS_MAX = 4096   # disc_correction's steps at most (the C twin's)
 DISC_STEP_VOXELS = 2.0
 
 
-def disc_correction(fields, w2is, thrs, sig_ts, x, wc, dc, wd, ds, stretch, step):
+def disc_correction(fields, w2is, thrs, sig_ts, x, wc, dc, wd, ds, stretch, step, xcs=None):
     """(N,3) optical depth over every medium from points ``x`` (N,3, m) to a lamp's disc
     point (unit directions ``wd``, distances ``ds``) minus ``stretch`` (N,) times that to the
     lamp's centre (``wc``, ``dc``): what the field's stretched depth to the centre
     (lights.path_stretch) misses where the medium is not homogeneous across the disc.  Both
     paths take n = ceil(dc / ``step``) steps (at least 1, at most DISC_STEPS_MAX), each read
-    at its midpoint (trilinear density).  Twin of csrc/march.c disc_correction."""
+    at its midpoint (trilinear density; ``xcs``: None or per medium its extinction channel,
+    ``_extinction``).  Twin of csrc/march.c disc_correction."""
     n = np.clip(np.ceil(dc / step), 1, DISC_STEPS_MAX).astype(np.int64)
     hc, hd = dc / n, ds / n
     tc = np.zeros((len(x), 3))
@@ -327,10 +340,10 @@ def disc_correction(fields, w2is, thrs, sig_ts, x, wc, dc, wd, ds, stretch, step
         sel = np.flatnonzero(n > k)
         pc = x[sel] + wc[sel] * ((k + 0.5) * hc[sel])[:, None]
         pd = x[sel] + wd[sel] * ((k + 0.5) * hd[sel])[:, None]
-        for f, w2i, thr, st in zip(fields, w2is, thrs, sig_ts):
-            st = np.asarray(st, np.float64)
-            tc[sel] += density_from(_fetch(f, w2i, pc, 0, 1)[:, 0], thr)[:, None] * st[None, :]
-            td[sel] += density_from(_fetch(f, w2i, pd, 0, 1)[:, 0], thr)[:, None] * st[None, :]
+        for j, (f, w2i, thr, st) in enumerate(zip(fields, w2is, thrs, sig_ts)):
+            xc = None if xcs is None else xcs[j]
+            tc[sel] += _extinction(f, w2i, thr, st, xc, pc)
+            td[sel] += _extinction(f, w2i, thr, st, xc, pd)
     return td * hd[:, None] - stretch[:, None] * tc * hc[:, None]
 
 
@@ -453,7 +466,7 @@ def light_varies(lights, origins, dirs, s_a, s_b, g):
 def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs, thresholds,
           voxels, lights, ambient, step, depth_opacity, depth_miss, multiple=None, emissions=None,
           bricks=None, adapt_tau=0.0, emission_channels=None, roulette=0.0, disc_reach=None,
-          scatter_channels=None):
+          scatter_channels=None, extinction_channels=None):
     """March camera rays through media fields: the numpy twin of ``_kernels.march``.
 
     Rays ``origins + t dirs`` (N,3), t in [t0, t1] (N,) metres; ``axial`` (N,) turns t into
@@ -477,6 +490,9 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
     ``scatter_channels``: None or per medium the first of 3 field channels holding its
     scatter colour grid (media.PreparedMedium.scatter_grid: the factor on ``sigma_ss``,
     negative values read as 0), or -1 for none.
+    ``extinction_channels``: None or per medium the first of 3 field channels holding its
+    extinction density (media.PreparedMedium.extinction_density: channel c's extinction is
+    ``sigma_ts[c]`` times it), or -1 for none (the density's).
 
     Super-step K covers [t0 + SUPER K h, t0 + SUPER (K + 1) h] (the last one ends at t1) and
     is cut into n_sub equal steps of length H (the ray's last one cut at t1), step j read at
@@ -575,7 +591,11 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
                 f = fields[mi]
                 v = _fetch(f, w2is[mi], x, 0, f.shape[3])
                 rho = density_from(v[:, 0], thresholds[mi])
-                sig_t += rho[:, None] * sigma_ts[mi][None, :]
+                xc = -1 if extinction_channels is None else extinction_channels[mi]
+                if xc >= 0:
+                    sig_t += (rho > 0)[:, None] * v[:, xc:xc + 3] * sigma_ts[mi][None, :]
+                else:
+                    sig_t += rho[:, None] * sigma_ts[mi][None, :]
                 if emission_channels is not None and emission_channels[mi] >= 0:
                     src_em += v[:, emission_channels[mi]:emission_channels[mi] + 3]
                 if emissions is not None:
@@ -595,7 +615,8 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
                     if edge.size:
                         tau = tau.copy()
                         tau[edge] = _refined_tau(fields, w2is, thresholds, sigma_ts, mi, c, x[edge],
-                                                 wc[edge], dc[edge], 0.5 * voxels[mi])
+                                                 wc[edge], dc[edge], 0.5 * voxels[mi],
+                                                 extinction_channels)
                     off = ds != dc  # light from an emitter point off the centre
                     if off.any():
                         tau = tau.copy() if tau is raw else tau
@@ -608,7 +629,8 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
                                 on = np.flatnonzero(off)[near]
                                 dt = disc_correction(fields, w2is, thresholds, sigma_ts, x[on],
                                                      wc[on], dc[on], -wi[on], ds[on], st[near],
-                                                     DISC_STEP_VOXELS * min(voxels))
+                                                     DISC_STEP_VOXELS * min(voxels),
+                                                     extinction_channels)
                                 tau[on] = np.maximum(tau[on] + dt, 0.0)
                     cos = -np.einsum("ij,ij->i", wi, d)
                     pe = hg(cos, gs[mi])[:, None] * e

@@ -16,7 +16,9 @@ In-scattered radiance at x, per medium m with density rho_m(x):
 with E_l the light's irradiance (lights.py), tau the precomputed optical depth to the light
 and A the precomputed world light (mpp_render/precompute/); where a medium's scattering
 colour varies (PreparedMedium.scatter_grid) sigma_s,m is times its factor c_m(x), read from
-the field's scatter colour channels.  Rays stop when T < ``T_MIN``.
+the field's scatter colour channels.  The extinction is sigma_t,m rho_m(x), or where its
+colour varies (PreparedMedium.extinction_density) sigma_t,m[c] times channel c of the field's
+extinction channels.  Rays stop when T < ``T_MIN``.
 
 Emission (the Emission pass) is a medium's constant ``emission`` wherever its density is > 0
 plus, for a medium with an emission grid, the grid's value read from the field's emission
@@ -178,8 +180,10 @@ def march_rays(ctx: MarchContext, origins, dirs, t0, t1, axial, keys):
     """March rays; returns dict of per-ray arrays: 'single' (N,3), 'T' (N,3), 'depth' (N,)."""
     amb = ctx.layout.ambient_channel
     em = [np.maximum(np.asarray(m.medium.emission, np.float64).reshape(3), 0.0) for m in ctx.media]
-    ec, sc = (_channels(ctx.layout.emission_channels), _channels(ctx.layout.scatter_channels)) \
-        if ctx.layout is not None else (None, None)
+    ec, sc, xc = (_channels(ctx.layout.emission_channels),
+                  _channels(ctx.layout.scatter_channels),
+                  _channels(ctx.layout.extinction_channels)) \
+        if ctx.layout is not None else (None, None, None)
     r = kernels.march(MarchInputs(
         origins, dirs, t0, t1, axial, keys, ctx.fields, [m.w2i for m in ctx.media],
         [m.sigma_s for m in ctx.media], [m.sigma_t for m in ctx.media],
@@ -189,6 +193,6 @@ def march_rays(ctx: MarchContext, origins, dirs, t0, t1, axial, keys):
         em if any(np.any(e > 0) for e in em) else None,
         [m.march_bricks for m in ctx.media] if ctx.tuning.skip_empty else None,
         adapt_tau=ctx.tuning.adapt_tau, emission_channels=ec, roulette=ctx.tuning.roulette,
-        disc_reach=ctx.disc_reach, scatter_channels=sc))
+        disc_reach=ctx.disc_reach, scatter_channels=sc, extinction_channels=xc))
     return {"single": r.single, "T": r.T, "depth": r.depth, "multiple": r.multiple,
             "steps": r.steps, "emission": r.emission}

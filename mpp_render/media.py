@@ -7,6 +7,7 @@ the padded array and the affine map from world metres to *padded* index coordina
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import List, Optional
 
@@ -28,6 +29,12 @@ class PreparedMedium:
     ``emission_grid``: None or float32 (X, Y, Z, 3) padded emission grid (W/(m^3 sr)).
     ``scatter_grid``: None or float32 (X, Y, Z, 3) padded factor on ``sigma_s`` per voxel
     (Medium.scatter_grid; the padding repeats the edge voxels, where the density fades).
+    ``extinction_density``: None or float32 (X, Y, Z, 3) padded, per channel the density the
+    extinction reads where its colour varies in space (Medium.extinction_grid times the
+    density): sigma_t,c(x) = sigma_t[c] * extinction_density[..., c](x), interpolated
+    trilinearly; each channel is at most ``grid`` (``prepare`` folds a larger factor into
+    the density), so the density's bounds bound the extinction too.  The transmittance
+    kernels read it through ``extinction_parts``.
     """
 
     medium: Medium
@@ -42,6 +49,7 @@ class PreparedMedium:
     threshold: float = -1.0
     emission_grid: Optional[np.ndarray] = None
     scatter_grid: Optional[np.ndarray] = None
+    extinction_density: Optional[np.ndarray] = None
 
     @property
     def kind(self) -> str:
@@ -78,6 +86,37 @@ class PreparedMedium:
         if flat is not None:
             return self.scatter_grid.reshape(-1, 3)[np.asarray(flat)].astype(np.float64)
         return np.asarray(trilinear(self.scatter_grid, np.asarray(idx, np.float64)),
+                          np.float64)
+
+    def extinction_parts(self) -> List["PreparedMedium"]:
+        """The medium as the transmittance kernels read it (optical depth, sweeps, density
+        lengths): itself, or with an ``extinction_density`` three media of one channel each
+        (channel c's density and sigma_t[c] in channel c alone, nothing scattered), whose
+        optical depths add to the medium's."""
+        if self.extinction_density is None:
+            return [self]
+        if getattr(self, "_parts", None) is None:
+            parts = []
+            for c in range(3):
+                unit = np.zeros(3)
+                unit[c] = 1.0
+                parts.append(dataclasses.replace(
+                    self, grid=np.ascontiguousarray(self.extinction_density[..., c]),
+                    sigma_s=np.zeros(3), sigma_a=self.sigma_t * unit,
+                    sigma_t=self.sigma_t * unit, emission_grid=None, scatter_grid=None,
+                    extinction_density=None))
+            self._parts = parts
+        return self._parts
+
+    def extinction_at(self, flat=None, idx=None) -> Optional[np.ndarray]:
+        """float64 (N,3) the density each channel's extinction reads (``extinction_density``)
+        at the voxels ``flat`` or, trilinear, at index coordinates ``idx`` (N,3); None where
+        the extinction has one colour (it reads the density)."""
+        if self.extinction_density is None:
+            return None
+        if flat is not None:
+            return self.extinction_density.reshape(-1, 3)[np.asarray(flat)].astype(np.float64)
+        return np.asarray(trilinear(self.extinction_density, np.asarray(idx, np.float64)),
                           np.float64)
 
     @property
@@ -161,13 +200,21 @@ def delta_scaled(pm: PreparedMedium) -> PreparedMedium:
     beam that the delta-scaled medium attenuates (optical depth with sigma_t*) holds the
     unscattered light and the forward-scattered light together (docs/method.md, "The
     forward peak").  ``pm`` itself where g <= 0."""
-    import dataclasses
     f = delta_fraction(pm.g)
     if f <= 0.0:
         return pm
     ss = pm.sigma_s * (1.0 - f)
-    out = dataclasses.replace(pm, sigma_s=ss, sigma_t=ss + pm.sigma_a, g=delta_g(pm.g))
+    st = ss + pm.sigma_a
+    ext = pm.extinction_density
+    if ext is not None:   # per channel sigma_t ext - f sigma_s c d, over sigma_t*
+        sc = 1.0 if pm.scatter_grid is None else pm.scatter_grid
+        removed = f * pm.sigma_s * sc * pm.grid[..., None]
+        ext = np.maximum(pm.sigma_t * ext - removed, 0.0) / np.where(st > 0.0, st, 1.0)
+        ext = np.ascontiguousarray(ext, np.float32)
+    out = dataclasses.replace(pm, sigma_s=ss, sigma_t=st, g=delta_g(pm.g),
+                              extinction_density=ext)
     out._bricks = getattr(pm, "_bricks", None)  # the same density: the same bounds
+    out._parts = None
     return out
 
 
@@ -205,13 +252,37 @@ def prepare(medium: Medium, warnings=None) -> PreparedMedium:
     voxel = float(np.min(np.linalg.norm(i2w[:3, :3], axis=0)))
     ss = np.asarray(medium.sigma_s, np.float64).reshape(3)
     sa = np.asarray(medium.sigma_a, np.float64).reshape(3)
-    thr = SHARP_THRESHOLD if medium.source == "MESH" else -1.0
+    scatter = _colour_grid(medium, medium.scatter_grid, "scatter colour", d.shape, warnings,
+                           edge=True)
+    ext = _colour_grid(medium, medium.extinction_grid, "extinction colour", d.shape, warnings,
+                       edge=True)
+    thr = SHARP_THRESHOLD if medium.source == "MESH" and ext is None else -1.0
+    if ext is not None:
+        grid, scatter, ext = _fold_extinction(grid, scatter, ext)
     return PreparedMedium(medium, np.ascontiguousarray(grid), np.ascontiguousarray(w2i), i2w,
                           ss, sa, ss + sa, clamp_g(float(medium.g)), voxel, thr,
                           _colour_grid(medium, medium.emission_grid, "emission", d.shape,
-                                       warnings),
-                          _colour_grid(medium, medium.scatter_grid, "scatter colour", d.shape,
-                                       warnings, edge=True))
+                                       warnings), scatter, ext)
+
+
+def _fold_extinction(grid, scatter, factor):
+    """(density, scatter factor, extinction density) of a padded density ``grid`` whose
+    extinction is ``factor`` (X,Y,Z,3) times it per channel: where a channel's factor is over
+    1 the density is times the largest (the scattering's factor divided by it), so that
+    every channel of the extinction density grid x factor is at most the density and the
+    density's bounds (bricks, majorants) bound the extinction.  The coefficients per point
+    are unchanged."""
+    top = np.max(factor, axis=-1)
+    over = top > 1.0
+    if np.any(over):
+        s = np.where(over, top, 1.0).astype(np.float32)
+        grid = (grid * s).astype(np.float32)
+        factor = factor / s[..., None]
+        scatter = (np.ones(grid.shape + (3,), np.float32) if scatter is None else scatter) \
+            / s[..., None]
+        scatter = np.ascontiguousarray(scatter, np.float32)
+    ext = np.minimum(grid[..., None] * factor, grid[..., None])
+    return grid, scatter, np.ascontiguousarray(ext, np.float32)
 
 
 def _colour_grid(medium: Medium, e, what: str, shape, warnings, edge: bool = False):

@@ -138,8 +138,8 @@ class PathMedium:
     voxel index, ``sigma_s``, ``sigma_t`` (3,) 1/m per unit density, ``g``, ``stride``
     voxels per lattice step, ``towards`` float64 (LX,LY,LZ,3) unit directions from its
     lattice points to the camera, ``rate`` its tentative collisions per metre inside its
-    box (above its largest extinction, as PathInputs.rate), ``threshold`` and ``scatter``
-    as PathInputs'."""
+    box (above its largest extinction, as PathInputs.rate), ``threshold``, ``scatter`` and
+    ``extinction`` as PathInputs'."""
 
     density: np.ndarray
     w2i: np.ndarray
@@ -151,6 +151,7 @@ class PathMedium:
     rate: float
     threshold: float = -1.0
     scatter: Optional[np.ndarray] = None
+    extinction: Optional[np.ndarray] = None
 
 
 @dataclass
@@ -191,7 +192,10 @@ class PathInputs:
     (media.PreparedMedium.scatter_grid), applied to a path's weight at each real
     collision, read at the nearest voxel (``_colour_factor``): the paths scatter with each
     point's colour, as the march does, and converge to the multiple scattering of the
-    coloured medium."""
+    coloured medium.  ``extinction``: None, or float32 (X,Y,Z,3) per voxel the density each
+    channel's extinction reads (media.PreparedMedium.extinction_density: sigma_t[c] times
+    channel c, at most ``density``), read at the nearest voxel (``_extinction_density``);
+    the collisions are then by spectral tracking."""
 
     density: np.ndarray
     w2i: np.ndarray
@@ -223,6 +227,7 @@ class PathInputs:
     threshold: float = -1.0
     light: Optional[np.ndarray] = None
     scatter: Optional[np.ndarray] = None
+    extinction: Optional[np.ndarray] = None
 
     @property
     def channels(self) -> int:
@@ -424,7 +429,7 @@ def trace_paths_np(inp: PathInputs) -> np.ndarray:
 
 def _own_medium(inp: PathInputs) -> PathMedium:
     return PathMedium(inp.density, inp.w2i, inp.sigma_s, inp.sigma_t, inp.g, inp.stride,
-                      inp.towards, inp.rate, inp.threshold, inp.scatter)
+                      inp.towards, inp.rate, inp.threshold, inp.scatter, inp.extinction)
 
 
 def _nearest_voxel(m, idx) -> np.ndarray:
@@ -443,6 +448,14 @@ def _colour_factor(m, idx) -> np.ndarray:
         return np.ones((len(idx), 3))
     f = np.asarray(m.scatter)[tuple(_nearest_voxel(m, idx).T)].astype(np.float64)
     return np.where(f > 0.0, f, 0.0)
+
+
+def _extinction_density(m, idx) -> np.ndarray:
+    """float64 (N,3) the density each channel's extinction reads in medium ``m`` at index
+    coordinates ``idx`` (N,3): its extinction grid's nearest voxel (negative and NaN read as
+    0) (csrc/paths.c, the collision)."""
+    e = np.asarray(m.extinction)[tuple(_nearest_voxel(m, idx).T)].astype(np.float64)
+    return np.where(e > 0.0, e, 0.0)
 
 
 def density_at(m, idx) -> np.ndarray:
@@ -671,18 +684,22 @@ def _collide(m, out, tw, g, st, ss, mu, coll, alive, ins, rate, kk, ev, pos, d, 
     rc = rate[coll]
     kc, ec = kk[coll], ev[coll]
     wc = w[ci]
-    if st_min == st_max:
+    stc = rho[:, None] * st[None, :]
+    ext = getattr(m, "extinction", None)
+    if ext is not None and np.any(inn):   # the extinction's own density per channel
+        stc[inn] = _extinction_density(m, _to_index(m, pos[ci[inn]])) * st[None, :]
+    if st_min == st_max and ext is None:
         p_hit = np.minimum(rho * st_max / rc, 1.0)
         hit = uniform(kc, ec, _D_HIT) < p_hit
-        num = 1.0 - rho[:, None] * st[None, :] / rc[:, None]
+        num = 1.0 - stc / rc[:, None]
         wc = np.where(hit[:, None], wc * (ss / st_max)[None, :],
                       wc * num / np.maximum(1.0 - p_hit, 1e-12)[:, None])
     else:
-        real = rho * st_max
-        nul = np.maximum(rc - rho * st_min, 0.0)
+        real = stc.max(axis=1)
+        nul = np.maximum(rc - stc.min(axis=1), 0.0)
         p_hit = real / np.maximum(real + nul, 1e-300)
         hit = uniform(kc, ec, _D_HIT) < p_hit
-        w_null = np.maximum(rc[:, None] - rho[:, None] * st[None, :], 0.0) / \
+        w_null = np.maximum(rc[:, None] - stc, 0.0) / \
             np.maximum(rc * (1.0 - p_hit), 1e-300)[:, None]
         w_real = rho[:, None] * ss[None, :] / np.maximum(rc * p_hit, 1e-300)[:, None]
         wc = wc * np.where(hit[:, None], w_real, w_null)

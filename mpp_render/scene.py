@@ -115,7 +115,14 @@ class Medium:
     ``sigma_s`` where the scattering colour varies in space (a node tree into a Principled
     Volume's Color), so sigma_s(x) = sigma_s * scatter_grid(x) * density(x), both grids
     interpolated trilinearly; ``sigma_s`` is then the density-weighted mean.  The extinction
-    stays ``sigma_t`` * density(x).  NaN, inf and negative values are set to 0 with a warning.
+    stays ``sigma_t`` * density(x) unless ``extinction_grid`` is given.  NaN, inf and negative
+    values are set to 0 with a warning.
+    ``extinction_grid``: None, or float32 (nx, ny, nz, 3), dimensionless: per voxel the factor
+    on ``sigma_t`` where the extinction's colour varies in space (a coloured Absorption Color
+    field, a Volume Scatter's coloured Color field), so sigma_t(x) = sigma_t *
+    extinction_grid(x) * density(x) per channel; NaN, inf and negative values are set to 0
+    with a warning.  The scattering is ``scatter_grid``'s, so the absorption is what is left.
+    A medium with one is interpolated like a grid (no sharp surface).
     ``source``: 'MESH' (a mesh volume: one density with a sharp surface), 'MESH_FIELD' (a
     mesh volume whose density a shader node tree varies: interpolated like a grid), 'VDB',
     'FLUID' or 'WORLD' (for messages and tests).  A 'WORLD'
@@ -134,6 +141,7 @@ class Medium:
     source: str = "VDB"
     emission_grid: Optional[np.ndarray] = None
     scatter_grid: Optional[np.ndarray] = None
+    extinction_grid: Optional[np.ndarray] = None
 
     @property
     def sigma_t(self) -> np.ndarray:

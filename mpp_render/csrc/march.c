@@ -15,8 +15,24 @@
 #define DISC_STEPS_MAX 4096 /* kernels_np.DISC_STEPS_MAX */
 #define DISC_STEP_VOXELS 2.0 /* kernels_np.DISC_STEP_VOXELS */
 
-static void refined_tau(const Grid *f, int nm, int mi, int c, const double x[3], const double w[3],
-                        double dist, double delta, double tau[3]) {
+/* Medium m's extinction (1/m, RGB) at world point x, added to out: its density
+ * (density_from) times sig, or with an extinction channel xc >= 0 channel a of its
+ * extinction density times sig[a] (twin of kernels_np._extinction). */
+static inline void extinction_at(const Grid *f, int xc, const double x[3], double scale,
+                                 double out[3]) {
+    if (xc >= 0) {
+        double idx[3], v[3];
+        to_index(f, x, idx);
+        trilinear(f, idx, xc, 3, v);
+        for (int a = 0; a < 3; a++) out[a] += scale * v[a] * f->sig[a];
+    } else {
+        double rho = density_from(f, fetch0(f, x));
+        for (int a = 0; a < 3; a++) out[a] += scale * rho * f->sig[a];
+    }
+}
+
+static void refined_tau(const Grid *f, const int *xcs, int nm, int mi, int c, const double x[3],
+                        const double w[3], double dist, double delta, double tau[3]) {
     double end[3] = {x[0], x[1], x[2]};
     tau[0] = tau[1] = tau[2] = 0.0;
     for (int k = 1; k <= REFINE_STEPS; k++) {
@@ -24,10 +40,7 @@ static void refined_tau(const Grid *f, int nm, int mi, int c, const double x[3],
         seg = seg < 0.0 ? 0.0 : (seg > delta ? delta : seg);
         double s_mid = (k - 1) * delta + 0.5 * seg, s_end = (k - 1) * delta + seg, mid[3];
         for (int a = 0; a < 3; a++) { mid[a] = x[a] + w[a] * s_mid; end[a] = x[a] + w[a] * s_end; }
-        for (int m = 0; m < nm; m++) {
-            double rho = density_from(&f[m], fetch0(&f[m], mid));
-            for (int a = 0; a < 3; a++) tau[a] += rho * seg * f[m].sig[a];
-        }
+        for (int m = 0; m < nm; m++) extinction_at(&f[m], xcs[m], mid, seg, tau);
         double occ = fetch0(&f[mi], end);
         if (occ <= EDGE_EPS || occ >= 1.0 - EDGE_EPS || seg < delta) break;
     }
@@ -42,7 +55,8 @@ static void refined_tau(const Grid *f, int nm, int mi, int c, const double x[3],
  * depth to the centre misses in a medium that is not homogeneous across the disc.  Both paths
  * take n = ceil(dc / step) steps, each read at its midpoint.  Twin of
  * kernels_np.disc_correction. */
-static void disc_correction(const Grid *f, int nm, const double x[3], const double wc[3], double dc,
+static void disc_correction(const Grid *f, const int *xcs, int nm, const double x[3],
+                            const double wc[3], double dc,
                             const double wd[3], double ds, double stretch, double step,
                             double out[3]) {
     double nf = ceil(dc / step);
@@ -55,9 +69,8 @@ static void disc_correction(const Grid *f, int nm, const double x[3], const doub
             pd[a] = x[a] + wd[a] * (k + 0.5) * hd;
         }
         for (int m = 0; m < nm; m++) {
-            double rc = density_from(&f[m], fetch0(&f[m], pc));
-            double rd = density_from(&f[m], fetch0(&f[m], pd));
-            for (int a = 0; a < 3; a++) { tc[a] += rc * f[m].sig[a]; td[a] += rd * f[m].sig[a]; }
+            extinction_at(&f[m], xcs[m], pc, 1.0, tc);
+            extinction_at(&f[m], xcs[m], pd, 1.0, td);
         }
     }
     for (int a = 0; a < 3; a++) out[a] = td[a] * hd - stretch * tc[a] * hc;
@@ -191,6 +204,8 @@ typedef struct {
     int emc[MAX_MEDIA];                    /* first channel of each medium's emission grid, or -1 */
     int scc[MAX_MEDIA];                    /* first channel of each medium's scatter colour grid
                                             * (its factor on sig_s), or -1 */
+    int xc[MAX_MEDIA];                     /* first channel of each medium's extinction density
+                                            * (sig[a] times channel a), or -1: the density's */
     int use_em;
     const double *LR;                      /* light records (nl, LIGHT_FIELDS) */
     Py_ssize_t nl;
@@ -267,7 +282,7 @@ static int parse_channels(const March *c, PyObject *list, int *out, const char *
 /* The per-medium lists: scattering coefficients, anisotropies, voxel sizes, emissions,
  * emission channels and scatter colour channels. */
 static int parse_media(March *c, PyObject *sss, PyObject *gsl, PyObject *vox, PyObject *pem,
-                       PyObject *pec, PyObject *psc) {
+                       PyObject *pec, PyObject *psc, PyObject *pxc) {
     int ng = c->ng;
     if (parse_rgb_list(sss, ng, c->sig_s, "sigma_ss: one RGB array per medium", "sigma_s") < 0)
         return -1;
@@ -292,7 +307,8 @@ static int parse_media(March *c, PyObject *sss, PyObject *gsl, PyObject *vox, Py
         c->use_em = 1;
     }
     if (parse_channels(c, pec, c->emc, "emission_channels") < 0 ||
-        parse_channels(c, psc, c->scc, "scatter_channels") < 0)
+        parse_channels(c, psc, c->scc, "scatter_channels") < 0 ||
+        parse_channels(c, pxc, c->xc, "extinction_channels") < 0)
         return -1;
     for (int m = 0; m < ng; m++) {
         if (!(c->gg[m] > -1.0 && c->gg[m] < 1.0) || !(c->voxel[m] > 0.0) || !isfinite(c->voxel[m])) {
@@ -434,14 +450,14 @@ static int parse_multiple(March *c, PyObject *pms) {
 static int march_parse(March *c, PyObject *args) {
     PyObject *po, *pd, *pt0, *pt1, *pax, *pk, *fields, *w2is, *sss, *sts, *gsl, *thrs, *vox, *plights;
     PyObject *pms = Py_None, *pem = Py_None, *pbk = Py_None, *pec = Py_None, *pdr = Py_None;
-    PyObject *psc = Py_None;
+    PyObject *psc = Py_None, *pxc = Py_None;
     int brick = 4;
     c->adapt_tau = 0.0;
     c->roulette = 0.0;
-    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOiddd|OOOidOdOO", &po, &pd, &pt0, &pt1, &pax, &pk, &fields,
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOiddd|OOOidOdOOO", &po, &pd, &pt0, &pt1, &pax, &pk, &fields,
                           &w2is, &sss, &sts, &gsl, &thrs, &vox, &plights, &c->ambient, &c->step,
                           &c->depth_opacity, &c->depth_miss, &pms, &pem, &pbk, &brick, &c->adapt_tau,
-                          &pec, &c->roulette, &pdr, &psc))
+                          &pec, &c->roulette, &pdr, &psc, &pxc))
         return -1;
     if (!(c->roulette >= 0.0 && c->roulette < 1.0)) {
         PyErr_SetString(PyExc_ValueError, "roulette must be in [0, 1)");
@@ -467,7 +483,7 @@ static int march_parse(March *c, PyObject *args) {
     if (parse_grids(fields, w2is, sts, thrs, c->g, c->gb, &c->ng, 1) < 0) return -1;
     if (parse_bricks(pbk, brick, c->g, c->ng, c->bks, c->kb, &c->nkb) < 0) return -1;
     c->skip = pbk != Py_None;
-    if (parse_media(c, sss, gsl, vox, pem, pec, psc) < 0) return -1;
+    if (parse_media(c, sss, gsl, vox, pem, pec, psc, pxc) < 0) return -1;
     if (parse_lights(c, plights) < 0) return -1;
     for (Py_ssize_t l = 0; l < c->nl; l++) c->disc_reach[l] = 0.0;
     if (pdr != Py_None) {
@@ -589,7 +605,10 @@ static void medium_sources(const March *c, int m, const double x[3], const doubl
     double rho = density_from(g, tri_get1(&tw, 0));  /* the density first */
     if (!(rho > 0.0)) return;
     tri_get(&tw, 0, (int)g->nc, v);
-    for (int a = 0; a < 3; a++) s->sig_t[a] += rho * g->sig[a];
+    if (c->xc[m] >= 0)  /* the extinction's colour varies: its own density per channel */
+        for (int a = 0; a < 3; a++) s->sig_t[a] += v[c->xc[m] + a] * g->sig[a];
+    else
+        for (int a = 0; a < 3; a++) s->sig_t[a] += rho * g->sig[a];
     if (c->use_em)
         for (int a = 0; a < 3; a++) s->src_em[a] += c->emit[m][a];
     int edge = g->thr >= 0.0 && v[0] > EDGE_EPS && v[0] < 1.0 - EDGE_EPS;
@@ -598,13 +617,13 @@ static void medium_sources(const March *c, int m, const double x[3], const doubl
         int ch = c->chan[l];
         if (ch < 0) continue;
         double tau[3] = {v[ch], v[ch + 1], v[ch + 2]};
-        if (edge) refined_tau(c->g, c->ng, m, ch, x, la->wc[l], la->dc[l], 0.5 * c->voxel[m], tau);
+        if (edge) refined_tau(c->g, c->xc, c->ng, m, ch, x, la->wc[l], la->dc[l], 0.5 * c->voxel[m], tau);
         if (la->ds[l] != la->dc[l]) {  /* light from an emitter point off the centre */
             double st = path_stretch(la->ds[l], la->dc[l], c->voxel[m]);
             for (int a = 0; a < 3; a++) tau[a] *= st;
             if (la->dc[l] < c->disc_reach[l]) {
                 double wd[3] = {-la->wi[l][0], -la->wi[l][1], -la->wi[l][2]}, dt[3];
-                disc_correction(c->g, c->ng, x, la->wc[l], la->dc[l], wd, la->ds[l], st,
+                disc_correction(c->g, c->xc, c->ng, x, la->wc[l], la->dc[l], wd, la->ds[l], st,
                                 c->disc_step, dt);
                 for (int a = 0; a < 3; a++) tau[a] = tau[a] + dt[a] > 0.0 ? tau[a] + dt[a] : 0.0;
             }
@@ -731,7 +750,8 @@ static long march_ray(const March *c, Py_ssize_t r, RaySums *sums) {
 const char march_doc[] =
     "march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs, thresholds,\n"
     "      voxels, lights, ambient, step, depth_opacity, depth_miss[, multiple, emissions, bricks, brick,\n"
-    "      adapt_tau, emission_channels, roulette, disc_reach])\n"
+    "      adapt_tau, emission_channels, roulette, disc_reach, scatter_channels,\n"
+    "      extinction_channels])\n"
     "  -> (single, T, depth, multiple, steps, emission) as bytes of float64\n"
     "Twin of kernels_np.march.";
 

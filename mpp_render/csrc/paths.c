@@ -10,12 +10,12 @@ const char trace_paths_doc[] =
     "trace_paths(out, density, w2i, i2w, sigma_s, sigma_t, g, stride, towards, starts, weights,\n"
     "            dirs, cdf, rate, path_lo, path_hi, n_paths, seed, max_collisions, roulette,\n"
     "            jitter, lobe, outside, reach, triangles, albedo, start_source, start_peak,\n"
-    "            moments, others, threshold, cells, light, colour)\n"
+    "            moments, others, threshold, cells, light, colour, extinction)\n"
     "Twin of mpp_render.paths.trace_paths_np: adds to out (LX,LY,LZ,3) float64 the deposits\n"
     "of paths path_lo..path_hi-1 of n_paths towards the camera, and to moments (LX,LY,LZ,12)\n"
     "float64, unless it is empty, their moments of order 0 and 1 (paths.py, \"Moments\").\n"
     "others: a tuple of (out, moments, density, w2i, sigma_s, sigma_t, g, stride, towards,\n"
-    "rate, threshold, cells, colour), the other media the paths fly through, scatter in and deposit on\n"
+    "rate, threshold, cells, colour, extinction), the other media the paths fly through, scatter in and deposit on\n"
     "(at most 7).  threshold >= 0: the medium is the grid's trilinear value >= threshold\n"
     "(density 1, a mesh volume's sharp surface, as the march reads it), else the nearest\n"
     "voxel's density.  cells: empty, or with threshold > 0 (n0-1,n1-1,n2-1) uint8, each cell\n"
@@ -24,12 +24,15 @@ const char trace_paths_doc[] =
     "light: empty, or the light record (LIGHT_FIELDS float64) whose first scatterings the\n"
     "lobe-0 starts are: each path's incoming direction is drawn from its emitter at the start\n"
     "(light_sample) instead of dirs.  colour: (0,0,0,3) float32, or the density's shape x 3:\n"
-    "each voxel's factor on sigma_s, applied at a real collision (the nearest voxel's).";
+    "each voxel's factor on sigma_s, applied at a real collision (the nearest voxel's).\n"
+    "extinction: (0,0,0,3) float32, or the density's shape x 3: per voxel the density each\n"
+    "channel's extinction reads (sigma_t[c] times channel c, the nearest voxel's; at most the\n"
+    "density, so the rate still bounds it), the collisions then by spectral tracking.";
 
 #define MAX_EVENTS 1000000L   /* tentative collisions per path, whatever the medium */
 #define MAX_RATE_SPAN 1e6    /* rate x the grid's diagonal (m): tentative points across it */
 #define TRI_CHUNK 64         /* triangles per culling box */
-#define OTHER_BUFS 9         /* buffers held per other medium (other_grid) */
+#define OTHER_BUFS 10        /* buffers held per other medium (other_grid) */
 #define T_MIN 1e-9           /* m: a surface closer than this along a segment is not hit */
 #define FAR 1e30             /* m: how far a segment into empty space is tested */
 #define D_PICK 0
@@ -97,6 +100,8 @@ typedef struct {
     double *mom;              /* NULL, or (LX,LY,LZ,12) the deposits' moments */
     const float *col;         /* NULL, or (X,Y,Z,3) each voxel's factor on ss (the scattering
                                  colour, Medium.scatter_grid) */
+    const float *ext;         /* NULL, or (X,Y,Z,3) the density each channel's extinction reads
+                                 (media.PreparedMedium.extinction_density) */
 } PathGrid;
 
 typedef struct {
@@ -498,25 +503,36 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
         }
         /* real or null collision; chromatic media use spectral tracking (Kutz et al. 2017),
          * whose null probability stays > 0 while any channel has null density */
-        double p_hit;
-        int hit;
-        if (G->st_min == G->st_max) {
+        double p_hit, stc[3];
+        int hit, chroma = G->st_min != G->st_max || G->ext != NULL;
+        if (G->ext && inside[j]) {   /* the extinction's own density per channel */
+            double idx[3];
+            Py_ssize_t v[3];
+            grid_index(G, pos, idx);
+            nearest_voxel(G, idx, v);
+            const float *e = G->ext + 3 * ((v[0] * G->n[1] + v[1]) * G->n[2] + v[2]);
+            for (int c = 0; c < 3; c++) stc[c] = (e[c] > 0.0f ? (double)e[c] : 0.0) * G->st[c];
+        } else {
+            for (int c = 0; c < 3; c++) stc[c] = rho * G->st[c];
+        }
+        if (!chroma) {
             p_hit = rho * G->st_max / rate;
             if (p_hit > 1.0) p_hit = 1.0;
             hit = uniform01(key, ev, D_HIT) < p_hit;
             if (!hit) {
                 double den = fmax(1.0 - p_hit, 1e-12);
-                for (int c = 0; c < 3; c++) w[c] *= (1.0 - rho * G->st[c] / rate) / den;
+                for (int c = 0; c < 3; c++) w[c] *= (1.0 - stc[c] / rate) / den;
             } else {
                 for (int c = 0; c < 3; c++) w[c] *= G->ss[c] / G->st_max;
             }
         } else {
-            double real = rho * G->st_max, nul = fmax(rate - rho * G->st_min, 0.0);
+            double real = fmax(stc[0], fmax(stc[1], stc[2]));
+            double nul = fmax(rate - fmin(stc[0], fmin(stc[1], stc[2])), 0.0);
             p_hit = real / fmax(real + nul, 1e-300);
             hit = uniform01(key, ev, D_HIT) < p_hit;
             if (!hit) {
                 for (int c = 0; c < 3; c++)
-                    w[c] *= fmax(rate - rho * G->st[c], 0.0) / fmax(rate * (1.0 - p_hit), 1e-300);
+                    w[c] *= fmax(rate - stc[c], 0.0) / fmax(rate * (1.0 - p_hit), 1e-300);
             } else {
                 for (int c = 0; c < 3; c++) w[c] *= rho * G->ss[c] / fmax(rate * p_hit, 1e-300);
             }
@@ -607,16 +623,17 @@ static int cell_buf(PyObject *obj, Buf *b, const Py_ssize_t n[3], double thr,
     return 0;
 }
 
-/* A medium's scattering colour grid: (0,0,0,3) for none (*col NULL), else the density's
- * shape sd and 3 channels; -1 with an exception. */
-static int colour_buf(PyObject *obj, Buf *b, const Py_ssize_t sd[3], const float **col) {
+/* A medium's 3-channel grid `what` (its scatter colour or extinction density): (0,0,0,3)
+ * for none (*col NULL), else the density's shape sd and 3 channels; -1 with an exception. */
+static int colour_buf(PyObject *obj, Buf *b, const Py_ssize_t sd[3], const float **col,
+                      const char *what) {
     Py_ssize_t s[4] = {-1, -1, -1, 3};
     *col = NULL;
-    if (get_buf(obj, b, 'f', 4, s, "scatter colour") < 0) return -1;
+    if (get_buf(obj, b, 'f', 4, s, what) < 0) return -1;
     if (s[0] * s[1] * s[2] == 0) return 0;
     if (s[0] != sd[0] || s[1] != sd[1] || s[2] != sd[2]) {
-        PyErr_SetString(PyExc_ValueError, "trace_paths: the scatter colour grid must have the "
-                        "density's shape (and 3 channels), or be empty");
+        PyErr_Format(PyExc_ValueError, "trace_paths: the %s grid must have the density's "
+                     "shape (and 3 channels), or be empty", what);
         return -1;
     }
     *col = (const float *)b->view.buf;
@@ -624,15 +641,15 @@ static int colour_buf(PyObject *obj, Buf *b, const Py_ssize_t sd[3], const float
 }
 
 /* One of the others: (out, moments, density, w2i, sigma_s, sigma_t, g, stride, towards,
- * rate, threshold, cells, colour), its buffers held in b[OTHER_BUFS] (released by the
+ * rate, threshold, cells, colour, extinction), its buffers held in b[OTHER_BUFS] (released by the
  * caller); -1 with an exception. */
 static int other_grid(PyObject *item, Buf b[OTHER_BUFS], PathGrid *G) {
-    PyObject *po, *pm, *pd, *pw, *pss, *pst, *ptw, *pcl, *pcol;
+    PyObject *po, *pm, *pd, *pw, *pss, *pst, *ptw, *pcl, *pcol, *pext;
     double g, rate, thr;
     long stride;
     if (!PyTuple_Check(item) ||
-        !PyArg_ParseTuple(item, "OOOOOOdlOddOO", &po, &pm, &pd, &pw, &pss, &pst, &g, &stride,
-                          &ptw, &rate, &thr, &pcl, &pcol)) {
+        !PyArg_ParseTuple(item, "OOOOOOdlOddOOO", &po, &pm, &pd, &pw, &pss, &pst, &g, &stride,
+                          &ptw, &rate, &thr, &pcl, &pcol, &pext)) {
         if (!PyErr_Occurred())
             PyErr_SetString(PyExc_ValueError, "trace_paths: each other medium is a tuple");
         return -1;
@@ -664,7 +681,8 @@ static int other_grid(PyObject *item, Buf b[OTHER_BUFS], PathGrid *G) {
                  (const double *)b[6].view.buf, so, (double *)b[0].view.buf,
                  has_mom ? (double *)b[1].view.buf : NULL, thr, cls) < 0)
         return -1;
-    if (colour_buf(pcol, &b[8], sd, &G->col) < 0) return -1;
+    if (colour_buf(pcol, &b[8], sd, &G->col, "scatter colour") < 0) return -1;
+    if (colour_buf(pext, &b[9], sd, &G->ext, "extinction density") < 0) return -1;
     if (!span_ok(rate, sd, G->w2i)) {
         PyErr_SetString(PyExc_ValueError,
                         "trace_paths: the rate of tentative collisions is too high for the "
@@ -676,15 +694,15 @@ static int other_grid(PyObject *item, Buf b[OTHER_BUFS], PathGrid *G) {
 
 PyObject *trace_paths(PyObject *self, PyObject *args) {
     PyObject *po, *pd, *pw2i, *pi2w, *pss, *pst, *ptw, *pstarts, *pws, *pdirs, *pcdf, *preach,
-        *ptri, *palb, *psrc, *ppeak, *pmom, *pothers, *pcells, *plight, *pcol;
+        *ptri, *palb, *psrc, *ppeak, *pmom, *pothers, *pcells, *plight, *pcol, *pext;
     double g, rate, roulette, jitter, outside, thr0;
     long stride, lo, hi, n_paths, max_hits, lobe;
     unsigned long seed;
-    if (!PyArg_ParseTuple(args, "OOOOOOdlOOOOOdlllklddldOOOOOOOdOOO", &po, &pd, &pw2i, &pi2w,
+    if (!PyArg_ParseTuple(args, "OOOOOOdlOOOOOdlllklddldOOOOOOOdOOOO", &po, &pd, &pw2i, &pi2w,
                           &pss, &pst, &g, &stride, &ptw, &pstarts, &pws, &pdirs, &pcdf, &rate,
                           &lo, &hi, &n_paths, &seed, &max_hits, &roulette, &jitter, &lobe,
                           &outside, &preach, &ptri, &palb, &psrc, &ppeak, &pmom, &pothers, &thr0,
-                          &pcells, &plight, &pcol))
+                          &pcells, &plight, &pcol, &pext))
         return NULL;
     if (!PyTuple_Check(pothers) || PyTuple_GET_SIZE(pothers) > PATH_MEDIA - 1) {
         PyErr_SetString(PyExc_ValueError, "trace_paths: others must be a tuple of at most 7 media");
@@ -692,8 +710,9 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
     }
     Buf bo = {0}, bd = {0}, bw = {0}, bi = {0}, bss = {0}, bst = {0}, btw = {0}, bs = {0},
         bws = {0}, bdir = {0}, bc = {0}, br = {0}, bt = {0}, ba = {0}, bq = {0}, bp = {0}, bm = {0},
-        bcl = {0}, bli = {0}, bcol = {0};
-    /* per other medium: out, moments, density, w2i, sigma_s, sigma_t, towards, cells, colour */
+        bcl = {0}, bli = {0}, bcol = {0}, bext = {0};
+    /* per other medium: out, moments, density, w2i, sigma_s, sigma_t, towards, cells, colour,
+     * extinction */
     Buf ob[PATH_MEDIA - 1][OTHER_BUFS];
     memset(ob, 0, sizeof ob);
     Py_ssize_t n_others = PyTuple_GET_SIZE(pothers);
@@ -775,7 +794,8 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
                  (const double *)bss.view.buf, (const double *)bst.view.buf, g, rate, stride,
                  (const double *)btw.view.buf, so, (double *)bo.view.buf, NULL, thr0, cls0) < 0)
         goto done;
-    if (colour_buf(pcol, &bcol, sd, &T.m[0].col) < 0) goto done;
+    if (colour_buf(pcol, &bcol, sd, &T.m[0].col, "scatter colour") < 0) goto done;
+    if (colour_buf(pext, &bext, sd, &T.m[0].ext, "extinction density") < 0) goto done;
     T.nm = 1;
     for (Py_ssize_t k = 0; k < n_others; k++) {
         if (other_grid(PyTuple_GET_ITEM(pothers, k), ob[k], &T.m[1 + k]) < 0) goto done;
@@ -857,7 +877,7 @@ done:
     buf_release(&bst); buf_release(&btw); buf_release(&bs); buf_release(&bws);
     buf_release(&bdir); buf_release(&bc); buf_release(&br); buf_release(&bt); buf_release(&ba);
     buf_release(&bq); buf_release(&bp); buf_release(&bm); buf_release(&bcl);
-    buf_release(&bli); buf_release(&bcol);
+    buf_release(&bli); buf_release(&bcol); buf_release(&bext);
     for (Py_ssize_t k = 0; k < n_others; k++)
         for (int q = 0; q < OTHER_BUFS; q++) buf_release(&ob[k][q]);
     free(boxes);

@@ -41,7 +41,7 @@ from ..surfaces import intersect
 from ..scene import World
 from ..worldfog import glow_radiance
 from .lattice import lattice_points
-from .lightdepth import density_lengths
+from .lightdepth import density_lengths, extinction_media
 from .lightpaths import PathLattice, _trace_all
 from .pathstarts import (LIFT, SURFACE_POINTS, Surroundings, reach, surface_albedo,
                          surface_points)
@@ -169,7 +169,7 @@ def surface_view(pm, lat, around: Surroundings, n_dirs: int, seed: int, threads:
     towards = lat.towards.reshape(-1, 3)
     n = len(pts)
     st = np.asarray(pm.sigma_t, np.float64)
-    solid = list(around.solid)
+    solid = extinction_media(around.solid)
     sig_t = np.stack([m.sigma_t for m in solid]) if solid else np.zeros((0, 3))
     albedo = surface_albedo(ss) if around.bounce else np.zeros((len(ss.v0), 3))
     _, far = reach(pm)

@@ -6,9 +6,11 @@ multiple scattering in a forward-scattering medium per lit light 3 channels of i
 peak's light; with a lit world or a medium that glows (PreparedMedium.glows) 3 channels of
 world light, then with multiple scattering 3 of its multiply scattered part (the glow's light
 scattered once and more is added to them, precompute.emissionlight); then, for a medium with
-an emission grid only, 3 channels of its emitted radiance; last, for a medium with a scatter
-colour grid only (PreparedMedium.scatter_grid), 3 channels of its factor on sigma_s.  The
-world's, the emission's and the scatter colour's channels run to the end of the field
+an emission grid only, 3 channels of its emitted radiance; then, for a medium with a scatter
+colour grid only (PreparedMedium.scatter_grid), 3 channels of its factor on sigma_s; last,
+for a medium whose extinction's colour varies only (PreparedMedium.extinction_density), 3
+channels of the density each channel's extinction reads.  The world's, the emission's, the
+scatter colour's and the extinction's channels run to the end of the field
 (``world_first``).
 """
 from __future__ import annotations
@@ -28,7 +30,8 @@ class FieldLayout:
     light i's optical depth, or None when the light is skipped (dark).  ``channels``: the
     channels every medium's field has; ``emission_channels[m]``: the offset of medium m's
     emission grid (its field then has ``channels + 3``), or None; ``scatter_channels[m]``:
-    that of its scatter colour grid (3 more channels, after the emission's), or None.
+    that of its scatter colour grid (3 more channels, after the emission's), or None;
+    ``extinction_channels[m]``: that of its extinction density (3 more, after those), or None.
     ``beam_channels[i]``
     (multiple scattering on, some medium with a forward peak): the offset of light i's
     forward peak's light (W/m^2, ``peak_light``: what has scattered into the peak and not
@@ -42,12 +45,25 @@ class FieldLayout:
     emission_channels: Optional[List[Optional[int]]] = None
     beam_channels: Optional[List[Optional[int]]] = None
     scatter_channels: Optional[List[Optional[int]]] = None
+    extinction_channels: Optional[List[Optional[int]]] = None
+
+    def own_grids(self, pm: PreparedMedium, m: int):
+        """(first channel, grid) of each of medium ``pm``'s own grids (index ``m``) in its
+        field: emission, scatter colour, extinction density."""
+        out = []
+        for chans, grid in ((self.emission_channels, pm.emission_grid),
+                            (self.scatter_channels, pm.scatter_grid),
+                            (self.extinction_channels, pm.extinction_density)):
+            if chans is not None and chans[m] is not None:
+                out.append((chans[m], grid))
+        return out
 
     def medium_channels(self, m: int) -> int:
         """The channels of medium m's field: ``channels`` and its own grids' after them."""
         return self.channels + 3 * sum(
             ch is not None and ch[m] is not None
-            for ch in (self.emission_channels, self.scatter_channels))
+            for ch in (self.emission_channels, self.scatter_channels,
+                       self.extinction_channels))
 
     @property
     def world_first(self) -> Optional[int]:
@@ -95,8 +111,10 @@ def field_layout(media: Sequence[PreparedMedium], lights, world_color, multiple:
         if multiple:
             amb_ms = c
             c += 3
-    emission = [c if pm.emission_grid is not None else None for pm in media]
-    scatter = [None if pm.scatter_grid is None else c + (3 if e is not None else 0)
-               for pm, e in zip(media, emission)]
+    own = [[pm.emission_grid is not None, pm.scatter_grid is not None,
+            pm.extinction_density is not None] for pm in media]
+    firsts = [[c + 3 * sum(has[:k]) if has[k] else None for k in range(3)] for has in own]
+    emission, scatter, extinction = ([f[k] for f in firsts] for k in range(3))
     return FieldLayout(chans, amb, c, amb_ms, emission,
-                       beams if any(b is not None for b in beams) else None, scatter)
+                       beams if any(b is not None for b in beams) else None, scatter,
+                       extinction)

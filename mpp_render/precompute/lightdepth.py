@@ -35,23 +35,19 @@ def _exit_distance(media, points, dirs, limit):
 SHADOW_TAU = 50.0  # optical depth standing for "blocked by an opaque surface" (T ~ 2e-22)
 
 
+def extinction_media(media):
+    """The media as the transmittance kernels read them: each one's
+    ``PreparedMedium.extinction_parts`` (itself, or three of one channel each where its
+    extinction's colour varies per voxel)."""
+    return [p for m in media for p in m.extinction_parts()]
+
+
 def kernel_arrays(media):
-    return ([m.grid for m in media], [m.w2i for m in media], [m.sigma_t for m in media],
-            [m.threshold for m in media])
-
-
-def _media_arrays_for(media, coefficient):
-    """Kernel arrays integrating ``coefficient``: 'sigma_t' or 'sigma_s' (RGB optical depth)
-    or 'length' (metres inside non-zero density, in all three channels)."""
-    if coefficient == "sigma_t":
-        return kernel_arrays(media)
-    if coefficient == "sigma_s":
-        return ([m.grid for m in media], [m.w2i for m in media], [m.sigma_s for m in media],
-                [m.threshold for m in media])
-    if coefficient == "length":
-        return ([(m.grid > 0).astype(np.float32) for m in media], [m.w2i for m in media],
-                [np.ones(3) for _ in media], [-1.0 for _ in media])
-    raise ValueError(coefficient)
+    """(grids, w2is, sigma_ts, thresholds) for the optical-depth kernels through ``media``
+    (``extinction_media``; ``media_bricks`` of the same media matches them)."""
+    parts = extinction_media(media)
+    return ([m.grid for m in parts], [m.w2i for m in parts], [m.sigma_t for m in parts],
+            [m.threshold for m in parts])
 
 
 def media_bricks(media, tuning: Tuning = Tuning()):
@@ -62,7 +58,7 @@ def media_bricks(media, tuning: Tuning = Tuning()):
     grids); the result is the same either way."""
     if not media or max(m.grid.size for m in media) < tuning.skip_min_voxels:
         return None
-    return [m.bricks for m in media]
+    return [m.bricks for m in extinction_media(media)]
 
 
 def density_lengths(media: List[PreparedMedium], points, dirs, t_max, step,
@@ -87,6 +83,32 @@ def density_lengths(media: List[PreparedMedium], points, dirs, t_max, step,
     return out
 
 
+def depth_rows(media: List[PreparedMedium]):
+    """(tracks, sig_t (K,3), sig_s (K,3)): ``density_lengths`` through ``tracks`` times
+    ``sig_t`` is the extinction's optical depth through ``media``, times ``sig_s`` the
+    scattering's (each medium's mean sigma_s on its density).  A medium whose extinction's
+    colour varies per voxel gives four tracks: its density (scattering only) and its
+    ``extinction_parts`` (extinction only)."""
+    tracks, st, ss = [], [], []
+    for m in media:
+        parts = m.extinction_parts()
+        if parts == [m]:
+            tracks.append(m)
+            st.append(m.sigma_t)
+            ss.append(m.sigma_s)
+            continue
+        tracks.append(m)
+        st.append(np.zeros(3))
+        ss.append(m.sigma_s)
+        for p in parts:
+            tracks.append(p)
+            st.append(p.sigma_t)
+            ss.append(np.zeros(3))
+    if not tracks:
+        return [], np.zeros((0, 3)), np.zeros((0, 3))
+    return tracks, np.stack(st), np.stack(ss)
+
+
 def split_fog(media: List[PreparedMedium]):
     """(the media other than the world's fog, the fog's PreparedMedium or None)."""
     fog = next((pm for pm in media if pm.endless), None)
@@ -95,20 +117,15 @@ def split_fog(media: List[PreparedMedium]):
 
 def light_optical_depth(media: List[PreparedMedium], light: Light, points, step,
                         chunk=1 << 14, should_cancel=None, surfaces=None, threads=0,
-                        coefficient="sigma_t", fog_sigma_t=None, tuning: Tuning = Tuning()):
+                        fog_sigma_t=None, tuning: Tuning = Tuning()):
     """RGB optical depth (N,3) from world ``points`` to ``light`` (its centre) through media;
     ``SHADOW_TAU`` is added where an opaque surface (``surfaces``, a SurfaceSet) blocks the
     way, so surfaces cast volumetric shadows, and with ``fog_sigma_t`` (RGB 1/m) the world
     fog's sigma_t x distance (worldfog.optical_depth).  ``media`` must not hold the fog.
-    ``coefficient`` (see _media_arrays_for) picks what is integrated; shadows and fog are
-    added to 'sigma_t' only.  Raises cancel.Cancelled on Esc."""
+    Raises cancel.Cancelled on Esc."""
     od = kernels.optical_depth
-    arrays = _media_arrays_for(media, coefficient) if media else None
-    # the bricks bound density_from(grid), which 'length' does not integrate
-    bricks = None if coefficient == "length" else media_bricks(media, tuning)
-    if coefficient != "sigma_t":
-        surfaces = None
-        fog_sigma_t = None
+    arrays = kernel_arrays(media) if media else None
+    bricks = media_bricks(media, tuning)
     out = np.zeros((len(points), 3))
 
     def work(a, b):

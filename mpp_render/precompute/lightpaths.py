@@ -295,9 +295,11 @@ def _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
                               np.asarray(opm.sigma_s, np.float64),
                               np.asarray(opm.sigma_t, np.float64), float(opm.g), plat.stride,
                               plat.towards, plat.rate, plat.threshold,
-                              _scatter(opm, plat))
+                              _own_grid(opm.scatter_grid, plat),
+                              _own_grid(opm.extinction_density, plat))
                    for opm, plat in partners)
-    scatter = _scatter(pm, lat)
+    scatter = _own_grid(pm.scatter_grid, lat)
+    extinction = _own_grid(pm.extinction_density, lat)
     totals = np.array([float(item[1].sum()) for item in sets])
     acc = None
     for k, item in enumerate(sets):
@@ -313,20 +315,20 @@ def _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
                          max_collisions=max_collisions, jitter=jitter, lobe=lobe,
                          start_source=source, start_peak=peak, moments=moments,
                          others=others, threshold=lat.threshold, light=light,
-                         scatter=scatter, **extra)
+                         scatter=scatter, extinction=extinction, **extra)
         got = kernels.trace_paths_media(inp, threads=worker_count(threads),
                                         should_cancel=should_cancel)
         acc = got if acc is None else [a + b for a, b in zip(acc, got)]
     return acc
 
 
-def _scatter(pm, lat) -> Optional[np.ndarray]:
-    """The scatter colour grid (PreparedMedium.scatter_grid) the paths of ``pm`` read on
-    its path lattice ``lat``, whose density is the medium's own voxels; None without one."""
-    sg = pm.scatter_grid
-    if sg is None or sg.shape[:3] != lat.density.shape:
+def _own_grid(grid, lat) -> Optional[np.ndarray]:
+    """A medium's 3-channel grid ``grid`` (PreparedMedium.scatter_grid or
+    extinction_density, or None) as its paths read it on its path lattice ``lat``, whose
+    density is the medium's own voxels; None without one."""
+    if grid is None or grid.shape[:3] != lat.density.shape:
         return None
-    return sg
+    return grid
 
 
 def _far_multiple(pm, sets, camera, n_paths, seed, threads, should_cancel, around,

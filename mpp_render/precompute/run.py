@@ -101,10 +101,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
         cm = layout.medium_channels(mi)
         f = np.zeros(pm.grid.shape + (cm,), np.float32)
         f[..., 0] = pm.grid
-        for chans_of, grid in ((layout.emission_channels, pm.emission_grid),
-                               (layout.scatter_channels, pm.scatter_grid)):
-            if grid is not None:
-                f[..., chans_of[mi]:chans_of[mi] + 3] = grid
+        for first, grid in layout.own_grids(pm, mi):
+            f[..., first:first + 3] = grid
         flat = needed_flat(pm)
         n_pts += len(flat)
         pts = grid_points(pm, flat) if shadowed or fog is not None else None

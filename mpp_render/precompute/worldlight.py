@@ -20,7 +20,7 @@ from ..phase import sample_hg
 from ..scene import Camera, Tuning, World
 from ..surfaces import intersect, occluded
 from .lattice import coarse_lattice
-from .lightdepth import SHADOW_TAU, density_lengths
+from .lightdepth import SHADOW_TAU, density_lengths, depth_rows
 
 
 AMBIENT_RESOLUTION = 32  # lattice points along the longest side for the world light
@@ -84,8 +84,7 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
         return (np.zeros((n, 3)), np.zeros((n, 3))) if multiple else np.zeros((n, 3))
     # (M, 3); with no media but the fog (which has no extinction where the sky still shows)
     # every optical depth is 0
-    sig_t = np.stack([m.sigma_t for m in media]) if media else np.zeros((0, 3))
-    sig_s = np.stack([m.sigma_s for m in media]) if media else np.zeros((0, 3))
+    tracks, sig_t, sig_s = depth_rows(media)
     out = np.zeros((n, 3))
     out_ms = np.zeros((n, 3))
     chunk = world_chunk(n_dirs) if chunk is None else int(chunk)
@@ -105,8 +104,8 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
             t_max = np.where(tri >= 0, t, np.inf)
             seen = np.where((tri >= 0)[:, None],
                             -np.expm1(-np.asarray(fog_sigma_t)[None, :] * t[:, None]), 1.0)
-        lengths = density_lengths(media, pp, d, t_max, step, tuning) \
-            if media else np.zeros((len(pp), 0))
+        lengths = density_lengths(tracks, pp, d, t_max, step, tuning) \
+            if tracks else np.zeros((len(pp), 0))
         tau = lengths @ sig_t
         if walled and fog_sigma_t is None:
             tau += SHADOW_TAU * occluded(surfaces, pp, d, t_max)[:, None]

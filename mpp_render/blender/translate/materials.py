@@ -39,13 +39,13 @@ needed, at a medium's voxels, by ``realise``):
 * Color / Absorption Color: a :class:`ColourMean` evaluates the closure's coefficients at
   every voxel.  The medium's coefficients are their density-weighted means; the scattering
   varies per voxel through its factor on that mean (``Realised.scatter_grid``,
-  Medium.scatter_grid), and the extinction's brightness per voxel goes into the density;
-  the extinction's colour does not vary: where it would (a coloured Absorption Color field, a
-  Volume Scatter's or Absorption's coloured field) a warning gives the mean the medium
-  uses.  A Principled Volume's Color field with a constant black Absorption Color leaves the
-  extinction the density itself, so it renders exactly.  Its Color Attribute (a grid, e.g.
-  a smoke domain's 'color') multiplies Color the same way, per voxel, where the object has
-  that grid.
+  Medium.scatter_grid), the extinction's brightness per voxel goes into the density, and
+  where the extinction's colour varies too (a coloured Absorption Color field, a Volume
+  Scatter's or Absorption's coloured field) its factor per channel on the mean
+  (``Realised.extinction_grid``, Medium.extinction_grid).  A Principled Volume's Color
+  field with a constant black Absorption Color leaves the extinction the density itself.
+  Its Color Attribute (a grid, e.g. a smoke domain's 'color') multiplies Color the same
+  way, per voxel, where the object has that grid.
 * Any other input (Anisotropy, Blackbody Intensity, a surface's inputs, ...) driven by a
   field that varies in space takes the socket's own value, with a warning.  A field that
   does not vary (Math on constants) is a constant; nodes a field cannot evaluate are named
@@ -475,22 +475,24 @@ def weighted_mean(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
 
 class Realised(NamedTuple):
     """Closures on a lattice (``realise``): ``density`` float32 (shape), ``coefficients``
-    (no fields left), ``emission_grid`` None or float32 shape + (3,) (W/(m^3 sr)) and
+    (no fields left), ``emission_grid`` None or float32 shape + (3,) (W/(m^3 sr)),
     ``scatter_grid`` None or float32 shape + (3,), the factor on ``coefficients.sigma_s``
-    per point (Medium.scatter_grid)."""
+    per point (Medium.scatter_grid), and ``extinction_grid`` None or float32 shape + (3,),
+    the factor on the coefficients' sigma_t per point (Medium.extinction_grid)."""
     density: np.ndarray
     coefficients: VolumeCoefficients
     emission_grid: Optional[np.ndarray]
     scatter_grid: Optional[np.ndarray]
+    extinction_grid: Optional[np.ndarray] = None
 
 
-# Relative spread of the extinction over the voxels above which realise warns that a colour
-# field's extinction is taken as its mean (float32 rounding of the fields is far below it).
+# Relative spread of the extinction's colour over the voxels above which realise gives it a
+# factor per voxel (float32 rounding of the fields is far below it).
 EXTINCTION_SPREAD = 1e-3
 
 
 def realise(co: VolumeCoefficients, base, sample, grid_of, where: str, warnings: List[str],
-            how: Optional[str] = "density-weighted mean") -> Realised:
+            per_point: bool = True) -> Realised:
     """Closures ``co`` on a lattice (:class:`Realised`).
 
     ``base``: the density before the fields (a mesh's inside mask, a grid's values), float32;
@@ -499,10 +501,10 @@ def realise(co: VolumeCoefficients, base, sample, grid_of, where: str, warnings:
     field, 0).  The colour fields (:class:`ColourMean`) give each point's coefficients:
     where they change the extinction's brightness, the density is times it
     (``_colour_fields``); the medium's coefficients are their means weighted by the density,
-    the scattering's factor on its mean per point the scatter grid (None where it is 1
-    everywhere); the extinction's colour is the mean (each colour field that changes it
-    beyond EXTINCTION_SPREAD named in a warning with its ``how``, unless that is None).  The emission grid (shape + (3,), W/(m^3 sr)) sums the
-    field emission terms."""
+    the scattering's factor on its mean per point the scatter grid and the extinction's the
+    extinction grid (each None where it is 1 everywhere, the extinction's also without
+    ``per_point``: one point, the world's).  The emission grid (shape + (3,), W/(m^3 sr))
+    sums the field emission terms."""
     density = np.asarray(base, np.float32)
     if co.density_field is not None:
         f = np.maximum(np.nan_to_num(np.asarray(sample(co.density_field), np.float64)), 0.0)
@@ -510,17 +512,17 @@ def realise(co: VolumeCoefficients, base, sample, grid_of, where: str, warnings:
     out = dataclasses.replace(co, density_field=None, colour_means=[],
                               emission_terms=[t for t in co.emission_terms
                                               if not isinstance(t, FIELD_TERMS)])
-    scatter = None
+    scatter = extinction = None
     if co.colour_means:
-        out, scatter, density = _colour_fields(co, out, density, sample, grid_of, where,
-                                               warnings, how)
+        out, scatter, density, extinction = _colour_fields(co, out, density, sample, grid_of,
+                                                           per_point)
     grid = None
     for t in co.emission_terms:
         if isinstance(t, FIELD_TERMS):
             per = t.per_voxel(sample, grid_of)
             per = np.broadcast_to(per, density.shape + (3,))
             grid = per.astype(np.float32) if grid is None else grid + per
-    return Realised(density, out, grid, scatter)
+    return Realised(density, out, grid, scatter, extinction)
 
 
 def _per_point(values, shape) -> np.ndarray:
@@ -533,13 +535,15 @@ def _per_point(values, shape) -> np.ndarray:
 
 
 def _colour_fields(co: VolumeCoefficients, out: VolumeCoefficients, density, sample, grid_of,
-                   where: str, warnings: List[str], how: Optional[str]):
+                   per_point: bool = True):
     """(``out`` with the colour fields' mean coefficients and anisotropy added, the scatter
-    grid or None, the density) for ``realise``.  Where the colours change the extinction,
-    its grey part per point (the least-squares scale k of the mean extinction's colour) goes
-    into the density, so an extinction that varies in brightness only (a grey colour field
-    into Volume Scatter or Volume Absorption, a grey Absorption Color field) renders exactly;
-    what is left (a change of its colour) takes the mean, with a warning."""
+    grid or None, the density, the extinction grid or None) for ``realise``.  Where the
+    colours change the extinction, its grey part per point (the least-squares scale k of the
+    mean extinction's colour) goes into the density, so an extinction that varies in
+    brightness only (a grey colour field into Volume Scatter or Volume Absorption, a grey
+    Absorption Color field) needs no more; what is left (a change of its colour beyond
+    ``EXTINCTION_SPREAD``) is each point's factor per channel on the mean extinction (with
+    ``per_point``)."""
     n = density.size
     d = density.reshape(-1).astype(np.float64)
     ss = np.broadcast_to(out.sigma_s, (n, 3)).astype(np.float64)
@@ -574,19 +578,16 @@ def _colour_fields(co: VolumeCoefficients, out: VolumeCoefficients, density, sam
     ss, sa = ss * per, sa * per
     weights = d * k
     out.sigma_s, out.sigma_a = weighted_mean(ss, weights), weighted_mean(sa, weights)
-    if how is not None:
-        st, mean_st = (ss + sa)[weights > 0], out.sigma_s + out.sigma_a
-        if st.size and np.max(np.abs(st - mean_st)) > EXTINCTION_SPREAD * max(
-                float(np.max(mean_st)), 1e-30):
-            names = ", ".join([f.describe() for m in co.colour_means for f in m.fields.values()]
-                              + [f"Color Attribute '{a}'" for m in co.colour_means
-                                 for a in m.attributes.values()])
-            warnings.append(f"{where}: the colour of the extinction that {names} gives varies "
-                            f"per voxel; the MPP engine uses its {how} {fmt(tuple(mean_st))} "
-                            "/m per unit density (its brightness and the scattering colour "
-                            "vary per voxel)")
+    extinction = None
+    mean_st = out.sigma_s + out.sigma_a
+    st = ss + sa
+    lit = weights > 0
+    if per_point and np.any(lit) and np.max(np.abs(st[lit] - mean_st)) > EXTINCTION_SPREAD * max(
+            float(np.max(mean_st)), 1e-30):
+        per = np.where(mean_st > 0.0, st / np.where(mean_st > 0.0, mean_st, 1.0), 1.0)
+        extinction = per.reshape(density.shape + (3,)).astype(np.float32)
     mean = np.where(out.sigma_s > 0.0, out.sigma_s, 1.0)
     factor = np.where(out.sigma_s > 0.0, ss / mean, 1.0)
     if np.all(np.abs(factor - 1.0) <= 1e-6):
-        return out, None, density
-    return out, factor.reshape(density.shape + (3,)).astype(np.float32), density
+        return out, None, density, extinction
+    return out, factor.reshape(density.shape + (3,)).astype(np.float32), density, extinction

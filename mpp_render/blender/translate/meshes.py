@@ -4,12 +4,13 @@ A volume mesh's medium is its interior on a voxel lattice in object space (voxel
 Closures whose inputs node trees drive (fields, materials.py) are evaluated at the voxel
 centres (materials.realise): the density grid is the inside mask x the density field, the
 emission fields give ``Medium.emission_grid`` (inside the mesh only), a varying scattering
-colour ``Medium.scatter_grid``.  A mesh has no grids, so Attribute and Volume Info nodes read 0 (as
+colour ``Medium.scatter_grid``, a varying colour of the extinction ``Medium.extinction_grid``.
+A mesh has no grids, so Attribute and Volume Info nodes read 0 (as
 in Cycles).  Generated coordinates map the mesh's texture space (its bounding box unless set
 otherwise) to [0, 1]^3.  Closures with different density fields become one medium each.
 
 A medium whose density a field varies (or whose colour fields vary its extinction's
-brightness, materials.realise) has the source ``FIELD_SOURCE`` rather than 'MESH':
+brightness or colour, materials.realise) has the source ``FIELD_SOURCE`` rather than 'MESH':
 the renderer (media.py) gives a 'MESH' medium a sharp surface of *one* density (its grid
 thresholded at one half), so a varying density is rendered as a grid, interpolated
 trilinearly (the surface then blurs over a voxel).
@@ -146,12 +147,13 @@ class MeshTranslator:
         media = []
         for i, coeff in enumerate(groups):
             density, grid, scatter, fielded = mask, None, None, has_fields(coeff)
+            extinction = None
             varies = coeff.density_field is not None
             if fielded:
-                density, coeff, grid, scatter = realise(coeff, mask, sampler, lambda name: None,
-                                                        where, self.warnings)
+                density, coeff, grid, scatter, extinction = realise(
+                    coeff, mask, sampler, lambda name: None, where, self.warnings)
                 # a field may have varied the density (its colours the extinction's brightness)
-                varies = varies or not np.array_equal(density, mask)
+                varies = varies or not np.array_equal(density, mask) or extinction is not None
                 if grid is not None:
                     grid = (grid * mask[..., None]).astype(np.float32)
                     if not np.any(grid > 0):
@@ -164,7 +166,7 @@ class MeshTranslator:
                                 sigma_s=coeff.sigma_s, sigma_a=coeff.sigma_a,
                                 g=float(coeff.g), emission=coeff.emission,
                                 source=FIELD_SOURCE if varies else "MESH", emission_grid=grid,
-                                scatter_grid=scatter))
+                                scatter_grid=scatter, extinction_grid=extinction))
         return media
 
     def _surfaces(self, ob, verts, tris, slot_of, per_slot, world_matrix) -> List[Surface]:

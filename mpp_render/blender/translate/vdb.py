@@ -210,7 +210,7 @@ def block_medium(name, coeff, block, blocks, world_matrix, source, zero=(), unif
     ``where`` in ``warnings``); the grids they read are resampled onto the block."""
     values, origin, index_to_object = block
     density = (values > 0).astype(np.float32) if uniform else values
-    extra = scatter = None
+    extra = scatter = extinction = None
     if has_fields(coeff):
         def grid_of(name):
             src = blocks.get(name)
@@ -218,8 +218,8 @@ def block_medium(name, coeff, block, blocks, world_matrix, source, zero=(), unif
         ctx = fields if fields is not None else FieldContext()
         sampler = ctx.sampler(values.shape, np.asarray(index_to_object) @ translation(origin),
                               world_matrix, grid_of)
-        density, coeff, extra, scatter = realise(coeff, density, sampler, grid_of, where,
-                                                 warnings if warnings is not None else [])
+        density, coeff, extra, scatter, extinction = realise(
+            coeff, density, sampler, grid_of, where, warnings if warnings is not None else [])
         if extra is not None:
             extra = (extra * (values > 0)[..., None]).astype(np.float32)
     emission, grid, lost = lattice_emission(coeff, block, blocks, zero=zero)
@@ -229,7 +229,7 @@ def block_medium(name, coeff, block, blocks, world_matrix, source, zero=(), unif
                     index_to_world=np.asarray(world_matrix) @ np.asarray(index_to_object)
                     @ translation(origin), sigma_s=coeff.sigma_s, sigma_a=coeff.sigma_a,
                     g=float(coeff.g), emission=emission, source=source, emission_grid=grid,
-                    scatter_grid=scatter)
+                    scatter_grid=scatter, extinction_grid=extinction)
     return medium, lost
 
 

@@ -84,8 +84,8 @@ def _folded(co, sample, where, warnings):
     constant coefficients and emission."""
     if not has_fields(co):
         return co
-    density, out, grid, _ = realise(co, np.ones(1, np.float32), sample, lambda name: None,
-                                    where, warnings, how=None)   # one point: one colour
+    density, out, grid = realise(co, np.ones(1, np.float32), sample, lambda name: None,
+                                 where, warnings, per_point=False)[:3]   # one point: one colour
     d = float(density[0])
     out.sigma_s = out.sigma_s * d
     out.sigma_a = out.sigma_a * d
