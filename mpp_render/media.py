@@ -81,12 +81,7 @@ class PreparedMedium:
         """float64 (N,3) the factor on ``sigma_s`` (``scatter_grid``) at the voxels ``flat``
         (flat indices into ``grid``) or, trilinear, at index coordinates ``idx`` (N,3); None
         where the medium has one colour."""
-        if self.scatter_grid is None:
-            return None
-        if flat is not None:
-            return self.scatter_grid.reshape(-1, 3)[np.asarray(flat)].astype(np.float64)
-        return np.asarray(trilinear(self.scatter_grid, np.asarray(idx, np.float64)),
-                          np.float64)
+        return _rgb_at(self.scatter_grid, flat, idx)
 
     def extinction_parts(self) -> List["PreparedMedium"]:
         """The medium as the transmittance kernels read it (optical depth, sweeps, density
@@ -107,17 +102,6 @@ class PreparedMedium:
                     extinction_density=None))
             self._parts = parts
         return self._parts
-
-    def extinction_at(self, flat=None, idx=None) -> Optional[np.ndarray]:
-        """float64 (N,3) the density each channel's extinction reads (``extinction_density``)
-        at the voxels ``flat`` or, trilinear, at index coordinates ``idx`` (N,3); None where
-        the extinction has one colour (it reads the density)."""
-        if self.extinction_density is None:
-            return None
-        if flat is not None:
-            return self.extinction_density.reshape(-1, 3)[np.asarray(flat)].astype(np.float64)
-        return np.asarray(trilinear(self.extinction_density, np.asarray(idx, np.float64)),
-                          np.float64)
 
     @property
     def outside_density(self) -> float:
@@ -191,6 +175,16 @@ class PreparedMedium:
     @property
     def shape(self):
         return self.grid.shape
+
+
+def _rgb_at(grid, flat=None, idx=None) -> Optional[np.ndarray]:
+    """float64 (N,3) of a padded 3-channel ``grid`` (or None) at the voxels ``flat`` or,
+    trilinear, at index coordinates ``idx`` (N,3); None without a grid."""
+    if grid is None:
+        return None
+    if flat is not None:
+        return grid.reshape(-1, 3)[np.asarray(flat)].astype(np.float64)
+    return np.asarray(trilinear(grid, np.asarray(idx, np.float64)), np.float64)
 
 
 def delta_scaled(pm: PreparedMedium) -> PreparedMedium:

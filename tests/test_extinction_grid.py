@@ -226,16 +226,9 @@ def path_inputs(rng, extinction=True, n_paths=3000):
 
 @needs_c
 def test_path_twins_agree_with_extinction_grids():
-    from mpp_render.paths import trace_paths_media_np
-    inp = path_inputs(np.random.default_rng(4))
-    a = trace_paths_media_np(inp)
-    b = kernels.trace_paths_media(inp, threads=2)
-    for x, y in zip(a, b):
-        assert x[..., :3].sum() > 0.0 and x.shape == y.shape
-        assert np.abs(x - y).max() <= 1e-9 * np.abs(x).max()
-    plain = kernels.trace_paths_media(path_inputs(np.random.default_rng(4), extinction=False),
-                                      threads=2)
-    assert np.abs(plain[0] - b[0]).max() > 0.01 * np.abs(b[0]).max()
+    from test_scatter_grid import assert_path_twins
+    assert_path_twins(path_inputs(np.random.default_rng(4)),
+                      path_inputs(np.random.default_rng(4), extinction=False))
 
 
 @needs_c
