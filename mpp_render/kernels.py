@@ -319,6 +319,21 @@ def _colour(grid) -> np.ndarray:
     return _f32(grid) if grid is not None else np.zeros((0, 0, 0, 3), np.float32)
 
 
+def intersect(origins, dirs, tmax, triangles, *, backend=None):
+    """(t (N,), triangle (N,) int64): the closest hit of rays ``origins`` + t ``dirs`` (N,3)
+    for t in (0, ``tmax``) (N,) among ``triangles`` (T,9: corner and two edges), tmax and
+    -1 where none (the numpy twin: kernels_np.intersect_triangles)."""
+    o = _f64(origins).reshape(-1, 3)
+    n = len(o)
+    if not _on_c(backend) or not hasattr(_c, "intersect"):
+        return kernels_np.intersect_triangles(o, _f64(dirs).reshape(n, 3),
+                                              _f64(tmax).reshape(n),
+                                              _f64(triangles).reshape(-1, 9))
+    t, k = _c.intersect(o, _f64(dirs).reshape(n, 3), _f64(tmax).reshape(n),
+                        _f64(triangles).reshape(-1, 9))
+    return np.frombuffer(t, np.float64).copy(), np.frombuffer(k, np.int64).copy()
+
+
 def trace_paths(inp, *, threads: int = 1, should_cancel=None, backend=None):
     """Light paths' deposits (LX,LY,LZ,inp.channels) float64 for ``inp`` (a paths.PathInputs
     without others; the numpy twin is paths.trace_paths_np): ``trace_paths_media``'s first."""

@@ -694,3 +694,62 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
         running = running[going]
         K += 1
     return single, trans, depth, multi, steps, emitted
+
+
+RAY_CHUNK = 4096    # rays per block in the ray x triangle tests
+
+
+def _box_hit(lo, hi, o, d, tmax):
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / d
+        ta = (lo - o) * inv
+        tb = (hi - o) * inv
+    t0 = np.nanmax(np.minimum(ta, tb), axis=1)
+    t1 = np.nanmin(np.maximum(ta, tb), axis=1)
+    return (t1 >= np.maximum(t0, 0.0)) & (t0 <= tmax)
+
+
+def intersect_triangles(o, d, tmax, triangles, boxes=None):
+    """(t (N,), triangle (N,) int64): the closest hit of rays o + t d among ``triangles``
+    (T,9: corner and two edges) for t in (0, ``tmax``) (N,), tmax and -1 where none; a
+    vectorised Moller-Trumbore test after a box cull (``boxes``: (lo, hi, first, last)
+    triangle ranges; None: one box per 64 triangles, as csrc/triangles.h).  The twin of
+    csrc/intersect.c."""
+    o = np.asarray(o, np.float64)
+    d = np.asarray(d, np.float64)
+    tri = np.asarray(triangles, np.float64).reshape(-1, 9)
+    v0s, e1s, e2s = tri[:, 0:3], tri[:, 3:6], tri[:, 6:9]
+    n = len(o)
+    t_best = np.array(np.asarray(tmax, np.float64).reshape(n))
+    out = np.full(n, -1, np.int64)
+    if boxes is None:
+        boxes = []
+        for a in range(0, len(tri), 64):
+            b = min(len(tri), a + 64)
+            pts = np.concatenate([v0s[a:b], v0s[a:b] + e1s[a:b], v0s[a:b] + e2s[a:b]])
+            boxes.append((pts.min(axis=0), pts.max(axis=0), a, b))
+    for lo, hi, a, b in boxes:
+        cand = np.flatnonzero(_box_hit(lo - 1e-9, hi + 1e-9, o, d, t_best))
+        for c0 in range(0, len(cand), RAY_CHUNK):
+            rays = cand[c0:c0 + RAY_CHUNK]
+            oo, dd = o[rays], d[rays]
+            for t0 in range(a, b, 256):
+                sl = slice(t0, min(b, t0 + 256))
+                e1, e2, v0 = e1s[sl], e2s[sl], v0s[sl]
+                p = np.cross(dd[:, None, :], e2[None, :, :])            # (R,T,3)
+                det = np.einsum("rtk,tk->rt", p, e1)
+                ok = np.abs(det) > 1e-300
+                inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+                s = oo[:, None, :] - v0[None, :, :]
+                u = np.einsum("rtk,rtk->rt", s, p) * inv
+                q = np.cross(s, e1[None, :, :])
+                v = np.einsum("rk,rtk->rt", dd, q) * inv
+                t = np.einsum("tk,rtk->rt", e2, q) * inv
+                hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)
+                t = np.where(hit, t, np.inf)
+                j = np.argmin(t, axis=1)
+                tj = t[np.arange(len(rays)), j]
+                better = tj < t_best[rays]
+                t_best[rays[better]] = tj[better]
+                out[rays[better]] = t0 + j[better]
+    return t_best, out

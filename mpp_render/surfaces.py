@@ -16,9 +16,10 @@ whole sky; along that direction a surface it hits adds its own light, reflected 
 
 f is Cycles' Principled BSDF (principled.py).
 
-Intersection is a vectorised Moller-Trumbore test against every triangle of every surface,
-after a per-surface bounding-box cull; it is meant for the ground planes and props of smoke
-scenes (thousands of triangles), not for million-triangle meshes.
+Intersection is a Moller-Trumbore test against every triangle after a bounding-box cull per
+64 triangles (the compiled kernels.intersect, or its numpy twin ``intersect_np``); it is
+meant for the ground planes and props of smoke scenes (thousands of triangles), not for
+million-triangle meshes.
 """
 from __future__ import annotations
 
@@ -27,12 +28,12 @@ from typing import Dict, List
 
 import numpy as np
 
+from . import kernels, kernels_np
 from .gathers import directions as gather_directions
 from .principled import Principled
 from .scene import Surface
 
 EPS = 1e-6          # relative offset (m per m of scene extent) for shadow-ray origins
-RAY_CHUNK = 4096    # rays per block in the ray x triangle tests
 
 # per-surface parameters (scene.Surface fields) and their shapes
 _SCALARS = ("specular", "roughness", "metallic", "coat_weight", "coat_roughness", "coat_ior",
@@ -61,6 +62,14 @@ class SurfaceSet:
     @property
     def empty(self) -> bool:
         return len(self.v0) == 0
+
+    @property
+    def triangles(self) -> np.ndarray:
+        """float64 (M,9) each triangle's corner and two edges, as the kernels take them."""
+        if getattr(self, "_triangles", None) is None:
+            self._triangles = np.ascontiguousarray(
+                np.concatenate([self.v0, self.e1, self.e2], axis=1), np.float64)
+        return self._triangles
 
 
 def _colour(v) -> np.ndarray:
@@ -134,51 +143,23 @@ def prepare_surfaces(surfaces: List[Surface]) -> SurfaceSet:
                       float(max(np.max(hi - lo), 1e-3)))
 
 
-def _box_hit(lo, hi, o, d, tmax):
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = 1.0 / d
-        ta = (lo - o) * inv
-        tb = (hi - o) * inv
-    t0 = np.nanmax(np.minimum(ta, tb), axis=1)
-    t1 = np.nanmin(np.maximum(ta, tb), axis=1)
-    return (t1 >= np.maximum(t0, 0.0)) & (t0 <= tmax)
-
-
 def intersect(ss: SurfaceSet, o, d, tmax):
-    """Closest hit of rays o + t d, t in (0, tmax].  Returns (t (N,), triangle (N,) int,
-    -1 where nothing is hit; t = tmax there)."""
+    """Closest hit of rays o + t d, t in (0, tmax).  Returns (t (N,), triangle (N,) int,
+    -1 where nothing is hit; t = tmax there): the compiled kernel (kernels.intersect, without
+    the GIL), or its numpy twin ``intersect_np``."""
     o = np.asarray(o, np.float64)
-    d = np.asarray(d, np.float64)
     n = len(o)
-    t_best = np.array(np.broadcast_to(np.asarray(tmax, np.float64), (n,)))
-    tri = np.full(n, -1, np.int64)
+    t_max = np.array(np.broadcast_to(np.asarray(tmax, np.float64), (n,)))
     if ss.empty or n == 0:
-        return t_best, tri
-    for lo, hi, a, b in ss.boxes:
-        cand = np.flatnonzero(_box_hit(lo - 1e-9, hi + 1e-9, o, d, t_best))
-        for c0 in range(0, len(cand), RAY_CHUNK):
-            rays = cand[c0:c0 + RAY_CHUNK]
-            oo, dd = o[rays], d[rays]
-            for t0 in range(a, b, 256):
-                sl = slice(t0, min(b, t0 + 256))
-                e1, e2, v0 = ss.e1[sl], ss.e2[sl], ss.v0[sl]
-                p = np.cross(dd[:, None, :], e2[None, :, :])            # (R,T,3)
-                det = np.einsum("rtk,tk->rt", p, e1)
-                ok = np.abs(det) > 1e-300
-                inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
-                s = oo[:, None, :] - v0[None, :, :]
-                u = np.einsum("rtk,rtk->rt", s, p) * inv
-                q = np.cross(s, e1[None, :, :])
-                v = np.einsum("rk,rtk->rt", dd, q) * inv
-                t = np.einsum("tk,rtk->rt", e2, q) * inv
-                hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)
-                t = np.where(hit, t, np.inf)
-                j = np.argmin(t, axis=1)
-                tj = t[np.arange(len(rays)), j]
-                better = tj < t_best[rays]
-                t_best[rays[better]] = tj[better]
-                tri[rays[better]] = t0 + j[better]
-    return t_best, tri
+        return t_max, np.full(n, -1, np.int64)
+    return kernels.intersect(o, d, t_max, ss.triangles)
+
+
+def intersect_np(ss: SurfaceSet, o, d, tmax):
+    """``intersect`` in numpy, culling by the surfaces' own boxes (``ss.boxes``)."""
+    o = np.asarray(o, np.float64)
+    t_max = np.array(np.broadcast_to(np.asarray(tmax, np.float64), (len(o),)))
+    return kernels_np.intersect_triangles(o, d, t_max, ss.triangles, ss.boxes)
 
 
 def occluded(ss: SurfaceSet, o, d, tmax):

@@ -11,9 +11,9 @@ ROOT = pathlib.Path(__file__).resolve().parents[1] / "mpp_render"
 LAYERS = [
     {"cli", "__main__", "package", "blender", "viewport"},              # entry points, glue
     {"render", "tiles", "pilot", "cache", "bounce", "budget", "metrics", "exr"},  # the frame; I/O
-    {"precompute", "march", "firstflight", "pyramid", "parallel"},      # the two stages
+    {"precompute", "march", "firstflight", "pyramid", "parallel", "surfaces"},  # the two stages
     {"kernels", "kernels_np", "_kernels", "paths"},                     # C kernels, numpy twins
-    {"lights", "surfaces", "gathers", "principled", "worldfog", "media", "phase", "mpp", "walk",
+    {"lights", "gathers", "principled", "worldfog", "media", "phase", "mpp", "walk",
      "lightrecord",
      "camera", "blackbody", "passes", "textures", "rng"},                                # physics, media, model
     {"scene", "cancel"},                                                # the description; Esc

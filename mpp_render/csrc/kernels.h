@@ -5,7 +5,7 @@
 #include "common.h"
 
 extern const char optical_depth_doc[], light_sweep_doc[], upsample_into_doc[], march_doc[],
-    trilinear_doc[], light_layout_doc[], trace_paths_doc[];
+    trilinear_doc[], light_layout_doc[], trace_paths_doc[], intersect_doc[];
 PyObject *optical_depth(PyObject *self, PyObject *args);
 PyObject *light_sweep(PyObject *self, PyObject *args);
 PyObject *upsample_into(PyObject *self, PyObject *args);
@@ -13,5 +13,6 @@ PyObject *march(PyObject *self, PyObject *args);
 PyObject *py_trilinear(PyObject *self, PyObject *args);
 PyObject *light_layout(PyObject *self, PyObject *noargs);
 PyObject *trace_paths(PyObject *self, PyObject *args);
+PyObject *intersect(PyObject *self, PyObject *args);
 
 #endif

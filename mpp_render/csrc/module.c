@@ -1,6 +1,7 @@
 /* mpp_render._kernels: the method table.  Each kernel lives in its own file (optical_depth.c,
- * sweep.c, march.c, upsample.c, trilinear.c, paths.c) over the shared headers common.h (buffers, grids,
- * trilinear reads, random numbers), bricks.h (empty space) and light.h (the light record).
+ * sweep.c, march.c, upsample.c, trilinear.c, paths.c, intersect.c) over the shared headers common.h
+ * (buffers, grids, trilinear reads, random numbers), bricks.h (empty space), light.h (the light
+ * record) and triangles.h (rays against triangles).
  */
 #include "kernels.h"
 #include "light.h"
@@ -41,6 +42,7 @@ static PyMethodDef methods[] = {
     {"upsample_into", upsample_into, METH_VARARGS, upsample_into_doc},
     {"trilinear", py_trilinear, METH_VARARGS, trilinear_doc},
     {"trace_paths", trace_paths, METH_VARARGS, trace_paths_doc},
+    {"intersect", intersect, METH_VARARGS, intersect_doc},
     {"light_layout", light_layout, METH_NOARGS, light_layout_doc},
     {NULL, NULL, 0, NULL},
 };

@@ -5,6 +5,7 @@
  */
 #include "kernels.h"
 #include "light.h"   /* basis: the orthonormal frame of phase.orthonormal_basis */
+#include "triangles.h"
 
 const char trace_paths_doc[] =
     "trace_paths(out, density, w2i, i2w, sigma_s, sigma_t, g, stride, towards, starts, weights,\n"
@@ -31,7 +32,6 @@ const char trace_paths_doc[] =
 
 #define MAX_EVENTS 1000000L   /* tentative collisions per path, whatever the medium */
 #define MAX_RATE_SPAN 1e6    /* rate x the grid's diagonal (m): tentative points across it */
-#define TRI_CHUNK 64         /* triangles per culling box */
 #define OTHER_BUFS 10        /* buffers held per other medium (other_grid) */
 #define T_MIN 1e-9           /* m: a surface closer than this along a segment is not hit */
 #define FAR 1e30             /* m: how far a segment into empty space is tested */
@@ -145,52 +145,10 @@ static double box_cross(const PathGrid *T, const double o[3], const double d[3],
 }
 
 /* The nearest triangle hit by o + t d for t in (T_MIN, tmax), other than ``skip`` (the one the
- * path leaves); -1 when none.  Moller-Trumbore, as surfaces.intersect. */
+ * path leaves); -1 when none (triangles.h). */
 static Py_ssize_t surface_hit(const Tracer *T, const double o[3], const double d[3], double tmax,
                               Py_ssize_t skip, double *t_hit) {
-    Py_ssize_t found = -1;
-    double best = tmax;
-    for (Py_ssize_t bi = 0; bi < T->n_box; bi++) {
-        const double *B = T->box + 6 * bi;
-        double t0 = 0.0, t1 = best;
-        int miss = 0;
-        for (int a = 0; a < 3 && !miss; a++) {
-            if (d[a] == 0.0) {
-                if (o[a] < B[a] || o[a] > B[3 + a]) miss = 1;
-                continue;
-            }
-            double ta = (B[a] - o[a]) / d[a], tb = (B[3 + a] - o[a]) / d[a];
-            if (ta > tb) { double x = ta; ta = tb; tb = x; }
-            if (ta > t0) t0 = ta;
-            if (tb < t1) t1 = tb;
-            if (t1 < t0) miss = 1;
-        }
-        if (miss) continue;
-        Py_ssize_t end = (bi + 1) * TRI_CHUNK < T->n_tri ? (bi + 1) * TRI_CHUNK : T->n_tri;
-        for (Py_ssize_t k = bi * TRI_CHUNK; k < end; k++) {
-            if (k == skip) continue;
-            const double *v0 = T->tri + 9 * k, *e1 = v0 + 3, *e2 = v0 + 6;
-            double p[3] = {d[1] * e2[2] - d[2] * e2[1], d[2] * e2[0] - d[0] * e2[2],
-                           d[0] * e2[1] - d[1] * e2[0]};
-            double det = p[0] * e1[0] + p[1] * e1[1] + p[2] * e1[2];
-            if (!(fabs(det) > 1e-300)) continue;
-            double inv = 1.0 / det;
-            double s[3] = {o[0] - v0[0], o[1] - v0[1], o[2] - v0[2]};
-            double u = (s[0] * p[0] + s[1] * p[1] + s[2] * p[2]) * inv;
-            if (!(u >= 0.0 && u <= 1.0)) continue;
-            double q[3] = {s[1] * e1[2] - s[2] * e1[1], s[2] * e1[0] - s[0] * e1[2],
-                           s[0] * e1[1] - s[1] * e1[0]};
-            double v = (d[0] * q[0] + d[1] * q[1] + d[2] * q[2]) * inv;
-            if (!(v >= 0.0 && u + v <= 1.0)) continue;
-            double t = (e2[0] * q[0] + e2[1] * q[1] + e2[2] * q[2]) * inv;
-            if (t > T_MIN && t < best) {
-                best = t;
-                found = k;
-            }
-        }
-    }
-    *t_hit = best;
-    return found;
+    return tri_hit(T->tri, T->n_tri, T->box, o, d, T_MIN, tmax, skip, t_hit);
 }
 
 /* World point p in grid G's voxel index coordinates. */
@@ -830,25 +788,7 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
             PyErr_NoMemory();
             goto done;
         }
-        for (Py_ssize_t bx = 0; bx < T.n_box; bx++) {
-            double *B = boxes + 6 * bx;
-            for (int a = 0; a < 3; a++) { B[a] = INFINITY; B[3 + a] = -INFINITY; }
-            Py_ssize_t end = (bx + 1) * TRI_CHUNK < T.n_tri ? (bx + 1) * TRI_CHUNK : T.n_tri;
-            for (Py_ssize_t k = bx * TRI_CHUNK; k < end; k++) {
-                const double *v = T.tri + 9 * k;
-                for (int corner = 0; corner < 3; corner++)
-                    for (int a = 0; a < 3; a++) {
-                        double x = v[a] + (corner ? v[3 * corner + a] : 0.0);
-                        if (x < B[a]) B[a] = x;
-                        if (x > B[3 + a]) B[3 + a] = x;
-                    }
-            }
-            for (int a = 0; a < 3; a++) {   /* a little wider, so a grazing ray still tests */
-                double pad = 1e-9 * (1.0 + fabs(B[a]) + fabs(B[3 + a]));
-                B[a] -= pad;
-                B[3 + a] += pad;
-            }
-        }
+        tri_chunk_boxes(T.tri, T.n_tri, boxes);
     }
     T.box = boxes;
     T.m[0].mom = has_mom ? (double *)bm.view.buf : NULL;
