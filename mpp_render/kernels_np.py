@@ -503,8 +503,7 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
     the majorant's optical depth per step within ``adapt_tau`` (thin medium: longer steps),
     unless a light's scattered light changes along the super-step (``light_varies``) or a
     sharp (mesh) medium's surface may be on it (the bricks' least bound below 1: not wholly
-    inside); not at all when a lit light is sampled with jitter (area,
-    sphere lights).
+    inside).
     Each step adds T S (1 - exp(-sigma_t H)) / sigma_t with S the in-scattered radiance at its
     point, then T *= exp(-sigma_t H).  ``roulette`` > 0: Russian roulette once the largest
     channel of T is below it: the ray goes on with probability q = max T / ``roulette``
@@ -530,12 +529,6 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
     lines = [ray_to_index(w, origins, dirs) for w in w2is] if bricks is not None else None
     running = np.flatnonzero(t0 < t1)
     K = 0
-    # longer steps in thin media only where no lit light is sampled with jitter (area, sphere):
-    # those average their shape over the steps' samples
-    jittered = [int(r[L_KIND]) == KIND_AREA or (int(r[L_KIND]) in (KIND_POINT, KIND_SPOT)
-                                                and r[L_RADIUS] > 0) for r in lights]
-    if any(j and r[L_CHANNEL] >= 0 for j, r in zip(jittered, lights)):
-        adapt_tau = 0.0
     while running.size:
         s_lo = t0[running] + float(SUPER * K) * h
         if not np.all(s_lo < t1[running]):  # past the end (after an empty super-step)

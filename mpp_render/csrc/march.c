@@ -528,11 +528,7 @@ static void march_prepare(March *c) {
     c->disc_step = HUGE_VAL;
     for (int m = 0; m < ng; m++) if (c->voxel[m] < c->disc_step) c->disc_step = c->voxel[m];
     c->disc_step *= DISC_STEP_VOXELS;
-    /* longer steps in thin media only where every lit light is sampled without jitter: the
-     * jittered ones (area, sphere) average their shape over the steps' samples */
     c->adapt = c->adapt_tau > 0.0;
-    for (Py_ssize_t l = 0; l < c->nl; l++)
-        if (c->chan[l] >= 0 && c->jitter[l]) c->adapt = 0;
 }
 
 /* ---- the march itself ---- */
