@@ -30,22 +30,10 @@ import time
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, REPO)
 SCENES = os.environ.get("MPP_SCENES") or os.path.join(os.path.dirname(REPO), "shared", "scenes")
+from guided_gathers import description  # noqa: E402  (a scene's description at a size)
+
 DEFAULT_SCENES = {"casts": "p_fog_point,p_slab_over_ground,smoke_plume",
                   "adapt": "p_fog_point,p_fog_area,p_point_in_cube,p_area_in_box"}
-
-
-def description(name, width=None, height=None):
-    from mpp_render.blender import batch
-    from mpp_render.blender.properties import settings_from_scene
-    from mpp_render.blender.translate import scene_from_depsgraph
-    bpy = batch.register()
-    bpy.ops.wm.open_mainfile(filepath=os.path.join(SCENES, name, "scene.blend"))
-    sc = bpy.context.scene
-    if width:
-        sc.render.resolution_x, sc.render.resolution_y = width, height
-        sc.render.resolution_percentage = 100
-    dg = bpy.context.evaluated_depsgraph_get()
-    return scene_from_depsgraph(dg, settings_from_scene(dg.scene_eval))
 
 
 @contextlib.contextmanager

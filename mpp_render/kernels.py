@@ -331,7 +331,7 @@ def intersect(origins, dirs, tmax, triangles, *, backend=None):
                                               _f64(triangles).reshape(-1, 9))
     t, k = _c.intersect(o, _f64(dirs).reshape(n, 3), _f64(tmax).reshape(n),
                         _f64(triangles).reshape(-1, 9))
-    return np.frombuffer(t, np.float64).copy(), np.frombuffer(k, np.int64).copy()
+    return np.frombuffer(t, np.float64), np.frombuffer(k, np.int64)
 
 
 def trace_paths(inp, *, threads: int = 1, should_cancel=None, backend=None):

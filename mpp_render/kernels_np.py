@@ -702,12 +702,11 @@ def _box_hit(lo, hi, o, d, tmax):
     return (t1 >= np.maximum(t0, 0.0)) & (t0 <= tmax)
 
 
-def intersect_triangles(o, d, tmax, triangles, boxes=None):
+def intersect_triangles(o, d, tmax, triangles):
     """(t (N,), triangle (N,) int64): the closest hit of rays o + t d among ``triangles``
     (T,9: corner and two edges) for t in (0, ``tmax``) (N,), tmax and -1 where none; a
-    vectorised Moller-Trumbore test after a box cull (``boxes``: (lo, hi, first, last)
-    triangle ranges; None: one box per 64 triangles, as csrc/triangles.h).  The twin of
-    csrc/intersect.c."""
+    vectorised Moller-Trumbore test after a cull by one box per 64 triangles (as
+    csrc/triangles.h).  The twin of csrc/intersect.c."""
     o = np.asarray(o, np.float64)
     d = np.asarray(d, np.float64)
     tri = np.asarray(triangles, np.float64).reshape(-1, 9)
@@ -715,12 +714,11 @@ def intersect_triangles(o, d, tmax, triangles, boxes=None):
     n = len(o)
     t_best = np.array(np.asarray(tmax, np.float64).reshape(n))
     out = np.full(n, -1, np.int64)
-    if boxes is None:
-        boxes = []
-        for a in range(0, len(tri), 64):
-            b = min(len(tri), a + 64)
-            pts = np.concatenate([v0s[a:b], v0s[a:b] + e1s[a:b], v0s[a:b] + e2s[a:b]])
-            boxes.append((pts.min(axis=0), pts.max(axis=0), a, b))
+    boxes = []
+    for a in range(0, len(tri), 64):
+        b = min(len(tri), a + 64)
+        pts = np.concatenate([v0s[a:b], v0s[a:b] + e1s[a:b], v0s[a:b] + e2s[a:b]])
+        boxes.append((pts.min(axis=0), pts.max(axis=0), a, b))
     for lo, hi, a, b in boxes:
         cand = np.flatnonzero(_box_hit(lo - 1e-9, hi + 1e-9, o, d, t_best))
         for c0 in range(0, len(cand), RAY_CHUNK):

@@ -17,7 +17,7 @@ whole sky; along that direction a surface it hits adds its own light, reflected 
 f is Cycles' Principled BSDF (principled.py).
 
 Intersection is a Moller-Trumbore test against every triangle after a bounding-box cull per
-64 triangles (the compiled kernels.intersect, or its numpy twin ``intersect_np``); it is
+64 triangles (kernels.intersect: compiled, or its numpy twin); it is
 meant for the ground planes and props of smoke scenes (thousands of triangles), not for
 million-triangle meshes.
 """
@@ -28,7 +28,7 @@ from typing import Dict, List
 
 import numpy as np
 
-from . import kernels, kernels_np
+from . import kernels
 from .gathers import directions as gather_directions
 from .principled import Principled
 from .scene import Surface
@@ -47,8 +47,7 @@ class SurfaceSet:
     edges; ``normal``: (M,3) unit geometric normals; ``surface``: (M,) index of each
     triangle's surface into ``params``, which holds one row per surface of every
     ``scene.Surface`` shading field (colours (S,3), the rest (S,)), sanitised as Cycles
-    clamps them; ``boxes``: per surface (lo, hi, first, last) triangle ranges for culling;
-    ``scale``: the scene's extent (m)."""
+    clamps them; ``scale``: the scene's extent (m)."""
 
     v0: np.ndarray
     e1: np.ndarray
@@ -56,7 +55,6 @@ class SurfaceSet:
     normal: np.ndarray
     surface: np.ndarray
     params: Dict[str, np.ndarray]
-    boxes: list
     scale: float
 
     @property
@@ -103,8 +101,7 @@ def surface_params(s: Surface) -> Dict[str, np.ndarray]:
 
 def prepare_surfaces(surfaces: List[Surface]) -> SurfaceSet:
     """Flatten surfaces into triangle arrays; degenerate (zero-area) triangles are dropped."""
-    v0s, e1s, e2s, owner, boxes, rows = [], [], [], [], [], []
-    first = 0
+    v0s, e1s, e2s, owner, rows = [], [], [], [], []
     for s in surfaces:
         v = np.asarray(s.vertices, np.float64).reshape(-1, 3)
         tri = np.asarray(s.triangles, np.int64).reshape(-1, 3)
@@ -118,9 +115,6 @@ def prepare_surfaces(surfaces: List[Surface]) -> SurfaceSet:
         a, e1, e2 = a[ok], e1[ok], e2[ok]
         if len(a) == 0:
             continue
-        pts = np.concatenate([a, a + e1, a + e2])
-        boxes.append((pts.min(axis=0), pts.max(axis=0), first, first + len(a)))
-        first += len(a)
         v0s.append(a)
         e1s.append(e1)
         e2s.append(e2)
@@ -130,36 +124,28 @@ def prepare_surfaces(surfaces: List[Surface]) -> SurfaceSet:
         z = np.zeros((0, 3))
         params = {k: np.zeros((0, 3)) for k in _COLOURS}
         params.update({k: np.zeros(0) for k in _SCALARS})
-        return SurfaceSet(z, z, z, z, np.zeros(0, np.int64), params, [], 1.0)
+        return SurfaceSet(z, z, z, z, np.zeros(0, np.int64), params, 1.0)
     v0 = np.concatenate(v0s)
     e1 = np.concatenate(e1s)
     e2 = np.concatenate(e2s)
     n = np.cross(e1, e2)
     n /= np.linalg.norm(n, axis=1, keepdims=True)
-    lo = np.min([b[0] for b in boxes], axis=0)
-    hi = np.max([b[1] for b in boxes], axis=0)
+    pts = np.concatenate([v0, v0 + e1, v0 + e2])
     params = {k: np.stack([r[k] for r in rows]) for k in rows[0]}
-    return SurfaceSet(v0, e1, e2, n, np.concatenate(owner), params, boxes,
-                      float(max(np.max(hi - lo), 1e-3)))
+    return SurfaceSet(v0, e1, e2, n, np.concatenate(owner), params,
+                      float(max(np.max(pts.max(axis=0) - pts.min(axis=0)), 1e-3)))
 
 
 def intersect(ss: SurfaceSet, o, d, tmax):
     """Closest hit of rays o + t d, t in (0, tmax).  Returns (t (N,), triangle (N,) int,
-    -1 where nothing is hit; t = tmax there): the compiled kernel (kernels.intersect, without
-    the GIL), or its numpy twin ``intersect_np``."""
+    -1 where nothing is hit; t = tmax there): kernels.intersect (compiled, without the GIL,
+    or its numpy twin kernels_np.intersect_triangles)."""
     o = np.asarray(o, np.float64)
     n = len(o)
     t_max = np.array(np.broadcast_to(np.asarray(tmax, np.float64), (n,)))
     if ss.empty or n == 0:
         return t_max, np.full(n, -1, np.int64)
     return kernels.intersect(o, d, t_max, ss.triangles)
-
-
-def intersect_np(ss: SurfaceSet, o, d, tmax):
-    """``intersect`` in numpy, culling by the surfaces' own boxes (``ss.boxes``)."""
-    o = np.asarray(o, np.float64)
-    t_max = np.array(np.broadcast_to(np.asarray(tmax, np.float64), (len(o),)))
-    return kernels_np.intersect_triangles(o, d, t_max, ss.triangles, ss.boxes)
 
 
 def occluded(ss: SurfaceSet, o, d, tmax):

@@ -7,12 +7,13 @@ import numpy as np
 import pytest
 
 from mpp_render import kernels
-from mpp_render.budget import fit_media
 from mpp_render.media import prepare
 from mpp_render.precompute import precompute
 from mpp_render.render import render
 from mpp_render.scene import Camera, Light, Medium, SceneDescription, Settings, World
 from rays import march_inputs, march_twins
+from test_scatter_grid import (assert_budget_weighs_rgb_grid_by_density, assert_path_twins,
+                               assert_rgb_grid_sanitised)
 
 needs_c = pytest.mark.skipif(kernels._c is None, reason="compiled kernels not built")
 
@@ -169,22 +170,8 @@ def test_a_constant_factor_is_the_scaled_coefficient(multiple):
 
 
 def test_bad_extinction_values_are_sanitised_and_ones_dropped():
-    m = tinted_medium()
-    g = m.extinction_grid.copy()
-    g[1, 1, 3] = np.nan
-    g[2, 2, 3, 1] = -4.0
-    m.extinction_grid = g
-    warnings = []
-    pm = prepare(m, warnings)
-    assert np.all(np.isfinite(pm.extinction_density)) and pm.extinction_density.min() >= 0
-    assert pm.extinction_density[2, 2, 4, 1] == 0.0
-    assert any("4 extinction colour values were NaN" in w for w in warnings)
-    m.extinction_grid = np.ones(m.density.shape + (3,), np.float32)   # no change of colour
-    assert prepare(m).extinction_density is None
-    m.extinction_grid = np.ones((2, 2, 2, 3), np.float32)             # wrong shape
-    warnings = []
-    assert prepare(m, warnings).extinction_density is None
-    assert any("extinction colour grid of shape" in w for w in warnings)
+    assert_rgb_grid_sanitised(tinted_medium(), "extinction_grid", "extinction_density",
+                              "extinction colour")
 
 
 def test_a_mesh_volume_with_an_extinction_grid_is_read_as_a_grid():
@@ -194,17 +181,7 @@ def test_a_mesh_volume_with_an_extinction_grid_is_read_as_a_grid():
 
 
 def test_budget_downsamples_the_extinction_grid_weighted_by_the_density():
-    shape = (40, 40, 40)
-    d = np.zeros(shape, np.float32)
-    d[::2] = 1.0
-    f = np.zeros(shape + (3,), np.float32)
-    f[::2] = [2.0, 1.0, 0.5]
-    m = Medium("m", d, np.eye(4), np.full(3, 0.5), np.full(3, 0.1), extinction_grid=f)
-    small = fit_media([m], [Light("POINT", "pt", np.full(3, 100.0))], 1.0, [])[0]
-    assert small.extinction_grid.shape == small.density.shape + (3,)
-    inside = small.density > 0
-    np.testing.assert_allclose(small.extinction_grid[inside], np.broadcast_to(
-        [2.0, 1.0, 0.5], (int(inside.sum()), 3)), rtol=1e-5)
+    assert_budget_weighs_rgb_grid_by_density("extinction_grid")
 
 
 # -- the traced paths (paths.PathInputs.extinction) --------------------------------------------
@@ -226,7 +203,6 @@ def path_inputs(rng, extinction=True, n_paths=3000):
 
 @needs_c
 def test_path_twins_agree_with_extinction_grids():
-    from test_scatter_grid import assert_path_twins
     assert_path_twins(path_inputs(np.random.default_rng(4)),
                       path_inputs(np.random.default_rng(4), extinction=False))
 

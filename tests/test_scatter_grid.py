@@ -127,39 +127,52 @@ def test_a_constant_factor_is_the_scaled_coefficient():
         np.testing.assert_allclose(ours[name], scaled[name], rtol=2e-5, atol=1e-7)
 
 
-def test_bad_scatter_values_are_sanitised_and_ones_dropped():
-    m = tinted_medium()
-    g = m.scatter_grid.copy()
+def assert_rgb_grid_sanitised(m, field, prepared, what):
+    """prepare() sets the NaN and negative values of medium ``m``'s RGB grid ``field`` to 0
+    with a warning naming ``what``, and drops a grid of ones and one of the wrong shape
+    (warned); ``prepared`` names its padded copy on the PreparedMedium."""
+    g = getattr(m, field).copy()
     g[1, 1, 3] = np.nan
     g[2, 2, 3, 1] = -4.0
-    m.scatter_grid = g
+    setattr(m, field, g)
     warnings = []
-    pm = prepare(m, warnings)
-    assert np.all(np.isfinite(pm.scatter_grid)) and pm.scatter_grid.min() >= 0
-    assert pm.scatter_grid[2, 2, 4].tolist() == [0.0, 0.0, 0.0]
-    assert any("4 scatter colour values were NaN, infinite or negative" in w for w in warnings)
-    m.scatter_grid = np.ones(m.density.shape + (3,), np.float32)   # no change of colour
-    assert prepare(m).scatter_grid is None
-    m.scatter_grid = np.ones((2, 2, 2, 3), np.float32)             # wrong shape
+    out = getattr(prepare(m, warnings), prepared)
+    assert np.all(np.isfinite(out)) and out.min() >= 0
+    assert out[2, 2, 4].tolist() == [0.0, 0.0, 0.0] and out[3, 3, 4, 1] == 0.0
+    assert any(f"4 {what} values were NaN, infinite or negative" in w for w in warnings)
+    setattr(m, field, np.ones(m.density.shape + (3,), np.float32))   # no change of colour
+    assert getattr(prepare(m), prepared) is None
+    setattr(m, field, np.ones((2, 2, 2, 3), np.float32))             # wrong shape
     warnings = []
-    assert prepare(m, warnings).scatter_grid is None
-    assert any("scatter colour grid of shape" in w for w in warnings)
+    assert getattr(prepare(m, warnings), prepared) is None
+    assert any(f"{what} grid of shape" in w for w in warnings)
 
 
-def test_budget_downsamples_the_scatter_grid_weighted_by_the_density():
+def test_bad_scatter_values_are_sanitised_and_ones_dropped():
+    assert_rgb_grid_sanitised(tinted_medium(), "scatter_grid", "scatter_grid", "scatter colour")
+
+
+def assert_budget_weighs_rgb_grid_by_density(field):
+    """The memory budget downsamples medium grid ``field`` (a factor per voxel) with each
+    block's mean weighted by the density."""
     shape = (40, 40, 40)
     d = np.zeros(shape, np.float32)
     d[::2] = 1.0                                   # every other slice holds all the smoke
     f = np.zeros(shape + (3,), np.float32)
     f[::2] = [2.0, 1.0, 0.5]                       # and the colour; empty slices 0
-    m = Medium("m", d, np.eye(4), np.full(3, 0.5), np.full(3, 0.1), scatter_grid=f)
+    m = Medium("m", d, np.eye(4), np.full(3, 0.5), np.full(3, 0.1), **{field: f})
     warnings = []
     small = fit_media([m], [Light("POINT", "pt", np.full(3, 100.0))], 1.0, warnings)[0]
-    assert small.density.shape != shape and small.scatter_grid.shape == small.density.shape + (3,)
+    got = getattr(small, field)
+    assert small.density.shape != shape and got.shape == small.density.shape + (3,)
     # where a block holds smoke its factor is the smoke's, not halved by the empty slices
     inside = small.density > 0
-    np.testing.assert_allclose(small.scatter_grid[inside], np.broadcast_to(
+    np.testing.assert_allclose(got[inside], np.broadcast_to(
         [2.0, 1.0, 0.5], (int(inside.sum()), 3)), rtol=1e-5)
+
+
+def test_budget_downsamples_the_scatter_grid_weighted_by_the_density():
+    assert_budget_weighs_rgb_grid_by_density("scatter_grid")
 
 
 # -- the traced paths (paths.PathInputs.scatter) -----------------------------------------------

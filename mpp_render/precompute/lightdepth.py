@@ -91,19 +91,14 @@ def depth_rows(media: List[PreparedMedium]):
     ``extinction_parts`` (extinction only)."""
     tracks, st, ss = [], [], []
     for m in media:
-        parts = m.extinction_parts()
-        if parts == [m]:
+        if m.extinction_density is not None:   # its scattering track (the parts scatter none)
             tracks.append(m)
-            st.append(m.sigma_t)
+            st.append(np.zeros(3))
             ss.append(m.sigma_s)
-            continue
-        tracks.append(m)
-        st.append(np.zeros(3))
-        ss.append(m.sigma_s)
-        for p in parts:
+        for p in m.extinction_parts():
             tracks.append(p)
             st.append(p.sigma_t)
-            ss.append(np.zeros(3))
+            ss.append(p.sigma_s)
     if not tracks:
         return [], np.zeros((0, 3)), np.zeros((0, 3))
     return tracks, np.stack(st), np.stack(ss)
