@@ -321,6 +321,11 @@ static double deposit(const PathGrid *G, const double pos[3], const double w[3],
     return rho;
 }
 
+static int cmp_u64(const void *a, const void *b) {
+    uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
+    return (x > y) - (x < y);
+}
+
 static void trace_one(const Tracer *T, uint32_t key, const double *start, const double *w_start,
                       const double *dir, double inv_n, double peak) {
     double pos[3], d[3], w[3], off[3], w0 = 0.0;
@@ -675,6 +680,7 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
     memset(ob, 0, sizeof ob);
     Py_ssize_t n_others = PyTuple_GET_SIZE(pothers);
     double *boxes = NULL;
+    uint64_t *order = NULL;   /* the paths' (start << 32 | path - lo), in tracing order */
     int ok = 0;
     Tracer T;
     Py_ssize_t so[4] = {-1, -1, -1, 3}, sd[3] = {-1, -1, -1}, sw[2] = {3, 4}, si[2] = {3, 3},
@@ -724,8 +730,9 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
         goto done;
     }
     if (stride < 1 || !(rate > 0.0) || !isfinite(rate) || !isfinite(g) ||
-        n_paths < 1 || lo < 0 || hi < lo || hi > n_paths || max_hits < 1 || !(roulette >= 0.0) ||
-        sn[0] < 1) {
+        n_paths < 1 || lo < 0 || hi < lo || hi > n_paths || hi - lo > 0xFFFFFFFFL ||
+        max_hits < 1 || !(roulette >= 0.0) ||
+        sn[0] < 1 || sn[0] > 0xFFFFFFFFL) {
         PyErr_SetString(PyExc_ValueError, "trace_paths: bad stride, rate, g, path range or caps");
         goto done;
     }
@@ -795,18 +802,36 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
     const double *S = (const double *)bs.view.buf, *W = (const double *)bws.view.buf,
                  *D = (const double *)bdir.view.buf, *C = (const double *)bc.view.buf;
     Py_ssize_t n_starts = sn[0];
+    if (hi > lo) {
+        order = (uint64_t *)malloc(sizeof(uint64_t) * (size_t)(hi - lo));
+        if (!order) {
+            PyErr_NoMemory();
+            goto done;
+        }
+    }
     Py_BEGIN_ALLOW_THREADS
     uint32_t base = hash32((uint32_t)((uint64_t)seed * 0x27D4EB2Fu + 0x165667B1u));
+    /* each path's start (searchsorted(cdf, u, side="right"), clamped to the last start),
+     * then the paths traced in the order of their starts: the starts lie in the lattice's
+     * order, so paths traced one after the other start near each other and find the
+     * density and the deposits' points they read in the cache (the same paths and sums;
+     * only the order of the additions changes) */
     for (long i = lo; i < hi; i++) {
         uint32_t key = hash32((uint32_t)i ^ base);
         double u = uniform01(key, 0, D_PICK);
-        /* searchsorted(cdf, u, side="right"), clamped to the last start */
         Py_ssize_t a = 0, b = n_starts;
         while (a < b) {
             Py_ssize_t mid = a + (b - a) / 2;
             if (C[mid] <= u) a = mid + 1; else b = mid;
         }
         if (a > n_starts - 1) a = n_starts - 1;
+        order[i - lo] = ((uint64_t)a << 32) | (uint64_t)(i - lo);
+    }
+    if (hi > lo) qsort(order, (size_t)(hi - lo), sizeof(uint64_t), cmp_u64);
+    for (long q = 0; q < hi - lo; q++) {
+        long i = lo + (long)(order[q] & 0xFFFFFFFFu);
+        Py_ssize_t a = (Py_ssize_t)(order[q] >> 32);
+        uint32_t key = hash32((uint32_t)i ^ base);
         trace_one(&T, key, S + 3 * a, W + 3 * a, D + 3 * a, 1.0 / (double)n_paths,
                   T.peak ? T.peak[a] : 1.0);
     }
@@ -821,6 +846,7 @@ done:
     for (Py_ssize_t k = 0; k < n_others; k++)
         for (int q = 0; q < OTHER_BUFS; q++) buf_release(&ob[k][q]);
     free(boxes);
+    free(order);
     if (!ok) return NULL;
     Py_RETURN_NONE;
 }
