@@ -215,7 +215,7 @@ def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, r
         # distance: the shadow ray and its optical depth run to that point, not as far as
         # the centre along the drawn direction (in smoke round a lamp, or fog under a large
         # area light, the centre's distance leaves out or adds medium)
-        wi, e, _, _, reach = light_sample(pack_light(light), po, u[:, 0], u[:, 1])
+        wi, e, _, _, reach = light_sample(pack_light(light), po, u[:, 0], u[:, 1], normal=nrm)
         to_l = -wi
         cos = np.einsum("ij,ij->i", nrm, to_l)
         lit = np.flatnonzero(cos > 0)

@@ -67,3 +67,50 @@ def test_behind_in_the_plane_far_or_round_falls_back():
     disc = rect_light(shape="DISK")
     got = light_sample(disc, np.array([[0.0, 0.0, 0.7]]), np.array([0.3]), np.array([0.6]))[1]
     assert got[0, 0] > 0.0
+
+
+@pytest.mark.parametrize("point,normal", [((0.0, 0.0, 0.2), (0.0, 0.0, 1.0)),
+                                          ((0.5, 0.3, 0.2), (0.6, 0.0, 0.8)),
+                                          ((0.35, 0.15, 0.6), (-1.0, 0.0, 0.0)),
+                                          ((3.0, 2.0, -1.0), (-0.6, -0.48, 0.64))])
+def test_a_surface_draws_the_light_towards_its_normal_unbiased_and_with_less_noise(point, normal):
+    """With the surface's normal (lights.cosine_warp) the irradiance E cos at a surface point
+    keeps its mean (that of the plain solid-angle draw) within the noise, and its spread per
+    sample falls where the cosine varies across the light (measured: 1.9x for a light 0.6 m
+    above a floor, whose cosine the corners' bilinear blend follows less well; 2.2x for a
+    wall the light half faces; 5.7-8x for tilted surfaces further off), never rising."""
+    rec = rect_light()
+    rng = np.random.default_rng(4)
+    n = 200_000
+    x = np.tile(np.asarray(point, np.float64), (n, 1))
+    nrm = np.tile(np.asarray(normal, np.float64) / np.linalg.norm(normal), (n, 1))
+    u1, u2 = rng.random(n), rng.random(n)
+    est = []
+    for given in (None, nrm):
+        d, e = light_sample(rec, x, u1, u2, normal=given)[:2]
+        est.append(e[:, 0] * np.maximum(-np.einsum("ij,ij->i", d, nrm), 0.0))
+    plain, warped = est
+    assert plain.mean() > 0.0 and np.all(np.isfinite(warped)) and np.all(warped >= 0.0)
+    se = np.hypot(plain.std(), warped.std()) / np.sqrt(n)
+    assert abs(warped.mean() - plain.mean()) < 5 * se, (warped.mean(), plain.mean(), se)
+    print(point, normal, "spread plain / warped", plain.std() / warped.std())
+    assert warped.std() <= 1.02 * plain.std()
+    if np.ptp(plain) > 0.2 * plain.mean():    # the cosine varies across the light
+        assert warped.std() < plain.std() / 1.5
+
+
+def test_the_warp_density_integrates_to_one_and_maps_the_square_onto_itself():
+    """cosine_warp's density over the unit square integrates to 1, and its points stay in
+    [0, 1)^2: it is a change of variables, whatever the corners' cosines."""
+    from mpp_render.lights import cosine_warp
+    rec = rect_light()
+    rng = np.random.default_rng(5)
+    n = 400_000
+    x = np.tile([0.5, 0.3, 0.2], (n, 1))
+    nrm = np.tile([0.6, 0.0, 0.8], (n, 1))
+    u, v = rng.random(n), rng.random(n)
+    up, vp, pdf = cosine_warp(rec, x, nrm, u, v)
+    assert np.all((up >= 0) & (up < 1) & (vp >= 0) & (vp < 1)) and np.all(pdf > 0)
+    # E[1 / pdf(u', v')] over the warped points is the square's area, 1
+    inv = 1.0 / pdf
+    assert inv.mean() == pytest.approx(1.0, abs=5 * inv.std() / np.sqrt(n))
