@@ -2,7 +2,7 @@
 settings) at a production size, alternating the two ways, and the error of each way at the
 suite's resolution against the Cycles references.
 
-    .venv/bin/python benchmarks/levers.py --lever casts|adapt [--scenes a,b] [--size 960x540]
+    .venv/bin/python benchmarks/levers.py --lever casts|adapt|warp|halves [--scenes a,b] [--size 960x540]
                                           [--rounds 2] [--out docs]
 
 Levers (each ``old`` is the code before the change, reproduced here):
@@ -13,7 +13,13 @@ Levers (each ``old`` is the code before the change, reproduced here):
   same hits, so the same image (asserted);
 * ``adapt``: the march's longer steps in thin media (``Tuning.adapt_tau``) also where a lamp
   with a radius or an area light is lit (its emitter sampled with jitter); ``old`` turns
-  them off in such a scene, as the march did before.
+  them off in such a scene, as the march did before;
+* ``warp``: a surface's direct light from a rectangle light drawn in its solid angle warped
+  towards the corners the surface faces (lights.cosine_warp); ``old`` draws it uniformly in
+  the solid angle, without the surface's normal, as surfaces.shade did before;
+* ``halves``: adaptive sampling reads a pixel's noise with the stratification's gain
+  (pilot.stratified_gain, from the halves of its samples); ``old`` reads every sample as
+  independent (the gain 1), as before.
 
 Writes ``OUT/levers_<lever>.json`` and ``OUT/levers_<lever>.md``.
 """
@@ -33,7 +39,36 @@ SCENES = os.environ.get("MPP_SCENES") or os.path.join(os.path.dirname(REPO), "sh
 from guided_gathers import description  # noqa: E402  (a scene's description at a size)
 
 DEFAULT_SCENES = {"casts": "p_fog_point,p_slab_over_ground,smoke_plume",
-                  "adapt": "p_fog_point,p_fog_area,p_point_in_cube,p_area_in_box"}
+                  "adapt": "p_fog_point,p_fog_area,p_point_in_cube,p_area_in_box",
+                  "warp": "p_fog_area",
+                  "halves": "p_fog_point,p_fog_area,smoke_plume,p_slab_over_ground,cloud_vdb"}
+
+
+@contextlib.contextmanager
+def independent_samples():
+    """Adaptive sampling as before: every sample read as independent (no gain)."""
+    from mpp_render import pilot
+    new = pilot.stratified_gain
+    pilot.stratified_gain = lambda *a, **k: 1.0
+    try:
+        yield
+    finally:
+        pilot.stratified_gain = new
+
+
+@contextlib.contextmanager
+def uniform_solid_angle():
+    """A surface's rectangle lights drawn as before: uniform in the solid angle (no normal)."""
+    from mpp_render import lights
+    new = lights.light_sample
+
+    def plain(*args, normal=None, **kw):
+        return new(*args, **kw)
+    lights.light_sample = plain
+    try:
+        yield
+    finally:
+        lights.light_sample = new
 
 
 @contextlib.contextmanager
@@ -58,6 +93,10 @@ def setup(lever, label, desc):
     """(description, context) of way ``label`` of ``lever``."""
     if lever == "casts":
         return desc, (numpy_casts() if label == "old" else contextlib.nullcontext())
+    if lever == "warp":
+        return desc, (uniform_solid_angle() if label == "old" else contextlib.nullcontext())
+    if lever == "halves":
+        return desc, (independent_samples() if label == "old" else contextlib.nullcontext())
     if label == "old" and jittered(desc):
         tun = dataclasses.replace(desc.settings.tuning, adapt_tau=0.0)
         desc = dataclasses.replace(desc, settings=dataclasses.replace(desc.settings, tuning=tun))
@@ -106,7 +145,11 @@ def write_md(rows, path, lever, rounds):
     size = "x".join(str(v) for v in rows[0]["size"]) if rows else ""
     what = {"casts": "the surfaces' ray casts in numpy (old) and in the compiled kernel (new)",
             "adapt": "the march's longer steps in thin media off (old) and on (new) where a "
-                     "lamp with a radius or an area light is lit"}[lever]
+                     "lamp with a radius or an area light is lit",
+            "warp": "a surface's rectangle lights drawn uniformly in their solid angle (old) "
+                    "and warped towards the corners it faces (new)",
+            "halves": "adaptive sampling reading each sample as independent (old) and with "
+                      "the stratification's gain its halves show (new)"}[lever]
     lines = [f"# Lever: {lever}", "",
              f"`benchmarks/levers.py --lever {lever}`, one run, {what}, alternating, "
              f"{rounds} rounds, {os.cpu_count()} cores (a shared machine: read the seconds "

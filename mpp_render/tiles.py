@@ -208,7 +208,7 @@ class FrameMarch:
         taken = (1 if plan is not None else first) if adaptive else spp
         scale = plan.scale if plan is not None else 1.0
         more = plan.more[y0:y0 + th, x0:x0 + tw].ravel() if plan is not None else None
-        acc = Accumulator(npx, self.out)
+        acc = Accumulator(npx, self.out, spp if adaptive else 0)
         active, batch, k, steps = np.arange(npx), order[:taken], 0, 0.0
         while True:
             px = (xx[active, None] + offs[active][:, batch, 0]).ravel()
@@ -218,7 +218,8 @@ class FrameMarch:
             strata = (bands[0][active][:, batch].ravel(), bands[1][active][:, batch].ravel(), spp)
             r, hit, behind = self.march(index, k, rng, o, d, tmin, tmax, axial,
                                         keys[active][:, batch].ravel(), strata)
-            acc.add(active, len(batch), r, hit, behind, st.film_transparent)
+            acc.add(active, len(batch), r, hit, behind, st.film_transparent,
+                    taken - len(batch))
             steps += float(r["steps"].sum())
             if taken >= spp:
                 break
@@ -351,10 +352,14 @@ def reverse_bits(values: np.ndarray, bits: int) -> np.ndarray:
 
 class Accumulator:
     """A tile's per-pixel sums over the rounds of its samples (the box filter over each
-    pixel), the passes ``out`` names: radiance W/(m^2 sr), transmittance, depth (m)."""
+    pixel), the passes ``out`` names: radiance W/(m^2 sr), transmittance, depth (m).
 
-    def __init__(self, npx: int, out: dict):
+    With ``samples`` (the most a pixel takes), each sample's luminance is kept by the
+    place it was taken in (``taken``), for ``noise``'s halves."""
+
+    def __init__(self, npx: int, out: dict, samples: int = 0):
         self.out = out
+        self.taken = np.zeros((npx, samples)) if samples > 0 else None
         self.count = np.zeros(npx)
         z = lambda: np.zeros((npx, 3))   # noqa: E731
         self.sums = {"single": z(), "multiple": z(), "emission": z(), "T": z(), "behind": z(),
@@ -363,9 +368,10 @@ class Accumulator:
         self.lum2 = np.zeros(npx)
         self.depth = np.full(npx, np.inf)
 
-    def add(self, pixels, spp, r, hit, behind, transparent: bool) -> None:
+    def add(self, pixels, spp, r, hit, behind, transparent: bool, start: int = 0) -> None:
         """Add ``spp`` samples of each of ``pixels`` (rays pixel-major): the march ``r``,
-        surface hits ``hit``, what lies behind the media ``behind``."""
+        surface hits ``hit``, what lies behind the media ``behind``; they are the pixels'
+        samples taken ``start`` to ``start + spp - 1``."""
         n = len(pixels)
 
         def total(a):   # (n * spp, C) -> (n, C) sums over each pixel's samples
@@ -378,6 +384,8 @@ class Accumulator:
         if transparent:
             self.sums["open"][pixels] += total(np.where(hit[:, None], 0.0, r["T"]).mean(axis=1))[:, 0]
         lum = (r["single"] + r["multiple"] + r["emission"] + seen).mean(axis=1)
+        if self.taken is not None:
+            self.taken[pixels, start:start + spp] = lum.reshape(n, spp)
         self.lum[pixels] += total(lum)[:, 0]
         self.lum2[pixels] += total(lum * lum)[:, 0]
         self.count[pixels] += spp
@@ -387,9 +395,19 @@ class Accumulator:
     def noise(self, pixels, scale: float = 1.0) -> np.ndarray:
         """The standard error of each pixel's mean luminance over sqrt((mean + 1e-4 S) S),
         S = ``scale`` the frame's mean luminance (pilot.relative_noise; with S = 1 Cycles'
-        adaptive sampling's unit, sqrt(mean + 1e-4))."""
-        return pilot.relative_noise(self.lum[pixels], self.lum2[pixels], self.count[pixels],
-                                    scale)
+        adaptive sampling's unit, sqrt(mean + 1e-4)), times sqrt(pilot.stratified_gain) of
+        the pixels' samples as taken (where they are kept): their variance, read as that of
+        independent samples, over what the halves of each pixel's samples show."""
+        rel = pilot.relative_noise(self.lum[pixels], self.lum2[pixels], self.count[pixels],
+                                   scale)
+        if self.taken is None:
+            return rel
+        n = int(self.count[pixels].max()) if len(pixels) else 0
+        if n < 2 or not np.all(self.count[pixels] == n):
+            return rel
+        gain = pilot.stratified_gain(self.taken[pixels, :n], self.lum[pixels],
+                                     self.lum2[pixels])
+        return rel * math.sqrt(gain)
 
     def passes(self, transparent: bool) -> dict:
         """The passes the frame holds, each pixel the mean of its samples."""

@@ -203,3 +203,47 @@ def test_an_outlier_and_its_neighbours_take_more_samples_and_a_gradient_does_not
     small = ramp.copy()
     small[2, 3] += 0.001
     assert not pilot.outliers(small.ravel(), tw, th, 1.0, 0.1).any()
+
+
+def _taken(values):
+    """(lum sums, their squares) of per-sample luminances (P, n)."""
+    return values.sum(axis=1), (values * values).sum(axis=1)
+
+
+def test_the_halves_read_independent_samples_as_they_are_and_credit_stratified_ones():
+    """pilot.stratified_gain: about 1 for independent samples; for samples stratified as
+    the rounds take them (sample p in stratum bitreverse(p)) of a smooth integrand, well
+    below 1 yet above the true ratio of the mean's variance to var / n (conservative: the
+    halves stand for the coarser strata); 1 where too few pixels are noisy."""
+    rng = np.random.default_rng(7)
+    p, n = 4000, 8
+    iid = rng.random((p, n))
+    g_iid = pilot.stratified_gain(iid, *_taken(iid))
+    assert 0.9 < g_iid <= 1.0, g_iid
+    rev = tiles.reverse_bits(np.arange(n), 3)
+    strat = (rev[None, :] + rng.random((p, n))) / n          # f(u) = u, stratified
+    g = pilot.stratified_gain(strat, *_taken(strat))
+    true_ratio = strat.mean(axis=1).var() / (iid.var() / n)
+    print("gain", g, "true ratio", true_ratio)
+    assert true_ratio < g < 0.5, (g, true_ratio)
+    few = np.zeros((p, n))
+    few[:pilot.GAIN_PIXELS - 1] = iid[:pilot.GAIN_PIXELS - 1]
+    assert pilot.stratified_gain(few, *_taken(few)) == 1.0
+
+
+def test_a_tile_keeps_its_samples_luminance_by_the_place_taken():
+    """Accumulator keeps each sample's luminance where it was taken (``start``), and its
+    noise is the independent estimate times sqrt(gain)."""
+    acc = Accumulator(20, {}, samples=4)
+    rng = np.random.default_rng(2)
+    lums = rng.random((20, 4))
+    for start, k in ((0, 1), (1, 3)):
+        v = np.repeat(lums[:, start:start + k].reshape(-1, 1), 3, axis=1)
+        r = {"single": v, "multiple": 0 * v, "emission": 0 * v, "T": np.ones_like(v),
+             "depth": np.full(len(v), 1e10)}
+        acc.add(np.arange(20), k, r, np.zeros(len(v), bool), 0 * v, False, start)
+    assert np.allclose(acc.taken, lums)
+    px = np.arange(20)
+    plain = pilot.relative_noise(acc.lum[px], acc.lum2[px], acc.count[px], 1.0)
+    gain = pilot.stratified_gain(lums, acc.lum[px], acc.lum2[px])
+    assert np.allclose(acc.noise(px, 1.0), plain * np.sqrt(gain))
