@@ -56,16 +56,23 @@ def relative_noise(lum, lum2, count, scale: float) -> np.ndarray:
     luminance ``lum``, their squares ``lum2`` and their ``count`` (at least 2), over the
     threshold's unit sqrt((I + NOISE_FLOOR S) S) with S = ``scale``."""
     n = np.asarray(count, np.float64)
+    return np.sqrt(mean_variance(lum, lum2, n)) / np.sqrt(
+        (np.maximum(lum / n, 0.0) + NOISE_FLOOR * scale) * scale)
+
+
+def mean_variance(lum, lum2, count) -> np.ndarray:
+    """The variance of each pixel's mean luminance, its samples read as independent: their
+    variance (ddof 1) over their ``count``, from the sums ``lum`` and ``lum2``."""
+    n = np.asarray(count, np.float64)
     mean = lum / n
-    var = np.maximum(lum2 / n - mean * mean, 0.0) * n / np.maximum(n - 1, 1)
-    return np.sqrt(var / n) / np.sqrt((np.maximum(mean, 0.0) + NOISE_FLOOR * scale) * scale)
+    return np.maximum(lum2 / n - mean * mean, 0.0) / np.maximum(n - 1, 1)
 
 
 # pixels with noise the halves must see before their gain is read (else 1)
 GAIN_PIXELS = 16
 
 
-def stratified_gain(taken, lum, lum2) -> float:
+def stratified_gain(taken) -> float:
     """What a tile's pixels' noise is, over what their samples' spread reads it as when
     taken for independent: at most 1.
 
@@ -78,17 +85,15 @@ def stratified_gain(taken, lum, lum2) -> float:
     stratification's gain in it (for independent samples it is the usual estimate's, and
     the finer strata of the whole make it an upper bound).  One pixel's is a single degree of
     freedom, so the gain is read over the tile: the sum over its pixels of that estimate
-    over the sum of the independent one (``lum``, ``lum2`` the pixels' sums of luminance and
-    its square), weighted so by the noisiest pixels; 1 where fewer than GAIN_PIXELS pixels
-    are noisy at all.  On a ground under an area light in fog (p_fog_area, its surfaces'
+    over the sum of the independent one (``mean_variance``), weighted so by the noisiest
+    pixels; 1 where fewer than GAIN_PIXELS pixels are noisy at all.  On a ground under an area light in fog (p_fog_area, its surfaces'
     light) the mean of 8 stratified samples varies 0.37 times as much as var / 8."""
     taken = np.asarray(taken, np.float64)
     n = taken.shape[1]
     h = n // 2
     a, b = taken[:, :h].mean(axis=1), taken[:, h:].mean(axis=1)
     halves = (a - b) ** 2 * h * (n - h) / (n * n)
-    mean = lum / n
-    iid = np.maximum(lum2 / n - mean * mean, 0.0) / max(n - 1, 1)
+    iid = mean_variance(taken.sum(axis=1), (taken * taken).sum(axis=1), n)
     live = iid > 0.0
     if np.count_nonzero(live) < GAIN_PIXELS or not np.isfinite(halves[live].sum()):
         return 1.0

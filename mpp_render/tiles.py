@@ -405,8 +405,7 @@ class Accumulator:
         n = int(self.count[pixels].max()) if len(pixels) else 0
         if n < 2 or not np.all(self.count[pixels] == n):
             return rel
-        gain = pilot.stratified_gain(self.taken[pixels, :n], self.lum[pixels],
-                                     self.lum2[pixels])
+        gain = pilot.stratified_gain(self.taken[pixels, :n])
         return rel * math.sqrt(gain)
 
     def passes(self, transparent: bool) -> dict:
