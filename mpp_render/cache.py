@@ -281,6 +281,7 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
     from .precompute.lattice import MULTIPLE_RESOLUTION
     from .precompute.layout import light_channels
     from .scene import Tuning, World
+    from .media import glow_lights
 
     cache = CACHE if cache is None else cache
     tuning = Tuning() if tuning is None else tuning
@@ -288,8 +289,7 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
         multiple_resolution = MULTIPLE_RESOLUTION
     # the media's glow scattered in them (precompute.emissionlight) sits in the world
     # channels and, like the world light, is read towards the camera
-    has_world = bool(np.any(np.asarray(world.color, np.float64) > 0)) or \
-        any(pm.glows for pm in media)
+    has_world = bool(np.any(np.asarray(world.color, np.float64) > 0)) or glow_lights(media)
     # the thread count does not change the numbers; it is keyed anyway so that a render with
     # other threads still runs (and checks) the precompute
     common = (media_key(media), surfaces_key(surfaces), bool(multiple),

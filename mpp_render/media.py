@@ -117,22 +117,31 @@ class PreparedMedium:
         return np.ascontiguousarray(density_from(self.grid, self.threshold), np.float32)
 
     @property
-    def glows(self) -> bool:
-        """Whether the medium gives off light that it scatters: emission somewhere and
-        sigma_s > 0 (the endless world fog's glow: precompute.fogglow; any other medium's:
-        ``emitted``, precompute.emissionlight)."""
-        if not np.any(np.asarray(self.sigma_s) > 0.0):
-            return False
+    def emits(self) -> bool:
+        """Whether the medium gives off light somewhere (its constant emission where it has
+        density, or its emission grid), whether or not it scatters: its light reaches the
+        other media (precompute.emissionlight) and the surfaces."""
         if np.any(np.asarray(self.medium.emission) > 0.0):
             return True
         return self.emission_grid is not None and bool(np.any(self.emission_grid > 0.0))
 
+    @property
+    def scatters(self) -> bool:
+        """Whether the medium scatters light in some colour (sigma_s > 0)."""
+        return bool(np.any(np.asarray(self.sigma_s) > 0.0))
+
+    @property
+    def glows(self) -> bool:
+        """Whether the medium gives off light that it scatters itself: ``emits`` and
+        ``scatters`` (the endless world fog's glow: precompute.fogglow)."""
+        return self.scatters and self.emits
+
     def emitted(self) -> Optional[np.ndarray]:
         """float64 (X,Y,Z,3) emitted radiance per metre of every voxel of the padded grid,
         W/(m^3 sr): the constant ``emission`` where the density is > 0 plus the emission
-        grid (negative values as 0); None where the medium does not ``glow`` or is the
+        grid (negative values as 0); None where the medium ``emits`` nothing or is the
         endless fog (whose glow has no voxels of its own: precompute.fogglow)."""
-        if not self.glows or self.endless:
+        if not self.emits or self.endless:
             return None
         const = np.maximum(np.asarray(self.medium.emission, np.float64).reshape(3), 0.0)
         e = np.zeros(self.grid.shape + (3,))
@@ -441,6 +450,12 @@ def surrounds(media: List[PreparedMedium], point) -> bool:
     return False
 
 
+def glow_lights(media: List[PreparedMedium]) -> bool:
+    """Whether some medium's emission lights a medium that scatters (precompute.emissionlight):
+    one ``emits`` and one ``scatters``, the same one or another."""
+    return any(pm.emits for pm in media) and any(pm.scatters for pm in media)
+
+
 def box_distance(pm: PreparedMedium, point) -> float:
     """A lower bound (m) of the distance from ``point`` (3,) to the medium's grid box: the
     distance in index space to the box of voxel centres times the map's smallest stretch
@@ -455,13 +470,13 @@ def box_distance(pm: PreparedMedium, point) -> float:
 def smooth_light(media: List[PreparedMedium], lights, reach: float) -> bool:
     """Whether the light in every one of ``media`` changes no faster than its voxels, so that
     the march may step a voxel at a time: every medium a density grid (no mesh volume's sharp
-    surface, no world fog, whose lamps are in it) that does not glow (its emission changes
+    surface, no world fog, whose lamps are in it) that does not emit (its emission changes
     at its own grid's scale, and the march's longer steps in thin smoke follow the density
     alone: a fire's glow moved by a voxel), no spot light (its cone's edge crosses
     the media wherever it goes), and every point and area light farther than ``reach`` (m)
     from every medium's box (its 1 / r^2 then changes by under 2 h / reach over a voxel h;
     the sun's and the sky's light is read from voxel grids)."""
-    if any(pm.kind != "grid" or pm.glows for pm in media):
+    if any(pm.kind != "grid" or pm.emits for pm in media):
         return False
     for light in lights:
         if light.kind == "SUN":

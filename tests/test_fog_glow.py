@@ -1,6 +1,9 @@
 """The world fog's own glow scattered in the fog (precompute/fogglow.py, worldfog.glow_radiance):
 the endless medium's closed form, a ray to infinity through the core's render, and the
-unscattered glow missing above a black ground against the exponential integral."""
+unscattered glow missing above a black ground against the exponential integral; a glowing
+volume that lights the fog round it."""
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -181,3 +184,50 @@ def test_a_volume_in_the_glowing_fog_is_lit_by_its_glow():
             face = e1[1, mid[1], mid[2]]         # a voxel inside a face: lit from outside
             assert np.all(face > 0.05 * e1_inf) and np.all(face > 10.0 * e1[mid] + 1e-6)
             assert np.all(em[1, mid[1], mid[2]] > face)    # scattered on its way in, mostly
+
+
+def test_a_glowing_volume_lights_the_world_fog_round_it():
+    """An absorbing sphere that glows and does not scatter (a fire; 0.3 m, emission 20
+    W/(m^3 sr), sigma_a 0.5 per m, voxels of 0.05 m) in a world fog that scatters (sigma_s
+    0.2, sigma_a 0.05 per m, g 0) and does not glow: the fog's single scattering of the
+    glow (Volume Single; no lamp, no sky) along a row of pixels beside the sphere against
+    the line integral of sigma_s T E1, E1 the direct sum over the emitting voxels of e V
+    e^-tau / r^2 / (4 pi).  Before, the glow lit only the volumes whose boxes overlapped
+    it, and never the fog (the row was 0)."""
+    from mpp_render.camera import primary_rays
+    from mpp_render.scene import Medium
+    vox, n, e = 0.05, 20, 20.0
+    i2w = np.eye(4)
+    i2w[:3, :3] *= vox
+    i2w[:3, 3] = -0.5 + 0.5 * vox
+    c = (np.arange(n) + 0.5) * vox - 0.5
+    x, y, z = np.meshgrid(c, c, c, indexing="ij")
+    inside = x * x + y * y + z * z <= 0.09
+    fire = Medium("fire", np.ones((n, n, n), np.float32), i2w, np.zeros(3), np.full(3, 0.5),
+                  0.0, emission_grid=(inside[..., None] * np.full(3, e)).astype(np.float32))
+    f = fog(sigma_s=(0.2,) * 3, sigma_a=(0.05,) * 3)
+    cam = camera(32, 24)
+    out = render(SceneDescription(cam, media=[fire], world=World(volume=f),
+                                  settings=Settings(samples=4, multiple=False,
+                                                    multiple_paths=200_000)))
+    got = out.passes["Volume Single"][12, :, 0]
+    pts = np.stack([x[inside], y[inside], z[inside]], 1)
+    power = np.full(len(pts), e * vox ** 3)
+
+    def e1(p):
+        d = p[None] - pts
+        r = np.linalg.norm(d, axis=1)
+        with np.errstate(divide="ignore"):
+            face = np.where(d > 0, (0.5 - pts) / d, (-0.5 - pts) / d)
+        out_of_box = np.min(np.where(d != 0, face, np.inf), axis=1) * r
+        return np.sum(power * np.exp(-0.5 * out_of_box - 0.25 * r) / r ** 2) / (4 * np.pi)
+
+    s = np.linspace(0.1, 40.0, 4000)
+    for col in (0, 3, 6, 9, 24, 27, 30):   # rays beside the fire's box
+        o, d, _, _, _ = primary_rays(cam, np.array([col + 0.5]), np.array([12.5]), None)
+        want = sum(0.2 * np.exp(-0.25 * si) * e1(o[0] + d[0] * si) for si in s) * (s[1] - s[0])
+        assert got[col] == pytest.approx(want, rel=0.1), (col, got[col], want)
+    dark = dataclasses.replace(fire, emission_grid=np.zeros_like(fire.emission_grid))
+    out = render(SceneDescription(cam, media=[dark], world=World(volume=f),
+                                  settings=Settings(samples=1, multiple=False)))
+    assert np.all(out.passes["Volume Single"] == 0.0)

@@ -21,13 +21,19 @@ difference has no noise of the first flights).  The march reads E1 with the sky'
 interpolated from the lattice to the voxels.  The paths reflect off the surfaces as the
 lights' do; the surfaces' own light from the glow is their gather march's (surfaces.py).
 
-Where media overlap, the glow's paths fly through the others as the lights' do
-(paths.PathInputs.others) and what they deposit on another medium's lattice lights that
-medium (``partners``).  The world fog's glow, an endless medium's, is fogglow.py's.  A
-medium that does not glow, or cannot scatter, costs nothing.
+The glow's paths fly through every other medium that scatters, overlapping the glowing one
+or apart from it across empty space (precompute.lightpaths.lit_by_glow, the nearest seven;
+paths.PathInputs.others), and what they deposit on another medium's lattice lights that
+medium (``partners``): a fire lights the smoke beside it and the world's fog round it, by
+its direct light and by what its light has scattered since.  The world fog takes that light
+in its grid, not beyond it (worldfog.tail carries none of it).  A medium that emits without
+scattering (an Emission shader alone, a black fire) lights the others all the same.  The
+world fog's own glow, an endless medium's, is fogglow.py's.  A medium that emits nothing
+costs nothing.
 """
 from __future__ import annotations
 
+import dataclasses
 from typing import Optional
 
 import numpy as np
@@ -35,7 +41,7 @@ import numpy as np
 from .. import kernels
 from ..media import PreparedMedium
 from .fogglow import fog_glow
-from .lightpaths import PathLattice, _trace_all
+from .lightpaths import PATHS_PER_POINT, PathLattice, _trace_all
 from .pathstarts import Surroundings
 
 CHUNK = 1 << 20  # voxels interpolated at once when the lattice is added to the field
@@ -52,7 +58,7 @@ def emission_light(pm: PreparedMedium, camera, n_paths: int, resolution: int,
     most lightpaths.PATHS_PER_POINT per lattice point the medium fills), ``around`` the
     surfaces they reflect off, ``partners`` (PreparedMedium, PathLattice) the overlapping
     media they fly through too (lightpaths.traced_multiple), ``cross`` per partner its
-    (E1, Em) on its lattice.  None where nothing glows or the medium is too dense for
+    (E1, Em) on its lattice.  None where nothing is emitted or the medium is too dense for
     paths."""
     if pm.endless:   # the world fog glows everywhere: its own estimate (fogglow.py)
         return fog_glow(pm, camera, n_paths, resolution, multiple, seed=seed, threads=threads,
@@ -60,6 +66,9 @@ def emission_light(pm: PreparedMedium, camera, n_paths: int, resolution: int,
     e = pm.emitted()
     if e is None or camera is None:
         return None
+    if not pm.scatters and not partners:
+        return None   # nothing its light could scatter in
+    pm = flown_through(pm)
     lat = PathLattice.of(pm, camera, resolution,
                          None if around is None else around.enclosed(pm))
     if lat is None:
@@ -67,8 +76,9 @@ def emission_light(pm: PreparedMedium, camera, n_paths: int, resolution: int,
     sets = voxel_starts(pm, e, lat.stride)
     if sets is None:
         return None
-    n = max(1, lat.paths(n_paths))
     lats = [lat] + [plat for _, plat in partners]
+    # at most PATHS_PER_POINT per lattice point of every medium the light scatters in
+    n = max(1, min(int(n_paths), PATHS_PER_POINT * sum(la.cells for la in lats)))
     first = _trace_all(sets, n, seed, threads, should_cancel, pm, lat, around, max_collisions=1,
                        partners=partners)
     later = [None] * len(lats)
@@ -78,6 +88,16 @@ def emission_light(pm: PreparedMedium, camera, n_paths: int, resolution: int,
         later = [la.mean(np.maximum(e - f, 0.0)) for la, e, f in zip(lats, every, first)]
     once = [la.mean(f) for la, f in zip(lats, first)]
     return lat.stride, once[0], later[0], list(zip(once[1:], later[1:]))
+
+
+def flown_through(pm: PreparedMedium) -> PreparedMedium:
+    """The medium as the glow's paths fly through it: itself, or where it has no extinction
+    (an Emission shader alone) an empty one, which the paths cross unhindered (the tracer
+    needs a positive extinction per unit density)."""
+    if np.any(np.asarray(pm.sigma_t) > 0.0):
+        return pm
+    return dataclasses.replace(pm, grid=np.zeros_like(pm.grid), sigma_a=np.ones(3),
+                               sigma_t=np.ones(3), emission_grid=None)
 
 
 def voxel_starts(pm: PreparedMedium, e: np.ndarray, stride: int):

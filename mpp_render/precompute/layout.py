@@ -3,8 +3,8 @@ the precompute fills it, the cache patches its parts, the march reads it.
 
 In order: channel 0 the density; per lit light 3 channels of RGB optical depth to it; with
 multiple scattering in a forward-scattering medium per lit light 3 channels of its forward
-peak's light; with a lit world or a medium that glows (PreparedMedium.glows) 3 channels of
-world light, then with multiple scattering 3 of its multiply scattered part (the glow's light
+peak's light; with a lit world or a medium's emission that lights a medium that scatters
+(media.glow_lights) 3 channels of world light, then with multiple scattering 3 of its multiply scattered part (the glow's light
 scattered once and more is added to them, precompute.emissionlight); then, for a medium with
 an emission grid only, 3 channels of its emitted radiance; then, for a medium with a scatter
 colour grid only (PreparedMedium.scatter_grid), 3 channels of its factor on sigma_s; last,
@@ -21,7 +21,7 @@ from typing import List, Optional, Sequence
 import numpy as np
 
 from ..lights import is_dark
-from ..media import PreparedMedium, delta_scaled
+from ..media import PreparedMedium, delta_scaled, glow_lights
 
 
 @dataclass
@@ -103,7 +103,7 @@ def field_layout(media: Sequence[PreparedMedium], lights, world_color, multiple:
             if chans[i] is not None:
                 beams[i] = c
                 c += 3
-    lit = np.any(np.asarray(world_color) > 0) or (glow and any(pm.glows for pm in media))
+    lit = np.any(np.asarray(world_color) > 0) or (glow and glow_lights(media))
     amb = c if lit else None
     amb_ms = None
     if amb is not None:

@@ -12,7 +12,7 @@ import numpy as np
 from .. import kernels
 from ..camera import towards_camera
 from ..lights import pack_light
-from ..media import density_from, trilinear
+from ..media import box_distance, density_from, trilinear
 from ..parallel import worker_count
 from ..paths import (MAX_COLLISIONS, PATH_MEDIA, PATHS_MAX_SPAN, PathInputs, PathMedium,
                      from_power, rate_span)
@@ -140,6 +140,17 @@ def overlapping(media) -> list:
                 got.append(j)
         out.append(got[:PATH_MEDIA - 1])
     return out
+
+
+def lit_by_glow(media, i: int) -> list:
+    """The indices of the media that medium ``i``'s emission lights besides itself (its glow's
+    paths fly through them, precompute.emissionlight): every other medium that scatters,
+    overlapping it or apart from it across empty space, the world's fog among them (as the
+    box of its grid), the nearest boxes first and at most paths.PATH_MEDIA - 1."""
+    centre = media[i].to_world(0.5 * (np.asarray(media[i].grid.shape[:3], np.float64) - 1.0)[None])[0]
+    near = [(box_distance(pm, centre), j) for j, pm in enumerate(media)
+            if j != i and pm.scatters]
+    return [j for _, j in sorted(near)[:PATH_MEDIA - 1]]
 
 
 def partner_lattice(pm, camera, resolution: int, around: Optional[Surroundings] = None):

@@ -19,7 +19,7 @@ from .lightdepth import (SHADOW_TAU, light_optical_depth, near_sharp_surfaces, s
 from .flatten import flattened
 from .fogglow import glow_on_medium
 from .emissionlight import EMISSION_PATHS, add_glow, emission_light
-from .lightpaths import overlapping, partner_lattice, traced_multiple
+from .lightpaths import lit_by_glow, overlapping, partner_lattice, traced_multiple
 from .pathstarts import Surroundings
 from .lightpyramid import MultipleField, multiple_field
 from .source import peak_light
@@ -82,9 +82,11 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
     partners_of = overlapping(media) if camera is not None else [[] for _ in media]
     partner_lats = {}
 
-    def partners(mi):
+    def partners(mi, of=None):
+        """(index, PathLattice) of the media medium mi's paths fly through: ``of`` (indices),
+        by default those whose boxes overlap its own."""
         got = []
-        for j in partners_of[mi]:
+        for j in (partners_of[mi] if of is None else of):
             if j not in partner_lats:
                 partner_lats[j] = partner_lattice(media[j], camera, path_res[j], around)
             if partner_lats[j] is not None:
@@ -160,10 +162,13 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                    seed=seed + mi, should_cancel=should_cancel,
                                    surfaces=surfaces, threads=threads, tuning=tuning)
             n_ambient += got
-        if glow and layout.ambient_channel is not None and pm.glows:
+        if glow and layout.ambient_channel is not None and \
+                (pm.glows if pm.endless else pm.emits):
             if progress:
                 progress(0.0, f"Emitted light on {pm.medium.name}")
-            near = partners(mi)
+            # a glow lights every medium that scatters, apart from it or overlapping it (the
+            # world fog's own glow is fogglow.py's)
+            near = [] if pm.endless or camera is None else partners(mi, lit_by_glow(media, mi))
             got = emission_light(pm, camera, multiple_paths if multiple_paths > 0
                                  else EMISSION_PATHS, path_res[mi], multiple,
                                  seed=seed + 7919 * mi + 6007, threads=threads,
