@@ -16,7 +16,9 @@ in fog kept 7-16 samples per pixel under adaptive sampling).
 
 So where the gather reads the media's light and a lamp (a point, spot or area light) sits
 inside a medium (``Guides``: its centre within a grid's box, or anywhere in the world's fog),
-a share of the ``k`` directions (``Tuning.guided_gathers``, half) is drawn about a lamp
+or a medium emits (a fire: its emission and its glow in the smoke round it reach a point
+through the directions towards it; ``Guides.of_emitters``, at the emission's centroid), a
+share of the ``k`` directions (``Tuning.guided_gathers``, half) is drawn about a lamp
 instead: the lamp chosen with probability P_i proportional to its power over its distance
 (the scale of L above), then gamma in [0, pi] about the direction to its centre with density
 2 (pi - gamma) / pi^2 and the azimuth uniform, a density per steradian of
@@ -76,6 +78,42 @@ class Guides:
         if not pos:
             return None
         return cls(np.asarray(pos, np.float64).reshape(-1, 3), np.asarray(power, np.float64))
+
+    @classmethod
+    def of_emitters(cls, media) -> "Guides | None":
+        """The media that emit (PreparedMedium.emits; not the world's fog, whose glow is
+        everywhere), each as a guide at the centroid of its emission with the power it
+        gives off, 4 pi sum(e V) W (the mean over the channels): a fire's light on the
+        ground round it comes through the few directions that meet it, and its glow in the
+        smoke round it peaks towards it as a lamp's does; None when none emits."""
+        pos, power = [], []
+        for pm in media:
+            if pm.endless or not pm.emits:
+                continue
+            e = pm.emitted()
+            if e is None:
+                continue
+            lum = e.mean(axis=-1)
+            flat = np.flatnonzero(lum > 0.0)
+            if not flat.size:
+                continue
+            vol = float(abs(np.linalg.det(np.asarray(pm.i2w[:3, :3], np.float64))))
+            wts = lum.reshape(-1)[flat]
+            ijk = np.stack(np.unravel_index(flat, lum.shape), axis=1).astype(np.float64)
+            pos.append(np.average(pm.to_world(ijk), axis=0, weights=wts))
+            power.append(4.0 * np.pi * vol * float(wts.sum()))
+        if not pos:
+            return None
+        return cls(np.asarray(pos, np.float64).reshape(-1, 3), np.asarray(power, np.float64))
+
+    @staticmethod
+    def joined(*guides) -> "Guides | None":
+        """The guides of every one of ``guides`` that is not None, or None."""
+        got = [g for g in guides if g is not None]
+        if not got:
+            return None
+        return Guides(np.concatenate([g.position for g in got]),
+                      np.concatenate([g.power for g in got]))
 
     def choice(self, points) -> tuple:
         """(unit directions (N,G,3) from ``points`` to each lamp, probabilities (N,G) of

@@ -71,9 +71,11 @@ class FrameMarch:
         self.fog_glow = worldfog.glow_radiance(self.fog, bool(self.st.multiple)) \
             if self.fog is not None and worldfog.glows(self.fog) else None
         self.arrays = kernel_arrays(self.solid)
-        # the lamps inside the media, towards which the surfaces' gathers are also drawn
-        self.guides = Guides.of_lights(self.lights, lambda c: surrounds(self.media, c)) \
-            if self.media else None
+        # the lamps inside the media and the media that emit, towards which the surfaces'
+        # gathers are also drawn
+        self.guides = Guides.joined(
+            Guides.of_lights(self.lights, lambda c: surrounds(self.media, c)),
+            Guides.of_emitters(self.media)) if self.media else None
         self.pilot_stride = max(1, int(tun.pilot_stride))
         self.pilot_samples = max(2, int(tun.pilot_samples))
         self.pilot_shape, px, py = pilot.grid(W, H, self.pilot_stride)

@@ -278,3 +278,64 @@ def test_a_glow_lights_a_medium_apart_from_it_even_without_scattering(absorbing)
     assert len(planes) >= 5
     assert np.all(np.abs(ratio - 1.0) < 0.12) and abs(got[near].sum() / want.sum() - 1) < 0.06
     assert more[..., 0].reshape(-1)[near].min() > 0.0
+
+
+def ground_under_a_glow(guided: float, seed: int):
+    """(image, the closed form, the pixels beside the glow's box, their distance from the
+    axis m): a grey (0.5) Lambertian ground 1 m under an Emission-only sphere (0.3 m, e 20
+    W/(m^3 sr), no extinction), seen from above (orthographic, 24 x 24 over 6 x 6 m), 16
+    samples in every pixel, the share ``guided`` of the gathers drawn towards the glow; the
+    closed form of a pixel's radiance is 0.5 / pi x the irradiance, the direct sum over the
+    emitting voxels of e V cos / r^2."""
+    from mpp_render.scene import Surface
+    vox, n, e = 0.05, 20, 20.0
+    i2w = np.eye(4)
+    i2w[:3, :3] *= vox
+    i2w[:3, 3] = -0.5 + 0.5 * vox
+    c = (np.arange(n) + 0.5) * vox - 0.5
+    x, y, z = np.meshgrid(c, c, c, indexing="ij")
+    inside = x * x + y * y + z * z <= 0.09
+    fire = Medium("fire", np.ones((n, n, n), np.float32), i2w, np.zeros(3), np.zeros(3), 0.0,
+                  emission_grid=(inside[..., None] * np.full(3, e)).astype(np.float32))
+    v = np.array([[-5, -5, -1], [5, -5, -1], [5, 5, -1], [-5, 5, -1]], np.float64)
+    ground = Surface("ground", v, np.array([[0, 1, 2], [0, 2, 3]]), base_color=np.full(3, 0.5))
+    c2w = np.eye(4)
+    c2w[:3, 3] = [0.0, 0.0, 10.0]
+    cam = Camera("ORTHO", c2w, 24, 24, (-3, 3, -3, 3))
+    tun = dataclasses.replace(Settings().tuning, guided_gathers=guided)
+    out = render(SceneDescription(cam, media=[fire], surfaces=[ground],
+                                  settings=Settings(samples=16, noise_threshold=0.0,
+                                                    multiple=False, seed=seed, tuning=tun)))
+    px = (np.arange(24) + 0.5) / 24 * 6 - 3
+    X, Y = np.meshgrid(px, -px)
+    src = np.stack([x[inside], y[inside], z[inside]], 1)
+    d = src[None] - np.stack([X.ravel(), Y.ravel(), np.full(X.size, -1.0)], 1)[:, None]
+    r = np.linalg.norm(d, axis=2)
+    want = (0.5 / np.pi * np.sum(e * vox ** 3 * d[..., 2] / r ** 3, axis=1)).reshape(24, 24)
+    beside = (np.abs(X) > 0.55) | (np.abs(Y) > 0.55)
+    return out.passes["Combined"][..., 0], want, beside, np.hypot(X, Y)
+
+
+def test_a_glow_lights_the_ground_round_it_and_the_gathers_aim_at_it():
+    """The ground round a glowing sphere against the closed form of its irradiance: all the
+    pixels beside it pooled within 4 %, and rings of them (0-1, 1-1.8, 1.8-2.6, 2.6-5 m from
+    the axis) within 10 % (measured 0.97-1.07 over two seeds).  The surfaces' gathers are
+    drawn towards an emitting medium as towards a lamp inside one (gathers.Guides.of_emitters):
+    a pixel's relative error was 1.49 / 1.64 with cosine-weighted gathers alone (seeds 0, 1)
+    and is 0.33 / 0.31 with them."""
+    from mpp_render.gathers import Guides
+    got, want, beside, r = ground_under_a_glow(0.5, 0)
+    assert got[beside].sum() == pytest.approx(want[beside].sum(), rel=0.04)
+    for lo, hi in ((0.0, 1.0), (1.0, 1.8), (1.8, 2.6), (2.6, 5.0)):
+        ring = beside & (r >= lo) & (r < hi)
+        assert got[ring].sum() == pytest.approx(want[ring].sum(), rel=0.10), (lo, hi)
+    guided = np.sqrt(np.mean((got[beside] / want[beside] - 1.0) ** 2))
+    plain_got, *_ = ground_under_a_glow(0.0, 0)
+    plain = np.sqrt(np.mean((plain_got[beside] / want[beside] - 1.0) ** 2))
+    print("a pixel's relative error, guided / cosine-weighted:", guided, plain)
+    assert guided < 0.5 and guided < plain / 3.0
+    fire, smoke, _ = apart_scene(0.0)
+    g = Guides.of_emitters([fire, smoke])
+    inside = fire.emitted()[..., 0] > 0
+    assert g.position.shape == (1, 3) and np.allclose(g.position[0], 0.0, atol=1e-9)
+    assert g.power[0] == pytest.approx(4 * np.pi * E * np.count_nonzero(inside) * 0.05 ** 3)

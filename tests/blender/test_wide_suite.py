@@ -61,7 +61,9 @@ PATHS = 100_000   # multiple scattering's traced paths per light (a tenth of the
 # 0.022 (measured 0.0304, 0.0103).  p_sphere_thick full 0.142 -> 0.099 when a mesh volume's
 # paths began to fly through its sharp surface and a dense one's surface voxels to take their
 # source from points of their cells (paths.density_at, source.surface_band_source; measured
-# 0.0773).
+# 0.0773).  p_glowing_smoke (0.059, 0.104) -> (0.046, 0.087) when the ground's gathers
+# began to be drawn towards emitting media too (gathers.Guides.of_emitters; measured 0.0313 /
+# 0.0670).
 BOUND = {  # scene: (single, full)
     "p_area_in_box": (0.062, 0.103),
     "p_backlit_slab": (0.079, 0.122),
@@ -70,7 +72,7 @@ BOUND = {  # scene: (single, full)
     "p_dragon": (0.017, 0.056),
     "p_fog_area": (0.017, 0.033),
     "p_fog_point": (0.028, 0.041),
-    "p_glowing_smoke": (0.059, 0.104),
+    "p_glowing_smoke": (0.046, 0.087),
     "p_haze_sun_ground": (0.127, 0.144),
     "p_noise_cloud": (0.024, 0.024),
     "p_overlap": (0.018, 0.045),
