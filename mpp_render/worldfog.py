@@ -170,6 +170,39 @@ def bounded_medium(desc: SceneDescription, fog: Medium, media=(),
     return FogBox(med, float(depth), voxel)
 
 
+FIELD_STEPS = 256  # samples along each probe ray that sizes a varying fog's box (field_depth)
+
+
+def field_depth(cam, extinction_at) -> float:
+    """Axial depth (m) a world fog whose coefficients vary in space needs for its grid: along
+    each of PROBES x PROBES camera rays, where the camera's optical depth through the fog
+    reaches TAU_VIEW, or else just past the farthest point with extinction before the clip
+    end; the largest over the rays (at least 1 mm past the near clip).  ``extinction_at``
+    (N,3) world points -> (N,) the fog's largest extinction there, 1/m; read at FIELD_STEPS
+    points a ray, so a layer thinner than the clip range over FIELD_STEPS may be missed."""
+    g = np.linspace(0.0, 1.0, PROBES)
+    px, py = np.meshgrid(g * cam.width, g * cam.height, indexing="ij")
+    o, d, tmin, tmax, axial = primary_rays(cam, px.ravel(), py.ravel())
+    near = max(float(cam.clip_start), 0.0)
+    tmax = np.where(np.isfinite(tmax), tmax, float(cam.clip_end) / np.maximum(axial, 1e-9))
+    frac = (np.arange(FIELD_STEPS) + 0.5) / FIELD_STEPS
+    t = tmin[:, None] + (tmax - tmin)[:, None] * frac[None, :]
+    pts = o[:, None, :] + d[:, None, :] * t[..., None]
+    sig = np.maximum(np.nan_to_num(np.asarray(extinction_at(pts.reshape(-1, 3)), np.float64)),
+                     0.0).reshape(t.shape)
+    dt = ((tmax - tmin) / FIELD_STEPS)[:, None]
+    tau = np.cumsum(sig * dt, axis=1)
+    reach = np.zeros(len(o))
+    for r in range(len(o)):
+        hit = np.flatnonzero(tau[r] >= TAU_VIEW)
+        some = np.flatnonzero(sig[r] > 0.0)
+        if hit.size:
+            reach[r] = t[r, hit[0]] + dt[r, 0]
+        elif some.size:
+            reach[r] = min(t[r, some[-1]] + dt[r, 0], tmax[r])
+    return max(float(np.max(reach * axial)), near + 1e-3)
+
+
 def frustum_box(cam, near: float, depth: float, resolution: int):
     """(shape, index_to_world (4,4), voxel m) of a grid of cubic voxels, ``resolution`` along
     its longest side (at least 8), on the camera-aligned box round the view frustum from

@@ -233,3 +233,19 @@ def test_forward_scattering_fog_spreads_its_peak_with_multiple_scattering():
         pc.peak_light = orig
     print("with", ms.mean(), "without", without.mean())
     assert without.mean() < 0.95 * ms.mean()
+
+
+def test_a_varying_fog_is_boxed_to_the_depth_its_own_extinction_needs():
+    """worldfog.field_depth: a uniform fog of sigma_t 0.1 / m ends where the central ray's
+    optical depth reaches TAU_VIEW (70 m); a fog only inside a ball of radius 2 m, 10 m ahead,
+    just past the ball; no fog at all, at the near clip; the camera's clip end bounds a thin
+    fog."""
+    cam = camera()          # at (0, -8, 0) looking along +y, clip 0.1 - 100 m
+    step = 100.0 / worldfog.FIELD_STEPS
+    uniform = worldfog.field_depth(cam, lambda p: np.full(len(p), 0.1))
+    assert worldfog.TAU_VIEW / 0.1 <= uniform <= worldfog.TAU_VIEW / 0.1 + 2 * step
+    ball = worldfog.field_depth(
+        cam, lambda p: np.where(np.linalg.norm(p - [0.0, 2.0, 0.0], axis=1) < 2.0, 1.0, 0.0))
+    assert 10.0 + 1.9 <= ball <= 12.0 + 2 * step
+    assert worldfog.field_depth(cam, lambda p: np.zeros(len(p))) == pytest.approx(0.1 + 1e-3)
+    assert worldfog.field_depth(cam, lambda p: np.full(len(p), 1e-4)) <= 100.0 + 1e-9

@@ -544,10 +544,18 @@ def test_emission_colour_vdb_and_world_fields(empty_scene, tmp_path):
     x = (ijk @ cl.index_to_world[:3, :3].T + cl.index_to_world[:3, 3])[..., 0]
     np.testing.assert_allclose(cl.density, values * (0.5 * x + 2.0), rtol=1e-5)
     np.testing.assert_allclose(cl.emission_grid, values[..., None] * np.ones(3), rtol=1e-5)
-    # the world: the field at the camera (z = 2), with a warning
-    fog = desc.world.volume
-    np.testing.assert_allclose(fog.sigma_s, 0.8 * (0.1 * 2.0 + 0.05), rtol=1e-6)  # Color 0.8
-    assert any("world 'World'" in w and "at the camera" in w for w in desc.warnings)
+    # the world: the field varies in space, so the fog is a volume on a grid over the view
+    # (translate/world.textured_fog) whose density is the field at its voxels (0 below z =
+    # -0.5, where 0.1 z + 0.05 < 0), with a message saying so
+    assert desc.world.volume is None
+    fog = media["world 'World'"]
+    assert fog.source == "WORLD_FIELD"
+    ijk = np.stack(np.meshgrid(*[np.arange(n) for n in fog.density.shape], indexing="ij"), -1)
+    z = (ijk @ fog.index_to_world[:3, :3].T + fog.index_to_world[:3, 3])[..., 2]
+    np.testing.assert_allclose(fog.density, np.maximum(0.1 * z + 0.05, 0.0), rtol=1e-5,
+                               atol=1e-6)
+    np.testing.assert_allclose(fog.sigma_s, 0.8, rtol=1e-6)  # the Color 0.8 per unit density
+    assert any("world 'World'" in w and "varies in space" in w for w in desc.warnings)
 
 
 # -- (d) against Cycles -------------------------------------------------------------------------

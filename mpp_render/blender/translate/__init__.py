@@ -31,7 +31,7 @@ from .lights import light_from_object
 from .materials import is_linked
 from .meshes import MeshTranslator, mesh_arrays, slot_materials
 from .vdb import VolumeTranslator
-from .world import world_from_scene
+from .world import FIELD_SOURCE, textured_fog, world_from_scene
 
 __all__ = ["scene_from_depsgraph", "retranslate"]
 
@@ -67,11 +67,12 @@ def scene_from_depsgraph(depsgraph, settings: Settings, camera_override=None,
     if getattr(scene.render, "use_motion_blur", False):
         warnings.append("motion blur is not supported yet; the frame is rendered without it")
     try:
-        desc.world = world_from_scene(scene, warnings)
+        desc.world = world_from_scene(scene, warnings, textured=True)
     except Exception as e:  # safety net, as for objects
         warnings.append(f"the world could not be translated ({type(e).__name__}: {e}); "
                         "using black")
     _objects(depsgraph, desc, settings)
+    desc.media = desc.media + _world_fog(scene, camera, settings, warnings)
     unlit = _unlit_message(desc)
     if unlit:
         desc.warnings.append(unlit)
@@ -91,7 +92,7 @@ def retranslate(depsgraph, settings: Settings, previous: Optional[SceneDescripti
     desc = dataclasses.replace(previous, camera=camera, settings=settings,
                                warnings=list(previous.warnings))
     if "world" in parts:
-        desc.world = world_from_scene(depsgraph.scene_eval, desc.warnings)
+        desc.world = world_from_scene(depsgraph.scene_eval, desc.warnings, textured=True)
     objects = {"lights", "geometry"} & set(parts)
     if objects:
         fresh = SceneDescription(camera=camera, settings=settings, warnings=desc.warnings)
@@ -100,8 +101,31 @@ def retranslate(depsgraph, settings: Settings, previous: Optional[SceneDescripti
             desc.lights = fresh.lights
         if "geometry" in parts:
             desc.media, desc.surfaces = fresh.media, fresh.surfaces
+    # a world fog that varies in space lies on a grid over the view: again with the world or
+    # a new camera, else the one made before (the same objects, for the cache's keys)
+    fog = [m for m in previous.media if m.source == FIELD_SOURCE]
+    if "world" in parts or not _same_view(camera, previous.camera):
+        fog = _world_fog(depsgraph.scene_eval, camera, settings, desc.warnings)
+    desc.media = [m for m in desc.media if m.source != FIELD_SOURCE] + fog
     desc.warnings = list(dict.fromkeys(desc.warnings))
     return desc
+
+
+def _same_view(a: Camera, b: Camera) -> bool:
+    """Whether cameras ``a`` and ``b`` are the same in every field."""
+    return all(np.array_equal(np.asarray(x), np.asarray(y))
+               for x, y in zip(dataclasses.astuple(a), dataclasses.astuple(b)))
+
+
+def _world_fog(scene, camera: Camera, settings: Settings, warnings) -> list:
+    """The world's fog as media on a grid over the view where a node tree varies it in
+    space (world.textured_fog), else none."""
+    try:
+        return textured_fog(scene, camera, settings.voxel_resolution, warnings) or []
+    except Exception as e:  # safety net, as for objects
+        warnings.append(f"the world's fog could not be translated ({type(e).__name__}: {e}); "
+                        "it is left out")
+        return []
 
 
 def _objects(depsgraph, desc: SceneDescription, settings: Settings,

@@ -359,6 +359,16 @@ class Sampler:
         return values
 
 
+def points_sampler(positions):
+    """A sampler of fields at world points ``positions`` (N,3) (the world volume's convention:
+    object and generated coordinates are the position): float32 (N,) or (N, 3)."""
+    pts = g.Points(np.asarray(positions, np.float64).reshape(-1, 3))
+
+    def sample(f: Field) -> np.ndarray:
+        return f.at(pts).astype(np.float32)
+    return sample
+
+
 def point_sampler(position, warn: Optional[Callable[[Field], None]] = None):
     """A sampler of fields at one world point (the world volume: object and generated
     coordinates are the position there, as Cycles' background): float32 (1,) or (1, 3).
