@@ -420,6 +420,27 @@ def test_textured_density_is_the_tree_at_the_voxels(empty_scene, monkeypatch, wa
                                rtol=1e-5, atol=1e-5)
 
 
+def test_a_texture_driven_by_a_driver_changes_with_it(empty_scene, warm):
+    """A Noise Scale driven by a driver of the frame (frame / 4) is the driver's value at each
+    frame: the density is the tree at Scale 1.5 on frame 6 and at 3 on frame 12."""
+    mat, noise, _ = noise_material()
+    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=3, radius=1.0)
+    ob = bpy.context.active_object
+    ob.data.materials.append(mat)
+    fc = inp(noise, "Scale").driver_add("default_value")
+    fc.driver.type = "SCRIPTED"
+    fc.driver.expression = "frame / 4"
+    got = {}
+    for frame in (6, 12):
+        empty_scene.frame_set(frame)
+        m = only(translate().media)
+        inside = expected_density(m, ob, radius=True)[1] < 0.97
+        want = expected_density(m, ob, frame / 4.0)
+        np.testing.assert_allclose(m.density[inside], want[inside], rtol=1e-5, atol=1e-5)
+        got[frame] = m.density
+    assert not np.allclose(got[6], got[12])
+
+
 def only(media):
     (m,) = media
     return m
