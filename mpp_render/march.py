@@ -79,8 +79,13 @@ def pack_lights(lights: List[Light], layout: FieldLayout) -> np.ndarray:
 
 def ray_keys(seed: int, tile: int, n: int) -> np.ndarray:
     """uint32 random keys of the n rays of a tile (the same for any thread count)."""
+    return ray_keys_at(seed, tile, np.arange(n))
+
+
+def ray_keys_at(seed: int, tile: int, ids) -> np.ndarray:
+    """``ray_keys``' keys of a tile's rays numbered ``ids`` (ints below 2^32)."""
     base = hash32(np.uint32((seed * 0x632BE5AB + tile * 0x2545F491) & 0xFFFFFFFF))
-    return hash32(np.arange(n, dtype=np.uint32) ^ base)
+    return hash32(np.asarray(ids, np.int64).astype(np.uint32) ^ base)
 
 
 @dataclass

@@ -77,7 +77,7 @@ def stratified_gain(taken) -> float:
     taken for independent: at most 1.
 
     A pixel's samples are stratified (their places in the pixel, the surfaces' gathering
-    bands: tiles.pixel_offsets, gather_bands; the first 2^m taken one in each of 2^m
+    bands: pixelsamples.PixelSamples; the first 2^m taken one in each of 2^m
     strata), and the mean of stratified samples varies less than var / n.  Each half of a
     pixel's samples as taken (``taken`` (P, n): each sample's luminance in the order taken,
     the first n/2 and the rest, each itself stratified) estimates the mean apart, so

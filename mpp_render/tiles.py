@@ -18,13 +18,15 @@ import numpy as np
 
 from . import kernels, pilot, worldfog
 from .camera import primary_rays
-from .march import MarchContext, march_rays, ray_keys
+from .march import MarchContext, march_rays, ray_keys, ray_keys_at
 from .gathers import Guides
 from .media import surrounds, union_interval
 from .passes import DEPTH_MISS
+from .pixelsamples import PixelSamples, power_of_two_side, reverse_bits
 from .precompute.lightdepth import kernel_arrays, split_fog
 from .surfaces import SurfaceSet, intersect, shade
 
+SAMPLES_SEED = 0x27D4EB2F  # offsets the seed of the tiles' pixel samples (pixelsamples.py)
 GATHER_SEED = 0x5BD1E995  # offsets the seed of the rays that gather volume light onto surfaces
 ROUND_SEED = 0x9E3779B1  # offsets the seed of each adaptive round's gathering rays
 GATHER_TAIL_NODES = 4   # Gauss-Legendre points of the fog tail on a gather ray (worldfog.tail)
@@ -178,9 +180,10 @@ class FrameMarch:
         """(index, (x0, y0, width, height), passes of the tile (pixels, C), (march samples,
         camera samples)).
 
-        Each pixel has ``samples`` samples drawn up front (their offsets in the pixel, lens
-        points, random keys and surface-gather bands), so a sample is the same whichever
-        round takes it.  Adaptive sampling (``Settings.noise_threshold`` > 0): with the
+        Each pixel has ``samples`` samples whose offsets in the pixel, lens points, random
+        keys and surface-gather bands are counter-based draws of (tile, pixel, sample)
+        (pixelsamples.py), so a sample is the same whichever round takes it, and only the
+        samples taken are drawn.  Adaptive sampling (``Settings.noise_threshold`` > 0): with the
         pilot's ``plan`` (pilot.py) every pixel first takes one sample, and the pixels the
         plan marks, the outliers (pilot.outliers) and their neighbours take the rest of
         ``Tuning.adaptive_first``; without a plan every pixel
@@ -202,24 +205,27 @@ class FrameMarch:
         # no round to add when the first holds every sample: the plain draw, as threshold 0
         adaptive = st.noise_threshold > 0.0 and (spp > first or plan is not None)
         order = sample_order(spp) if adaptive else np.arange(spp)
-        offs = pixel_offsets(spp, npx, rng)
-        lens = rng.random((npx * spp, 2)).reshape(npx, spp, 2) if self.cam.aperture > 0.0 \
-            else None
-        bands = gather_bands(spp, npx, rng, order if adaptive else None)
-        keys = ray_keys(st.seed, index, npx * spp).reshape(npx, spp)
+        # each sample's offset, lens point, gather bands and key, drawn for the samples taken
+        draws = PixelSamples(spp, npx, int(ray_keys(st.seed + SAMPLES_SEED, index, 1)[0]),
+                             order if adaptive else None)
+        lensed = self.cam.aperture > 0.0
         taken = (1 if plan is not None else first) if adaptive else spp
         scale = plan.scale if plan is not None else 1.0
         more = plan.more[y0:y0 + th, x0:x0 + tw].ravel() if plan is not None else None
         acc = Accumulator(npx, self.out, spp if adaptive else 0)
         active, batch, k, steps = np.arange(npx), order[:taken], 0, 0.0
         while True:
-            px = (xx[active, None] + offs[active][:, batch, 0]).ravel()
-            py = (yy[active, None] + offs[active][:, batch, 1]).ravel()
-            ln = None if lens is None else lens[active][:, batch].reshape(-1, 2)
+            offs = draws.offsets(active, batch)
+            px = (xx[active, None] + offs[..., 0]).ravel()
+            py = (yy[active, None] + offs[..., 1]).ravel()
+            ln = draws.lens(active, batch).reshape(-1, 2) if lensed else None
             o, d, tmin, tmax, axial = primary_rays(self.cam, px, py, ln)
-            strata = (bands[0][active][:, batch].ravel(), bands[1][active][:, batch].ravel(), spp)
+            hits_surfaces = not self.surf.empty
+            bands = draws.bands(active, batch) if hits_surfaces else None
+            strata = (bands[0].ravel(), bands[1].ravel(), spp) if hits_surfaces else None
+            ids = (active[:, None] * spp + batch[None, :]).ravel()
             r, hit, behind = self.march(index, k, rng, o, d, tmin, tmax, axial,
-                                        keys[active][:, batch].ravel(), strata)
+                                        ray_keys_at(st.seed, index, ids), strata)
             acc.add(active, len(batch), r, hit, behind, st.film_transparent,
                     taken - len(batch))
             steps += float(r["steps"].sum())
@@ -288,42 +294,9 @@ def noisy_pixels(acc, active, threshold: float, tw: int, th: int,
     return np.flatnonzero(pilot.grow(noisy) & keep)
 
 
-def pixel_offsets(spp: int, npx: int, rng) -> np.ndarray:
-    """(npx, spp, 2) offsets in [0,1)^2 of each pixel's samples, drawn for each pixel apart:
-    on a k x k grid of strata when ``spp`` = k^2, jittered in each; with k a power of two,
-    sample s in stratum (i, j) XOR a random mask per pixel (so that sample_order's first 4^m
-    samples are one in each cell of a 2^m x 2^m grid, each uniform in its cell); otherwise
-    uniform.  (Offsets shared by a tile's pixels made their errors alike: a row of pixels
-    straddling a lamp's bright edge all bright or all dark together.)"""
-    u = rng.random((npx, spp, 2))
-    k = int(round(math.sqrt(spp)))
-    if k * k != spp:
-        return u
-    i, j = np.divmod(np.arange(spp), k)
-    cells = np.stack([np.broadcast_to(i, (npx, spp)), np.broadcast_to(j, (npx, spp))], -1)
-    if power_of_two_side(spp):
-        cells = cells ^ rng.integers(0, k, size=(npx, 1, 2))
-    return (cells + u) / k
-
-
-def gather_bands(spp: int, npx: int, rng, order=None) -> np.ndarray:
-    """(2, npx, spp) the bands of r^2 and phi (surfaces.shade's strata) of each pixel's
-    samples: a random Latin hypercube per pixel.  With ``order`` (sample_order; adaptive
-    rounds) and ``spp`` a power of two, the sample taken p-th gets the bands bitreverse(p)
-    XOR a random mask per pixel and dimension, so that the first 2^m samples taken hold one
-    sample in each of 2^m equal bands as well."""
-    if order is None or spp & (spp - 1):
-        return np.argsort(rng.random((2, npx, spp)), axis=2)
-    rev = reverse_bits(np.arange(spp), spp.bit_length() - 1)
-    masks = rng.integers(0, spp, size=(2, npx, 1))
-    bands = np.empty((2, npx, spp), np.int64)
-    bands[:, :, order] = rev[None, None, :] ^ masks
-    return bands
-
-
 def sample_order(spp: int) -> np.ndarray:
     """The order in which adaptive rounds take a pixel's ``spp`` samples: for a k x k grid
-    of strata (pixel_offsets) with k a power of two, by the bit-reversed Morton code of the
+    of strata (PixelSamples.offsets) with k a power of two, by the bit-reversed Morton code of the
     stratum, so that the first 4^m samples hold one sample in each cell of a 2^m x 2^m grid
     over the pixel; otherwise in their own order."""
     k = power_of_two_side(spp)
@@ -338,20 +311,6 @@ def sample_order(spp: int) -> np.ndarray:
     return np.argsort(reverse_bits(morton, 2 * bits), kind="stable")
 
 
-def power_of_two_side(spp: int) -> int:
-    """k when ``spp`` = k^2 with k a power of two (the strata adaptive rounds spread), else 0."""
-    k = int(round(math.sqrt(spp)))
-    return k if k * k == spp and not k & (k - 1) else 0
-
-
-def reverse_bits(values: np.ndarray, bits: int) -> np.ndarray:
-    """``values`` (integers below 2^bits) with their ``bits`` low bits in reverse order."""
-    out = np.zeros(len(values), np.int64)
-    for b in range(bits):
-        out |= ((values >> b) & 1) << (bits - 1 - b)
-    return out
-
-
 class Accumulator:
     """A tile's per-pixel sums over the rounds of its samples (the box filter over each
     pixel), the passes ``out`` names: radiance W/(m^2 sr), transmittance, depth (m).
@@ -359,13 +318,16 @@ class Accumulator:
     With ``samples`` (the most a pixel takes), each sample's luminance is kept by the
     place it was taken in (``taken``), for ``noise``'s halves."""
 
+    # the sums' columns: single, multiple, emission, T, behind (RGB each), open
+    COLUMNS = {"single": slice(0, 3), "multiple": slice(3, 6), "emission": slice(6, 9),
+               "T": slice(9, 12), "behind": slice(12, 15), "open": 15}
+
     def __init__(self, npx: int, out: dict, samples: int = 0):
         self.out = out
         self.taken = np.zeros((npx, samples)) if samples > 0 else None
         self.count = np.zeros(npx)
-        z = lambda: np.zeros((npx, 3))   # noqa: E731
-        self.sums = {"single": z(), "multiple": z(), "emission": z(), "T": z(), "behind": z(),
-                     "open": np.zeros(npx)}
+        self.total = np.zeros((npx, 16))
+        self.sums = {key: self.total[:, col] for key, col in self.COLUMNS.items()}
         self.lum = np.zeros(npx)       # sums of each sample's mean RGB radiance and its square
         self.lum2 = np.zeros(npx)
         self.depth = np.full(npx, np.inf)
@@ -375,21 +337,24 @@ class Accumulator:
         surface hits ``hit``, what lies behind the media ``behind``; they are the pixels'
         samples taken ``start`` to ``start + spp - 1``."""
         n = len(pixels)
-
-        def total(a):   # (n * spp, C) -> (n, C) sums over each pixel's samples
-            return a.reshape(n, spp, -1).sum(axis=1)
-
-        seen = r["T"] * (np.where(hit[:, None], behind, 0.0) if transparent else behind)
-        for key, val in (("single", r["single"]), ("multiple", r["multiple"]),
-                         ("emission", r["emission"]), ("T", r["T"]), ("behind", seen)):
-            self.sums[key][pixels] += total(val)
-        if transparent:
-            self.sums["open"][pixels] += total(np.where(hit[:, None], 0.0, r["T"]).mean(axis=1))[:, 0]
-        lum = (r["single"] + r["multiple"] + r["emission"] + seen).mean(axis=1)
+        vals = np.empty((n * spp, 18))
+        vals[:, 0:3], vals[:, 3:6], vals[:, 6:9] = r["single"], r["multiple"], r["emission"]
+        vals[:, 9:12] = r["T"]
+        seen = vals[:, 12:15]
+        np.multiply(r["T"], np.where(hit[:, None], behind, 0.0) if transparent else behind,
+                    out=seen)
+        vals[:, 15] = np.where(hit, 0.0, r["T"].mean(axis=1)) if transparent else 0.0
+        lum = vals[:, 16]
+        np.sum(vals[:, 0:9], axis=1, out=lum)
+        lum += seen.sum(axis=1)
+        lum /= 3.0
+        vals[:, 17] = lum * lum
+        tot = vals if spp == 1 else vals.reshape(n, spp, 18).sum(axis=1)
+        self.total[pixels] += tot[:, :16]
+        self.lum[pixels] += tot[:, 16]
+        self.lum2[pixels] += tot[:, 17]
         if self.taken is not None:
             self.taken[pixels, start:start + spp] = lum.reshape(n, spp)
-        self.lum[pixels] += total(lum)[:, 0]
-        self.lum2[pixels] += total(lum * lum)[:, 0]
         self.count[pixels] += spp
         dep = np.where(r["depth"] < DEPTH_MISS, r["depth"], np.inf).reshape(n, spp).min(axis=1)
         self.depth[pixels] = np.minimum(self.depth[pixels], dep)

@@ -10,7 +10,8 @@ import pytest
 
 from mpp_render import pilot, tiles
 from mpp_render.render import render
-from mpp_render.tiles import Accumulator, gather_bands, pixel_offsets, sample_order
+from mpp_render.pixelsamples import PixelSamples
+from mpp_render.tiles import Accumulator, sample_order
 
 from test_cache import scene
 
@@ -87,11 +88,11 @@ def test_a_noisy_pixel_keeps_its_neighbours_sampling():
 
 
 def test_every_round_prefix_is_stratified_over_the_pixel_and_the_gather_bands():
-    rng = np.random.default_rng(3)
     order = sample_order(16)
     assert sorted(order.tolist()) == list(range(16))
-    offs = pixel_offsets(16, 50, rng)
-    bands = gather_bands(16, 50, rng, order)
+    draws = PixelSamples(16, 50, 3, order)
+    offs = draws.offsets(np.arange(50), np.arange(16))
+    bands = draws.bands(np.arange(50), np.arange(16))
     for n, cells in ((4, 2), (16, 4)):
         first = offs[:, order[:n]]                     # (pixels, n, 2)
         cell = np.floor(first * cells).astype(int)
@@ -100,7 +101,7 @@ def test_every_round_prefix_is_stratified_over_the_pixel_and_the_gather_bands():
             for dim in range(2):                       # and in each of n equal bands
                 assert len(set((bands[dim, p, order[:n]] * n // 16).tolist())) == n
     # unbiased: the first 4 samples are spread uniformly over the pixel
-    big = pixel_offsets(16, 20000, rng)[:, order[:4]]
+    big = PixelSamples(16, 20000, 4, order).offsets(np.arange(20000), order[:4])
     assert abs(big.mean() - 0.5) < 0.01
     assert np.histogram(big[..., 0], bins=8, range=(0, 1))[0].min() > 0.9 * 20000 * 4 / 8
 
@@ -109,7 +110,7 @@ def test_every_round_prefix_is_stratified_over_the_pixel_and_the_gather_bands():
 def test_each_pixel_draws_its_own_offsets(spp):
     """No two pixels of a tile share their samples' places: a row of pixels straddling an
     edge would be all bright or all dark together (p_area_in_box's lamp, 50 %, 4 spp)."""
-    offs = pixel_offsets(spp, 4000, np.random.default_rng(7))
+    offs = PixelSamples(spp, 4000, 7).offsets(np.arange(4000), np.arange(spp))
     assert offs.shape == (4000, spp, 2) and offs.min() >= 0.0 and offs.max() < 1.0
     first = offs[:, 0, 1]
     assert len(np.unique(first)) == 4000
@@ -242,3 +243,23 @@ def test_a_tile_keeps_its_samples_luminance_by_the_place_taken():
     plain = pilot.relative_noise(acc.lum[px], acc.lum2[px], acc.count[px], 1.0)
     gain = pilot.stratified_gain(lums)
     assert np.allclose(acc.noise(px, 1.0), plain * np.sqrt(gain))
+
+
+@pytest.mark.parametrize("spp, adaptive", [(16, True), (16, False), (6, False), (9, True)])
+def test_a_sample_is_drawn_the_same_whichever_round_takes_it(spp, adaptive):
+    """PixelSamples draws sample s of pixel p from (tile, p, s) alone: asked for a few
+    pixels and samples, or all at once, the same offsets, lens points and gather bands; the
+    bands of a pixel are a permutation of 0 .. spp - 1 (a Latin hypercube)."""
+    order = sample_order(spp) if adaptive else None
+    draws = PixelSamples(spp, 300, 11, order)
+    every = np.arange(300), np.arange(spp)
+    offs, lens, bands = draws.offsets(*every), draws.lens(*every), draws.bands(*every)
+    some_p, some_s = np.array([5, 17, 299]), np.array([spp - 1, 0, 2])
+    np.testing.assert_array_equal(draws.offsets(some_p, some_s), offs[some_p][:, some_s])
+    np.testing.assert_array_equal(draws.lens(some_p, some_s), lens[some_p][:, some_s])
+    np.testing.assert_array_equal(draws.bands(some_p, some_s), bands[:, some_p][:, :, some_s])
+    for dim in (0, 1):
+        assert np.all(np.sort(bands[dim], axis=1) == np.arange(spp))
+    assert lens.min() >= 0.0 and lens.max() < 1.0 and abs(lens.mean() - 0.5) < 0.02
+    other = PixelSamples(spp, 300, 12, order).offsets(*every)
+    assert not np.array_equal(other, offs)          # another tile, other draws
