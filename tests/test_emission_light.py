@@ -280,6 +280,23 @@ def test_a_glow_lights_a_medium_apart_from_it_even_without_scattering(absorbing)
     assert more[..., 0].reshape(-1)[near].min() > 0.0
 
 
+def glowing_ball(absorbing: float = 0.0):
+    """(Medium, the emitting voxels' centres (N,3) m): a 1 m box of 0.05 m voxels centred on
+    the origin whose sphere of radius 0.3 m emits 20 W/(m^3 sr) (an emission grid), scattering
+    nothing and absorbing ``absorbing`` per m."""
+    vox, n = 0.05, 20
+    i2w = np.eye(4)
+    i2w[:3, :3] *= vox
+    i2w[:3, 3] = -0.5 + 0.5 * vox
+    c = (np.arange(n) + 0.5) * vox - 0.5
+    x, y, z = np.meshgrid(c, c, c, indexing="ij")
+    inside = x * x + y * y + z * z <= 0.09
+    fire = Medium("fire", np.ones((n, n, n), np.float32), i2w, np.zeros(3),
+                  np.full(3, float(absorbing)), 0.0,
+                  emission_grid=(inside[..., None] * np.full(3, 20.0)).astype(np.float32))
+    return fire, np.stack([x[inside], y[inside], z[inside]], 1)
+
+
 def ground_under_a_glow(guided: float, seed: int):
     """(image, the closed form, the pixels beside the glow's box, their distance from the
     axis m): a grey (0.5) Lambertian ground 1 m under an Emission-only sphere (0.3 m, e 20
@@ -288,15 +305,8 @@ def ground_under_a_glow(guided: float, seed: int):
     closed form of a pixel's radiance is 0.5 / pi x the irradiance, the direct sum over the
     emitting voxels of e V cos / r^2."""
     from mpp_render.scene import Surface
-    vox, n, e = 0.05, 20, 20.0
-    i2w = np.eye(4)
-    i2w[:3, :3] *= vox
-    i2w[:3, 3] = -0.5 + 0.5 * vox
-    c = (np.arange(n) + 0.5) * vox - 0.5
-    x, y, z = np.meshgrid(c, c, c, indexing="ij")
-    inside = x * x + y * y + z * z <= 0.09
-    fire = Medium("fire", np.ones((n, n, n), np.float32), i2w, np.zeros(3), np.zeros(3), 0.0,
-                  emission_grid=(inside[..., None] * np.full(3, e)).astype(np.float32))
+    fire, src = glowing_ball()
+    vox, e = 0.05, 20.0
     v = np.array([[-5, -5, -1], [5, -5, -1], [5, 5, -1], [-5, 5, -1]], np.float64)
     ground = Surface("ground", v, np.array([[0, 1, 2], [0, 2, 3]]), base_color=np.full(3, 0.5))
     c2w = np.eye(4)
@@ -308,7 +318,6 @@ def ground_under_a_glow(guided: float, seed: int):
                                                     multiple=False, seed=seed, tuning=tun)))
     px = (np.arange(24) + 0.5) / 24 * 6 - 3
     X, Y = np.meshgrid(px, -px)
-    src = np.stack([x[inside], y[inside], z[inside]], 1)
     d = src[None] - np.stack([X.ravel(), Y.ravel(), np.full(X.size, -1.0)], 1)[:, None]
     r = np.linalg.norm(d, axis=2)
     want = (0.5 / np.pi * np.sum(e * vox ** 3 * d[..., 2] / r ** 3, axis=1)).reshape(24, 24)

@@ -195,23 +195,15 @@ def test_a_glowing_volume_lights_the_world_fog_round_it():
     e^-tau / r^2 / (4 pi).  Before, the glow lit only the volumes whose boxes overlapped
     it, and never the fog (the row was 0)."""
     from mpp_render.camera import primary_rays
-    from mpp_render.scene import Medium
-    vox, n, e = 0.05, 20, 20.0
-    i2w = np.eye(4)
-    i2w[:3, :3] *= vox
-    i2w[:3, 3] = -0.5 + 0.5 * vox
-    c = (np.arange(n) + 0.5) * vox - 0.5
-    x, y, z = np.meshgrid(c, c, c, indexing="ij")
-    inside = x * x + y * y + z * z <= 0.09
-    fire = Medium("fire", np.ones((n, n, n), np.float32), i2w, np.zeros(3), np.full(3, 0.5),
-                  0.0, emission_grid=(inside[..., None] * np.full(3, e)).astype(np.float32))
+    from test_emission_light import glowing_ball
+    vox, e = 0.05, 20.0
+    fire, pts = glowing_ball(absorbing=0.5)
     f = fog(sigma_s=(0.2,) * 3, sigma_a=(0.05,) * 3)
     cam = camera(32, 24)
     out = render(SceneDescription(cam, media=[fire], world=World(volume=f),
                                   settings=Settings(samples=4, multiple=False,
                                                     multiple_paths=200_000)))
     got = out.passes["Volume Single"][12, :, 0]
-    pts = np.stack([x[inside], y[inside], z[inside]], 1)
     power = np.full(len(pts), e * vox ** 3)
 
     def e1(p):
