@@ -10,7 +10,8 @@ ROOT = pathlib.Path(__file__).resolve().parents[1] / "mpp_render"
 # top to bottom; a module not named here is a failure (name it in docs/structure.md first)
 LAYERS = [
     {"cli", "__main__", "package", "blender", "viewport"},              # entry points, glue
-    {"render", "tiles", "pilot", "cache", "bounce", "budget", "metrics", "exr"},  # the frame; I/O
+    {"render", "tiles", "pixelsamples", "pilot", "cache", "bounce", "budget", "metrics",
+     "exr"},                                                            # the frame; I/O
     {"precompute", "march", "firstflight", "pyramid", "parallel", "surfaces"},  # the two stages
     {"kernels", "kernels_np", "_kernels", "paths"},                     # C kernels, numpy twins
     {"lights", "gathers", "principled", "worldfog", "media", "phase", "mpp", "walk",
