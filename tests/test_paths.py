@@ -58,43 +58,6 @@ def test_twins_agree_on_a_chromatic_grid():
     assert np.abs(a - b).max() <= 1e-9 * np.abs(a).max()
 
 
-@pytest.mark.parametrize("view", [(0.3, -4.0, 2.0, 0.0), (0.0, 0.6, 0.8, 1.0)])
-def test_a_deposit_phased_from_its_own_point_twins_agree_and_match_the_points(view):
-    """With the camera given (PathInputs.view: a perspective camera's position, an
-    orthographic one's axis) a deposit's phase is the one towards the camera from where it
-    is: the twins agree to 1e-9, and the deposits equal those phased at each lattice point's
-    own direction (the towards arrays of that camera) to second order: within 1 % here,
-    where the camera is 4 m from a 2 m grid and g is 0.6 (exactly, for an orthographic
-    camera, whose direction is the same everywhere)."""
-    from mpp_render.precompute.lattice import lattice_index
-    rng = np.random.default_rng(4)
-    n, stride, vox = 20, 2, 0.1
-    ls = lattice_shape((n, n, n), stride)
-    pts = lattice_index(ls) * (stride * vox)
-    v = np.asarray(view, np.float64)
-    if v[3] > 0.5:
-        tow = np.broadcast_to(v[:3], pts.shape)
-    else:
-        tow = (v[:3] - pts) / np.linalg.norm(v[:3] - pts, axis=1, keepdims=True)
-    starts = rng.random((6, 3)) * 1.8
-    d = rng.normal(size=(6, 3))
-    d /= np.linalg.norm(d, axis=1)[:, None]
-    w, cdf = from_power(rng.random((6, 3)) + 0.1)
-    inp = PathInputs(rng.random((n, n, n)).astype(np.float32), np.concatenate(
-        [np.eye(3) / vox, np.zeros((3, 1))], 1), np.eye(3) * vox, np.array([1.0, 1.5, 2.0]),
-        np.array([2.0, 2.0, 2.5]), 0.6, stride, np.ascontiguousarray(tow).reshape(ls + (3,)),
-        starts, w, d, cdf, 5.0, 20000, 5, view=v)
-    a = trace_paths_np(dataclasses.replace(inp, n_paths=2000))
-    b = kernels.trace_paths(dataclasses.replace(inp, n_paths=2000), threads=2)
-    assert a.sum() > 0.0
-    assert np.abs(a - b).max() <= 1e-9 * np.abs(a).max()
-    own = kernels.trace_paths(inp, threads=2).sum()
-    per_point = kernels.trace_paths(dataclasses.replace(inp, view=None), threads=2).sum()
-    assert own == pytest.approx(per_point, rel=0.01)
-    if v[3] == 0.0:      # a perspective camera's directions differ across a cell
-        assert own != per_point
-
-
 def half_empty_case(n_paths=4000):
     """A 20^3 grid whose voxels with i < 10 are empty, chromatic, first scatterings at lattice
     points on the boundary plane and beside it (their tents reach both halves)."""
