@@ -251,15 +251,6 @@ def primary_rays(camera, px, py, lens=None):
     return origins, directions, t_min, t_max, axial
 
 
-def camera_view(camera) -> np.ndarray:
-    """(4,) what ``towards_camera`` needs of ``camera``, for the kernels that compute it at
-    their own points: its position and 0, or for ORTHO its +Z axis and 1."""
-    c2w = np.asarray(camera.cam_to_world, np.float64)
-    if str(camera.projection).upper() == "ORTHO":
-        return np.append(c2w[:3, 2], 1.0)
-    return np.append(c2w[:3, 3], 0.0)
-
-
 def towards_camera(camera, points):
     """Unit directions (N,3) from world ``points`` (N,3, m) to the camera: to its position
     for PERSP, its view axis reversed (+Z of the camera) for ORTHO, the same for every point."""

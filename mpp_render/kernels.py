@@ -384,7 +384,6 @@ def trace_paths_media(inp, *, threads: int = 1, should_cancel=None, backend=None
     colour, extinction = _colour(inp.scatter), _colour(inp.extinction)
     cells = cell_classes(inp.density, inp.threshold)
     light = _f64(inp.light).reshape(-1) if inp.light is not None else np.zeros(0)
-    view = _f64(inp.view).reshape(4) if inp.view is not None else None
 
     cancelled = []
 
@@ -397,7 +396,7 @@ def trace_paths_media(inp, *, threads: int = 1, should_cancel=None, backend=None
             _c.trace_paths(outs[i][0], *args, a, min(a + PATH_CHUNK, int(cuts[i + 1])), n,
                            int(inp.seed) & 0xFFFFFFFF, int(inp.max_collisions), float(ROULETTE),
                            *extra, moms[i][0], others, float(inp.threshold), cells, light,
-                           colour, extinction, view)
+                           colour, extinction)
 
     if workers == 1:
         for i in range(blocks):

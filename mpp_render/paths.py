@@ -23,15 +23,10 @@ light's propagation there.  It then flies through the voxels' density (nearest v
 tentative collisions at a rate mu = max(majorant, 1 / h) per metre (h the lattice spacing;
 null-collision tracking, Woodcock et al. 1965): at each tentative point the path deposits
 its weight / mu times the density there, times the trilinear share of each of the 8 lattice
-points around it and p(w . v) (the track-length estimate of the integral of rho L p against
-each point's tent, unbiased for any mu >= the majorant; divided by the tent's integral of
-rho, precompute.lightpaths makes M the medium's mean under the tent, so a lattice point
-beside the medium's surface is not diluted by the empty side).  v is the direction to the
-camera from the tentative point itself (``PathInputs.view``, the renderer's case: one phase
-for the 8 points; the tent's mean of p(w . v(x)) is p(w . v(y)) to second order in the
-tent's width over the camera's distance) or, without a view, from each lattice point
-(``towards``: 8 phases and a read of each point's direction, a cache miss on a large
-lattice; the tracer ran 1.25x faster with one phase on cloud_vdb's paths); a tentative
+points around it and p(w . v) at that point (the track-length estimate of the integral of
+rho L p against each point's tent, unbiased for any mu >= the majorant; divided by the
+tent's integral of rho, precompute.lightpaths makes M the medium's mean under the tent, so
+a lattice point beside the medium's surface is not diluted by the empty side); a tentative
 point is a real collision with probability P = rho sigma_t,max / mu.  Chromatic media use
 spectral tracking (Kutz et al. 2017, "Spectral and decomposition tracking"): P =
 rho sigma_t,max / (rho sigma_t,max + mu - rho sigma_t,min), so that a null collision stays
@@ -200,9 +195,7 @@ class PathInputs:
     coloured medium.  ``extinction``: None, or float32 (X,Y,Z,3) per voxel the density each
     channel's extinction reads (media.PreparedMedium.extinction_density: sigma_t[c] times
     channel c, at most ``density``), read at the nearest voxel (``_extinction_density``);
-    the collisions are then by spectral tracking.  ``view``: None, or camera.camera_view of
-    the camera every ``towards`` points to: a deposit's phase is then the one towards the
-    camera from the deposit's own point (module docstring), ``towards`` is not read."""
+    the collisions are then by spectral tracking."""
 
     density: np.ndarray
     w2i: np.ndarray
@@ -235,7 +228,6 @@ class PathInputs:
     light: Optional[np.ndarray] = None
     scatter: Optional[np.ndarray] = None
     extinction: Optional[np.ndarray] = None
-    view: Optional[np.ndarray] = None
 
     @property
     def channels(self) -> int:
@@ -629,17 +621,15 @@ def trace_paths_media_np(inp: PathInputs) -> list:
                 continue
             _collide(grids[j], outs[j], tws[j], gs[j], sts[j], sss[j], mus[j], sel, alive,
                      ins[:, j], rate, kk, ev, pos, d, w, w0, hits, keep, nc, lshapes[j],
-                     outside, centre, radius, inp.max_collisions, inp.view)
+                     outside, centre, radius, inp.max_collisions)
         alive = alive[keep & (ev < MAX_EVENTS)]
     return [o.reshape(sh + (nc,)) for o, sh in zip(outs, lshapes)]
 
 
 def _collide(m, out, tw, g, st, ss, mu, coll, alive, ins, rate, kk, ev, pos, d, w, w0, hits,
-             keep, nc, lshape, outside, centre, radius, max_collisions, view=None):
+             keep, nc, lshape, outside, centre, radius, max_collisions):
     """The tentative collisions ``coll`` (a mask over ``alive``) in medium ``m``: their
-    deposits on its lattice ``out``, then real or null collisions (csrc/paths.c).  With
-    ``view`` (PathInputs.view) a deposit's phase is the one towards the camera from where it
-    is, the same on its 8 lattice points; without, each point's own from ``tw``."""
+    deposits on its lattice ``out``, then real or null collisions (csrc/paths.c)."""
     lsh = np.array(lshape)
     st_max, st_min = float(np.max(st)), float(np.min(st))
     ci = alive[coll]
@@ -663,22 +653,13 @@ def _collide(m, out, tw, g, st, ss, mu, coll, alive, ins, rate, kk, ev, pos, d, 
         fr = lat - base
         wd = w[pi] * (r / mu)[:, None]
         da = d[pi]
-        ph_at = None
-        if view is not None:
-            v = np.asarray(view, np.float64)
-            if v[3] > 0.5:
-                c = da @ v[:3]
-            else:
-                t = v[:3][None, :] - pos[pi]
-                c = _dot(da, t) / np.maximum(np.sqrt(_dot(t, t)), 1e-30)
-            ph_at = hg(c, g) if g != 0.0 else np.full(len(pi), float(hg(0.0, 0.0)))
         for corner in range(8):
             o = np.array([(corner >> 2) & 1, (corner >> 1) & 1, corner & 1])
             cc = base + o
             ok = np.all((cc >= 0) & (cc < lsh), axis=1)
             share = np.prod(np.where(o == 1, fr, 1.0 - fr), axis=1) * ok
             flat = np.ravel_multi_index(tuple(np.where(ok[:, None], cc, 0).T), lshape)
-            ph = hg(_dot(da, tw[flat]), g) if ph_at is None else ph_at
+            ph = hg(_dot(da, tw[flat]), g)
             for ch in range(3):
                 out[:, ch] += np.bincount(flat, wd[:, ch] * share * ph, minlength=len(out))
         if nc == MOMENT_CHANNELS:

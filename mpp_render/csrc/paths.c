@@ -11,7 +11,7 @@ const char trace_paths_doc[] =
     "trace_paths(out, density, w2i, i2w, sigma_s, sigma_t, g, stride, towards, starts, weights,\n"
     "            dirs, cdf, rate, path_lo, path_hi, n_paths, seed, max_collisions, roulette,\n"
     "            jitter, lobe, outside, reach, triangles, albedo, start_source, start_peak,\n"
-    "            moments, others, threshold, cells, light, colour, extinction[, view])\n"
+    "            moments, others, threshold, cells, light, colour, extinction)\n"
     "Twin of mpp_render.paths.trace_paths_np: adds to out (LX,LY,LZ,3) float64 the deposits\n"
     "of paths path_lo..path_hi-1 of n_paths towards the camera, and to moments (LX,LY,LZ,12)\n"
     "float64, unless it is empty, their moments of order 0 and 1 (paths.py, \"Moments\").\n"
@@ -28,11 +28,7 @@ const char trace_paths_doc[] =
     "each voxel's factor on sigma_s, applied at a real collision (the nearest voxel's).\n"
     "extinction: (0,0,0,3) float32, or the density's shape x 3: per voxel the density each\n"
     "channel's extinction reads (sigma_t[c] times channel c, the nearest voxel's; at most the\n"
-    "density, so the rate still bounds it), the collisions then by spectral tracking.\n"
-    "view: None, or (4,) float64: the camera's position and 0, or its +Z axis and 1 for an\n"
-    "orthographic one: a deposit's phase is then the one towards the camera from where it is\n"
-    "(camera.towards_camera there), the same on its 8 lattice points, not each point's own\n"
-    "from the towards arrays (a cache miss per point on a large lattice, and 8 phases).";
+    "density, so the rate still bounds it), the collisions then by spectral tracking.";
 
 #define MAX_EVENTS 1000000L   /* tentative collisions per path, whatever the medium */
 #define MAX_RATE_SPAN 1e6    /* rate x the grid's diagonal (m): tentative points across it */
@@ -99,9 +95,6 @@ typedef struct {
     const unsigned char *cls; /* NULL, or with thr: each cell's class (0 out, 1 in, 2 read) */
     long stride;
     const double *tw;
-    const double *view;       /* NULL, or the camera (Tracer.view): a deposit's phase is the
-                                 one towards it from where the deposit is, on all 8 lattice
-                                 points (point_phase), not each point's own from tw */
     Py_ssize_t ls[3];
     double *out;
     double *mom;              /* NULL, or (LX,LY,LZ,12) the deposits' moments */
@@ -124,9 +117,6 @@ typedef struct {
     const double *tri, *alb;  /* (T,9) corner and two edges; (T,3) diffuse albedo */
     Py_ssize_t n_tri, n_box;
     const double *box;        /* (n_box,6) lo, hi of each TRI_CHUNK triangles */
-    double view[4];           /* with has_view: the camera's position and 0 (a perspective
-                                 or panoramic camera), or its +Z axis and 1 (orthographic) */
-    int has_view;
     const double *light;      /* NULL, or the light record (LIGHT_FIELDS) whose first
                                  scatterings the lobe-0 starts are: the light's direction is
                                  drawn at the start from the emitter (light_sample) */
@@ -274,33 +264,6 @@ static void apply_colour(const PathGrid *G, const double pos[3], double w[3]) {
     for (int c = 0; c < 3; c++) w[c] *= f[c] > 0.0f ? (double)f[c] : 0.0;
 }
 
-/* The phase function towards the camera from lattice point flat of grid G (its G->tw) for a
- * path going along d; isotropic media need no direction. */
-static inline double lattice_phase(const PathGrid *G, Py_ssize_t flat, const double d[3]) {
-    if (G->g == 0.0) return hg_phase(0.0, 0.0);
-    const double *tv = G->tw + 3 * flat;
-    return hg_phase(d[0] * tv[0] + d[1] * tv[1] + d[2] * tv[2], G->g);
-}
-
-/* The phase function towards the camera (G->view) from world point p for a path going
- * along d (camera.towards_camera at p). */
-static inline double point_phase(const PathGrid *G, const double p[3], const double d[3]) {
-    if (G->g == 0.0) return hg_phase(0.0, 0.0);
-    const double *V = G->view;
-    double t[3], c;
-    if (V[3] > 0.5) {
-        c = d[0] * V[0] + d[1] * V[1] + d[2] * V[2];
-    } else {
-        double n2 = 0.0;
-        for (int a = 0; a < 3; a++) {
-            t[a] = V[a] - p[a];
-            n2 += t[a] * t[a];
-        }
-        c = (d[0] * t[0] + d[1] * t[1] + d[2] * t[2]) / fmax(sqrt(n2), 1e-30);
-    }
-    return hg_phase(c, G->g);
-}
-
 static double deposit(const PathGrid *G, const double pos[3], const double w[3], const double d[3],
                       uint32_t key, long ev) {
     double idx[3];
@@ -315,8 +278,6 @@ static double deposit(const PathGrid *G, const double pos[3], const double w[3],
         b[a] = (Py_ssize_t)fl;
         fr[a] = lat[a] - fl;
     }
-    /* with the camera given, one phase for the deposit, towards the camera from where it is */
-    double ph_at = (G->view && rho > 0.0) ? point_phase(G, pos, d) : -1.0;
     for (int corner = 0; rho > 0.0 && corner < 8; corner++) {
         int o[3] = {(corner >> 2) & 1, (corner >> 1) & 1, corner & 1};
         Py_ssize_t cc[3];
@@ -329,7 +290,8 @@ static double deposit(const PathGrid *G, const double pos[3], const double w[3],
         }
         if (!ok) continue;
         Py_ssize_t flat = (cc[0] * G->ls[1] + cc[1]) * G->ls[2] + cc[2];
-        double ph = ph_at >= 0.0 ? ph_at : lattice_phase(G, flat, d);
+        const double *tv = G->tw + 3 * flat;
+        double ph = hg_phase(d[0] * tv[0] + d[1] * tv[1] + d[2] * tv[2], G->g);
         double *o_pt = G->out + 3 * flat;
         for (int c = 0; c < 3; c++)
             o_pt[c] += (w[c] / G->mu) * rho * share * ph;
@@ -581,7 +543,6 @@ static int set_grid(PathGrid *G, const float *dens, const Py_ssize_t n[3], const
     G->mu = rate;
     G->stride = stride;
     G->tw = tw;
-    G->view = NULL;
     G->out = out;
     G->mom = mom;
     return 0;
@@ -700,12 +661,11 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
     double g, rate, roulette, jitter, outside, thr0;
     long stride, lo, hi, n_paths, max_hits, lobe;
     unsigned long seed;
-    PyObject *pview = Py_None;
-    if (!PyArg_ParseTuple(args, "OOOOOOdlOOOOOdlllklddldOOOOOOOdOOOO|O", &po, &pd, &pw2i, &pi2w,
+    if (!PyArg_ParseTuple(args, "OOOOOOdlOOOOOdlllklddldOOOOOOOdOOOO", &po, &pd, &pw2i, &pi2w,
                           &pss, &pst, &g, &stride, &ptw, &pstarts, &pws, &pdirs, &pcdf, &rate,
                           &lo, &hi, &n_paths, &seed, &max_hits, &roulette, &jitter, &lobe,
                           &outside, &preach, &ptri, &palb, &psrc, &ppeak, &pmom, &pothers, &thr0,
-                          &pcells, &plight, &pcol, &pext, &pview))
+                          &pcells, &plight, &pcol, &pext))
         return NULL;
     if (!PyTuple_Check(pothers) || PyTuple_GET_SIZE(pothers) > PATH_MEDIA - 1) {
         PyErr_SetString(PyExc_ValueError, "trace_paths: others must be a tuple of at most 7 media");
@@ -815,22 +775,6 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
             goto done;
         }
         T.light = sl[0] ? (const double *)bli.view.buf : NULL;
-    }
-    T.has_view = 0;
-    if (pview != Py_None) {
-        Buf bv = {0};
-        Py_ssize_t s4v[1] = {4};
-        if (get_buf(pview, &bv, 'd', 1, s4v, "view") < 0) goto done;
-        memcpy(T.view, bv.view.buf, sizeof T.view);
-        buf_release(&bv);
-        int fin = 1;
-        for (int a = 0; a < 4; a++) fin &= isfinite(T.view[a]) != 0;
-        if (!fin || !(T.view[3] == 0.0 || T.view[3] == 1.0)) {
-            PyErr_SetString(PyExc_ValueError, "trace_paths: view must be finite, its kind 0 or 1");
-            goto done;
-        }
-        T.has_view = 1;
-        for (int k = 0; k < T.nm; k++) T.m[k].view = T.view;
     }
     T.src = has_src ? (const float *)bq.view.buf : NULL;
     T.peak = has_src ? (const double *)bp.view.buf : NULL;

@@ -10,7 +10,7 @@ from typing import Optional
 import numpy as np
 
 from .. import kernels
-from ..camera import camera_view, towards_camera
+from ..camera import towards_camera
 from ..lights import pack_light
 from ..media import box_distance, density_from, trilinear
 from ..parallel import worker_count
@@ -215,8 +215,7 @@ class PathLattice:
     lattice points the medium fills.  ``threshold``: >= 0 for a mesh volume, whose paths fly
     through its sharp surface as the march reads it (``density`` is then the grid's values,
     density 1 where their trilinear interpolation is >= it; paths.density_at), else -1
-    (``density`` the voxels' own, read at the nearest voxel).  ``view``: camera.camera_view of
-    the camera ``towards`` points to (the C tracer computes the directions from it), or None."""
+    (``density`` the voxels' own, read at the nearest voxel)."""
 
     stride: int
     shape: tuple
@@ -229,7 +228,6 @@ class PathLattice:
     tent_mass: np.ndarray
     cells: int
     threshold: float = -1.0
-    view: Optional[np.ndarray] = None
 
     @classmethod
     def of(cls, pm, camera, resolution: int, enclosed: Optional[np.ndarray] = None):
@@ -261,7 +259,7 @@ class PathLattice:
         grid = np.ascontiguousarray(pm.grid, np.float32) if sharp else density
         return cls(stride, tuple(shape), h, grid, np.asarray(pm.w2i, np.float64), i2w,
                    towards, rate, mean_rho[..., None] * cell_volume(pm, stride),
-                   int(np.count_nonzero(mean_rho > 0.0)), threshold, camera_view(camera))
+                   int(np.count_nonzero(mean_rho > 0.0)), threshold)
 
     def paths(self, n_paths: int) -> int:
         """``n_paths``, at most ``PATHS_PER_POINT`` per lattice point the medium fills."""
@@ -328,7 +326,7 @@ def _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
                          max_collisions=max_collisions, jitter=jitter, lobe=lobe,
                          start_source=source, start_peak=peak, moments=moments,
                          others=others, threshold=lat.threshold, light=light,
-                         scatter=scatter, extinction=extinction, view=lat.view, **extra)
+                         scatter=scatter, extinction=extinction, **extra)
         got = kernels.trace_paths_media(inp, threads=worker_count(threads),
                                         should_cancel=should_cancel)
         acc = got if acc is None else [a + b for a, b in zip(acc, got)]
@@ -364,8 +362,7 @@ def _far_multiple(pm, sets, camera, n_paths, seed, threads, should_cancel, aroun
     towards = np.ascontiguousarray(towards_camera(camera, pts).reshape(tuple(shape) + (3,)))
     rate = max(float(np.max(pm.sigma_t)), 1.0 / voxel)
     lat = PathLattice(1, tuple(shape), voxel, density, w2i, np.ascontiguousarray(i2w4[:3, :3]),
-                      towards, rate, np.full(tuple(shape) + (1,), voxel ** 3), int(density.size),
-                      view=camera_view(camera))
+                      towards, rate, np.full(tuple(shape) + (1,), voxel ** 3), int(density.size))
     acc = _trace(sets, max(1, int(n_paths * FAR_PATHS)), int(seed) + 7, threads, should_cancel,
                  pm, lat, around, light=light)
     return FarField(w2i, np.ascontiguousarray(acc / voxel ** 3, np.float32))
