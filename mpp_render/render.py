@@ -19,6 +19,7 @@ from typing import Callable, Dict, List, Optional
 import numpy as np
 
 from . import cache, kernels, worldfog
+from .blasthreads import one_blas_thread
 from .march import MarchContext
 from .lights import is_dark
 from .media import prepare, smooth_light
@@ -71,7 +72,14 @@ def render(desc: SceneDescription,
     """Render one frame.  ``progress(fraction, message)`` is called between tiles;
     ``should_cancel()`` is polled between tiles and precompute chunks (Esc).  ``any_camera``:
     the precompute may be one kept for another camera position of the same scene
-    (cache.precompute_cached; the viewport's coarse picture while orbiting)."""
+    (cache.precompute_cached; the viewport's coarse picture while orbiting).  numpy's BLAS
+    runs on one thread meanwhile (blasthreads): the render's own pool fills the cores."""
+    with one_blas_thread():
+        return _render(desc, progress, should_cancel, any_camera)
+
+
+def _render(desc, progress, should_cancel, any_camera) -> RenderOutput:
+    """render()'s frame, with BLAS already on one thread."""
     st = desc.settings
     cam = desc.camera
     W, H = int(cam.width), int(cam.height)

@@ -12,7 +12,8 @@ LAYERS = [
     {"cli", "__main__", "package", "blender", "viewport"},              # entry points, glue
     {"render", "tiles", "pixelsamples", "pilot", "cache", "bounce", "budget", "metrics",
      "exr"},                                                            # the frame; I/O
-    {"precompute", "march", "firstflight", "pyramid", "parallel", "surfaces"},  # the two stages
+    {"precompute", "march", "firstflight", "pyramid", "parallel", "blasthreads",
+     "surfaces"},                                                       # the two stages
     {"kernels", "kernels_np", "_kernels", "paths"},                     # C kernels, numpy twins
     {"lights", "gathers", "principled", "worldfog", "media", "phase", "mpp", "walk",
      "lightrecord",

@@ -31,12 +31,15 @@ class MPPRenderSettings(bpy.types.PropertyGroup):
     quality: EnumProperty(
         name="Quality", default="FINAL", update=_apply_quality,
         items=[("PREVIEW", "Preview", "4 samples and the fast most-probable-path model of "
-                "multiple scattering: smooth, seconds, but biased (docs/accuracy.md)"),
+                "multiple scattering: smooth, seconds, but biased (public scenes: error median "
+                "0.09, worst 1.7; 3 s median at 160x120)"),
                ("FINAL", "Final", "16 samples at most (adaptive, Noise Threshold 0.02) and 2 "
-                "million traced light paths per light for multiple scattering: the defaults"),
+                "million traced light paths per light for multiple scattering: the defaults "
+                "(public scenes: error median 0.024, worst 0.17; 18 s median at 160x120)"),
                ("REFERENCE", "Reference", "16 samples in every pixel (Noise Threshold 0), 8 "
                 "million paths per light on a lattice twice as fine: closest to Cycles, "
-                "several times the precompute")],
+                "3-17x Final's time (public scenes: error median 0.017, 90th percentile 0.05; "
+                "100 s median at 160x120)")],
         description="Sets Samples, Noise Threshold, Multiple Scattering Paths and Resolution "
                     "together "
                     "(they stay editable). docs/usage.md gives each one's time and error on "
