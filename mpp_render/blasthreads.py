@@ -21,8 +21,9 @@ import glob
 import os
 from typing import List, Optional, Tuple
 
-_PREFIXES = ("openblas", "scipy_openblas")
-_SUFFIXES = ("", "64_")
+# (getter, setter) names: OpenBLAS's own, its 64-bit-integer builds', the scipy-openblas wheels'
+_NAMES = [(f"{pre}_get_num_threads{suf}", f"{pre}_set_num_threads{suf}")
+          for pre in ("openblas", "scipy_openblas") for suf in ("", "64_")]
 _found: Optional[List[Tuple[object, object]]] = None
 
 
@@ -45,7 +46,18 @@ def _candidates() -> List[str]:
             paths += glob.glob(os.path.join(root, pattern))
     except ImportError:
         pass
-    return list(dict.fromkeys(paths))
+    return list(dict.fromkeys(os.path.realpath(p) for p in paths))   # each file once
+
+
+def _thread_functions(lib) -> Optional[Tuple[object, object]]:
+    """The (get, set) thread-count functions ``lib`` exports, or None."""
+    for get_name, set_name in _NAMES:
+        getter, setter = getattr(lib, get_name, None), getattr(lib, set_name, None)
+        if getter is not None and setter is not None:
+            getter.argtypes, getter.restype = [], ctypes.c_int
+            setter.argtypes, setter.restype = [ctypes.c_int], None
+            return getter, setter
+    return None
 
 
 def _functions() -> List[Tuple[object, object]]:
@@ -55,21 +67,11 @@ def _functions() -> List[Tuple[object, object]]:
         _found = []
         for path in _candidates():
             try:
-                lib = ctypes.CDLL(path)
+                pair = _thread_functions(ctypes.CDLL(path))
             except OSError:
                 continue
-            for pre in _PREFIXES:
-                for suf in _SUFFIXES:
-                    setter = getattr(lib, f"{pre}_set_num_threads{suf}", None)
-                    getter = getattr(lib, f"{pre}_get_num_threads{suf}", None)
-                    if setter is not None and getter is not None:
-                        setter.argtypes, setter.restype = [ctypes.c_int], None
-                        getter.argtypes, getter.restype = [], ctypes.c_int
-                        _found.append((getter, setter))
-                        break
-                else:
-                    continue
-                break
+            if pair is not None:
+                _found.append(pair)
     return _found
 
 

@@ -208,7 +208,7 @@ class FrameMarch:
         # each sample's offset, lens point, gather bands and key, drawn for the samples taken
         draws = PixelSamples(spp, npx, int(ray_keys(st.seed + SAMPLES_SEED, index, 1)[0]),
                              order if adaptive else None)
-        lensed = self.cam.aperture > 0.0
+        lensed, hits_surfaces = self.cam.aperture > 0.0, not self.surf.empty
         taken = (1 if plan is not None else first) if adaptive else spp
         scale = plan.scale if plan is not None else 1.0
         more = plan.more[y0:y0 + th, x0:x0 + tw].ravel() if plan is not None else None
@@ -220,9 +220,10 @@ class FrameMarch:
             py = (yy[active, None] + offs[..., 1]).ravel()
             ln = draws.lens(active, batch).reshape(-1, 2) if lensed else None
             o, d, tmin, tmax, axial = primary_rays(self.cam, px, py, ln)
-            hits_surfaces = not self.surf.empty
-            bands = draws.bands(active, batch) if hits_surfaces else None
-            strata = (bands[0].ravel(), bands[1].ravel(), spp) if hits_surfaces else None
+            strata = None
+            if hits_surfaces:
+                bands = draws.bands(active, batch)
+                strata = (bands[0].ravel(), bands[1].ravel(), spp)
             ids = (active[:, None] * spp + batch[None, :]).ravel()
             r, hit, behind = self.march(index, k, rng, o, d, tmin, tmax, axial,
                                         ray_keys_at(st.seed, index, ids), strata)
