@@ -27,7 +27,7 @@ int parse_bricks(PyObject *list, int brick, const Grid *g, int ng, Bricks *out, 
 }
 
 void walk_init(Walk *w, const Grid *g, const Bricks *b, const double o[3], const double v[3]) {
-    double dims[3] = {(double)(g->nx - 1), (double)(g->ny - 1), (double)(g->nz - 1)};
+    const double *dims = g->last;
     w->b = b;
     w->sa = -INFINITY;
     w->sb = INFINITY;
@@ -124,7 +124,7 @@ double segment_majorant(const Grid *g, const Bricks *b, const double o[3], const
 
 double segment_bounds(const Grid *g, const Bricks *b, const double o[3], const double v[3],
                       double s_a, double s_b, double *least) {
-    double dims[3] = {(double)(g->nx - 1), (double)(g->ny - 1), (double)(g->nz - 1)};
+    const double *dims = g->last;
     Py_ssize_t lo[3], hi[3];
     double mn[3], mx[3];
     int partly = 0;  /* the segment leaves the grid: its least density is 0 */
@@ -161,7 +161,7 @@ double media_exit(const Grid *g, int ng, const double p[3], const double d[3], d
     for (int m = 0; m < ng; m++) {
         double o[3], v[3], lo = -INFINITY, hi = INFINITY;
         ray_to_index(&g[m], p, d, o, v);
-        double dims[3] = {(double)(g[m].nx - 1), (double)(g[m].ny - 1), (double)(g[m].nz - 1)};
+        const double *dims = g[m].last;
         for (int a = 0; a < 3; a++) {
             if (fabs(v[a]) < 1e-300) {
                 if (!(o[a] >= 0.0 && o[a] <= dims[a])) { lo = INFINITY; hi = -INFINITY; }

@@ -73,7 +73,7 @@ int parse_grids(PyObject *grids, PyObject *w2is, PyObject *sigs, PyObject *thrs,
             return -1;
         }
         out[m].data = (const float *)bufs[m].view.buf;
-        out[m].nx = sh[0]; out[m].ny = sh[1]; out[m].nz = sh[2]; out[m].nc = four_d ? sh[3] : 1;
+        grid_shape(&out[m], sh[0], sh[1], sh[2], four_d ? sh[3] : 1);
         Buf wb, sb;
         Py_ssize_t s34[2] = {3, 4}, s3[1] = {3};
         if (get_buf(PyList_GET_ITEM(w2is, m), &wb, 'd', 2, s34, "w2i") < 0) return -1;

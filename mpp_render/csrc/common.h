@@ -14,6 +14,9 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#ifdef __SSE2__
+#include <emmintrin.h>  /* SSE2: every x86-64 CPU has it (no -march flag needed) */
+#endif
 
 #define MAX_MEDIA 64
 #ifndef M_PI
@@ -37,7 +40,14 @@ typedef struct {
     double w2i[12];             /* 3x4 world -> index */
     double sig[3];
     double thr;                 /* sharp-boundary threshold, < 0 for smooth grids */
+    double last[3];             /* nx - 1, ny - 1, nz - 1: the last index per axis */
 } Grid;
+
+/* Sets grid g's shape (voxels per axis, channels per voxel) and what derives from it. */
+static inline void grid_shape(Grid *g, Py_ssize_t nx, Py_ssize_t ny, Py_ssize_t nz, Py_ssize_t nc) {
+    g->nx = nx; g->ny = ny; g->nz = nz; g->nc = nc;
+    g->last[0] = (double)(nx - 1); g->last[1] = (double)(ny - 1); g->last[2] = (double)(nz - 1);
+}
 
 static inline double density_from(const Grid *g, double v) {
     return g->thr >= 0.0 ? (v >= g->thr ? 1.0 : 0.0) : v;
@@ -47,13 +57,49 @@ static inline double density_from(const Grid *g, double v) {
  * cell lies in grid g (0 <= idx < n - 1 per axis; NaN is outside).  Truncation is the floor
  * there, without a libm call. */
 static inline int cell_floor(const double idx[3], const Grid *g, double *fx, double *fy, double *fz) {
-    if (!(idx[0] >= 0.0 && idx[1] >= 0.0 && idx[2] >= 0.0 && idx[0] < (double)(g->nx - 1) &&
-          idx[1] < (double)(g->ny - 1) && idx[2] < (double)(g->nz - 1)))
+    if (!(idx[0] >= 0.0 && idx[1] >= 0.0 && idx[2] >= 0.0 && idx[0] < g->last[0] &&
+          idx[1] < g->last[1] && idx[2] < g->last[2]))
         return 0;
     *fx = (double)(Py_ssize_t)idx[0];
     *fy = (double)(Py_ssize_t)idx[1];
     *fz = (double)(Py_ssize_t)idx[2];
     return 1;
+}
+
+/* out[c] = sum over the 8 corners q, in order, of w[q] * p[off[q] + c], for c < n: each
+ * channel's sum in double starting from 0, so the SSE2 path (two channels a lane pair, four
+ * a load) gives the same bits as the scalar one.  Reads p[off[q] + c] for c < n only. */
+static inline void corner_sums(const float *p, const Py_ssize_t off[8], const double w[8], int n,
+                               double *out) {
+    int c = 0;
+#ifdef __SSE2__
+    for (; c + 4 <= n; c += 4) {
+        __m128d lo = _mm_setzero_pd(), hi = _mm_setzero_pd();
+        for (int q = 0; q < 8; q++) {
+            __m128 f = _mm_loadu_ps(p + off[q] + c);
+            __m128d wq = _mm_set1_pd(w[q]);
+            lo = _mm_add_pd(lo, _mm_mul_pd(wq, _mm_cvtps_pd(f)));
+            hi = _mm_add_pd(hi, _mm_mul_pd(wq, _mm_cvtps_pd(_mm_movehl_ps(f, f))));
+        }
+        _mm_storeu_pd(out + c, lo);
+        _mm_storeu_pd(out + c + 2, hi);
+    }
+    for (; c + 2 <= n; c += 2) {
+        __m128d acc = _mm_setzero_pd();
+        for (int q = 0; q < 8; q++) {
+            double two;   /* two floats, loaded as one 8-byte word wherever they lie */
+            memcpy(&two, p + off[q] + c, sizeof two);
+            __m128 f = _mm_castpd_ps(_mm_set_sd(two));
+            acc = _mm_add_pd(acc, _mm_mul_pd(_mm_set1_pd(w[q]), _mm_cvtps_pd(f)));
+        }
+        _mm_storeu_pd(out + c, acc);
+    }
+#endif
+    for (; c < n; c++) {
+        double v = 0.0;
+        for (int q = 0; q < 8; q++) v += w[q] * (double)p[off[q] + c];
+        out[c] = v;
+    }
 }
 
 /* Trilinear fetch of channel range [c0, c0+nc_out) at index coords; zeros outside. */
@@ -72,11 +118,7 @@ static inline int trilinear(const Grid *g, const double idx[3], int c0, int nc_o
                    tx * (1 - ty) * (1 - tz),       tx * (1 - ty) * tz,
                    tx * ty * (1 - tz),             tx * ty * tz};
     Py_ssize_t off[8] = {0, sz, sy, sy + sz, sx, sx + sz, sx + sy, sx + sy + sz};
-    for (int c = 0; c < nc_out; c++) {
-        double v = 0.0;
-        for (int q = 0; q < 8; q++) v += w[q] * (double)p[off[q] + c];
-        out[c] = v;
-    }
+    corner_sums(p, off, w, nc_out, out);
     return 1;
 }
 
@@ -111,7 +153,7 @@ static inline double tri_get1(const Tri *t, int c) {
 }
 
 static inline void tri_get(const Tri *t, int c0, int n, double *out) {
-    for (int c = 0; c < n; c++) out[c] = tri_get1(t, c0 + c);
+    corner_sums(t->p + c0, t->off, t->w, n, out);
 }
 
 /* out = exp(-x) per channel; one exp when the three are equal (grey media). */
@@ -130,10 +172,10 @@ static inline void to_index(const Grid *g, const double x[3], double idx[3]) {
 
 /* floor(v) clamped to [lo, hi] (lo for NaN): a safe index from any double. */
 static inline Py_ssize_t floor_clamp(double v, Py_ssize_t lo, Py_ssize_t hi) {
-    double f = floor(v);
-    if (!(f > (double)lo)) return lo;
-    if (f > (double)hi) return hi;
-    return (Py_ssize_t)f;
+    if (!(v >= (double)lo + 1.0)) return lo;   /* floor(v) <= lo, or NaN */
+    if (v >= (double)hi) return hi;            /* floor(v) >= hi */
+    Py_ssize_t t = (Py_ssize_t)v;              /* |v| is within the index range here */
+    return (double)t > v ? t - 1 : t;          /* truncation to the floor below 0 */
 }
 
 /* Parse parallel lists of grids, (3,4) maps and RGB coefficients (buffers.c). */

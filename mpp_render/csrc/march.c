@@ -120,12 +120,12 @@ static int read_level(const Grid *lv, const double idx[3], const double d[3], do
     return 1;
 }
 
+/* Medium m's multiply scattered radiance towards -d at the point of index coordinates idx_w
+ * (its field's) and density rho, from the levels lv of each of the nl lights (cosl: the cosines
+ * from their directions to -d). */
 static void multiple_source_c(const MS *ms, const Grid *lv, int m, int nl, const double *cosl,
-                              double rho, const double x[3], const double d[3],
-                              const double *w2i, double out[3]) {
-    double idx_w[3];
-    for (int r = 0; r < 3; r++)
-        idx_w[r] = w2i[4 * r] * x[0] + w2i[4 * r + 1] * x[1] + w2i[4 * r + 2] * x[2] + w2i[4 * r + 3];
+                              double rho, const double idx_w[3], const double d[3],
+                              double out[3]) {
     out[0] = out[1] = out[2] = 0.0;
     const int flat = ms->flat[m];
     Py_ssize_t i = 0;
@@ -146,7 +146,7 @@ static void multiple_source_c(const MS *ms, const Grid *lv, int m, int nl, const
         double stride = ms->stride[m][l];
         for (int k = 0; k < K; k++) {
             const double *e0 = tab + ((Py_ssize_t)k * ms->nr + i) * 6, *e1 = e0 + 6;
-            double scale = stride * ldexp(1.0, k), idx[3], q[3];
+            double scale = stride * (double)(1L << k), idx[3], q[3];
             for (int a = 0; a < 3; a++) idx[a] = idx_w[a] / scale;
             if (read_level(&lv[f0 + k], idx, d, q)) {
                 if (flat) {
@@ -226,6 +226,7 @@ typedef struct {
     Buf bo, bd, b0, b1, bax, bk, bl, btab, gb[MAX_MEDIA], btabs[MAX_MEDIA], kb[MAX_MEDIA];
     int ntabs, nkb, nlv;
     Buf *lvb;
+    int sun[MAX_LIGHTS];                   /* a sun: the same light at every point */
 } March;
 
 static void march_release(March *c) {
@@ -395,7 +396,7 @@ static int parse_multiple(March *c, PyObject *pms) {
         }
         Grid *lv = &c->lv[i];
         lv->data = (const float *)c->lvb[i].view.buf;
-        lv->nx = sh[0]; lv->ny = sh[1]; lv->nz = sh[2]; lv->nc = sh[3];
+        grid_shape(lv, sh[0], sh[1], sh[2], sh[3]);
         lv->thr = -1.0;
     }
     Py_ssize_t nr = -1;
@@ -522,6 +523,7 @@ static void march_prepare(March *c) {
     for (Py_ssize_t l = 0; l < c->nl; l++) {
         const double *L = c->LR + l * LIGHT_FIELDS;
         int kind = (int)L[L_KIND];
+        c->sun[l] = kind == KIND_SUN;
         c->jitter[l] = kind == KIND_AREA || ((kind == KIND_POINT || kind == KIND_SPOT) && L[L_RADIUS] > 0.0);
         if (!((kind == KIND_POINT || kind == KIND_SPOT) && L[L_RADIUS] > 0.0)) c->disc_reach[l] = 0.0;
     }
@@ -537,6 +539,9 @@ static void march_prepare(March *c) {
  * and distance dc to the centre, distance ds to the emitting point(s) sampled (light_sample). */
 typedef struct {
     double wi[MAX_LIGHTS][3], e[MAX_LIGHTS][3], wc[MAX_LIGHTS][3], dc[MAX_LIGHTS], ds[MAX_LIGHTS];
+    /* the last phase function value of each light: at cosine pc with anisotropy pg, pp (a
+     * sun's cosine is the same all along a ray); pc NaN: none yet */
+    double pc[MAX_LIGHTS], pg[MAX_LIGHTS], pp[MAX_LIGHTS];
 } LightsAt;
 
 /* What the media add at one march sample: extinction, the single-scattered, multiple-scattered
@@ -575,9 +580,12 @@ static int super_step_count(const March *c, const double o[3], const double d[3]
     return n_sub;
 }
 
-/* Every light at x, march step k of the ray with random key `key`. */
-static void sample_lights(const March *c, const double x[3], uint32_t key, long k, LightsAt *la) {
+/* Every light at x, march step k of the ray with random key `key`; with `again`, the ray's
+ * lights sampled before, only those whose sample depends on x (all but suns). */
+static void sample_lights(const March *c, const double x[3], uint32_t key, long k, int again,
+                          LightsAt *la) {
     for (Py_ssize_t l = 0; l < c->nl; l++) {
+        if (again && c->sun[l]) continue;
         double u1 = 0.5, u2 = 0.5;
         if (c->jitter[l]) { u1 = uniform01(key, k, 2 * l); u2 = uniform01(key, k, 2 * l + 1); }
         light_sample(c->LR + l * LIGHT_FIELDS, x, u1, u2, la->wi[l], la->e[l], la->wc[l], &la->dc[l],
@@ -587,7 +595,7 @@ static void sample_lights(const March *c, const double x[3], uint32_t key, long 
 
 /* Medium m's part of the sources at x (seen along d), added to s. */
 static void medium_sources(const March *c, int m, const double x[3], const double d[3],
-                           const LightsAt *la, Sources *s) {
+                           LightsAt *la, Sources *s) {
     const Grid *g = &c->g[m];
     double idx[3], v[MAX_CH];
     to_index(g, x, idx);
@@ -598,9 +606,10 @@ static void medium_sources(const March *c, int m, const double x[3], const doubl
         tri_get(&tw, c->emc[m], 3, ev);
         for (int a = 0; a < 3; a++) s->src_em[a] += ev[a];
     }
-    double rho = density_from(g, tri_get1(&tw, 0));  /* the density first */
+    v[0] = tri_get1(&tw, 0);
+    double rho = density_from(g, v[0]);  /* the density first */
     if (!(rho > 0.0)) return;
-    tri_get(&tw, 0, (int)g->nc, v);
+    tri_get(&tw, 1, (int)g->nc - 1, v + 1);
     if (c->xc[m] >= 0)  /* the extinction's colour varies: its own density per channel */
         for (int a = 0; a < 3; a++) s->sig_t[a] += v[c->xc[m] + a] * g->sig[a];
     else
@@ -627,7 +636,10 @@ static void medium_sources(const March *c, int m, const double x[3], const doubl
         int cb = c->use_ms ? c->beam[l] : -1;
         const double *wi = la->wi[l];
         double cs = -(wi[0] * d[0] + wi[1] * d[1] + wi[2] * d[2]);
-        double p = hg_phase(cs, c->gg[m]);
+        if (!(cs == la->pc[l] && c->gg[m] == la->pg[l])) {
+            la->pc[l] = cs; la->pg[l] = c->gg[m]; la->pp[l] = hg_phase(cs, c->gg[m]);
+        }
+        double p = la->pp[l];
         exp3(tau, tau);
         double *to = c->indirect[l] ? ind_inc : inc;  /* a bounce's light: multiple */
         for (int a = 0; a < 3; a++) to[a] += p * la->e[l][a] * tau[a];
@@ -648,7 +660,7 @@ static void medium_sources(const March *c, int m, const double x[3], const doubl
             const double *wi = la->wi[l];
             cosl[l] = -(wi[0] * d[0] + wi[1] * d[1] + wi[2] * d[2]);
         }
-        multiple_source_c(&c->ms, c->lv, m, (int)c->nl, cosl, rho, x, d, g->w2i, msi);
+        multiple_source_c(&c->ms, c->lv, m, (int)c->nl, cosl, rho, idx, d, msi);
         if (c->ms.amb >= 0)
             for (int a = 0; a < 3; a++) msi[a] += v[c->ms.amb + a];
         for (int a = 0; a < 3; a++) s->src_ms[a] += ss[a] * (msi[a] + beam_inc[a]);
@@ -661,17 +673,32 @@ typedef struct {
     double T[3], S[3], M[3], E[3], depth;
 } RaySums;
 
+#define FRACTION_SERIES 1e-2  /* below this optical depth step_fraction sums its series */
+
+/* (1 - exp(-x)) / x, the mean transmittance over a step of optical depth x >= 0, given
+ * att = exp(-x): from att where the cancellation costs at most 1e-14 relatively, else from
+ * its series to x^4 (truncation below 2e-13); 1 - x / 2 at or below 1e-7.  The twin's
+ * -expm1(-x) / x to those bounds. */
+static inline double step_fraction(double x, double att) {
+    if (x > FRACTION_SERIES) return (1.0 - att) / x;
+    if (!(x > 1e-7)) return 1.0 - 0.5 * x;   /* as the twin, also for x < 0 */
+    return 1.0 - x * (0.5 - x * (1.0 / 6.0 - x * (1.0 / 24.0 - x * (1.0 / 120.0))));
+}
+
 /* Integrates one step [seg, seg + hl] of constant sources s into the ray's sums (exactly, for
  * the exponential attenuation over the step); `axial` turns the ray's distance into depth. */
 static void integrate_step(const March *c, const Sources *s, double seg, double hl, double axial,
                            RaySums *r) {
-    double Tb[3] = {r->T[0], r->T[1], r->T[2]}, xt[3], att[3];
+    double Tb[3] = {r->T[0], r->T[1], r->T[2]}, xt[3], att[3], fr[3];
     for (int a = 0; a < 3; a++) xt[a] = s->sig_t[a] * hl;
     exp3(xt, att);
-    int grey = xt[0] == xt[1] && xt[1] == xt[2];
-    double frac0 = xt[0] > 1e-7 ? -expm1(-xt[0]) / xt[0] : 1.0 - 0.5 * xt[0];
+    if (xt[0] == xt[1] && xt[1] == xt[2]) {
+        fr[0] = fr[1] = fr[2] = step_fraction(xt[0], att[0]);
+    } else {
+        for (int a = 0; a < 3; a++) fr[a] = step_fraction(xt[a], att[a]);
+    }
     for (int a = 0; a < 3; a++) {
-        double frac = grey ? frac0 : (xt[a] > 1e-7 ? -expm1(-xt[a]) / xt[a] : 1.0 - 0.5 * xt[a]);
+        double frac = fr[a];
         r->S[a] += Tb[a] * s->src[a] * (frac * hl);
         r->M[a] += Tb[a] * s->src_ms[a] * (frac * hl);
         r->E[a] += Tb[a] * s->src_em[a] * (frac * hl);
@@ -701,6 +728,9 @@ static long march_ray(const March *c, Py_ssize_t r, RaySums *sums) {
     double lo[MAX_MEDIA][3], lvv[MAX_MEDIA][3];
     if (c->skip)
         for (int m = 0; m < c->ng; m++) ray_to_index(&c->g[m], o, d, lo[m], lvv[m]);
+    LightsAt la;
+    int sampled = 0;
+    for (Py_ssize_t l = 0; l < c->nl; l++) la.pc[l] = NAN;
     while (!done && K < MAX_STEPS / SUPER) {
         double s_lo = t0 + (double)(SUPER * K) * step;
         if (!(s_lo < t1)) break;
@@ -717,8 +747,8 @@ static long march_ray(const March *c, Py_ssize_t r, RaySums *sums) {
             double hl = t1 - seg < H ? t1 - seg : H;   /* the last step may end early, at t1 */
             double ts = seg + uniform01(key, k, DIM_JITTER) * hl, x[3];  /* uniform on it */
             for (int q = 0; q < 3; q++) x[q] = o[q] + d[q] * ts;
-            LightsAt la;
-            sample_lights(c, x, key, k, &la);
+            sample_lights(c, x, key, k, sampled, &la);
+            sampled = 1;
             Sources s = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}, {0, 0, 0}};
             for (int m = 0; m < c->ng; m++) medium_sources(c, m, x, d, &la, &s);
             taken++;

@@ -28,7 +28,7 @@ PyObject *py_trilinear(PyObject *self, PyObject *args) {
         Grid g;
         memset(&g, 0, sizeof g);
         g.data = (const float *)bg.view.buf;
-        g.nx = sg[0]; g.ny = sg[1]; g.nz = sg[2]; g.nc = nc;
+        grid_shape(&g, sg[0], sg[1], sg[2], nc);
         g.thr = -1.0;
         Py_BEGIN_ALLOW_THREADS
         for (Py_ssize_t q = 0; q < n; q++)  /* zeros outside [0, extent - 1) and for NaN */
