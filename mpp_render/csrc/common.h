@@ -170,6 +170,14 @@ static inline void to_index(const Grid *g, const double x[3], double idx[3]) {
         idx[r] = g->w2i[4 * r] * x[0] + g->w2i[4 * r + 1] * x[1] + g->w2i[4 * r + 2] * x[2] + g->w2i[4 * r + 3];
 }
 
+/* floor(v), without a libm call where |v| < 2^52 (x86-64 without SSE4.1 has no floor
+ * instruction): exact there; NaN, infinities and larger values go to floor itself. */
+static inline double floor_fast(double v) {
+    if (!(v > -4503599627370496.0 && v < 4503599627370496.0)) return floor(v);
+    double t = (double)(int64_t)v;   /* truncation towards 0, exact below 2^52 */
+    return t > v ? t - 1.0 : t;
+}
+
 /* floor(v) clamped to [lo, hi] (lo for NaN): a safe index from any double. */
 static inline Py_ssize_t floor_clamp(double v, Py_ssize_t lo, Py_ssize_t hi) {
     if (!(v >= (double)lo + 1.0)) return lo;   /* floor(v) <= lo, or NaN */

@@ -161,7 +161,7 @@ static inline void grid_index(const PathGrid *G, const double p[3], double idx[3
 /* The nearest voxel to index coordinates idx (the edge voxel on the box's face, or for NaN). */
 static void nearest_voxel(const PathGrid *G, const double idx[3], Py_ssize_t v[3]) {
     for (int a = 0; a < 3; a++) {
-        double f = floor(idx[a] + 0.5);
+        double f = floor_fast(idx[a] + 0.5);
         if (!(f >= 0.0)) f = 0.0;
         if (f > (double)(G->n[a] - 1)) f = (double)(G->n[a] - 1);
         v[a] = (Py_ssize_t)f;
@@ -176,7 +176,7 @@ static double density_at(const PathGrid *G, const double idx[3]) {
         Py_ssize_t i0[3];
         double fr[3];
         for (int a = 0; a < 3; a++) {
-            double f = floor(idx[a]);
+            double f = floor_fast(idx[a]);
             if (!(f >= 0.0 && f < (double)(G->n[a] - 1))) return 0.0;
             i0[a] = (Py_ssize_t)f;
             fr[a] = idx[a] - f;
@@ -209,7 +209,7 @@ static double source_at(const Tracer *TR, const double p[3]) {
     grid_index(T, p, idx);
     Py_ssize_t v[3];
     for (int r = 0; r < 3; r++) {
-        double f = floor(idx[r] + 0.5);
+        double f = floor_fast(idx[r] + 0.5);
         if (!(f >= 0.0 && f < (double)T->n[r])) return 0.0;
         v[r] = (Py_ssize_t)f;
     }
@@ -241,7 +241,7 @@ static int in_box(const PathGrid *G, const double p[3]) {
     double idx[3];
     grid_index(G, p, idx);
     for (int r = 0; r < 3; r++) {
-        double f = floor(idx[r] + 0.5);
+        double f = floor_fast(idx[r] + 0.5);
         if (!(f >= 0.0 && f < (double)G->n[r])) return 0;
     }
     return 1;
@@ -282,27 +282,35 @@ static double deposit(const PathGrid *G, const double pos[3], const double w[3],
     Py_ssize_t b[3];
     for (int a = 0; a < 3; a++) {
         lat[a] = idx[a] / (double)G->stride;
-        double fl = floor(lat[a]);
+        double fl = floor_fast(lat[a]);
         if (!(fl > -2.0)) fl = -2.0;   /* NaN guard: no corner in range */
         b[a] = (Py_ssize_t)fl;
         fr[a] = lat[a] - fl;
     }
-    for (int corner = 0; rho > 0.0 && corner < 8; corner++) {
-        int o[3] = {(corner >> 2) & 1, (corner >> 1) & 1, corner & 1};
-        Py_ssize_t cc[3];
-        double share = 1.0;
-        int ok = 1;
+    if (rho > 0.0) {
+        /* what the 8 corners share, worked out once: the weight (w / mu) rho, each axis'
+         * two shares and whether each of its two lattice points lies in the lattice (the
+         * products in the order of one corner's: the same bits) */
+        double wr[3], sh[3][2];
+        int in[3][2];
+        Py_ssize_t step[3] = {G->ls[1] * G->ls[2], G->ls[2], 1};
+        for (int c = 0; c < 3; c++) wr[c] = (w[c] / G->mu) * rho;
         for (int a = 0; a < 3; a++) {
-            cc[a] = b[a] + o[a];
-            if (cc[a] < 0 || cc[a] >= G->ls[a]) ok = 0;
-            share *= o[a] ? fr[a] : 1.0 - fr[a];
+            sh[a][0] = 1.0 - fr[a];
+            sh[a][1] = fr[a];
+            in[a][0] = b[a] >= 0 && b[a] < G->ls[a];
+            in[a][1] = b[a] + 1 >= 0 && b[a] + 1 < G->ls[a];
         }
-        if (!ok) continue;
-        Py_ssize_t flat = (cc[0] * G->ls[1] + cc[1]) * G->ls[2] + cc[2];
-        double ph = lattice_phase(G, flat, d);
-        double *o_pt = G->out + 3 * flat;
-        for (int c = 0; c < 3; c++)
-            o_pt[c] += (w[c] / G->mu) * rho * share * ph;
+        for (int corner = 0; corner < 8; corner++) {
+            int o0 = (corner >> 2) & 1, o1 = (corner >> 1) & 1, o2 = corner & 1;
+            if (!(in[0][o0] && in[1][o1] && in[2][o2])) continue;
+            double share = sh[0][o0] * sh[1][o1] * sh[2][o2];
+            Py_ssize_t flat = (b[0] + o0) * step[0] + (b[1] + o1) * step[1] + b[2] + o2;
+            double ph = lattice_phase(G, flat, d);
+            double *o_pt = G->out + 3 * flat;
+            for (int c = 0; c < 3; c++)
+                o_pt[c] += wr[c] * share * ph;
+        }
     }
     if (G->mom && rho > 0.0) {
         /* the moments, dep / (4 pi) and g d dep / (4 pi), on one corner drawn by the
