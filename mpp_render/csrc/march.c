@@ -168,21 +168,35 @@ static void multiple_source_c(const MS *ms, const Grid *lv, int m, int nl, const
 
 #define LIGHT_VARIATION 0.2  /* kernels_np.LIGHT_VARIATION */
 
+/* The light one light scatters towards the camera at a point of a ray, as light_varies weighs
+ * it, kept by the ray's distance s where it was last worked out (NaN: not yet): consecutive
+ * super-steps share an end. */
+typedef struct {
+    double s[MAX_LIGHTS], e[MAX_LIGHTS];
+} VaryMemo;
+
+static double varies_value(const double *L, const double x[3], const double d[3], double g) {
+    double wi[3], e[3], wc[3], dc, ds;
+    light_sample(L, x, 0.5, 0.5, wi, e, wc, &dc, &ds);
+    return (e[0] + e[1] + e[2]) * hg_phase(-(wi[0] * d[0] + wi[1] * d[1] + wi[2] * d[2]), g);
+}
+
 /* Whether the light a lit local light scatters towards the camera (its irradiance at its
  * centre, before the media, times the phase function of anisotropy g) differs by more than
  * LIGHT_VARIATION between the ends of the segment [s_a, s_b] of the ray o + s d: a spot's cone
  * edge, a nearby light or a forward-scattering lobe, whose shape longer steps would miss.
- * Twin of kernels_np.light_varies. */
+ * `memo` keeps the ray's last end's values.  Twin of kernels_np.light_varies. */
 static int light_varies(const double *LR, Py_ssize_t nl, const int *chan, const double o[3],
-                        const double d[3], double s_a, double s_b, double g) {
-    double xa[3], xb[3], wi[3], e[3], wc[3], dc, ds;
+                        const double d[3], double s_a, double s_b, double g, VaryMemo *memo) {
+    double xa[3], xb[3];
     for (int q = 0; q < 3; q++) { xa[q] = o[q] + d[q] * s_a; xb[q] = o[q] + d[q] * s_b; }
     for (Py_ssize_t l = 0; l < nl; l++) {
         if (chan[l] < 0 || (int)LR[l * LIGHT_FIELDS + L_KIND] == KIND_SUN) continue;
-        light_sample(LR + l * LIGHT_FIELDS, xa, 0.5, 0.5, wi, e, wc, &dc, &ds);
-        double ea = (e[0] + e[1] + e[2]) * hg_phase(-(wi[0] * d[0] + wi[1] * d[1] + wi[2] * d[2]), g);
-        light_sample(LR + l * LIGHT_FIELDS, xb, 0.5, 0.5, wi, e, wc, &dc, &ds);
-        double eb = (e[0] + e[1] + e[2]) * hg_phase(-(wi[0] * d[0] + wi[1] * d[1] + wi[2] * d[2]), g);
+        const double *L = LR + l * LIGHT_FIELDS;
+        double ea = memo->s[l] == s_a ? memo->e[l] : varies_value(L, xa, d, g);
+        double eb = varies_value(L, xb, d, g);
+        memo->s[l] = s_b;
+        memo->e[l] = eb;
         double hi = ea > eb ? ea : eb, lo = ea > eb ? eb : ea;
         if (hi > 0.0 && !(lo >= (1.0 - LIGHT_VARIATION) * hi)) return 1;
     }
@@ -555,7 +569,8 @@ typedef struct {
  * the majorant's optical depth per step <= adapt_tau.  lo, lv: the ray in each medium's index
  * coordinates. */
 static int super_step_count(const March *c, const double o[3], const double d[3],
-                            const double lo[][3], const double lv[][3], double s_lo, double s_hi) {
+                            const double lo[][3], const double lv[][3], double s_lo, double s_hi,
+                            VaryMemo *memo) {
     int n_sub = SUPER;
     if (!c->skip) return n_sub;
     double maj = 0.0;
@@ -574,7 +589,7 @@ static int super_step_count(const March *c, const double o[3], const double d[3]
     if (c->adapt && !sharp) {
         double want = ceil(maj * (s_hi - s_lo) / c->adapt_tau);
         n_sub = want < 1.0 ? 1 : (want > (double)SUPER ? SUPER : (int)want);
-        if (n_sub < SUPER && light_varies(c->LR, c->nl, c->chan, o, d, s_lo, s_hi, c->g_lobe))
+        if (n_sub < SUPER && light_varies(c->LR, c->nl, c->chan, o, d, s_lo, s_hi, c->g_lobe, memo))
             n_sub = SUPER;
     }
     return n_sub;
@@ -730,14 +745,15 @@ static long march_ray(const March *c, Py_ssize_t r, RaySums *sums) {
         for (int m = 0; m < c->ng; m++) ray_to_index(&c->g[m], o, d, lo[m], lvv[m]);
     LightsAt la;
     int sampled = 0;
-    for (Py_ssize_t l = 0; l < c->nl; l++) la.pc[l] = NAN;
+    VaryMemo memo;
+    for (Py_ssize_t l = 0; l < c->nl; l++) la.pc[l] = memo.s[l] = NAN;
     while (!done && K < MAX_STEPS / SUPER) {
         double s_lo = t0 + (double)(SUPER * K) * step;
         if (!(s_lo < t1)) break;
         double s_hi = t0 + (double)(SUPER * (K + 1)) * step;
         s_hi = s_hi < t1 ? s_hi : t1;
         int n_sub = super_step_count(c, o, d, (const double (*)[3])lo, (const double (*)[3])lvv,
-                                     s_lo, s_hi);
+                                     s_lo, s_hi, &memo);
         if (n_sub == 0) { K++; continue; }
         double H = (double)SUPER * step / (double)n_sub;
         for (int jj = 0; jj < n_sub; jj++) {
