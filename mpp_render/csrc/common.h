@@ -178,6 +178,20 @@ static inline double floor_fast(double v) {
     return t > v ? t - 1.0 : t;
 }
 
+/* fmax and fmin as glibc's x86-64 ones give them (the other argument where one is NaN; b where
+ * the two are equal), inline: the compiler calls libm for fmax itself. */
+static inline double max_d(double a, double b) {
+    if (a != a) return b;
+    if (b != b) return a;
+    return a > b ? a : b;
+}
+
+static inline double min_d(double a, double b) {
+    if (a != a) return b;
+    if (b != b) return a;
+    return a < b ? a : b;
+}
+
 /* floor(v) clamped to [lo, hi] (lo for NaN): a safe index from any double. */
 static inline Py_ssize_t floor_clamp(double v, Py_ssize_t lo, Py_ssize_t hi) {
     if (!(v >= (double)lo + 1.0)) return lo;   /* floor(v) <= lo, or NaN */

@@ -98,10 +98,10 @@ static inline double rect_solid_angle_sample(const double *L, const double x[3],
      * and the spherical rectangle's inner angles */
     double n0z = -y0 / sqrt(z2 + y0 * y0), n1z = x1 / sqrt(z2 + x1 * x1);
     double n2z = y1 / sqrt(z2 + y1 * y1), n3z = -x0 / sqrt(z2 + x0 * x0);
-    double g0 = acos(fmax(-1.0, fmin(1.0, -n0z * n1z)));
-    double g1 = acos(fmax(-1.0, fmin(1.0, -n1z * n2z)));
-    double g2 = acos(fmax(-1.0, fmin(1.0, -n2z * n3z)));
-    double g3 = acos(fmax(-1.0, fmin(1.0, -n3z * n0z)));
+    double g0 = acos(max_d(-1.0, min_d(1.0, -n0z * n1z)));
+    double g1 = acos(max_d(-1.0, min_d(1.0, -n1z * n2z)));
+    double g2 = acos(max_d(-1.0, min_d(1.0, -n2z * n3z)));
+    double g3 = acos(max_d(-1.0, min_d(1.0, -n3z * n0z)));
     double b0 = n0z, b1 = n2z, k = 2.0 * M_PI - g2 - g3, S = g0 + g1 - k;
     if (!(S > 0.0)) return -1.0;
     /* u: the angle swept from the first edge; v: the height along the chosen column */
@@ -109,14 +109,14 @@ static inline double rect_solid_angle_sample(const double *L, const double x[3],
     double sa = sin(au);
     double fu = (cos(au) * b0 - b1) / (fabs(sa) > 1e-300 ? sa : 1e-300);
     double cu = (fu > 0.0 ? 1.0 : -1.0) / sqrt(fu * fu + b0 * b0);
-    cu = fmax(-1.0, fmin(1.0, cu));
-    double xu = -(cu * z0) / sqrt(fmax(1.0 - cu * cu, 1e-300));
-    xu = fmax(x0, fmin(x1, xu));
+    cu = max_d(-1.0, min_d(1.0, cu));
+    double xu = -(cu * z0) / sqrt(max_d(1.0 - cu * cu, 1e-300));
+    xu = max_d(x0, min_d(x1, xu));
     double dist = sqrt(xu * xu + z2);
     double h0 = y0 / sqrt(dist * dist + y0 * y0), h1 = y1 / sqrt(dist * dist + y1 * y1);
     double hv = h0 + v * (h1 - h0), hv2 = hv * hv;
     double yv = hv2 < 1.0 - 1e-12 ? hv * dist / sqrt(1.0 - hv2) : y1;
-    yv = fmax(y0, fmin(y1, yv));
+    yv = max_d(y0, min_d(y1, yv));
     for (int a = 0; a < 3; a++) src[a] = x[a] + xu * ex[a] + yv * ey[a] + z0 * ez[a];
     return S;
 }

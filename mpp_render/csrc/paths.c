@@ -54,7 +54,7 @@ const char trace_paths_doc[] =
 
 /* The unit direction at cosine c and azimuth 2 pi u2 about the unit vector axis. */
 static inline void about(double c, double u2, const double axis[3], double out[3]) {
-    double st = sqrt(fmax(0.0, 1.0 - c * c)), phi = 2.0 * M_PI * u2;
+    double st = sqrt(max_d(0.0, 1.0 - c * c)), phi = 2.0 * M_PI * u2;
     double t1[3], t2[3];
     basis(axis, t1, t2);
     double cp = st * cos(phi), sp = st * sin(phi), len2 = 0.0;
@@ -229,11 +229,11 @@ static double source_at(const Tracer *TR, const double p[3]) {
  * 0 when the path ends (roulette, the collision cap, or no weight left). */
 static inline int survive(const Tracer *T, uint32_t key, long ev, double w[3], double w0,
                           long hits) {
-    double m = fmax(w[0], fmax(w[1], w[2])) / fmax(w0, 1e-300);
+    double m = max_d(w[0], max_d(w[1], w[2])) / max_d(w0, 1e-300);
     double q = m < T->roulette ? m / T->roulette : 1.0;
     int live = uniform01(key, ev, D_RR) < q;
-    for (int c = 0; c < 3; c++) w[c] /= fmax(q, 1e-300);
-    return live && hits < T->max_hits && fmax(w[0], fmax(w[1], w[2])) > 0.0;
+    for (int c = 0; c < 3; c++) w[c] /= max_d(q, 1e-300);
+    return live && hits < T->max_hits && max_d(w[0], max_d(w[1], w[2])) > 0.0;
 }
 
 /* Whether world point p lies in grid G's box (the nearest-voxel domain). */
@@ -301,11 +301,14 @@ static double deposit(const PathGrid *G, const double pos[3], const double w[3],
             in[a][0] = b[a] >= 0 && b[a] < G->ls[a];
             in[a][1] = b[a] + 1 >= 0 && b[a] + 1 < G->ls[a];
         }
+        /* all 8 corners in the lattice (away from its faces): no test per corner */
+        int all = in[0][0] && in[0][1] && in[1][0] && in[1][1] && in[2][0] && in[2][1];
+        Py_ssize_t base = b[0] * step[0] + b[1] * step[1] + b[2];
         for (int corner = 0; corner < 8; corner++) {
             int o0 = (corner >> 2) & 1, o1 = (corner >> 1) & 1, o2 = corner & 1;
-            if (!(in[0][o0] && in[1][o1] && in[2][o2])) continue;
+            if (!all && !(in[0][o0] && in[1][o1] && in[2][o2])) continue;
             double share = sh[0][o0] * sh[1][o1] * sh[2][o2];
-            Py_ssize_t flat = (b[0] + o0) * step[0] + (b[1] + o1) * step[1] + b[2] + o2;
+            Py_ssize_t flat = base + o0 * step[0] + o1 * step[1] + o2;
             double ph = lattice_phase(G, flat, d);
             double *o_pt = G->out + 3 * flat;
             for (int c = 0; c < 3; c++)
@@ -387,7 +390,7 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
         light_sample(T->light, pos, uniform01(key, 0, D_LIGHT), uniform01(key, 0, D_LIGHT + 1),
                      dl, el, wc, &dc, &ds);
         double n2 = dl[0] * dl[0] + dl[1] * dl[1] + dl[2] * dl[2];
-        if (n2 > 0.25 && n2 < 4.0 && fmax(el[0], fmax(el[1], el[2])) > 0.0) {
+        if (n2 > 0.25 && n2 < 4.0 && max_d(el[0], max_d(el[1], el[2])) > 0.0) {
             double inv = 1.0 / sqrt(n2);
             for (int a = 0; a < 3; a++) din[a] = dl[a] * inv;
         }
@@ -428,10 +431,10 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
             for (int j = 0; j < T->nm; j++)
                 if (inside[j]) rate += T->m[j].mu;
         double t = rate > 0.0 ? -log(1.0 - uniform01(key, ev, D_FLY)) / rate : INFINITY;
-        double tseg = fmin(t, tb);
+        double tseg = min_d(t, tb);
         if (T->n_tri > 0) {
             double ts;
-            Py_ssize_t k = surface_hit(T, pos, d, fmin(tseg, FAR), skip, &ts);
+            Py_ssize_t k = surface_hit(T, pos, d, min_d(tseg, FAR), skip, &ts);
             if (k >= 0) {   /* a diffuse bounce off the surface, on the side the path came from */
                 const double *e1 = T->tri + 9 * k + 3, *e2 = T->tri + 9 * k + 6;
                 double nrm[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
@@ -499,21 +502,21 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
             if (p_hit > 1.0) p_hit = 1.0;
             hit = uniform01(key, ev, D_HIT) < p_hit;
             if (!hit) {
-                double den = fmax(1.0 - p_hit, 1e-12);
+                double den = max_d(1.0 - p_hit, 1e-12);
                 for (int c = 0; c < 3; c++) w[c] *= (1.0 - stc[c] / rate) / den;
             } else {
                 for (int c = 0; c < 3; c++) w[c] *= G->ss[c] / G->st_max;
             }
         } else {
-            double real = fmax(stc[0], fmax(stc[1], stc[2]));
-            double nul = fmax(rate - fmin(stc[0], fmin(stc[1], stc[2])), 0.0);
-            p_hit = real / fmax(real + nul, 1e-300);
+            double real = max_d(stc[0], max_d(stc[1], stc[2]));
+            double nul = max_d(rate - min_d(stc[0], min_d(stc[1], stc[2])), 0.0);
+            p_hit = real / max_d(real + nul, 1e-300);
             hit = uniform01(key, ev, D_HIT) < p_hit;
             if (!hit) {
                 for (int c = 0; c < 3; c++)
-                    w[c] *= fmax(rate - stc[c], 0.0) / fmax(rate * (1.0 - p_hit), 1e-300);
+                    w[c] *= max_d(rate - stc[c], 0.0) / max_d(rate * (1.0 - p_hit), 1e-300);
             } else {
-                for (int c = 0; c < 3; c++) w[c] *= rho * G->ss[c] / fmax(rate * p_hit, 1e-300);
+                for (int c = 0; c < 3; c++) w[c] *= rho * G->ss[c] / max_d(rate * p_hit, 1e-300);
             }
         }
         if (hit) {
@@ -523,7 +526,7 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
             for (int a = 0; a < 3; a++) d[a] = nd[a];
             hits++;
             if (!survive(T, key, ev, w, w0, hits)) return;
-        } else if (!(fmax(w[0], fmax(w[1], w[2])) > 0.0)) {
+        } else if (!(max_d(w[0], max_d(w[1], w[2])) > 0.0)) {
             return;
         }
     }
@@ -545,8 +548,8 @@ static int set_grid(PathGrid *G, const float *dens, const Py_ssize_t n[3], const
     memcpy(G->w2i, w2i, sizeof G->w2i);
     memcpy(G->ss, ss, sizeof G->ss);
     memcpy(G->st, st, sizeof G->st);
-    G->st_max = fmax(G->st[0], fmax(G->st[1], G->st[2]));
-    G->st_min = fmin(G->st[0], fmin(G->st[1], G->st[2]));
+    G->st_max = max_d(G->st[0], max_d(G->st[1], G->st[2]));
+    G->st_min = min_d(G->st[0], min_d(G->st[1], G->st[2]));
     if (!(G->st_max > 0.0) || !isfinite(G->st_max)) {
         PyErr_SetString(PyExc_ValueError, "trace_paths: sigma_t must be positive and finite");
         return -1;
