@@ -264,15 +264,6 @@ static void apply_colour(const PathGrid *G, const double pos[3], double w[3]) {
     for (int c = 0; c < 3; c++) w[c] *= f[c] > 0.0f ? (double)f[c] : 0.0;
 }
 
-/* The phase function towards the camera from lattice point flat of grid G (its direction
- * G->tw) for a path going along d; an isotropic medium's needs no direction (the same value:
- * a read of tw saved, a cache miss per corner on a large lattice). */
-static inline double lattice_phase(const PathGrid *G, Py_ssize_t flat, const double d[3]) {
-    if (G->g == 0.0) return hg_phase(0.0, 0.0);
-    const double *tv = G->tw + 3 * flat;
-    return hg_phase(d[0] * tv[0] + d[1] * tv[1] + d[2] * tv[2], G->g);
-}
-
 static double deposit(const PathGrid *G, const double pos[3], const double w[3], const double d[3],
                       uint32_t key, long ev) {
     double idx[3];
@@ -301,16 +292,25 @@ static double deposit(const PathGrid *G, const double pos[3], const double w[3],
             in[a][0] = b[a] >= 0 && b[a] < G->ls[a];
             in[a][1] = b[a] + 1 >= 0 && b[a] + 1 < G->ls[a];
         }
+        /* the grid's fields in locals: the deposits' stores could alias them */
+        const double g = G->g, *tw = G->tw, ph_iso = hg_phase(0.0, 0.0);
+        /* each corner's phase function towards the camera from its lattice point (direction
+         * tw) for a path going along d; an isotropic medium's needs no direction (the same
+         * value: a read of tw saved, a cache miss per corner on a large lattice) */
+        const int iso = g == 0.0;
+        double *out = G->out;
         /* all 8 corners in the lattice (away from its faces): no test per corner */
         int all = in[0][0] && in[0][1] && in[1][0] && in[1][1] && in[2][0] && in[2][1];
         Py_ssize_t base = b[0] * step[0] + b[1] * step[1] + b[2];
+#pragma GCC unroll 8   /* each corner's offsets and shares known at compile time */
         for (int corner = 0; corner < 8; corner++) {
             int o0 = (corner >> 2) & 1, o1 = (corner >> 1) & 1, o2 = corner & 1;
             if (!all && !(in[0][o0] && in[1][o1] && in[2][o2])) continue;
             double share = sh[0][o0] * sh[1][o1] * sh[2][o2];
             Py_ssize_t flat = base + o0 * step[0] + o1 * step[1] + o2;
-            double ph = lattice_phase(G, flat, d);
-            double *o_pt = G->out + 3 * flat;
+            double ph = iso ? ph_iso : hg_phase(d[0] * tw[3 * flat] + d[1] * tw[3 * flat + 1] +
+                                                 d[2] * tw[3 * flat + 2], g);
+            double *o_pt = out + 3 * flat;
             for (int c = 0; c < 3; c++)
                 o_pt[c] += wr[c] * share * ph;
         }
