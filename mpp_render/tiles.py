@@ -171,7 +171,8 @@ class FrameMarch:
         s0 = np.maximum(worldfog.tail_start(self.fog_pm, o, d), tmin)
         t_single, t_emit, t_trans, t_multi = worldfog.tail(self.fog, self.lights, o, d, s0,
                                                            t_end, nodes=nodes, far=self.far,
-                                                           glow=self.fog_glow)
+                                                           glow=self.fog_glow,
+                                                           trilinear=kernels.trilinear)
         return dict(r, single=r["single"] + r["T"] * t_single,
                     multiple=r["multiple"] + r["T"] * t_multi,
                     emission=r["emission"] + r["T"] * t_emit, T=r["T"] * t_trans)

@@ -238,9 +238,12 @@ class FarField:
     w2i: np.ndarray
     M: np.ndarray
 
-    def read(self, x) -> np.ndarray:
-        """M (N,3) at world points ``x`` (N,3), trilinear; 0 outside the box."""
-        from .media import trilinear
+    def read(self, x, trilinear=None) -> np.ndarray:
+        """M (N,3) at world points ``x`` (N,3), trilinear; 0 outside the box.  ``trilinear``:
+        the read (media.trilinear's arguments and values; None: media.trilinear itself; the
+        frame passes the compiled kernels.trilinear)."""
+        if trilinear is None:
+            from .media import trilinear
         idx = np.asarray(x, np.float64) @ self.w2i[:, :3].T + self.w2i[:, 3]
         return trilinear(self.M, idx)   # float32 values, float64 weights: a float64 sum
 
@@ -274,7 +277,7 @@ def far_field(fields) -> Optional[FarField]:
 
 
 def tail(fog: Medium, lights: List[Light], origins, dirs, s0, s1, nodes: int = TAIL_NODES,
-         far: Optional[FarField] = None, glow=None):
+         far: Optional[FarField] = None, glow=None, trilinear=None):
     """What the homogeneous fog adds to rays o + s d over s in [s0, s1] (s1 may be inf;
     nothing where s1 <= s0), as seen from s0: ``(single (N,3), emission (N,3),
     transmittance (N,3), multiple (N,3))``, radiance in W/(m^2 sr).  Single scattering of the
@@ -285,7 +288,8 @@ def tail(fog: Medium, lights: List[Light], origins, dirs, s0, s1, nodes: int = T
     towards the camera along the stretch as sigma_s E1 (into single) and sigma_s Em (into
     multiple), exactly as in the endless fog (the surfaces' shade on it is left out beyond
     the grid).  Emission in channels without extinction over an infinite stretch would be
-    infinite; it is left out there (the caller warns)."""
+    infinite; it is left out there (the caller warns).  ``trilinear``: how ``far`` is read
+    (FarField.read)."""
     o = np.asarray(origins, np.float64)
     d = np.asarray(dirs, np.float64)
     s0 = np.asarray(s0, np.float64)
@@ -332,7 +336,7 @@ def tail(fog: Medium, lights: List[Light], origins, dirs, s0, s1, nodes: int = T
         att = np.exp(-st[None, None, :] * s[..., None])      # (M, K, 3) fog from s0 to the node
         single[live] = ss * np.sum(att * inc.reshape(len(live), nodes, 3) * w[..., None], axis=1)
         if far is not None:
-            m = far.read(x).reshape(len(live), nodes, 3)
+            m = far.read(x, trilinear).reshape(len(live), nodes, 3)
             multiple[live] = ss * np.sum(att * m * w[..., None], axis=1)
     return single, emitted, trans, multiple
 

@@ -121,6 +121,31 @@ def test_tail_reads_the_far_multiple_scattering():
     assert np.all(worldfog.tail(f, [point()], o, d, s0, s1)[3] == 0)
 
 
+def test_the_frame_reads_the_far_field_with_the_compiled_trilinear_to_the_same_values():
+    """tiles passes kernels.trilinear to the tail (FarField.read): on a far field that varies
+    voxel to voxel it gives media.trilinear's multiple scattering within 1e-12, and a read
+    that returns something else shows in the tail."""
+    from mpp_render import kernels
+    f = fog(sigma_s=(0.08, 0.08, 0.04), sigma_a=(0.02, 0.05, 0.02), g=0.5)
+    rng = np.random.default_rng(3)
+    i2w = np.eye(4) * 2.0
+    i2w[:3, 3] = -20.0
+    i2w[3, 3] = 1.0
+    far = worldfog.FarField(np.linalg.inv(i2w)[:3], rng.random((21, 21, 21, 3), np.float32))
+    n = 64
+    o = np.tile([0.0, -8.0, 0.0], (n, 1))
+    d = rng.normal(size=(n, 3)) * 0.2 + [0.0, 1.0, 0.0]
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    s0, s1 = np.full(n, 2.0), np.full(n, 25.0)
+    ref = worldfog.tail(f, [point()], o, d, s0, s1, far=far)[3]
+    got = worldfog.tail(f, [point()], o, d, s0, s1, far=far, trilinear=kernels.trilinear)[3]
+    assert ref.max() > 0.0
+    np.testing.assert_allclose(got, ref, rtol=1e-12, atol=0.0)
+    half = worldfog.tail(f, [point()], o, d, s0, s1, far=far,
+                         trilinear=lambda g, idx: 0.5 * kernels.trilinear(g, idx))[3]
+    np.testing.assert_allclose(half, 0.5 * ref, rtol=1e-12)
+
+
 def test_a_lamp_in_fog_lights_the_fog_beyond_its_grid():
     """The traced paths of a lamp in the fog leave a far field (worldfog.FarField) on a
     frustum box to the fog's view depth: its M is positive beyond the fog's grid, falls with
