@@ -14,8 +14,10 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
-#ifdef __SSE2__
-#include <emmintrin.h>  /* SSE2: every x86-64 CPU has it (no -march flag needed) */
+#if (defined(__SSE2__) || defined(_M_X64)) && !defined(MPP_NO_SIMD)
+/* SSE2: every x86-64 CPU has it (no -march flag; MSVC defines _M_X64).  MPP_NO_SIMD builds
+ * the scalar code that other CPUs run, for checking it here. */
+#include <emmintrin.h>
 #endif
 
 #define MAX_MEDIA 64
@@ -72,7 +74,7 @@ static inline int cell_floor(const double idx[3], const Grid *g, double *fx, dou
 static inline void corner_sums(const float *p, const Py_ssize_t off[8], const double w[8], int n,
                                double *out) {
     int c = 0;
-#ifdef __SSE2__
+#if (defined(__SSE2__) || defined(_M_X64)) && !defined(MPP_NO_SIMD)
     for (; c + 4 <= n; c += 4) {
         __m128d lo = _mm_setzero_pd(), hi = _mm_setzero_pd();
         for (int q = 0; q < 8; q++) {
