@@ -15,9 +15,12 @@
 #include <stdlib.h>
 #include <string.h>
 #if (defined(__SSE2__) || defined(_M_X64)) && !defined(MPP_NO_SIMD)
+#define MPP_SIMD 1
 /* SSE2: every x86-64 CPU has it (no -march flag; MSVC defines _M_X64).  MPP_NO_SIMD builds
  * the scalar code that other CPUs run, for checking it here. */
 #include <emmintrin.h>
+#else
+#define MPP_SIMD 0
 #endif
 
 #define MAX_MEDIA 64
@@ -74,7 +77,7 @@ static inline int cell_floor(const double idx[3], const Grid *g, double *fx, dou
 static inline void corner_sums(const float *p, const Py_ssize_t off[8], const double w[8], int n,
                                double *out) {
     int c = 0;
-#if (defined(__SSE2__) || defined(_M_X64)) && !defined(MPP_NO_SIMD)
+#if MPP_SIMD
     for (; c + 4 <= n; c += 4) {
         __m128d lo = _mm_setzero_pd(), hi = _mm_setzero_pd();
         for (int q = 0; q < 8; q++) {

@@ -51,4 +51,12 @@ static struct PyModuleDef moduledef = {PyModuleDef_HEAD_INIT, "_kernels",
                                        "Compiled twins of mpp_render.kernels_np.", -1, methods,
                                        NULL, NULL, NULL, NULL};
 
-PyMODINIT_FUNC PyInit__kernels(void) { return PyModule_Create(&moduledef); }
+/* SIMD: 1 where the trilinear sums run in SSE2 (common.h's corner_sums), 0 for the scalar code */
+PyMODINIT_FUNC PyInit__kernels(void) {
+    PyObject *m = PyModule_Create(&moduledef);
+    if (m && PyModule_AddIntConstant(m, "SIMD", MPP_SIMD) < 0) {
+        Py_DECREF(m);
+        return NULL;
+    }
+    return m;
+}
