@@ -80,19 +80,16 @@ def indirect_lights():
     return lights
 
 
-@needs_c
-@pytest.mark.parametrize("lights,density", [(all_lights(), 2.0), (unjittered_lights(), 2.0),
-                                            (unjittered_lights(), 0.1), (indirect_lights(), 2.0)],
-                         ids=["all", "unjittered", "unjittered-thin", "indirect"])
-def test_march_twins_agree_on_random_rays(lights, density):
-    rng = np.random.default_rng(5)
+def random_march(rng, lights, density: float, n: int):
+    """``random_media`` of ``density`` under ``lights`` (a world light too), precomputed with
+    multiple scattering, and ``n`` random downward rays through them, the smoke emitting:
+    (media, the precompute, MarchInputs)."""
     media = random_media(rng, density)
     cam = Camera("PERSP", np.eye(4), 8, 8, (-0.5, 0.5, -0.5, 0.5))
     cam.cam_to_world[:3, 3] = [0, 0, 6]
     pre = precompute(media, lights, World(np.array([0.2, 0.3, 0.5])), cam, n_dirs=8,
                      multiple=True)
     multiple = MarchContext(media, pre.fields, pre.layout, lights, 0.07, pre.multiple).multiple
-    n = TWIN_RAYS
     o, d, t0, t1 = downward_rays(rng, n, 2.0, 0.3, 2.5)
     inputs = MarchInputs(o, d, t0, t1, rng.uniform(0.5, 1, n),
                          rng.integers(0, 2**32, n, dtype=np.uint32), pre.fields,
@@ -101,6 +98,15 @@ def test_march_twins_agree_on_random_rays(lights, density):
                          [m.threshold for m in media], [m.voxel_size for m in media],
                          pack_lights(lights, pre.layout), pre.layout.ambient_channel, 0.07, 0.01,
                          1e10, multiple, [np.array([0.1, 0.2, 0.3]), np.zeros(3)])
+    return media, pre, inputs
+
+
+@needs_c
+@pytest.mark.parametrize("lights,density", [(all_lights(), 2.0), (unjittered_lights(), 2.0),
+                                            (unjittered_lights(), 0.1), (indirect_lights(), 2.0)],
+                         ids=["all", "unjittered", "unjittered-thin", "indirect"])
+def test_march_twins_agree_on_random_rays(lights, density):
+    media, _, inputs = random_march(np.random.default_rng(5), lights, density, TWIN_RAYS)
     a = kernels.march(inputs, backend="numpy")
     b = kernels.march(inputs, backend="c")
     for x, y, name in zip(a, b, MarchResult._fields):

@@ -21,30 +21,11 @@ SCRIPT = r"""
 import sys
 import numpy as np
 from mpp_render import kernels
-from mpp_render.kernels import MarchInputs, MarchResult
-from mpp_render.march import MarchContext, pack_lights
-from mpp_render.precompute import precompute
-from mpp_render.scene import Camera, World
-from rays import downward_rays
-from test_kernels import all_lights, random_media
+from mpp_render.kernels import MarchResult
+from test_kernels import all_lights, random_march
 
 assert kernels.backend() == "c", kernels.backend()
-rng = np.random.default_rng(11)
-media = random_media(rng, 2.0)
-lights = all_lights()
-cam = Camera("PERSP", np.eye(4), 8, 8, (-0.5, 0.5, -0.5, 0.5))
-cam.cam_to_world[:3, 3] = [0, 0, 6]
-pre = precompute(media, lights, World(np.array([0.2, 0.3, 0.5])), cam, n_dirs=8, multiple=True)
-multiple = MarchContext(media, pre.fields, pre.layout, lights, 0.07, pre.multiple).multiple
-n = 600
-o, d, t0, t1 = downward_rays(rng, n, 2.0, 0.3, 2.5)
-inputs = MarchInputs(o, d, t0, t1, rng.uniform(0.5, 1, n),
-                     rng.integers(0, 2**32, n, dtype=np.uint32), pre.fields,
-                     [m.w2i for m in media], [m.sigma_s for m in media],
-                     [m.sigma_t for m in media], [m.g for m in media],
-                     [m.threshold for m in media], [m.voxel_size for m in media],
-                     pack_lights(lights, pre.layout), pre.layout.ambient_channel, 0.07, 0.01,
-                     1e10, multiple, [np.array([0.1, 0.2, 0.3]), np.zeros(3)])
+_, pre, inputs = random_march(np.random.default_rng(11), all_lights(), 2.0, 600)
 r = kernels.march(inputs, backend="c")
 fields = {f"field{i}": np.asarray(f) for i, f in enumerate(pre.fields)}
 np.savez(sys.argv[1], simd=kernels._c.SIMD, **fields,
