@@ -175,12 +175,18 @@ static inline void to_index(const Grid *g, const double x[3], double idx[3]) {
         idx[r] = g->w2i[4 * r] * x[0] + g->w2i[4 * r + 1] * x[1] + g->w2i[4 * r + 2] * x[2] + g->w2i[4 * r + 3];
 }
 
-/* floor(v), without a libm call where |v| < 2^52 (x86-64 without SSE4.1 has no floor
- * instruction): exact there; NaN, infinities and larger values go to floor itself. */
+/* floor(v) for |v| < 2^52 (the caller's bound), without a libm call (x86-64 without SSE4.1
+ * has no floor instruction): truncation towards 0, one less where that rounded up. */
+static inline double floor_within(double v) {
+    double t = (double)(int64_t)v;
+    return t > v ? t - 1.0 : t;
+}
+
+/* floor(v): floor_within where |v| < 2^52, exact there; NaN, infinities and larger values go
+ * to floor itself. */
 static inline double floor_fast(double v) {
     if (!(v > -4503599627370496.0 && v < 4503599627370496.0)) return floor(v);
-    double t = (double)(int64_t)v;   /* truncation towards 0, exact below 2^52 */
-    return t > v ? t - 1.0 : t;
+    return floor_within(v);
 }
 
 /* fmax and fmin as glibc's x86-64 ones give them (the other argument where one is NaN; b where
@@ -201,8 +207,7 @@ static inline double min_d(double a, double b) {
 static inline Py_ssize_t floor_clamp(double v, Py_ssize_t lo, Py_ssize_t hi) {
     if (!(v >= (double)lo + 1.0)) return lo;   /* floor(v) <= lo, or NaN */
     if (v >= (double)hi) return hi;            /* floor(v) >= hi */
-    Py_ssize_t t = (Py_ssize_t)v;              /* |v| is within the index range here */
-    return (double)t > v ? t - 1 : t;          /* truncation to the floor below 0 */
+    return (Py_ssize_t)floor_within(v);        /* |v| is within the index range here */
 }
 
 /* Parse parallel lists of grids, (3,4) maps and RGB coefficients (buffers.c). */
