@@ -20,7 +20,8 @@ point drawn in proportion to its first-scattering power Q V (precompute.source:
 Q = sigma_s E exp(-tau), W/m^3, tent-shared from the voxels, so a tent-distributed offset of
 one lattice step per axis undoes the sharing), with the direction drawn from p about the
 light's propagation there.  It then flies through the voxels' density (nearest voxel), with
-tentative collisions at a rate mu = max(majorant, 1 / h) per metre (h the lattice spacing;
+tentative collisions at a rate mu = max(majorant, k / h) per metre (h the lattice spacing,
+k = Tuning.path_deposits, the deposits per spacing at least, via PathInputs.rate;
 null-collision tracking, Woodcock et al. 1965): at each tentative point the path deposits
 its weight / mu times the density there, times the trilinear share of each of the 8 lattice
 points around it and p(w . v) at that point (the track-length estimate of the integral of

@@ -284,7 +284,18 @@ class Tuning:
     e^-tau(u), whose mean over the step exceeds the step's transmittance by sinh(d/2)/(d/2) - 1
     = d^2/24 for tau changing by d across it, 1 % at d = 0.5, the worst case being a step
     from empty to the densest voxel (p_dragon, 1.2 of optical depth in a voxel, scored 0.041
-    against 0.040 at a voxel a step, and keeps its half voxel)."""
+    against 0.040 at a voxel a step, and keeps its half voxel).
+    ``path_deposits``: the traced paths' tentative collisions, each a deposit, per lattice
+    spacing h at least (paths.py: the rate mu = max(majorant, path_deposits / h)).  Where the
+    medium is thinner than that, the deposits are the paths' cost, and fewer of them buy more
+    paths in the same time: at 0.5 and 3 000 000 paths against 1.0 and 2 000 000 (the same
+    precompute time within 5 %), two seeds each, rel_rmse_4 on eight mesh-volume scenes fell
+    on five (colored_sphere 0.0128 -> 0.0116, p_backlit_slab 0.0344 -> 0.0292,
+    p_overlap 0.0124 -> 0.0115, p_chromatic_box 0.0138 -> 0.0110, p_sphere_g95
+    0.096 -> 0.077) and held on three (p_sphere_gneg, p_point_in_cube, slab_isotropic);
+    the first four of the eight chose it, the other four checked it.  At 0 (the majorant
+    alone) the few deposits under a tent made spikes in M (colored_sphere 0.09-0.31);
+    docs/performance.md."""
 
     skip_min_voxels: int = 1 << 20
     spot_cull: bool = True
@@ -309,6 +320,7 @@ class Tuning:
     guided_gathers: float = 0.5
     smooth_step_voxels: float = 1.0
     smooth_step_tau: float = 0.5
+    path_deposits: float = 0.5
 
 
 # The default Noise Threshold (pilot.py's unit: the standard error over sqrt(I S), S the
@@ -319,7 +331,7 @@ class Tuning:
 NOISE_THRESHOLD = 0.02
 
 # light paths per light and medium at the default quality (docs/method.md, "Traced paths")
-MULTIPLE_PATHS = 2_000_000
+MULTIPLE_PATHS = 3_000_000
 
 # What the Quality menu sets (blender/properties.py; docs/usage.md gives what each costs and
 # how close it comes on the public scenes).  Preview: the walk's smooth, biased multiple

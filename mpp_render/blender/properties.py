@@ -33,10 +33,10 @@ class MPPRenderSettings(bpy.types.PropertyGroup):
         items=[("PREVIEW", "Preview", "4 samples and the fast most-probable-path model of "
                 "multiple scattering: smooth, seconds, but biased (public scenes: error median "
                 "0.09, worst 1.7; 3 s median at 160x120)"),
-               ("FINAL", "Final", "16 samples at most (adaptive, Noise Threshold 0.02) and 2 "
+               ("FINAL", "Final", "16 samples at most (adaptive, Noise Threshold 0.02) and 3 "
                 "million traced light paths per light for multiple scattering: the defaults "
-                "(public scenes: error median 0.024, worst 0.17; 18 s median at 160x120)"),
-               ("REFERENCE", "Reference", "16 samples in every pixel (Noise Threshold 0), 8 "
+                "(public scenes: error median 0.023, worst 0.17; 9 s median at 160x120)"),
+               ("REFERENCE", "Reference", "16 samples in every pixel (Noise Threshold 0), 12 "
                 "million paths per light on a lattice twice as fine: closest to Cycles, "
                 "3-17x Final's time (public scenes: error median 0.017, 90th percentile 0.05; "
                 "100 s median at 160x120)")],

@@ -40,6 +40,7 @@ import numpy as np
 
 from .. import kernels
 from ..media import PreparedMedium
+from ..scene import Tuning
 from .fogglow import fog_glow
 from .lightpaths import PATHS_PER_POINT, PathLattice, _trace_all
 from .pathstarts import Surroundings
@@ -52,17 +53,18 @@ EMISSION_PATHS = 250_000
 
 def emission_light(pm: PreparedMedium, camera, n_paths: int, resolution: int,
                    multiple: bool, seed: int = 0, threads: int = 0, should_cancel=None,
-                   around: Optional[Surroundings] = None, partners=()):
+                   around: Optional[Surroundings] = None, partners=(),
+                   deposits: float = Tuning.path_deposits):
     """(stride, E1, Em, cross) on the light pyramid's lattice of ``pm`` (module docstring),
     float32 (LX,LY,LZ,3) W/(m^2 sr); Em None without ``multiple``.  ``n_paths`` paths (at
     most lightpaths.PATHS_PER_POINT per lattice point the medium fills), ``around`` the
     surfaces they reflect off, ``partners`` (PreparedMedium, PathLattice) the overlapping
     media they fly through too (lightpaths.traced_multiple), ``cross`` per partner its
     (E1, Em) on its lattice.  None where nothing is emitted or the medium is too dense for
-    paths."""
+    paths.  ``deposits``: Tuning.path_deposits (lightpaths.PathLattice.of)."""
     if pm.endless:   # the world fog glows everywhere: its own estimate (fogglow.py)
         return fog_glow(pm, camera, n_paths, resolution, multiple, seed=seed, threads=threads,
-                        should_cancel=should_cancel, around=around)
+                        should_cancel=should_cancel, around=around, deposits=deposits)
     e = pm.emitted()
     if e is None or camera is None:
         return None
@@ -70,7 +72,7 @@ def emission_light(pm: PreparedMedium, camera, n_paths: int, resolution: int,
         return None   # nothing its light could scatter in
     pm = flown_through(pm)
     lat = PathLattice.of(pm, camera, resolution,
-                         None if around is None else around.enclosed(pm))
+                         None if around is None else around.enclosed(pm), deposits=deposits)
     if lat is None:
         return None
     sets = voxel_starts(pm, e, lat.stride)

@@ -38,7 +38,7 @@ import numpy as np
 
 from ..parallel import run_chunks
 from ..surfaces import intersect
-from ..scene import World
+from ..scene import Tuning, World
 from ..worldfog import glow_radiance
 from .lattice import lattice_points
 from .lightdepth import density_lengths, extinction_media
@@ -54,16 +54,18 @@ DEFICIT_PATHS = 0.25
 
 def fog_glow(pm, camera, n_paths: int, resolution: int, multiple: bool, seed: int = 0,
              threads: int = 0, should_cancel=None, around: Optional[Surroundings] = None,
-             n_dirs: int = 32):
+             n_dirs: int = 32, deposits: float = Tuning.path_deposits):
     """(stride, E1, Em, []) on the path lattice of the endless fog ``pm`` (module
     docstring), float32 (LX,LY,LZ,3) W/(m^2 sr), Em None without ``multiple``; the empty
     list: no other medium's share (emissionlight.emission_light's ``cross``).  ``n_dirs``
     directions per lattice point find the surfaces round it (``surface_view``).  None where
-    the fog does not glow or its lattice cannot take paths."""
+    the fog does not glow or its lattice cannot take paths.  ``deposits``:
+    Tuning.path_deposits (lightpaths.PathLattice.of)."""
     e1_inf, em_inf = glow_radiance(pm.medium, multiple)
     if camera is None or not np.any(e1_inf + em_inf > 0.0):
         return None
-    lat = PathLattice.of(pm, camera, resolution, None if around is None else around.enclosed(pm))
+    lat = PathLattice.of(pm, camera, resolution, None if around is None else around.enclosed(pm),
+                         deposits=deposits)
     if lat is None:
         return None
     shape = tuple(lat.shape) + (3,)

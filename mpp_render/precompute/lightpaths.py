@@ -14,6 +14,7 @@ from ..camera import towards_camera
 from ..lights import pack_light
 from ..media import box_distance, density_from, trilinear
 from ..parallel import worker_count
+from ..scene import Tuning
 from ..paths import (MAX_COLLISIONS, PATH_MEDIA, PATHS_MAX_SPAN, PathInputs, PathMedium,
                      from_power, rate_span)
 from .lattice import dilate, lattice_points, paths_lattice
@@ -23,7 +24,7 @@ from .source import (CELL_POINTS, light_direction, near_light_cells, source_and_
 
 
 # paths per lattice point the medium fills, at most (the Paths setting caps the total): a
-# 65-point lattice of a mesh cube holds 270 000 such points, past the default 2 000 000 paths
+# 65-point lattice of a mesh cube holds 270 000 such points, past the default 3 000 000 paths
 PATHS_PER_POINT = 32
 FAR_RESOLUTION = 32  # voxels along the longest side of the world fog's far box (worldfog.FarField)
 FAR_PATHS = 0.25     # the far box's paths, a fraction of the grid's
@@ -32,7 +33,7 @@ FAR_PATHS = 0.25     # the far box's paths, a fraction of the grid's
 def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: int,
                     resolution: int, seed: int = 0, threads: int = 0, should_cancel=None,
                     around: Optional[Surroundings] = None, moments: bool = True,
-                    partners=()):
+                    partners=(), deposits: float = Tuning.path_deposits):
     """(stride, h, M, far, moments) for ``light`` on medium ``pm`` (its field ``fld``, the light's optical
     depth at ``channel``): M float32 (LX,LY,LZ,3) W/(m^2 sr) on the light pyramid's lattice
     (lattice.walk_lattice at ``resolution``), from ``n_paths`` paths (paths.py; at most
@@ -55,7 +56,7 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     sixth item, per partner, is what they deposited there as M (float32 (LX,LY,LZ,3), with the
     moments where these are made (LX,LY,LZ,15)), to be added to that medium's M for this
     light.  None where the medium is too dense for paths (paths.PATHS_MAX_SPAN): the caller
-    keeps the walk."""
+    keeps the walk.  ``deposits``: Tuning.path_deposits (PathLattice.of)."""
     stride, shape, h = paths_lattice(pm, resolution)
     voxels = np.zeros(pm.grid.shape[:3], np.float32)
     base, _, pts = source_and_density(pm, fld, light, channel, stride, voxels=voxels,
@@ -87,7 +88,7 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     if not sets:
         return stride, h, np.zeros(tuple(shape) + (3,), np.float32), None, None, []
     lat = PathLattice.of(pm, camera, resolution,
-                         None if around is None else around.enclosed(pm))
+                         None if around is None else around.enclosed(pm), deposits=deposits)
     if lat is None:
         return None
     n_paths = lat.paths(n_paths)
@@ -153,11 +154,12 @@ def lit_by_glow(media, i: int) -> list:
     return [j for _, j in sorted(near)[:PATH_MEDIA - 1]]
 
 
-def partner_lattice(pm, camera, resolution: int, around: Optional[Surroundings] = None):
+def partner_lattice(pm, camera, resolution: int, around: Optional[Surroundings] = None,
+                    deposits: float = Tuning.path_deposits):
     """The PathLattice other media's paths deposit on in ``pm`` (traced_multiple's
     ``partners``); None where it is too dense for paths."""
     return PathLattice.of(pm, camera, resolution,
-                          None if around is None else around.enclosed(pm))
+                          None if around is None else around.enclosed(pm), deposits=deposits)
 
 
 def tent_peak(voxels: np.ndarray, stride: int, shape) -> np.ndarray:
@@ -230,16 +232,20 @@ class PathLattice:
     threshold: float = -1.0
 
     @classmethod
-    def of(cls, pm, camera, resolution: int, enclosed: Optional[np.ndarray] = None):
+    def of(cls, pm, camera, resolution: int, enclosed: Optional[np.ndarray] = None,
+           deposits: float = Tuning.path_deposits):
         """The lattice of medium ``pm`` at ``resolution`` seen from ``camera``; None where the
         medium is too dense for paths (paths.PATHS_MAX_SPAN).  ``enclosed``: None, or bool
         (X,Y,Z) the voxels behind the scene's surfaces (Surroundings.enclosed), left out of
         the tent mass: no light reaches them, and a lattice point by a ground is the mean of
-        the medium above it."""
+        the medium above it.  ``deposits``: tentative collisions per lattice spacing h at
+        least (Tuning.path_deposits): the rate is max(majorant, deposits / h)."""
+        if not deposits > 0.0:
+            raise ValueError(f"path deposits per lattice step must be above 0, not {deposits}")
         stride, shape, h = paths_lattice(pm, resolution)
         i2w = np.asarray(pm.i2w[:3, :3], np.float64)
         density = pm.path_density()
-        rate = max(float(density.max()) * float(np.max(pm.sigma_t)), 1.0 / h)
+        rate = max(float(density.max()) * float(np.max(pm.sigma_t)), float(deposits) / h)
         if not rate_span(rate, i2w, density.shape) <= PATHS_MAX_SPAN:
             return None
         _, lpts = lattice_points(pm, shape, stride)

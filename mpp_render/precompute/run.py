@@ -88,7 +88,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
         got = []
         for j in (partners_of[mi] if of is None else of):
             if j not in partner_lats:
-                partner_lats[j] = partner_lattice(media[j], camera, path_res[j], around)
+                partner_lats[j] = partner_lattice(media[j], camera, path_res[j], around,
+                                                  tuning.path_deposits)
             if partner_lats[j] is not None:
                 got.append((j, partner_lats[j]))
         return got
@@ -173,7 +174,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                  else EMISSION_PATHS, path_res[mi], multiple,
                                  seed=seed + 7919 * mi + 6007, threads=threads,
                                  should_cancel=should_cancel, around=around,
-                                 partners=[(media[j], lat) for j, lat in near])
+                                 partners=[(media[j], lat) for j, lat in near],
+                                 deposits=tuning.path_deposits)
             if got is not None:
                 stride, once, more, cross = got
                 glowed += [(j, lat.stride) + em for (j, lat), em in zip(near, cross)]
@@ -203,7 +205,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                              path_res[mi], seed=seed + 7919 * mi + li,
                                              threads=threads, should_cancel=should_cancel,
                                              around=around, moments=tuning.gather_moments,
-                                             partners=[(media[j], lat) for j, lat in near])
+                                             partners=[(media[j], lat) for j, lat in near],
+                                             deposits=tuning.path_deposits)
                     if traced is not None:
                         for (j, _), m in zip(near, traced[5]):
                             key = (j, li)
