@@ -1,6 +1,6 @@
 """The wide suite (``shared/scenes/p_*``) held to bounds measured on it, at a cheap setting:
 half the references' resolution (scored against them box-downsampled, metrics.compare), a few
-samples, a tenth of the default traced paths, seed 0.  One scene of every kind: lights inside mesh and VDB media (point, spot,
+samples, a twentieth of the default traced paths, seed 0.  One scene of every kind: lights inside mesh and VDB media (point, spot,
 area), world fog with lamps, haze and a dense slab over a ground, backlit media, dense and
 negatively anisotropic spheres, overlapping and mixed volumes, a third-party VDB, a chromatic
 medium.  The bounds are our measurement at this setting plus 15 % (and 0.01 for the noise of
@@ -19,7 +19,7 @@ from mpp_render.exr import read_passes  # noqa: E402
 
 PERCENT = 50
 SAMPLES = {"single": 4, "full": 2}
-PATHS = 100_000   # multiple scattering's traced paths per light (a tenth of the default)
+PATHS = 150_000   # multiple scattering's traced paths per light (a twentieth of the default)
 # rel_rmse_4 measured at this setting (tests/blender/test_wide_suite.py, seed 0), x 1.15 + 0.01.
 # The full renders' bounds were set again when multiple scattering became traced paths
 # (docs/method.md 9.9; measured before -> after: p_point_in_plume 15.4 -> 0.887,
@@ -70,6 +70,12 @@ PATHS = 100_000   # multiple scattering's traced paths per light (a tenth of the
 # the same as before (seeds 0-3, before / after: p_area_in_box single 0.047 0.067 0.060
 # 0.044 / 0.079 0.032 0.021 0.072, p_point_in_plume full 0.192 0.168 0.274 0.196 / 0.283
 # 0.145 0.074 0.216); the other bounds hold and are kept.
+# PATHS 100 000 -> 150 000 when the paths began to deposit at half a tentative point per
+# lattice spacing (Tuning.path_deposits 0.5; the default paths 2 000 000 -> 3 000 000, the
+# same trade): p_spot_in_fogbox full 0.111 -> 0.169 (measured 0.1386).  Its 2 samples' noise
+# sets it: seeds 0-5 at the old setting 0.110 0.084 0.125 0.105 0.081 0.090 (seed 2 was past
+# the old bound), at the new 0.139 0.094 0.131 0.117 0.076 0.086; at the default setting it
+# went 0.028 -> 0.013 (docs/accuracy.md).  The other bounds hold and are kept.
 BOUND = {  # scene: (single, full)
     "p_area_in_box": (0.101, 0.103),
     "p_backlit_slab": (0.079, 0.122),
@@ -87,7 +93,7 @@ BOUND = {  # scene: (single, full)
     "p_slab_over_ground": (0.035, 0.074),
     "p_sphere_gneg": (0.026, 0.060),
     "p_sphere_thick": (0.036, 0.099),
-    "p_spot_in_fogbox": (0.125, 0.111),
+    "p_spot_in_fogbox": (0.125, 0.169),
     "p_vdb_and_fogbox": (0.012, 0.022),
 }
 SCENE_NAMES = sorted(BOUND)
