@@ -2,6 +2,7 @@
 closed mesh, on grids aligned with the world and turned; and the traced paths' lattice means
 leave them out (a lattice point on a ground holds the medium above it, not half of it)."""
 import numpy as np
+import pytest
 
 from mpp_render.media import prepare
 from mpp_render.precompute.enclosed import enclosed_voxels
@@ -87,3 +88,19 @@ def test_the_lattice_mean_by_a_ground_leaves_out_what_lies_under_it():
     assert np.all(b[on] < 0.75 * a[on]) and np.all(b[on] > 0.25 * a[on])
     np.testing.assert_allclose(b[above], a[above])
     assert np.all(b[z < z0 - 1.5 * free.h] == 0.0)
+
+
+def test_the_lattice_rate_follows_the_deposits_per_spacing():
+    """PathLattice.of's tentative rate is max(majorant, deposits / h) (Tuning.path_deposits),
+    and a rate of no deposits is refused."""
+    pm = medium(n=(16, 16, 16))
+    cam = Camera("PERSP", np.eye(4), 8, 8, (-0.5, 0.5, -0.5, 0.5))
+    cam.cam_to_world[:3, 3] = [0.0, 0.0, 5.0]
+    majorant = float(pm.path_density().max()) * float(np.max(pm.sigma_t))
+    for k in (0.5, 1.0, 4.0):
+        lat = PathLattice.of(pm, cam, 8, deposits=k)
+        assert lat.rate == pytest.approx(max(majorant, k / lat.h))
+    assert PathLattice.of(pm, cam, 8, deposits=1e-9).rate == pytest.approx(majorant)
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(ValueError):
+            PathLattice.of(pm, cam, 8, deposits=bad)
