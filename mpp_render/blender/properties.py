@@ -35,11 +35,11 @@ class MPPRenderSettings(bpy.types.PropertyGroup):
                 "0.09, worst 1.7; 3 s median at 160x120)"),
                ("FINAL", "Final", "16 samples at most (adaptive, Noise Threshold 0.02) and 3 "
                 "million traced light paths per light for multiple scattering: the defaults "
-                "(public scenes: error median 0.023, worst 0.17; 9 s median at 160x120)"),
+                "(public scenes: error median 0.023, worst 0.17; 10 s median at 160x120)"),
                ("REFERENCE", "Reference", "16 samples in every pixel (Noise Threshold 0), 12 "
                 "million paths per light on a lattice twice as fine: closest to Cycles, "
-                "3-17x Final's time (public scenes: error median 0.017, 90th percentile 0.05; "
-                "100 s median at 160x120)")],
+                "3-10x Final's time (public scenes: error median 0.015, 90th percentile 0.05; "
+                "68 s median at 160x120)")],
         description="Sets Samples, Noise Threshold, Multiple Scattering Paths and Resolution "
                     "together "
                     "(they stay editable). docs/usage.md gives each one's time and error on "
