@@ -14,9 +14,9 @@ from ..camera import towards_camera
 from ..lights import pack_light
 from ..media import box_distance, density_from, trilinear
 from ..parallel import worker_count
-from ..scene import Tuning
 from ..paths import (MAX_COLLISIONS, PATH_MEDIA, PATHS_MAX_SPAN, PathInputs, PathMedium,
                      from_power, rate_span)
+from ..scene import Tuning
 from .lattice import dilate, lattice_points, paths_lattice
 from .pathstarts import Surroundings, fog_starts, reach, surface_albedo, surface_starts
 from .source import (CELL_POINTS, light_direction, near_light_cells, source_and_density,
@@ -154,6 +154,15 @@ def lit_by_glow(media, i: int) -> list:
     return [j for _, j in sorted(near)[:PATH_MEDIA - 1]]
 
 
+def tentative_rate(majorant: float, h: float, deposits: float) -> float:
+    """The paths' tentative collisions per metre (paths.PathInputs.rate): the medium's
+    ``majorant`` (1/m), or ``deposits`` per lattice spacing ``h`` (m) where that is more
+    (Tuning.path_deposits; paths.py).  Raises ValueError for ``deposits`` not above 0."""
+    if not deposits > 0.0:
+        raise ValueError(f"path deposits per lattice step must be above 0, not {deposits}")
+    return max(float(majorant), float(deposits) / float(h))
+
+
 def partner_lattice(pm, camera, resolution: int, around: Optional[Surroundings] = None,
                     deposits: float = Tuning.path_deposits):
     """The PathLattice other media's paths deposit on in ``pm`` (traced_multiple's
@@ -240,12 +249,10 @@ class PathLattice:
         the tent mass: no light reaches them, and a lattice point by a ground is the mean of
         the medium above it.  ``deposits``: tentative collisions per lattice spacing h at
         least (Tuning.path_deposits): the rate is max(majorant, deposits / h)."""
-        if not deposits > 0.0:
-            raise ValueError(f"path deposits per lattice step must be above 0, not {deposits}")
         stride, shape, h = paths_lattice(pm, resolution)
         i2w = np.asarray(pm.i2w[:3, :3], np.float64)
         density = pm.path_density()
-        rate = max(float(density.max()) * float(np.max(pm.sigma_t)), float(deposits) / h)
+        rate = tentative_rate(float(density.max()) * float(np.max(pm.sigma_t)), h, deposits)
         if not rate_span(rate, i2w, density.shape) <= PATHS_MAX_SPAN:
             return None
         _, lpts = lattice_points(pm, shape, stride)
@@ -366,7 +373,9 @@ def _far_multiple(pm, sets, camera, n_paths, seed, threads, should_cancel, aroun
     lidx = np.stack(np.meshgrid(*[np.arange(s) for s in shape], indexing="ij"), -1).reshape(-1, 3)
     pts = lidx @ i2w4[:3, :3].T + i2w4[:3, 3]
     towards = np.ascontiguousarray(towards_camera(camera, pts).reshape(tuple(shape) + (3,)))
-    rate = max(float(np.max(pm.sigma_t)), 1.0 / voxel)
+    # one deposit per voxel of the far box: Tuning.path_deposits was measured on the
+    # media's own lattices only
+    rate = tentative_rate(float(np.max(pm.sigma_t)), voxel, 1.0)
     lat = PathLattice(1, tuple(shape), voxel, density, w2i, np.ascontiguousarray(i2w4[:3, :3]),
                       towards, rate, np.full(tuple(shape) + (1,), voxel ** 3), int(density.size))
     acc = _trace(sets, max(1, int(n_paths * FAR_PATHS)), int(seed) + 7, threads, should_cancel,
