@@ -4,7 +4,8 @@ The precompute (precompute/) holds one float32 field per medium on its padded gr
 (nx+2, ny+2, nz+2) with ``1 + 3 L + 6`` channels: density, the optical depth to each of the L
 lights that emit, and the world light (single and multiply scattered); 3 L more with
 multiple scattering in a forward-scattering medium (the light of each light's forward peak,
-precompute/layout.py).  ``field_bytes`` is
+precompute/layout.py); with multiple scattering the march adds 3 channels of a flat level on
+the field's voxels (march.on_field), counted here as the field's.  ``field_bytes`` is
 that size; it dominates the render's memory.  When the sum over media exceeds the budget,
 the grid with the largest field is made one integer factor coarser, again and again, until
 the sum fits (so the largest grids shrink first and end up about equally coarse).
@@ -30,6 +31,7 @@ from .scene import Light, Medium, SceneDescription
 
 MB = 1 << 20  # bytes in the MB of ``Settings.memory_budget_mb``
 WORLD_CHANNELS = 6  # world light, single and multiply scattered (counted even when unused)
+ON_FIELD_CHANNELS = 3  # with multiple scattering, the march's flat level on the voxels
 
 
 def field_channels(lights: Sequence[Light], beams: bool = False) -> int:
@@ -39,9 +41,12 @@ def field_channels(lights: Sequence[Light], beams: bool = False) -> int:
     return 1 + per_light * sum(1 for light in lights if not is_dark(light)) + WORLD_CHANNELS
 
 
-def field_bytes(shape: Tuple[int, ...], lights: Sequence[Light], beams: bool = False) -> int:
-    """Bytes of the float32 precompute field of a medium whose density has ``shape``."""
-    return 4 * field_channels(lights, beams) * int(np.prod([int(s) + 2 for s in shape]))
+def field_bytes(shape: Tuple[int, ...], lights: Sequence[Light], beams: bool = False,
+                multiple: bool = False) -> int:
+    """Bytes of the float32 precompute field of a medium whose density has ``shape``, with
+    ``multiple`` (multiple scattering on) the march's level on its voxels too."""
+    channels = field_channels(lights, beams) + (ON_FIELD_CHANNELS if multiple else 0)
+    return 4 * channels * int(np.prod([int(s) + 2 for s in shape]))
 
 
 def has_beams(media: Sequence[Medium], multiple: bool) -> bool:
@@ -57,7 +62,7 @@ def reduced_shape(shape: Tuple[int, ...], factor: int) -> Tuple[int, ...]:
 
 
 def plan(shapes: Sequence[Tuple[int, ...]], lights: Sequence[Light], budget_mb: float,
-         beams: bool = False) -> List[int]:
+         beams: bool = False, multiple: bool = False) -> List[int]:
     """Integer downsampling factor of each grid (1: kept) so the fields of all fit in
     ``budget_mb`` MB (<= 0: unlimited).  The grid with the largest field is coarsened one
     factor at a time; when even one voxel per medium would not fit, the factors stop there."""
@@ -65,7 +70,7 @@ def plan(shapes: Sequence[Tuple[int, ...]], lights: Sequence[Light], budget_mb: 
     if budget_mb <= 0 or not shapes:
         return factors
     budget = float(budget_mb) * MB
-    sizes = [field_bytes(s, lights, beams) for s in shapes]
+    sizes = [field_bytes(s, lights, beams, multiple) for s in shapes]
     while sum(sizes) > budget:
         order = sorted(range(len(shapes)), key=lambda i: -sizes[i])
         i = next((i for i in order if max(reduced_shape(shapes[i], factors[i])) > 1), None)
@@ -77,7 +82,7 @@ def plan(shapes: Sequence[Tuple[int, ...]], lights: Sequence[Light], budget_mb: 
         while f < max(shapes[i]) and reduced_shape(shapes[i], f) == now:
             f += 1
         factors[i] = f
-        sizes[i] = field_bytes(reduced_shape(shapes[i], f), lights, beams)
+        sizes[i] = field_bytes(reduced_shape(shapes[i], f), lights, beams, multiple)
     return factors
 
 
@@ -138,7 +143,7 @@ def fit_media(media: Sequence[Medium], lights: Sequence[Light], budget_mb: float
     shapes = [tuple(np.shape(m.density)) for m in media]
     if any(len(s) != 3 for s in shapes):  # prepare() reports those
         return list(media)
-    factors = plan(shapes, lights, budget_mb, has_beams(media, multiple))
+    factors = plan(shapes, lights, budget_mb, has_beams(media, multiple), bool(multiple))
     out, done = [], {}
     for m, shape, f in zip(media, shapes, factors):
         if f == 1:

@@ -162,15 +162,15 @@ def light_sweep(out, channel: int, job: SweepJob, *, backend=None):
 
 
 def upsample_into(field, channel, lattice, stride, flat, *, backend=None):
-    """A lattice's trilinear values written into ``field`` at voxels ``flat``
-    (kernels_np.upsample_into)."""
+    """A lattice's trilinear values written into ``field`` at voxels ``flat`` (None: every
+    voxel; kernels_np.upsample_into)."""
     if not _on_c(backend):
         return kernels_np.upsample_into(field, channel, lattice, stride, flat)
     if not (isinstance(field, np.ndarray) and field.dtype == np.float32 and field.flags.c_contiguous
             and field.flags.writeable and field.ndim == 4):
         raise ValueError("upsample_into: field must be a writable C-contiguous (X,Y,Z,C) float32 array")
     _c.upsample_into(field, int(channel), _f32(lattice), int(stride),
-                     np.ascontiguousarray(flat, np.int64).reshape(-1))
+                     None if flat is None else np.ascontiguousarray(flat, np.int64).reshape(-1))
 
 
 def trilinear(grid, idx, *, backend=None):
@@ -194,10 +194,15 @@ class LevelField(NamedTuple):
 
 
 class MultipleInputs(NamedTuple):
-    """The march's multiple scattering."""
+    """The march's multiple scattering.  ``on_field``: None, or per medium None or its one
+    level (float32 (X,Y,Z,3), the radiance 4 pi M of its lights' summed level before the flat
+    table's weight) resampled on its field's voxels (march.on_field), read with the field's
+    own trilinear stencil; such a medium's table is flat (march.FLAT_TABLE) and its
+    ``per_medium`` entry holds no level."""
     ambient: int                                    # the world light's multiple channel, or -1
     per_medium: List[List[Optional[LevelField]]]    # per medium, per light (None: no pyramid)
     tables: List[np.ndarray]                        # per medium its walk.level_table (K, R, 6)
+    on_field: Optional[List[Optional[np.ndarray]]] = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -278,7 +283,7 @@ def march(inputs: MarchInputs, *, backend=None) -> MarchResult:
     nl = len(np.asarray(a.lights).reshape(-1, LIGHT_FIELDS))
     packed = None
     if a.multiple is not None:
-        amb_ms, per_medium, tables = a.multiple
+        amb_ms, per_medium, tables, on_field = a.multiple
         levels, table = [], np.zeros((len(a.fields), nl, 4))
         table[:, :, 0] = -1
         for m, mfs in enumerate(per_medium):
@@ -288,7 +293,9 @@ def march(inputs: MarchInputs, *, backend=None) -> MarchResult:
                 lv, stride, h = msf
                 table[m, li] = (len(levels), len(lv), stride, h)
                 levels.extend(_f32(x) for x in lv)
-        packed = (int(amb_ms), levels, table, [_f64(t) for t in tables], LOG_RHO0, DLOG_RHO)
+        packed = (int(amb_ms), levels, table, [_f64(t) for t in tables], LOG_RHO0, DLOG_RHO,
+                  [None] * len(a.fields) if on_field is None else
+                  [None if f is None else _f32(f) for f in on_field])
     s, t, d, m, k, e = _c.march(
         _f64(a.origins).reshape(n, 3), _f64(a.dirs).reshape(n, 3), _f64(a.t0).reshape(n),
         _f64(a.t1).reshape(n), _f64(a.axial).reshape(n),

@@ -260,10 +260,12 @@ def upsample(lattice, stride, shape):
 
 def upsample_into(field, channel, lattice, stride, flat):
     """Write ``upsample(lattice, stride, field.shape[:3])`` into
-    ``field[..., channel:channel + C]`` at the flat voxel indices ``flat`` only (C = the
-    lattice's channels; ``field`` (X,Y,Z,F) float32, modified in place)."""
+    ``field[..., channel:channel + C]`` at the flat voxel indices ``flat`` only (None: every
+    voxel; C = the lattice's channels; ``field`` (X,Y,Z,F) float32, modified in place)."""
     nc = lattice.shape[3]
     fine = upsample(lattice, int(stride), field.shape[:3]).reshape(-1, nc)
+    if flat is None:
+        flat = slice(None)
     field.reshape(-1, field.shape[3])[flat, channel:channel + nc] = fine[flat]
 
 
@@ -478,7 +480,8 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
     packed records; ``ambient`` the world-light channel or -1.  ``step`` metres.
     ``multiple``: None, or a kernels.MultipleInputs (ambient_ms channel or -1, per medium a
     list with, per light, None or the kernels.LevelField (levels, stride, h) of its
-    MultipleField, per medium its walk.level_table) to accumulate multiple scattering too.
+    MultipleField, per medium its walk.level_table, and per medium None or its flat level on
+    its field's voxels) to accumulate multiple scattering too.
     (kernels.MarchInputs holds these arguments as one record; kernels.march takes it.)
 
     ``emissions``: None or per medium the RGB emitted radiance per metre (W/(m^3 sr)), given
@@ -644,7 +647,7 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
                 src_ms += ss * ind_inc
                 if multiple is not None:
                     src_ms += ss * beam_inc
-                    amb_ms, per_medium, tables = multiple
+                    amb_ms, per_medium, tables, on_field = multiple
                     ms_fields = per_medium[mi]
                     live = np.flatnonzero(rho > 0)
                     if live.size:
@@ -653,6 +656,10 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
                         cos = -np.einsum("lij,ij->li", wd, d[live])
                         ms_inc = multiple_source(ms_fields, tables[mi], rho[live], x[live], w2is[mi], cos,
                                                  d[live])
+                        if on_field is not None and on_field[mi] is not None:
+                            # the level on the field's voxels, weighed by the flat table
+                            ms_inc += _fetch(on_field[mi], w2is[mi], x[live], 0, 3) * (
+                                tables[mi][0, 0, :3] * hg(np.zeros(1), 0.0)[0])
                         if amb_ms >= 0:
                             ms_inc += v[live, amb_ms:amb_ms + 3]
                         src_ms[live] += ss[live] * ms_inc

@@ -116,23 +116,30 @@ class MarchContext:
         if self.multiple_fields is not None:
             amb = self.layout.ambient_multiple_channel
             from .walk import level_table
-            per_medium, tables = [], []
-            for pm, mfs in zip(self.media, self.multiple_fields):
+            per_medium, tables, on = [], [], []
+            for pm, mfs, fld in zip(self.media, self.multiple_fields, self.fields):
                 ref = next((m for m in mfs if m is not None), None)
                 table = np.zeros((1, len(RHO_TABLE), 6)) if ref is None else \
                     level_table(pm.g, pm.sigma_s, pm.sigma_a, ref.h, len(ref.levels))
+                on.append(None)
                 if ref is not None and (ref.traced or ref.flat):
                     # one level a light: the traced paths' M (paths.py), or a mesh volume's
                     # pyramids flattened by the precompute (precompute.flatten): summed
-                    total = sum(self.level_of(m) for m in mfs if m is not None)
-                    per_medium.append([LevelField([np.ascontiguousarray(total, np.float32)],
-                                                  ref.stride, ref.h)] + [None] * (len(mfs) - 1))
+                    total = np.ascontiguousarray(
+                        sum(self.level_of(m) for m in mfs if m is not None), np.float32)
                     tables.append(FLAT_TABLE)
+                    on[-1] = on_field(total, ref.stride, fld.shape[:3])
+                    if on[-1] is not None:
+                        per_medium.append([None] * len(mfs))
+                        continue
+                    per_medium.append([LevelField([total], ref.stride, ref.h)]
+                                      + [None] * (len(mfs) - 1))
                     continue
                 per_medium.append([None if m is None else LevelField(m.levels, m.stride, m.h)
                                    for m in mfs])
                 tables.append(table)
-            self.multiple = MultipleInputs(-1 if amb is None else amb, per_medium, tables)
+            self.multiple = MultipleInputs(-1 if amb is None else amb, per_medium, tables,
+                                           on if any(f is not None for f in on) else None)
 
     def level_of(self, msf) -> np.ndarray:
         """The level a traced or flattened MultipleField gives the march: its M towards the
@@ -171,6 +178,26 @@ class MarchContext:
 # Tuning.flatten says so (precompute.lightpyramid.flattens).
 FLAT_TABLE = np.concatenate([np.full((1, len(RHO_TABLE), 3), 4.0 * np.pi),
                              np.zeros((1, len(RHO_TABLE), 3))], axis=2)
+
+
+def on_field(level: np.ndarray, stride, shape) -> Optional[np.ndarray]:
+    """A medium's one flat level (float32 (x,y,z,3), its point j at field index j ``stride``)
+    on the field's voxels ``shape`` (X,Y,Z): float32 (X,Y,Z,3), its trilinear values there
+    (kernels.upsample_into), or None where that would read differently.  A trilinear function
+    is trilinear on each sub-cell of its cells, so with an integer stride the field's own
+    trilinear stencil reads the same values the level's would (to float32 rounding) while
+    the march sets up one stencil a sample, not two; that needs a level of 3 channels (not
+    the gathers' 12 of moments) that covers the field (its last point at or beyond the
+    field's last voxel on each axis).  Costs about 12 bytes a voxel, a quarter to a third of
+    the field's own (budget.py counts them)."""
+    s = float(stride)
+    if level.ndim != 4 or level.shape[3] != 3 or not (s >= 1.0 and s.is_integer()):
+        return None
+    if any((level.shape[a] - 1) * s < shape[a] - 1 for a in range(3)):
+        return None
+    out = np.zeros(tuple(shape) + (3,), np.float32)
+    kernels.upsample_into(out, 0, level, int(s), None)
+    return out
 
 
 def _channels(per_medium):

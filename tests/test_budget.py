@@ -56,6 +56,8 @@ def test_the_beams_of_a_forward_scattering_medium_are_counted():
         unused = 0 if multiple else 3
         assert pre.fields[0].shape[-1] == field_channels([SUN, DARK], has_beams(media, multiple)) - unused
     assert field_bytes((10, 20, 30), [SUN, DARK], True) == 4 * (1 + 6 + 6) * 12 * 22 * 32
+    # multiple scattering: the march's flat level on the field's voxels (march.on_field) too
+    assert field_bytes((10, 20, 30), [SUN, DARK], True, True) == 4 * (1 + 6 + 6 + 3) * 12 * 22 * 32
     # a budget that holds the field without beams but not with them
     need = field_bytes((64,) * 3, [SUN])
     assert fit_media([cloud(64)], [SUN], 1.1 * need / MB, [])[0].density.shape == (64,) * 3

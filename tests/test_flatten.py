@@ -53,8 +53,9 @@ def test_only_mesh_volumes_are_flattened():
     pre = precompute([pm], desc.lights, desc.world, desc.camera, multiple=True)
     ctx = march.MarchContext([pm], pre.fields, pre.layout, desc.lights, 0.05, pre.multiple,
                              desc.camera)
-    per_light = ctx.multiple.per_medium[0]
-    assert len(per_light[0].levels) == 1 and per_light[1] is None
+    # the one level lies on the field's voxels (march.on_field): no level left to read
+    assert all(m is None for m in ctx.multiple.per_medium[0])
+    assert ctx.multiple.on_field[0].shape == pre.fields[0].shape[:3] + (3,)
     assert ctx.multiple.tables[0] is march.FLAT_TABLE
     cloud = prepare(Medium("cloud", np.linspace(0.1, 1.0, 24 ** 3, dtype=np.float32).reshape(
         (24,) * 3), desc.media[0].index_to_world, desc.media[0].sigma_s, desc.media[0].sigma_a, 0.5))
@@ -62,6 +63,7 @@ def test_only_mesh_volumes_are_flattened():
     ctx = march.MarchContext([cloud], pre.fields, pre.layout, desc.lights, 0.05, pre.multiple,
                              desc.camera)
     assert all(m is not None and len(m.levels) > 1 for m in ctx.multiple.per_medium[0])
+    assert ctx.multiple.on_field is None
 
 
 def pre_light_fields(pm, desc, **kw):

@@ -127,11 +127,13 @@ static inline int trilinear(const Grid *g, const double idx[3], int c0, int nc_o
     return 1;
 }
 
-/* A trilinear stencil, set up once and read channel by channel. */
+/* A trilinear stencil, set up once and read channel by channel; vox is the flat index of
+ * its first corner's voxel (another grid of the same voxels reads there, tri_on). */
 typedef struct {
     const float *p;
     Py_ssize_t off[8];
     double w[8];
+    Py_ssize_t vox;
 } Tri;
 
 /* The stencil of grid g at index coordinates idx; 0 outside (zeros there). */
@@ -141,7 +143,8 @@ static inline int tri_setup(const Grid *g, const double idx[3], Tri *t) {
         return 0;
     double tx = idx[0] - fx, ty = idx[1] - fy, tz = idx[2] - fz;
     Py_ssize_t sz = g->nc, sy = g->nz * sz, sx = g->ny * sy;
-    t->p = g->data + (Py_ssize_t)fx * sx + (Py_ssize_t)fy * sy + (Py_ssize_t)fz * sz;
+    t->vox = ((Py_ssize_t)fx * g->ny + (Py_ssize_t)fy) * g->nz + (Py_ssize_t)fz;
+    t->p = g->data + t->vox * sz;
     double w[8] = {(1 - tx) * (1 - ty) * (1 - tz), (1 - tx) * (1 - ty) * tz,
                    (1 - tx) * ty * (1 - tz),       (1 - tx) * ty * tz,
                    tx * (1 - ty) * (1 - tz),       tx * (1 - ty) * tz,
@@ -159,6 +162,20 @@ static inline double tri_get1(const Tri *t, int c) {
 
 static inline void tri_get(const Tri *t, int c0, int n, double *out) {
     corner_sums(t->p + c0, t->off, t->w, n, out);
+}
+
+/* The n channels of grid `on`, which has the voxels of the grid that set up t and n channels
+ * a voxel (its corner offsets `off`, grid_offsets), at t's point: t's weights there. */
+static inline void tri_on(const Tri *t, const Grid *on, const Py_ssize_t off[8], int n,
+                          double *out) {
+    corner_sums(on->data + t->vox * n, off, t->w, n, out);
+}
+
+/* The 8 corner offsets (in floats) of a cell of grid g, from its first corner. */
+static inline void grid_offsets(const Grid *g, Py_ssize_t off[8]) {
+    Py_ssize_t sz = g->nc, sy = g->nz * sz, sx = g->ny * sy;
+    Py_ssize_t o[8] = {0, sz, sy, sy + sz, sx, sx + sz, sx + sy, sx + sy + sz};
+    for (int q = 0; q < 8; q++) off[q] = o[q];
 }
 
 /* out = exp(-x) per channel; one exp when the three are equal (grey media). */

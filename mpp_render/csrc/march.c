@@ -234,6 +234,11 @@ typedef struct {
     int use_ms;                            /* multiple scattering from the pyramid levels lv */
     MS ms;
     Grid *lv;
+    int on[MAX_MEDIA];                     /* the medium's flat level lies on its field's voxels */
+    Grid onf[MAX_MEDIA];                   /* that level (3 channels), read with the field's
+                                            * stencil at the corner offsets onoff */
+    Py_ssize_t onoff[MAX_MEDIA][8];
+    Buf onb[MAX_MEDIA];
     double sig_max[MAX_MEDIA];             /* largest extinction per unit density, over channels */
     double g_lobe;                         /* the most anisotropic medium's g (light_varies) */
     int adapt;                             /* longer steps in thin media */
@@ -246,6 +251,7 @@ typedef struct {
 static void march_release(March *c) {
     buf_release(&c->btab);
     for (int m = 0; m < c->ntabs; m++) buf_release(&c->btabs[m]);
+    for (int m = 0; m < c->ng; m++) buf_release(&c->onb[m]);
     if (c->lvb) for (int i = 0; i < c->nlv; i++) buf_release(&c->lvb[i]);
     free(c->lvb); free(c->lv);
     buf_release(&c->bo); buf_release(&c->bd); buf_release(&c->b0); buf_release(&c->b1);
@@ -378,13 +384,19 @@ static int parse_lights(March *c, PyObject *plights) {
 /* The multiple-scattering pack (amb_ms, levels list, table (M, L, 4) [first, count, stride, h],
  * per-medium level tables [(K, nr, 6)], log density of entry 0, spacing). */
 static int parse_multiple(March *c, PyObject *pms) {
-    PyObject *plv, *ptab, *ptabs;
+    PyObject *plv, *ptab, *ptabs, *pon = Py_None;
     int amb_ms, ng = c->ng;
     Py_ssize_t nl = c->nl;
     double lr0, dlr;
     MS *ms = &c->ms;
-    if (!PyTuple_Check(pms) || !PyArg_ParseTuple(pms, "iOOOdd", &amb_ms, &plv, &ptab, &ptabs, &lr0, &dlr)) {
-        PyErr_SetString(PyExc_ValueError, "multiple: expected (amb, levels, table, tables, lr0, dlr)");
+    if (!PyTuple_Check(pms) || !PyArg_ParseTuple(pms, "iOOOdd|O", &amb_ms, &plv, &ptab, &ptabs, &lr0,
+                                                 &dlr, &pon)) {
+        PyErr_SetString(PyExc_ValueError, "multiple: expected (amb, levels, table, tables, lr0, dlr"
+                        "[, on_field])");
+        return -1;
+    }
+    if (pon != Py_None && (!PyList_Check(pon) || PyList_GET_SIZE(pon) != ng)) {
+        PyErr_SetString(PyExc_ValueError, "multiple: on_field must be a list, one per medium");
         return -1;
     }
     if (!PyList_Check(plv) || PyList_GET_SIZE(plv) > 100000) {
@@ -431,6 +443,20 @@ static int parse_multiple(March *c, PyObject *pms) {
         for (int a = 3; flat && a < 6; a++) flat &= tab[a] == 0.0;
         ms->flat[m] = flat;
         for (int a = 0; a < 3; a++) ms->flat_w[m][a] = flat ? tab[a] * hg_phase(0.0, 0.0) : 0.0;
+        PyObject *po = pon == Py_None ? Py_None : PyList_GET_ITEM(pon, m);
+        if (po != Py_None) {  /* the flat level on the field's voxels */
+            const Grid *g = &c->g[m];
+            Py_ssize_t sh[4] = {g->nx, g->ny, g->nz, 3};
+            if (get_buf(po, &c->onb[m], 'f', 4, sh, "on_field level") < 0) return -1;
+            if (!flat) {
+                PyErr_SetString(PyExc_ValueError, "on_field level: its medium's table must be flat");
+                return -1;
+            }
+            c->on[m] = 1;
+            c->onf[m].data = (const float *)c->onb[m].view.buf;
+            grid_shape(&c->onf[m], g->nx, g->ny, g->nz, 3);
+            grid_offsets(&c->onf[m], c->onoff[m]);
+        }
     }
     ms->nr = nr;
     ms->lr0 = lr0;
@@ -675,7 +701,12 @@ static void medium_sources(const March *c, int m, const double x[3], const doubl
             const double *wi = la->wi[l];
             cosl[l] = -(wi[0] * d[0] + wi[1] * d[1] + wi[2] * d[2]);
         }
-        multiple_source_c(&c->ms, c->lv, m, (int)c->nl, cosl, rho, idx, d, msi);
+        if (c->on[m]) {  /* the flat level on the field's voxels: the field's stencil */
+            tri_on(&tw, &c->onf[m], c->onoff[m], 3, msi);
+            for (int a = 0; a < 3; a++) msi[a] *= c->ms.flat_w[m][a];
+        } else {
+            multiple_source_c(&c->ms, c->lv, m, (int)c->nl, cosl, rho, idx, d, msi);
+        }
         if (c->ms.amb >= 0)
             for (int a = 0; a < 3; a++) msi[a] += v[c->ms.amb + a];
         for (int a = 0; a < 3; a++) s->src_ms[a] += ss[a] * (msi[a] + beam_inc[a]);

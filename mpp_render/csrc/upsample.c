@@ -4,7 +4,8 @@
 const char upsample_into_doc[] =
     "upsample_into(field, channel, lattice, stride, flat) -> None\n"
     "Twin of kernels_np.upsample_into: trilinear values of the lattice (point j at fine index\n"
-    "j * stride) written into field[..., channel:channel + C] at the flat voxel indices.";
+    "j * stride) written into field[..., channel:channel + C] at the flat voxel indices (None:\n"
+    "every voxel).";
 
 PyObject *upsample_into(PyObject *self, PyObject *args) {
     PyObject *pf, *pl, *pflat;
@@ -15,13 +16,14 @@ PyObject *upsample_into(PyObject *self, PyObject *args) {
     Py_ssize_t sf[4] = {-1, -1, -1, -1}, sl[4] = {-1, -1, -1, -1}, sx[1] = {-1};
     if (get_buf_ex(pf, &bf, 'f', 4, sf, "field", PyBUF_WRITABLE) < 0) goto done;
     if (get_buf(pl, &bl, 'f', 4, sl, "lattice") < 0) goto done;
-    if (PyObject_GetBuffer(pflat, &bx.view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | PyBUF_ND) < 0) {
+    int every = pflat == Py_None;   /* None: every voxel of the field */
+    if (!every && PyObject_GetBuffer(pflat, &bx.view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | PyBUF_ND) < 0) {
         PyErr_Clear();
         PyErr_SetString(PyExc_ValueError, "flat: expected a C-contiguous int64 array");
         goto done;
     }
-    bx.held = 1;
-    {
+    bx.held = !every;
+    if (!every) {
         const char *fm = bx.view.format ? bx.view.format : "B";
         if (fm[0] == '<' || fm[0] == '=' || fm[0] == '@') fm++;
         if (bx.view.ndim != 1 || bx.view.itemsize != 8 || (fm[0] != 'q' && fm[0] != 'l') || fm[1]) {
@@ -36,9 +38,10 @@ PyObject *upsample_into(PyObject *self, PyObject *args) {
         PyErr_SetString(PyExc_ValueError, "upsample_into: bad stride, channel or lattice");
         goto done;
     }
-    const int64_t *FL = (const int64_t *)bx.view.buf;
+    const int64_t *FL = every ? NULL : (const int64_t *)bx.view.buf;
     Py_ssize_t nvox = sf[0] * sf[1] * sf[2];
-    for (Py_ssize_t q = 0; q < sx[0]; q++)
+    if (every) sx[0] = nvox;
+    for (Py_ssize_t q = 0; FL && q < sx[0]; q++)
         if (FL[q] < 0 || FL[q] >= nvox) {
             PyErr_SetString(PyExc_ValueError, "flat: index outside the field");
             goto done;
@@ -47,7 +50,7 @@ PyObject *upsample_into(PyObject *self, PyObject *args) {
     const float *LT = (const float *)bl.view.buf;
     Py_BEGIN_ALLOW_THREADS
     for (Py_ssize_t q = 0; q < sx[0]; q++) {
-        Py_ssize_t f = (Py_ssize_t)FL[q], ijk[3] = {f / (sf[1] * sf[2]), (f / sf[2]) % sf[1], f % sf[2]};
+        Py_ssize_t f = FL ? (Py_ssize_t)FL[q] : q, ijk[3] = {f / (sf[1] * sf[2]), (f / sf[2]) % sf[1], f % sf[2]};
         Py_ssize_t lo[3], hi[3];
         double t[3];
         for (int a = 0; a < 3; a++) {
