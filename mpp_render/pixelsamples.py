@@ -18,6 +18,7 @@ whichever adaptive round takes the sample, and nothing drawn for the samples no 
 """
 from __future__ import annotations
 
+import functools
 import math
 from typing import Optional
 
@@ -41,6 +42,12 @@ def reverse_bits(values: np.ndarray, bits: int) -> np.ndarray:
     for b in range(bits):
         out |= ((values >> b) & 1) << (bits - 1 - b)
     return out
+
+
+@functools.lru_cache(maxsize=64)
+def _salt(dim: int) -> np.uint32:
+    """The hash that salts dimension ``dim``'s draws (PixelSamples._bits)."""
+    return np.uint32(hash32(np.uint32((dim * 0x9E3779B1 + 0x68E31DA4) & _M32)))
 
 
 class PixelSamples:
@@ -69,8 +76,7 @@ class PixelSamples:
     def _bits(self, pixels, samples, dim: int) -> np.ndarray:
         """uint32 hashes of (pixel, sample, dim), as int64."""
         ids = (np.asarray(pixels, np.int64) * self.spp + np.asarray(samples, np.int64)) & _M32
-        salt = hash32(np.uint32((dim * 0x9E3779B1 + 0x68E31DA4) & _M32))
-        return hash32(hash32(ids.astype(np.uint32) ^ self.key) ^ salt).astype(np.int64)
+        return hash32(hash32(ids.astype(np.uint32) ^ self.key) ^ _salt(dim)).astype(np.int64)
 
     def _uniform(self, pixels, samples, dim: int) -> np.ndarray:
         """[0, 1) numbers (24 bits) of (pixel, sample, dim)."""

@@ -10,6 +10,7 @@ same bits however its tiles are shared among threads.
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import Optional
@@ -195,7 +196,8 @@ class FrameMarch:
         over the pixel).  With the threshold 0, or no more samples than the first round
         takes, one round of all the samples, drawn as without adaptive sampling."""
         st, spp = self.st, self.spp
-        rng = np.random.default_rng([st.seed, index])
+        # the surfaces' own draws (surfaces.shade); without surfaces nothing draws from it
+        rng = np.random.default_rng([st.seed, index]) if not self.surf.empty else None
         x0, y0 = self.tiles[index]
         tw = min(self.size, int(self.cam.width) - x0)
         th = min(self.size, int(self.cam.height) - y0)
@@ -296,11 +298,18 @@ def noisy_pixels(acc, active, threshold: float, tw: int, th: int,
     return np.flatnonzero(pilot.grow(noisy) & keep)
 
 
+@functools.lru_cache(maxsize=16)
 def sample_order(spp: int) -> np.ndarray:
     """The order in which adaptive rounds take a pixel's ``spp`` samples: for a k x k grid
     of strata (PixelSamples.offsets) with k a power of two, by the bit-reversed Morton code of the
     stratum, so that the first 4^m samples hold one sample in each cell of a 2^m x 2^m grid
-    over the pixel; otherwise in their own order."""
+    over the pixel; otherwise in their own order.  Read-only (every tile shares it)."""
+    order = _sample_order(spp)
+    order.flags.writeable = False
+    return order
+
+
+def _sample_order(spp: int) -> np.ndarray:
     k = power_of_two_side(spp)
     if not k:
         return np.arange(spp)
