@@ -340,6 +340,40 @@ static double deposit(const PathGrid *G, const double pos[3], const double w[3],
     return rho;
 }
 
+/* Asks the caches for what a tentative collision at world point p of grid G will read: its
+ * density (with a threshold the cell's class) and the deposit's lattice points (and their
+ * directions towards the camera).  The paths are bound by these reads' latency (a cloud's
+ * density or a mesh's cell classes outgrow the core's cache); asked for one event ahead,
+ * they arrive while the event before is worked out.  It changes no result. */
+static inline void prefetch_collision(const PathGrid *G, const double p[3]) {
+    double idx[3];
+    grid_index(G, p, idx);
+    Py_ssize_t v[3], b[3];
+    for (int a = 0; a < 3; a++) {
+        double f = floor_fast(idx[a]);
+        if (!(f >= 0.0 && f < (double)(G->n[a] - 1))) return;   /* also NaN */
+        v[a] = (Py_ssize_t)f;
+        double l = floor_fast(idx[a] / (double)G->stride);
+        b[a] = l >= 0.0 && l < (double)(G->ls[a] - 1) ? (Py_ssize_t)l : -1;
+    }
+    if (G->thr >= 0.0 && G->cls)
+        PREFETCH(G->cls + (v[0] * (G->n[1] - 1) + v[1]) * (G->n[2] - 1) + v[2], 0);
+    else
+        PREFETCH(G->dens + (v[0] * G->n[1] + v[1]) * G->n[2] + v[2], 0);
+    if (b[0] < 0 || b[1] < 0 || b[2] < 0) return;
+    Py_ssize_t s1 = G->ls[2], s0 = G->ls[1] * s1, base = b[0] * s0 + b[1] * s1 + b[2];
+    const Py_ssize_t pair[4] = {0, s1, s0, s0 + s1};   /* the 4 pairs of corners along z */
+    for (int q = 0; q < 4; q++) {
+        const Py_ssize_t f = 3 * (base + pair[q]);
+        PREFETCH(G->out + f, 1);
+        PREFETCH(G->out + f + 5, 1);
+        if (G->g != 0.0) {
+            PREFETCH(G->tw + f, 0);
+            PREFETCH(G->tw + f + 5, 0);
+        }
+    }
+}
+
 static int cmp_u64(const void *a, const void *b) {
     uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
     return (x > y) - (x < y);
@@ -408,6 +442,10 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
     Py_ssize_t skip = -1;
     int inside[PATH_MEDIA];
     for (int j = 0; j < T->nm; j++) inside[j] = in_box(&T->m[j], pos);
+    /* the next event's flight, worked out at the end of this one for prefetch_collision:
+     * its event, the rate it was drawn at and its length (the same formula: the same bits) */
+    long ahead_ev = 0;
+    double ahead_rate = 0.0, ahead_t = 0.0;
     for (long ev = 1; ev <= MAX_EVENTS; ev++) {
         /* with several media each keeps its own tentative collisions at its rate inside its
          * box: their sum is the rate of the whole, and a tentative point is medium j's with
@@ -430,7 +468,9 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
         else
             for (int j = 0; j < T->nm; j++)
                 if (inside[j]) rate += T->m[j].mu;
-        double t = rate > 0.0 ? -log(1.0 - uniform01(key, ev, D_FLY)) / rate : INFINITY;
+        double t = !(rate > 0.0) ? INFINITY
+                 : ev == ahead_ev && rate == ahead_rate ? ahead_t   /* worked out the event before */
+                 : -log(1.0 - uniform01(key, ev, D_FLY)) / rate;
         double tseg = min_d(t, tb);
         if (T->n_tri > 0) {
             double ts;
@@ -528,6 +568,16 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
             if (!survive(T, key, ev, w, w0, hits)) return;
         } else if (!(max_d(w[0], max_d(w[1], w[2])) > 0.0)) {
             return;
+        }
+        if (T->nm == 1 && inside[0]) {   /* where the next tentative collision falls, unless a
+                                            face or a surface comes first */
+            const double r1 = T->m[0].mu;
+            ahead_ev = ev + 1;
+            ahead_rate = r1;
+            ahead_t = -log(1.0 - uniform01(key, ev + 1, D_FLY)) / r1;
+            double q[3];
+            for (int a = 0; a < 3; a++) q[a] = pos[a] + ahead_t * d[a];
+            prefetch_collision(&T->m[0], q);
         }
     }
 }
