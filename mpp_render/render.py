@@ -125,7 +125,7 @@ def _render(desc, progress, should_cancel, any_camera) -> RenderOutput:
         timings["pilot"] = time.perf_counter() - t_march
         if chunks is None:
             return RenderOutput(out, timings, warnings, True)
-        frame.use_plan(frame.make_plan(chunks))
+        frame.use_plan(frame.make_plan(chunks), frame.pilot_cost(chunks))
         pilot_samples = sum(c[4] for c in chunks)
     (march_samples, camera_samples), cancelled = march_tiles(frame.tile, len(frame.tiles),
                                                              threads, cancel, progress, out)

@@ -228,10 +228,14 @@ class Tuning:
     surface gathers the sky, the volumes' light and the other surfaces' (surfaces.shade); 4
     took p_fog_spot_shafts' single scattering from 0.194 to 0.079 at 16 spp (its pillars are
     lit by the spot-lit ground, its ground by the beam's fog) for 25-40 % more render time in
-    scenes with a ground.  ``tile_rays``: camera rays per tile at most (all its samples);
-    each tile's Python work is a fixed cost beside the kernels' (16384 marched cloud_vdb at
-    1920x1080 1.2x faster, but the noisy scenes' single scattering came out worse on 4 seeds
-    out of 4: docs/adaptive.md).
+    scenes with a ground.  ``tile_rays``, ``tile_rays_most``, ``tile_samples``: camera rays per tile
+    (all its samples), as many as hold ``tile_samples`` march samples at the pilot's
+    samples per ray (its surface gathers' counted in), within [tile_rays, tile_rays_most]
+    (tiles.tile_rays; tile_rays without a pilot, and the pilot's own chunks): each tile's
+    Python work is a fixed cost beside the kernels' per sample (cloud_vdb at 1920x1080,
+    about 25 samples a ray: 16384 rays a tile marched 1.15x faster than 4096; the six
+    noisiest scenes' single scattering within the seeds' scatter over 4 seeds:
+    docs/adaptive.md), and a tile of dear rays stays short for Esc.
     ``adaptive_first``: with adaptive sampling, the samples a pixel
     gets before its own noise is judged (at least 2: a variance needs two); with the pilot,
     only the pixels it marks get them, the others stop at one.  ``pilot_stride``: the
@@ -305,8 +309,10 @@ class Tuning:
     flatten: bool = True
     skip_empty: bool = True
     adapt_tau: float = 0.1
-    tile: int = 64
+    tile: int = 128
     tile_rays: int = 4096
+    tile_rays_most: int = 16384
+    tile_samples: float = 400_000.0
     surface_gathers: int = 4
     adaptive_first: int = 4
     pilot_stride: int = 8

@@ -1,6 +1,7 @@
 """One frame's camera march, tile by tile (render.py prepares what it reads).
 
-A tile is up to ``Tuning.tile_rays`` camera rays: ``samples`` jittered rays per pixel
+A tile is up to ``tile_rays`` camera rays (as many as the pilot's march samples say a
+tile can hold: tile_rays): ``samples`` jittered rays per pixel
 (``pixel_offsets``; with depth of field each ray also leaves its own point of the lens),
 their surface hits (surfaces.py), the march through the media (march.py) to the hit or the
 clip end, the surfaces' shading with the volumes' light gathered onto them, and for the
@@ -33,11 +34,28 @@ ROUND_SEED = 0x9E3779B1  # offsets the seed of each adaptive round's gathering r
 GATHER_TAIL_NODES = 4   # Gauss-Legendre points of the fog tail on a gather ray (worldfog.tail)
 
 
-def tile_size(samples: float, largest: int = 64, rays: int = 4096) -> int:
-    """Tile side (pixels) so that a tile holds at most ``rays`` rays (Tuning.tile_rays) at
+def tile_size(samples: float, largest: int = 128, rays: int = 4096) -> int:
+    """Tile side (pixels) so that a tile holds at most ``rays`` rays (tile_rays) at
     ``samples`` rays per pixel (with adaptive sampling, the pilot's expectation), 4 to
     ``largest`` (Tuning.tile).  Esc and progress are served between tiles."""
     return int(np.clip(int(math.sqrt(max(1, rays) / max(1.0, samples))), 4, largest))
+
+
+def tile_rays(samples_per_ray: Optional[float], least: int = 4096, most: int = 16384,
+              budget: float = 400_000.0) -> int:
+    """Camera rays a tile holds: as many as make ``budget`` march samples
+    (Tuning.tile_samples) at ``samples_per_ray`` (the pilot's, its camera rays' and their
+    surface gathers' together), within [``least``, ``most``] (Tuning.tile_rays,
+    Tuning.tile_rays_most); ``least`` without a pilot (None).  Each tile's Python work is
+    a cost per tile beside the kernels' per sample: where rays are cheap, larger tiles
+    spread it; where they are dear, a tile stays short enough for Esc and the progress
+    bar.  The pilot's counts are the same on every machine, so is the cut."""
+    least, most = max(1, int(least)), max(1, int(least), int(most))
+    if samples_per_ray is None:
+        return least
+    if not samples_per_ray > 0.0:   # nothing to march: rays as cheap as they come
+        return most
+    return int(np.clip(int(budget / samples_per_ray), least, most))
 
 
 @dataclass
@@ -82,21 +100,25 @@ class FrameMarch:
         self.pilot_stride = max(1, int(tun.pilot_stride))
         self.pilot_samples = max(2, int(tun.pilot_samples))
         self.pilot_shape, px, py = pilot.grid(W, H, self.pilot_stride)
-        per = max(1, int(tun.tile_rays) // self.pilot_samples)
+        per = max(1, int(tun.tile_rays) // self.pilot_samples)   # the pilot's chunks
         self.pilot_pixels = [(px[i:i + per], py[i:i + per]) for i in range(0, len(px), per)]
 
-    def cut(self, samples: float) -> None:
+    def cut(self, samples: float, samples_per_ray: Optional[float] = None) -> None:
         """Cut the frame into tiles (``self.tiles``, their corners; ``self.size``, their side)
-        for ``samples`` rays per pixel (tile_size)."""
+        for ``samples`` rays per pixel (tile_size) of ``samples_per_ray`` march samples
+        each (tile_rays; None: not known)."""
         W, H = int(self.cam.width), int(self.cam.height)
-        self.size = tile_size(samples, self.st.tuning.tile, self.st.tuning.tile_rays)
+        tun = self.st.tuning
+        rays = tile_rays(samples_per_ray, tun.tile_rays, tun.tile_rays_most, tun.tile_samples)
+        self.size = tile_size(samples, tun.tile, rays)
         self.tiles = [(x0, y0) for y0 in range(0, H, self.size) for x0 in range(0, W, self.size)]
 
-    def use_plan(self, plan: pilot.SamplePlan) -> None:
+    def use_plan(self, plan: pilot.SamplePlan, samples_per_ray: Optional[float] = None) -> None:
         """Sample by the pilot's ``plan``, the tiles cut for the rays it expects a pixel to
-        take (``plan.expected``; the outliers, unknown before the tiles, are not counted)."""
+        take (``plan.expected``; the outliers, unknown before the tiles, are not counted),
+        each of ``samples_per_ray`` march samples (the pilot's, pilot_cost)."""
         self.plan = plan
-        self.cut(plan.expected)
+        self.cut(plan.expected, samples_per_ray)
 
     @property
     def wants_pilot(self) -> bool:
@@ -106,9 +128,10 @@ class FrameMarch:
                 and self.st.tuning.pilot_samples > 0)
 
     def pilot_chunk(self, j):
-        """(j, sums of the luminance, of its square, samples, march samples) of chunk ``j``
-        of the pilot's pixels (pilot.py), each with ``Tuning.pilot_samples`` samples.  Its
-        random streams are its own: neither the frame's tiles nor their cut depend on it."""
+        """(j, sums of the luminance, of its square, samples, march samples, the surface
+        gathers' march samples) of chunk ``j`` of the pilot's pixels (pilot.py), each with
+        ``Tuning.pilot_samples`` samples.  Its random streams are its own: the frame's tiles
+        do not depend on it, their cut only through its counts (pilot_cost)."""
         st, ns = self.st, self.pilot_samples
         px, py = self.pilot_pixels[j]
         n = len(px)
@@ -120,11 +143,19 @@ class FrameMarch:
                                                (py[:, None] + offs[..., 1]).ravel(), lens)
         bands = np.argsort(rng.random((2, n, ns)), axis=2)
         keys = ray_keys(st.seed + pilot.PILOT_SEED, index, n * ns)
+        gathered = []
         r, hit, behind = self.march(index, 0, rng, o, d, tmin, tmax, axial, keys,
-                                    (bands[0].ravel(), bands[1].ravel(), ns))
+                                    (bands[0].ravel(), bands[1].ravel(), ns), gathered)
         acc = Accumulator(n, {})
         acc.add(np.arange(n), ns, r, hit, behind, st.film_transparent)
-        return j, acc.lum, acc.lum2, acc.count, float(r["steps"].sum())
+        return j, acc.lum, acc.lum2, acc.count, float(r["steps"].sum()), float(sum(gathered))
+
+    @staticmethod
+    def pilot_cost(chunks) -> float:
+        """March samples per camera ray in the pilot's ``chunks`` (pilot_chunk's results),
+        their surface gathers' counted in: what a tile's ray costs (tile_rays)."""
+        rays = sum(float(c[3].sum()) for c in chunks)
+        return sum(c[4] + c[5] for c in chunks) / rays if rays > 0 else 0.0
 
     def make_plan(self, chunks) -> pilot.SamplePlan:
         """The frame's SamplePlan from every pilot_chunk's result (any order)."""
@@ -145,11 +176,11 @@ class FrameMarch:
             tau = tau + worldfog.optical_depth(self.fog_pm.sigma_t, t_max)
         return tau
 
-    def radiance_towards(self, index, k=0):
+    def radiance_towards(self, index, k=0, steps: Optional[list] = None):
         """``(points, dirs, t_max) -> (N,3)``: the radiance the volumes scatter and emit
         towards ``points`` along ``dirs`` (a march of tile ``index``'s own random stream, of
         its round ``k``): the light they throw onto a surface (surfaces.shade); None without
-        media."""
+        media.  Each march's samples are appended to ``steps`` where given."""
         if self.ctx is None:
             return None
         ctx = self.ctx.for_gathers()
@@ -159,6 +190,8 @@ class FrameMarch:
             t0, t1 = union_interval(self.media, p, d, np.zeros(n), t_max)
             r = march_rays(ctx, p, d, t0, t1, np.ones(n),
                            ray_keys(self.st.seed + GATHER_SEED + ROUND_SEED * k, index, n))
+            if steps is not None:
+                steps.append(float(r["steps"].sum()))
             r = self.fog_tail(r, p, d, np.zeros(n), t_max, nodes=GATHER_TAIL_NODES)
             return r["single"] + r["multiple"] + r["emission"]
         return radiance
@@ -250,10 +283,11 @@ class FrameMarch:
         return (index, (x0, y0, tw, th), acc.passes(st.film_transparent),
                 (steps, float(acc.count.sum())))
 
-    def march(self, index, k, rng, o, d, tmin, tmax, axial, keys, strata):
+    def march(self, index, k, rng, o, d, tmin, tmax, axial, keys, strata, gathered=None):
         """Round ``k`` of tile ``index``: the rays' march through the media (random
         ``keys``), their surface hits (gathering through the Latin hypercube ``strata``) and
-        what lies behind the media: (the march's per-ray results, hit, behind)."""
+        what lies behind the media: (the march's per-ray results, hit, behind).  The
+        gathers' march samples are appended to ``gathered`` where given."""
         st, fog_pm = self.st, self.fog_pm
         n = len(o)
         t_hit, tri = intersect(self.surf, o, d, tmax)
@@ -274,7 +308,7 @@ class FrameMarch:
             # each pixel's samples gather through a Latin hypercube of directions
             ph = o[hit] + d[hit] * t_hit[hit, None]
             behind[hit] = shade(self.surf, tri[hit], ph, d[hit], self.lights, self.bg,
-                                self.optical_depth, rng, self.radiance_towards(index, k),
+                                self.optical_depth, rng, self.radiance_towards(index, k, gathered),
                                 gathers=st.tuning.surface_gathers,
                                 strata=(strata[0][hit], strata[1][hit], strata[2]),
                                 guides=self.guides, guided=st.tuning.guided_gathers)

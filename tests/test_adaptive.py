@@ -263,3 +263,44 @@ def test_a_sample_is_drawn_the_same_whichever_round_takes_it(spp, adaptive):
     assert lens.min() >= 0.0 and lens.max() < 1.0 and abs(lens.mean() - 0.5) < 0.02
     other = PixelSamples(spp, 300, 12, order).offsets(*every)
     assert not np.array_equal(other, offs)          # another tile, other draws
+
+
+def test_a_tile_holds_the_rays_of_its_march_samples_budget_within_its_bounds():
+    assert tiles.tile_rays(None, 4096, 16384, 4e5) == 4096        # no pilot: the least
+    assert tiles.tile_rays(0.0, 4096, 16384, 4e5) == 16384        # nothing to march
+    assert tiles.tile_rays(40.0, 4096, 16384, 4e5) == 10000       # 4e5 samples / 40 a ray
+    assert tiles.tile_rays(1.0, 4096, 16384, 4e5) == 16384
+    assert tiles.tile_rays(1e4, 4096, 16384, 4e5) == 4096
+    got = [tiles.tile_rays(s, 4096, 16384, 4e5) for s in np.geomspace(1, 1e3, 40)]
+    assert all(a >= b for a, b in zip(got, got[1:]))               # dearer rays, smaller tiles
+
+
+def test_the_pilot_counts_its_gathers_samples_and_dearer_rays_cut_more_tiles():
+    from mpp_render.tiles import FrameMarch
+    desc = base()
+    seen = []
+    orig = FrameMarch.pilot_cost
+
+    def spy(chunks):
+        seen.append((sum(c[4] for c in chunks), sum(c[5] for c in chunks)))
+        return orig(chunks)
+
+    FrameMarch.pilot_cost = staticmethod(spy)
+    try:
+        with_ground = render(variant(desc, noise_threshold=0.02))
+        bare = base()
+        bare.surfaces = []
+        render(variant(bare, noise_threshold=0.02))
+    finally:
+        FrameMarch.pilot_cost = staticmethod(orig)
+    (cam_g, gath_g), (cam_b, gath_b) = seen
+    assert cam_g > 0 and gath_g > 0          # the ground's gathers march through the cloud
+    assert cam_b > 0 and gath_b == 0         # no surface, no gather
+    # a budget of a few samples a tile: the least rays a tile (4096 would be one tile)
+    tun = desc.settings.tuning
+    small = render(variant(desc, noise_threshold=0.02, tuning=dataclasses.replace(
+        tun, tile_samples=1.0, tile_rays=64, tile_rays_most=16384)))
+    large = render(variant(desc, noise_threshold=0.02, tuning=dataclasses.replace(
+        tun, tile_samples=1e12, tile_rays=64, tile_rays_most=16384)))
+    assert small.stats["tiles"] > large.stats["tiles"] == 1
+    assert with_ground.stats["tiles"] == 1   # 40 x 30 pixels: one tile of the default's
