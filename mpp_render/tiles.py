@@ -153,7 +153,10 @@ class FrameMarch:
     @staticmethod
     def pilot_cost(chunks) -> float:
         """March samples per camera ray in the pilot's ``chunks`` (pilot_chunk's results),
-        their surface gathers' counted in: what a tile's ray costs (tile_rays)."""
+        their surface gathers' counted in: what a tile's ray costs (tile_rays).  Summed in
+        the chunks' order, whichever thread finished first (the counts are whole numbers:
+        exact in any order, but the cut must not hang on that)."""
+        chunks = sorted(chunks, key=lambda c: c[0])
         rays = sum(float(c[3].sum()) for c in chunks)
         return sum(c[4] + c[5] for c in chunks) / rays if rays > 0 else 0.0
 
