@@ -349,17 +349,23 @@ static inline void prefetch_collision(const PathGrid *G, const double p[3]) {
     double idx[3];
     grid_index(G, p, idx);
     Py_ssize_t v[3], b[3];
+    int cell = 1;   /* with a threshold: the cell density_at reads lies in the grid */
     for (int a = 0; a < 3; a++) {
         double f = floor_fast(idx[a]);
-        if (!(f >= 0.0 && f < (double)(G->n[a] - 1))) return;   /* also NaN */
-        v[a] = (Py_ssize_t)f;
+        cell &= f >= 0.0 && f < (double)(G->n[a] - 1);   /* also NaN */
+        v[a] = cell ? (Py_ssize_t)f : 0;
         double l = floor_fast(idx[a] / (double)G->stride);
         b[a] = l >= 0.0 && l < (double)(G->ls[a] - 1) ? (Py_ssize_t)l : -1;
     }
-    if (G->thr >= 0.0 && G->cls)
-        PREFETCH(G->cls + (v[0] * (G->n[1] - 1) + v[1]) * (G->n[2] - 1) + v[2], 0);
-    else
+    if (G->thr < 0.0) {   /* density_at's nearest voxel */
+        nearest_voxel(G, idx, v);
         PREFETCH(G->dens + (v[0] * G->n[1] + v[1]) * G->n[2] + v[2], 0);
+    } else if (cell) {    /* its cell's class, or without classes its first corner */
+        if (G->cls)
+            PREFETCH(G->cls + (v[0] * (G->n[1] - 1) + v[1]) * (G->n[2] - 1) + v[2], 0);
+        else
+            PREFETCH(G->dens + (v[0] * G->n[1] + v[1]) * G->n[2] + v[2], 0);
+    }
     if (b[0] < 0 || b[1] < 0 || b[2] < 0) return;
     Py_ssize_t s1 = G->ls[2], s0 = G->ls[1] * s1, base = b[0] * s0 + b[1] * s1 + b[2];
     const Py_ssize_t pair[4] = {0, s1, s0, s0 + s1};   /* the 4 pairs of corners along z */
