@@ -228,12 +228,12 @@ class Tuning:
     surface gathers the sky, the volumes' light and the other surfaces' (surfaces.shade); 4
     took p_fog_spot_shafts' single scattering from 0.194 to 0.079 at 16 spp (its pillars are
     lit by the spot-lit ground, its ground by the beam's fog) for 25-40 % more render time in
-    scenes with a ground.  ``tile_rays``, ``tile_rays_most``, ``tile_samples``: camera rays per tile
-    (all its samples), as many as hold ``tile_samples`` march samples at the pilot's
+    scenes with a ground.  ``tile_rays``, ``tile_rays_most``, ``tile_samples``: camera rays
+    per tile (all its samples), as many as hold ``tile_samples`` march samples at the pilot's
     samples per ray (its surface gathers' counted in), within [tile_rays, tile_rays_most]
     (tiles.tile_rays; tile_rays without a pilot, and the pilot's own chunks): each tile's
-    Python work is a fixed cost beside the kernels' per sample (cloud_vdb at 1920x1080,
-    about 25 samples a ray: 16384 rays a tile marched 1.15x faster than 4096; the six
+    Python work is a fixed cost beside the kernels' per sample (cloud_vdb at 1920x1080, at
+    the cap of 16384 rays a tile, marched 1.14x faster than at 4096; the six
     noisiest scenes' single scattering within the seeds' scatter over 4 seeds:
     docs/adaptive.md), and a tile of dear rays stays short for Esc.
     ``adaptive_first``: with adaptive sampling, the samples a pixel

@@ -1,7 +1,7 @@
 """One frame's camera march, tile by tile (render.py prepares what it reads).
 
-A tile is up to ``tile_rays`` camera rays (as many as the pilot's march samples say a
-tile can hold: tile_rays): ``samples`` jittered rays per pixel
+A tile is up to ``tile_rays`` camera rays (as many as the pilot's march samples per ray
+say make a tile's budget): ``samples`` jittered rays per pixel
 (``pixel_offsets``; with depth of field each ray also leaves its own point of the lens),
 their surface hits (surfaces.py), the march through the media (march.py) to the hit or the
 clip end, the surfaces' shading with the volumes' light gathered onto them, and for the
@@ -34,15 +34,14 @@ ROUND_SEED = 0x9E3779B1  # offsets the seed of each adaptive round's gathering r
 GATHER_TAIL_NODES = 4   # Gauss-Legendre points of the fog tail on a gather ray (worldfog.tail)
 
 
-def tile_size(samples: float, largest: int = 128, rays: int = 4096) -> int:
+def tile_size(samples: float, largest: int, rays: int) -> int:
     """Tile side (pixels) so that a tile holds at most ``rays`` rays (tile_rays) at
     ``samples`` rays per pixel (with adaptive sampling, the pilot's expectation), 4 to
     ``largest`` (Tuning.tile).  Esc and progress are served between tiles."""
     return int(np.clip(int(math.sqrt(max(1, rays) / max(1.0, samples))), 4, largest))
 
 
-def tile_rays(samples_per_ray: Optional[float], least: int = 4096, most: int = 16384,
-              budget: float = 400_000.0) -> int:
+def tile_rays(samples_per_ray: Optional[float], least: int, most: int, budget: float) -> int:
     """Camera rays a tile holds: as many as make ``budget`` march samples
     (Tuning.tile_samples) at ``samples_per_ray`` (the pilot's, its camera rays' and their
     surface gathers' together), within [``least``, ``most``] (Tuning.tile_rays,
@@ -154,8 +153,7 @@ class FrameMarch:
     def pilot_cost(chunks) -> float:
         """March samples per camera ray in the pilot's ``chunks`` (pilot_chunk's results),
         their surface gathers' counted in: what a tile's ray costs (tile_rays).  Summed in
-        the chunks' order, whichever thread finished first (the counts are whole numbers:
-        exact in any order, but the cut must not hang on that)."""
+        the chunks' order, not the order the threads finished them in."""
         chunks = sorted(chunks, key=lambda c: c[0])
         rays = sum(float(c[3].sum()) for c in chunks)
         return sum(c[4] + c[5] for c in chunks) / rays if rays > 0 else 0.0
