@@ -25,7 +25,7 @@ from .gathers import Guides
 from .media import surrounds, union_interval
 from .passes import DEPTH_MISS
 from .pixelsamples import PixelSamples, power_of_two_side, reverse_bits
-from .precompute.lightdepth import kernel_arrays, split_fog
+from .precompute.lightdepth import kernel_arrays, media_bricks, split_fog
 from .surfaces import SurfaceSet, intersect, shade
 
 SAMPLES_SEED = 0x27D4EB2F  # offsets the seed of the tiles' pixel samples (pixelsamples.py)
@@ -91,6 +91,8 @@ class FrameMarch:
         self.fog_glow = worldfog.glow_radiance(self.fog, bool(self.st.multiple)) \
             if self.fog is not None and worldfog.glows(self.fog) else None
         self.arrays = kernel_arrays(self.solid)
+        # the shadow rays add the empty and constant bricks in one go (the same sum)
+        self.bricks = media_bricks(self.solid, tun)
         # the lamps inside the media and the media that emit, towards which the surfaces'
         # gathers are also drawn
         self.guides = Guides.joined(
@@ -172,7 +174,8 @@ class FrameMarch:
         tau = np.zeros((len(p), 3))
         if self.solid:
             t0, t1 = union_interval(self.solid, p, d, np.zeros(len(p)), t_max)
-            tau = kernels.optical_depth(p, d, np.maximum(t1, 0.0), *self.arrays, self.step, 0.5)
+            tau = kernels.optical_depth(p, d, np.maximum(t1, 0.0), *self.arrays, self.step, 0.5,
+                                        bricks=self.bricks)
         if self.fog_pm is not None:
             tau = tau + worldfog.optical_depth(self.fog_pm.sigma_t, t_max)
         return tau
