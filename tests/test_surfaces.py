@@ -411,3 +411,44 @@ def test_a_surfaces_shadow_ray_runs_to_the_emitter_point_drawn(kind):
         assert np.all(np.linalg.norm(end - m[:3, 3], axis=1) <= 0.6 + 1e-9)
     # and not all of the same length as the centre's
     assert np.ptp(t) > 0.05
+
+
+def test_the_surfaces_shadow_rays_walk_the_bricks_and_give_the_same_image():
+    """The tiles' shadow rays (tiles.FrameMarch.optical_depth: a surface point towards a light
+    or the sky) pass the media's brick bounds where the grids are large enough
+    (Tuning.skip_min_voxels): the image is the one they give without them."""
+    import dataclasses
+    import sys
+
+    from mpp_render import tiles
+    from mpp_render.render import render
+
+    from test_cache import scene
+
+    desc = scene()
+    tun = desc.settings.tuning
+    seen = []
+    orig = tiles.kernels.optical_depth
+
+    def spy(*args, **kw):   # the tiles' calls (the precompute's have their own bricks)
+        if sys._getframe(1).f_code is tiles.FrameMarch.optical_depth.__code__:
+            seen.append(kw.get("bricks") is not None)
+        return orig(*args, **kw)
+
+    def run(least):
+        seen.clear()
+        d = dataclasses.replace(desc, settings=dataclasses.replace(
+            desc.settings, tuning=dataclasses.replace(tun, skip_min_voxels=least)))
+        tiles.kernels.optical_depth = spy
+        try:
+            return render(d), list(seen)
+        finally:
+            tiles.kernels.optical_depth = orig
+
+    walked, with_bricks = run(0)
+    marched, without = run(1 << 40)
+    assert with_bricks and all(with_bricks) and not any(without)
+    for k in walked.passes:
+        np.testing.assert_allclose(walked.passes[k], marched.passes[k], rtol=1e-9, atol=1e-12,
+                                   err_msg=k)
+    assert walked.passes["Combined"].max() > 0.0
