@@ -326,6 +326,23 @@ def _colour(grid) -> np.ndarray:
     return _f32(grid) if grid is not None else np.zeros((0, 0, 0, 3), np.float32)
 
 
+def union_interval(media, origins, dirs, t_lo, t_hi, *, backend=None):
+    """(t0, t1) (N,) each: the smallest interval of rays ``origins`` + t ``dirs`` (N,3) that
+    covers every one of the prepared ``media``'s sampling boxes they cross, clipped to
+    [``t_lo``, ``t_hi``] (t0 > t1 where they cross none): media.union_interval, its twin."""
+    from .media import union_interval as union_np
+    if not _on_c(backend) or not hasattr(_c, "union_interval") or not len(media):
+        return union_np(media, origins, dirs, t_lo, t_hi)
+    n = len(origins)
+    w2is = np.stack([np.asarray(pm.w2i, np.float64).reshape(3, 4) for pm in media])
+    last = np.array([np.array(pm.grid.shape[:3], np.float64) - 1.0 for pm in media])
+    lo = np.broadcast_to(np.asarray(t_lo, np.float64), (n,))
+    hi = np.broadcast_to(np.asarray(t_hi, np.float64), (n,))
+    a, b = _c.union_interval(_f64(origins).reshape(n, 3), _f64(dirs).reshape(n, 3), _f64(lo),
+                             _f64(hi), _f64(w2is), _f64(last))
+    return np.frombuffer(a, np.float64), np.frombuffer(b, np.float64)
+
+
 def intersect(origins, dirs, tmax, triangles, *, backend=None):
     """(t (N,), triangle (N,) int64): the closest hit of rays ``origins`` + t ``dirs`` (N,3)
     for t in (0, ``tmax``) (N,) among ``triangles`` (T,9: corner and two edges), tmax and

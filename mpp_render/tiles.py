@@ -22,7 +22,7 @@ from . import kernels, pilot, worldfog
 from .camera import primary_rays
 from .march import MarchContext, march_rays, ray_keys, ray_keys_at
 from .gathers import Guides
-from .media import surrounds, union_interval
+from .media import surrounds
 from .passes import DEPTH_MISS
 from .pixelsamples import PixelSamples, power_of_two_side, reverse_bits
 from .precompute.lightdepth import kernel_arrays, media_bricks, split_fog
@@ -173,7 +173,7 @@ class FrameMarch:
         ``t_max`` (the fog analytically): the surfaces' shadow rays."""
         tau = np.zeros((len(p), 3))
         if self.solid:
-            t0, t1 = union_interval(self.solid, p, d, np.zeros(len(p)), t_max)
+            t0, t1 = kernels.union_interval(self.solid, p, d, np.zeros(len(p)), t_max)
             tau = kernels.optical_depth(p, d, np.maximum(t1, 0.0), *self.arrays, self.step, 0.5,
                                         bricks=self.bricks)
         if self.fog_pm is not None:
@@ -191,7 +191,7 @@ class FrameMarch:
 
         def radiance(p, d, t_max):
             n = len(p)
-            t0, t1 = union_interval(self.media, p, d, np.zeros(n), t_max)
+            t0, t1 = kernels.union_interval(self.media, p, d, np.zeros(n), t_max)
             r = march_rays(ctx, p, d, t0, t1, np.ones(n),
                            ray_keys(self.st.seed + GATHER_SEED + ROUND_SEED * k, index, n))
             if steps is not None:
@@ -301,7 +301,7 @@ class FrameMarch:
         void = tmax < tmin   # a panoramic lens's points outside its circle: black
         t_end = np.where(void, tmin, t_end)
         if self.ctx is not None:
-            t0, t1 = union_interval(self.media, o, d, tmin, t_end)
+            t0, t1 = kernels.union_interval(self.media, o, d, tmin, t_end)
             r = march_rays(self.ctx, o, d, t0, t1, axial, keys)
         else:
             r = {"single": np.zeros((n, 3)), "T": np.ones((n, 3)), "depth": np.full(n, DEPTH_MISS),

@@ -106,3 +106,41 @@ def test_optical_depth_clipped_to_the_media_is_the_twins_and_the_exit_distance()
         assert np.allclose(got_c, want, rtol=1e-4, atol=1e-9)
     assert want.max() > 0.3 and (want == 0).mean() > 0.05
 
+
+
+@pytest.mark.parametrize("backend", ["c", "numpy"])
+def test_the_media_interval_is_the_twins(backend):
+    """kernels.union_interval (the tiles' rays through the media's boxes) is
+    media.union_interval: rays that cross one box, several, none, run parallel to a face or
+    start inside, with finite and endless ends, on every medium layout."""
+    if backend == "c" and kernels._c is None:
+        pytest.skip("compiled kernels not built")
+    from mpp_render.media import union_interval
+    rng = np.random.default_rng(12)
+    media = []
+    for k, sharp in enumerate((False, True, False)):
+        i2w = np.eye(4)
+        i2w[:3, :3] = np.diag(rng.uniform(0.05, 0.09, 3))
+        i2w[:3, 3] = rng.uniform(-1.2, -0.6, 3) + k * 0.4
+        media.append(prepare(Medium(f"m{k}", blocky((20, 18, 22), rng, sharp), i2w,
+                                    rng.uniform(0.5, 3, 3), np.full(3, 0.2), 0.0,
+                                    source="MESH" if sharp else "VDB")))
+    m = 5000
+    p = rng.uniform(-2.5, 2.5, (m, 3))
+    d = rng.normal(size=(m, 3))
+    d[:300, 1] = 0.0                      # parallel to a face
+    d[300:400, :2] = 0.0                  # along an axis
+    d *= rng.uniform(0.5, 2.0, (m, 1))    # any length
+    lo = np.where(rng.random(m) < 0.5, 0.0, rng.uniform(-1, 1, m))
+    hi = np.where(rng.random(m) < 0.5, np.inf, rng.uniform(0, 4, m))
+    for sub in ([0], [1, 2], [0, 1, 2]):
+        ms = [media[i] for i in sub]
+        want = union_interval(ms, p, d, lo, hi)
+        got = kernels.union_interval(ms, p, d, lo, hi, backend=backend)
+        for w, g in zip(want, got):
+            assert np.array_equal(np.isfinite(w), np.isfinite(g)), sub
+            f = np.isfinite(w)
+            np.testing.assert_allclose(g[f], w[f], rtol=1e-12, atol=1e-12, err_msg=str(sub))
+        crossed = want[1] > want[0]
+        assert np.array_equal(got[1] > got[0], crossed)
+        assert 0.05 < crossed.mean() < 0.95       # rays that cross and rays that miss

@@ -5,7 +5,8 @@
 #include "common.h"
 
 extern const char optical_depth_doc[], light_sweep_doc[], upsample_into_doc[], march_doc[],
-    trilinear_doc[], light_layout_doc[], trace_paths_doc[], intersect_doc[];
+    trilinear_doc[], light_layout_doc[], trace_paths_doc[], intersect_doc[],
+    union_interval_doc[];
 PyObject *optical_depth(PyObject *self, PyObject *args);
 PyObject *light_sweep(PyObject *self, PyObject *args);
 PyObject *upsample_into(PyObject *self, PyObject *args);
@@ -14,5 +15,6 @@ PyObject *py_trilinear(PyObject *self, PyObject *args);
 PyObject *light_layout(PyObject *self, PyObject *noargs);
 PyObject *trace_paths(PyObject *self, PyObject *args);
 PyObject *intersect(PyObject *self, PyObject *args);
+PyObject *union_interval(PyObject *self, PyObject *args);
 
 #endif

@@ -1,5 +1,5 @@
 /* mpp_render._kernels: the method table.  Each kernel lives in its own file (optical_depth.c,
- * sweep.c, march.c, upsample.c, trilinear.c, paths.c, intersect.c) over the shared headers common.h
+ * sweep.c, march.c, upsample.c, trilinear.c, paths.c, intersect.c, intervals.c) over the shared headers common.h
  * (buffers, grids, trilinear reads, random numbers), bricks.h (empty space), light.h (the light
  * record) and triangles.h (rays against triangles).
  */
@@ -43,6 +43,7 @@ static PyMethodDef methods[] = {
     {"trilinear", py_trilinear, METH_VARARGS, trilinear_doc},
     {"trace_paths", trace_paths, METH_VARARGS, trace_paths_doc},
     {"intersect", intersect, METH_VARARGS, intersect_doc},
+    {"union_interval", union_interval, METH_VARARGS, union_interval_doc},
     {"light_layout", light_layout, METH_NOARGS, light_layout_doc},
     {NULL, NULL, 0, NULL},
 };

@@ -19,7 +19,7 @@ import numpy as np
 
 from .. import kernels, kernels_np
 from ..lights import towards_light
-from ..media import PreparedMedium, union_interval
+from ..media import PreparedMedium
 from ..parallel import run_chunks, worker_count
 from ..scene import Light, Tuning
 from ..surfaces import occluded
@@ -28,7 +28,7 @@ from .lattice import dilate, grid_points
 
 
 def _exit_distance(media, points, dirs, limit):
-    t0, t1 = union_interval(media, points, dirs, np.zeros(len(points)), limit)
+    t0, t1 = kernels.union_interval(media, points, dirs, np.zeros(len(points)), limit)
     return np.where(t1 > 0.0, np.minimum(t1, limit), 0.0)
 
 
