@@ -144,3 +144,20 @@ def test_the_media_interval_is_the_twins(backend):
         crossed = want[1] > want[0]
         assert np.array_equal(got[1] > got[0], crossed)
         assert 0.05 < crossed.mean() < 0.95       # rays that cross and rays that miss
+
+
+@pytest.mark.skipif(kernels._c is None, reason="compiled kernels not built")
+def test_the_compiled_interval_refuses_inputs_of_the_wrong_shape():
+    """_kernels.union_interval checks every buffer's shape against the rays' and the media's
+    counts: a clear error, never a read past an array."""
+    c = kernels._c
+    n = 8
+    o, d, t = np.zeros((n, 3)), np.ones((n, 3)), np.zeros(n)
+    w, last = np.zeros((2, 3, 4)), np.ones((2, 3))
+    c.union_interval(o, d, t, t, w, last)                       # the right shapes pass
+    bad = [(o[:, :2], d, t, t, w, last), (o, d[:5], t, t, w, last), (o, d, t[:5], t, w, last),
+           (o, d, t, t[:5], w, last), (o, d, t, t, np.zeros((2, 3, 3)), last),
+           (o, d, t, t, w, np.ones((3, 3))), (o, d, t, t, w.astype(np.float32), last)]
+    for args in bad:
+        with pytest.raises((ValueError, TypeError, BufferError)):
+            c.union_interval(*args)
