@@ -26,6 +26,19 @@ def blocky(shape, rng, sharp=False):
     return d
 
 
+def boxed_media(rng, sharps, shapes, shift=0.0):
+    """Prepared media of ``blocky`` grids, smooth or sharp per ``sharps``, medium k of
+    ``shapes[k]`` voxels in a box near the origin moved by k ``shift`` along every axis."""
+    media = []
+    for k, (sharp, n) in enumerate(zip(sharps, shapes)):
+        i2w = np.eye(4)
+        i2w[:3, :3] = np.diag(rng.uniform(0.05, 0.09, 3))
+        i2w[:3, 3] = rng.uniform(-1.2, -0.6, 3) + k * shift
+        media.append(prepare(Medium(f"m{k}", blocky(n, rng, sharp), i2w, rng.uniform(0.5, 3, 3),
+                                    np.full(3, 0.2), 0.0, source="MESH" if sharp else "VDB")))
+    return media
+
+
 @pytest.mark.parametrize("sharp", [False, True])
 @pytest.mark.parametrize("brick", [BRICK, 3, 8])
 def test_brick_bounds_hold_every_point(sharp, brick):
@@ -52,14 +65,7 @@ def test_brick_bounds_hold_every_point(sharp, brick):
 @needs_c
 def test_optical_depth_is_the_same_with_bricks():
     rng = np.random.default_rng(3)
-    media = []
-    for k, sharp in enumerate((False, True, False)):
-        n = (30, 26, 34) if k != 1 else (20, 22, 18)
-        i2w = np.eye(4)
-        i2w[:3, :3] = np.diag(rng.uniform(0.05, 0.09, 3))
-        i2w[:3, 3] = rng.uniform(-1.2, -0.6, 3)
-        media.append(prepare(Medium(f"m{k}", blocky(n, rng, sharp), i2w, rng.uniform(0.5, 3, 3),
-                                    np.full(3, 0.2), 0.0, source="MESH" if sharp else "VDB")))
+    media = boxed_media(rng, (False, True, False), ((30, 26, 34), (20, 22, 18), (30, 26, 34)))
     m = 4000
     p = rng.uniform(-1.5, 1.5, (m, 3))
     d = rng.normal(size=(m, 3))
@@ -82,14 +88,7 @@ def test_optical_depth_clipped_to_the_media_is_the_twins_and_the_exit_distance()
     from mpp_render import kernels_np
     from mpp_render.precompute.lightdepth import _exit_distance
     rng = np.random.default_rng(11)
-    media = []
-    for k, sharp in enumerate((False, True)):
-        i2w = np.eye(4)
-        i2w[:3, :3] = np.diag(rng.uniform(0.05, 0.09, 3))
-        i2w[:3, 3] = rng.uniform(-1.2, -0.6, 3) + k * 0.5
-        media.append(prepare(Medium(f"m{k}", blocky((20, 18, 22), rng, sharp), i2w,
-                                    rng.uniform(0.5, 3, 3), np.full(3, 0.2), 0.0,
-                                    source="MESH" if sharp else "VDB")))
+    media = boxed_media(rng, (False, True), [(20, 18, 22)] * 2, shift=0.5)
     m = 2000
     p = rng.uniform(-2, 2, (m, 3))
     d = rng.normal(size=(m, 3))
@@ -107,7 +106,6 @@ def test_optical_depth_clipped_to_the_media_is_the_twins_and_the_exit_distance()
     assert want.max() > 0.3 and (want == 0).mean() > 0.05
 
 
-
 @pytest.mark.parametrize("backend", ["c", "numpy"])
 def test_the_media_interval_is_the_twins(backend):
     """kernels.union_interval (the tiles' rays through the media's boxes) is
@@ -117,14 +115,7 @@ def test_the_media_interval_is_the_twins(backend):
         pytest.skip("compiled kernels not built")
     from mpp_render.media import union_interval
     rng = np.random.default_rng(12)
-    media = []
-    for k, sharp in enumerate((False, True, False)):
-        i2w = np.eye(4)
-        i2w[:3, :3] = np.diag(rng.uniform(0.05, 0.09, 3))
-        i2w[:3, 3] = rng.uniform(-1.2, -0.6, 3) + k * 0.4
-        media.append(prepare(Medium(f"m{k}", blocky((20, 18, 22), rng, sharp), i2w,
-                                    rng.uniform(0.5, 3, 3), np.full(3, 0.2), 0.0,
-                                    source="MESH" if sharp else "VDB")))
+    media = boxed_media(rng, (False, True, False), [(20, 18, 22)] * 3, shift=0.4)
     m = 5000
     p = rng.uniform(-2.5, 2.5, (m, 3))
     d = rng.normal(size=(m, 3))

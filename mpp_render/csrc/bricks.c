@@ -156,22 +156,33 @@ double segment_bounds(const Grid *g, const Bricks *b, const double o[3], const d
 /* Where the ray p + s d leaves the last of the media's padded boxes it crosses (the far end of
  * the union of their intervals, as media.union_interval), capped at t_max; 0 when it meets
  * none ahead.  Twin of kernels_np.media_exit. */
+void box_interval(const double o[3], const double v[3], const double last[3], double *lo,
+                  double *hi) {
+    double a0 = -INFINITY, a1 = INFINITY;
+    for (int a = 0; a < 3; a++) {
+        double t0, t1;
+        if (fabs(v[a]) < 1e-300) {   /* parallel to the slab: all of it or none */
+            int in = o[a] >= 0.0 && o[a] <= last[a];
+            t0 = in ? -INFINITY : INFINITY;
+            t1 = in ? INFINITY : -INFINITY;
+        } else {
+            double inv = 1.0 / v[a], ta = -o[a] * inv, tb = (last[a] - o[a]) * inv;
+            t0 = fmin(ta, tb);
+            t1 = fmax(ta, tb);
+        }
+        a0 = (t0 > a0 || t0 != t0) ? t0 : a0;
+        a1 = (t1 < a1 || t1 != t1) ? t1 : a1;
+    }
+    *lo = a0;
+    *hi = a1;
+}
+
 double media_exit(const Grid *g, int ng, const double p[3], const double d[3], double t_max) {
     double far = -INFINITY;
     for (int m = 0; m < ng; m++) {
-        double o[3], v[3], lo = -INFINITY, hi = INFINITY;
+        double o[3], v[3], lo, hi;
         ray_to_index(&g[m], p, d, o, v);
-        const double *dims = g[m].last;
-        for (int a = 0; a < 3; a++) {
-            if (fabs(v[a]) < 1e-300) {
-                if (!(o[a] >= 0.0 && o[a] <= dims[a])) { lo = INFINITY; hi = -INFINITY; }
-                continue;
-            }
-            double inv = 1.0 / v[a], ta = -o[a] * inv, tb = (dims[a] - o[a]) * inv;
-            double t0 = ta < tb ? ta : tb, t1 = ta < tb ? tb : ta;
-            if (t0 > lo) lo = t0;
-            if (t1 < hi) hi = t1;
-        }
+        box_interval(o, v, g[m].last, &lo, &hi);
         if (hi > lo && hi > far) far = hi;
     }
     double t = far < t_max ? far : t_max;

@@ -54,6 +54,11 @@ double segment_majorant(const Grid *g, const Bricks *b, const double o[3], const
  * over the bricks.  Twin of kernels_np.segment_majorant (least=). */
 double segment_bounds(const Grid *g, const Bricks *b, const double o[3], const double v[3],
                       double s_a, double s_b, double *least);
+/* The interval [*lo, *hi] of the index-space ray o + s v inside the box [0, last] (*lo > *hi
+ * where it misses; a ray parallel to a slab is wholly in or out of it).  As numpy's maximum
+ * and minimum, a NaN stays NaN, and the ray then misses.  Twin of media.ray_box. */
+void box_interval(const double o[3], const double v[3], const double last[3], double *lo,
+                  double *hi);
 /* Where the ray p + s d leaves the last of the media's padded boxes it crosses, capped at
  * t_max; 0 when it meets none ahead.  Twin of kernels_np.media_exit. */
 double media_exit(const Grid *g, int ng, const double p[3], const double d[3], double t_max);

@@ -1,4 +1,5 @@
 /* The interval of rays through the media's boxes (twin of media.union_interval). */
+#include "bricks.h"
 #include "kernels.h"
 
 const char union_interval_doc[] =
@@ -7,33 +8,7 @@ const char union_interval_doc[] =
     "world -> padded index maps and last ((M,3) float64) their grids' last index per axis.\n"
     "Per ray the smallest interval covering every box it crosses (t0 > t1 where it crosses\n"
     "none), clipped to [t_lo, t_hi] ((N,) float64).  Twin of mpp_render.media.union_interval\n"
-    "(ray_box per medium); runs without the GIL.";
-
-/* Ray o + t d against the box [0, last] of index space through map w (3x4): *a, *b. */
-static void ray_box(const double *w, const double *last, const double o[3], const double d[3],
-                    double *a, double *b) {
-    double lo = -INFINITY, hi = INFINITY;
-    for (int r = 0; r < 3; r++) {
-        double oi = o[0] * w[4 * r] + o[1] * w[4 * r + 1] + o[2] * w[4 * r + 2] + w[4 * r + 3];
-        double di = d[0] * w[4 * r] + d[1] * w[4 * r + 1] + d[2] * w[4 * r + 2];
-        double tmin, tmax;
-        if (fabs(di) < 1e-300) {   /* parallel to the slab: all of it or none */
-            int in = oi >= 0.0 && oi <= last[r];
-            tmin = in ? -INFINITY : INFINITY;
-            tmax = in ? INFINITY : -INFINITY;
-        } else {
-            double inv = 1.0 / di, ta = -oi * inv, tb = (last[r] - oi) * inv;
-            tmin = fmin(ta, tb);
-            tmax = fmax(ta, tb);
-        }
-        /* as numpy's maximum / minimum: a NaN (a ray from a non-finite origin) stays NaN,
-         * and the ray then crosses nothing */
-        lo = (tmin > lo || tmin != tmin) ? tmin : lo;
-        hi = (tmax < hi || tmax != tmax) ? tmax : hi;
-    }
-    *a = lo;
-    *b = hi;
-}
+    "(ray_box per medium, bricks.c's box_interval); runs without the GIL.";
 
 PyObject *union_interval(PyObject *self, PyObject *args) {
     PyObject *po, *pd, *plo, *phi, *pw, *pl;
@@ -62,8 +37,11 @@ PyObject *union_interval(PyObject *self, PyObject *args) {
         for (Py_ssize_t r = 0; r < n; r++) {
             double t0 = INFINITY, t1 = -INFINITY;
             for (Py_ssize_t k = 0; k < m; k++) {
-                double a, b;
-                ray_box(W + 12 * k, L + 3 * k, O + 3 * r, D + 3 * r, &a, &b);
+                Grid g;   /* only its map and last index: ray_to_index, box_interval */
+                memcpy(g.w2i, W + 12 * k, sizeof g.w2i);
+                double o[3], v[3], a, b;
+                ray_to_index(&g, O + 3 * r, D + 3 * r, o, v);
+                box_interval(o, v, L + 3 * k, &a, &b);
                 if (b > a) {
                     t0 = a < t0 ? a : t0;
                     t1 = b > t1 ? b : t1;
