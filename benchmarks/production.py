@@ -57,6 +57,16 @@ def samples_to_reach(err: float, curve) -> tuple:
     return float(s_last * (e_last / err) ** 2), True
 
 
+def commit() -> str:
+    """The short git commit of the tree measured, or "unknown" outside a git checkout."""
+    import subprocess
+    try:
+        return subprocess.run(["git", "-C", REPO, "rev-parse", "--short", "HEAD"],
+                              capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
 def open_scene(name):
     import bpy
     bpy.ops.wm.open_mainfile(filepath=os.path.join(SCENES, name, "scene.blend"))
@@ -70,7 +80,7 @@ def measure(name, size, cycles_spp, tmp):
 
     refs = [read_passes(p, names=("Combined",))["Combined"]
             for p in metrics.reference_paths(os.path.join(SCENES, name), False)]
-    row = {"scene": name}
+    row = {"scene": name, "commit": commit()}
     sc = open_scene(name)
     sc.render.engine = 'MPP_RENDER'              # the file's own MPP settings: F12
     rec = batch.render_current(sc, os.path.join(tmp, f"{name}_ours.exr"))
@@ -135,6 +145,8 @@ def write_report(rows, out, size):
          "suite's resolution in the same run (our error measured there too: the large images "
          "have no reference). \"extrapolated\": Cycles did not reach our error within the "
          "curve's last point, and error ~ samples^-1/2 took it further.", ""]
+    commits = sorted({r.get("commit", "unknown") for r in rows})
+    L += [f"Commit{'s' if len(commits) > 1 else ''} measured: {', '.join(commits)}.", ""]
     if sp:
         L += [f"Equal-error speedup over the {len(sp)} scenes: median {np.median(sp):.1f}x, "
               f"worst {min(sp):.1f}x ({min(rows, key=lambda r: r.get('speedup') or 1e9)['scene']}), "

@@ -25,3 +25,22 @@ def test_samples_to_reach_interpolates_and_extrapolates_as_noise_falls():
     assert n == 1.0 and not extrapolated                        # worse than Cycles' cheapest
     assert production.samples_to_reach(None, curve) == (None, False)
     assert production.samples_to_reach(0.1, []) == (None, False)
+
+
+def _row(name, commit):
+    return {"scene": name, "commit": commit,
+            "ours_small": {"seconds": 1.0, "rel_rmse_4": 0.02, "floor_4": 0.01, "bias": 0.0},
+            "ours_hd": {"seconds": 10.0, "precompute": 2.0, "march": 7.0, "pixel_samples": 1.2,
+                        "samples_per_s_per_core": 4e6},
+            "cycles_hd": {"per_sample": 5.0, "fixed": 1.0}, "cycles_spp_needed": 100.0,
+            "extrapolated": True, "cycles_hd_seconds_at_our_error": 501.0, "speedup": 50.1}
+
+
+def test_report_names_the_commits_its_rows_measured(tmp_path):
+    production.write_report([_row("a", "abc1234"), _row("b", "def5678"), _row("c", "abc1234")],
+                            str(tmp_path), (1920, 1080))
+    text = (tmp_path / "production.md").read_text()
+    assert "Commits measured: abc1234, def5678." in text
+    assert "median 50.1x" in text
+    production.write_report([_row("a", "abc1234")], str(tmp_path), (1920, 1080))
+    assert "Commit measured: abc1234." in (tmp_path / "production.md").read_text()
