@@ -32,6 +32,8 @@ REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 # settings or repeats would hide the precompute's seconds.
 os.environ["MPP_CACHE_MB"] = "0"
 sys.path.insert(0, REPO)
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import docblocks  # noqa: E402
 # the public scene suite: $MPP_SCENES, else shared/scenes beside the checkout
 SCENES = os.environ.get("MPP_SCENES") or os.path.join(os.path.dirname(REPO), "shared", "scenes")
 
@@ -142,6 +144,9 @@ def write_report(results, out, single):
              "not shrink with the image, is most of our time and Cycles' cost per sample is "
              "small: the speed that artists see is measured at 1920x1080 in "
              "[production.md](production.md).", ""]
+    stem = "error_vs_time_single" if single else "error_vs_time"
+    # production.py's table at 1920x1080 (its own run), carried over
+    lines += docblocks.kept_block(os.path.join(out, stem + ".md"), "production")
     lines += summary(results)
     for r in results:
         lines += [f"## {r['scene']}", "", "| engine | setting | seconds | rel_rmse_4 | bias | "
@@ -156,7 +161,6 @@ def write_report(results, out, single):
             lines.append(f"| Cycles | {c['spp']} spp | {c['seconds']:.2f} | {c['rel_rmse_4']:.4f} | "
                          f"{c['bias']:+.4f} | |")
         lines.append("")
-    stem = "error_vs_time_single" if single else "error_vs_time"
     lines.append(f"![error against time]({stem}.png)")
     with open(os.path.join(out, stem + ".md"), "w") as f:
         f.write("\n".join(lines) + "\n")

@@ -20,8 +20,11 @@ interpolated log-log on the curve of step 2 (our error and the curve are measure
 suite's resolution: the images at ``--size`` have no reference).  Where the curve does not
 reach our error within its last point, n is extrapolated as Monte Carlo noise falls,
 error ~ n^-1/2, from the last point, and the row says "extrapolated".  The equal-error
-speedup is that time over ours at ``--size``.  Writes ``OUT/production.md`` and
-``OUT/production.json``; each scene's row is also appended to ``--rows`` as it completes.
+speedup is that time over ours at ``--size``.  Writes ``OUT/production.md``,
+``OUT/production.png`` (Cycles' seconds to our error against ours, per scene) and
+``OUT/production.json``, and the summary into ``OUT/error_vs_time.md`` (block
+``production``, beside that page's tables at the suite's size; error_vs_time.py keeps it);
+each scene's row is also appended to ``--rows`` as it completes.
 """
 from __future__ import annotations
 
@@ -36,6 +39,9 @@ import numpy as np
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, REPO)
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+import docblocks  # noqa: E402
 SCENES = os.environ.get("MPP_SCENES") or os.path.join(os.path.dirname(REPO), "shared", "scenes")
 
 
@@ -166,10 +172,72 @@ def write_report(rows, out, size):
                  f"{' (extrapolated)' if r.get('extrapolated') else ''} | "
                  f"{r.get('cycles_hd_seconds_at_our_error', 0):.0f} | "
                  f"{speed} |")
+    L += ["", "![our seconds against Cycles' at equal error](production.png)"]
     with open(os.path.join(out, "production.md"), "w") as f:
         f.write("\n".join(L) + "\n")
     with open(os.path.join(out, "production.json"), "w") as f:
         json.dump(rows, f, indent=1)
+    plot(rows, os.path.join(out, "production.png"), size)
+    docblocks.put_block(os.path.join(out, "error_vs_time.md"), "production",
+                        summary_lines(rows, size))
+
+
+def summary_lines(rows, size) -> list:
+    """Markdown lines for docs/error_vs_time.md: per scene our error, our seconds at ``size``,
+    Cycles' seconds to reach that error there and the speedup, then the median and worst."""
+    w, h = size
+    sp = [r["speedup"] for r in rows if r.get("speedup")]
+    commits = sorted({r.get("commit", "unknown") for r in rows})
+    L = [f"## At {w}x{h}, the defaults (F12)", "",
+         f"From [production.md](production.md) (`benchmarks/production.py`, commit "
+         f"{', '.join(commits)}; {time.strftime('%Y-%m-%d')}): ours at {w}x{h} as F12 renders "
+         f"it, Cycles' seconds per sample at {w}x{h} in the same run, the samples it needs to "
+         "reach our error from its curve at the suite's size, also in the same run."]
+    if sp:
+        worst = min(rows, key=lambda r: r.get("speedup") or 1e9)["scene"]
+        L += ["", f"Equal-error speedup over {len(sp)} scenes: median {np.median(sp):.1f}x, "
+              f"worst {min(sp):.1f}x ({worst}); {sum(v >= 100.0 for v in sp)} scenes at 100x "
+              f"or more, {sum(v < 30.0 for v in sp)} below 30x."]
+    L += ["", f"| scene | our error | ours at {w}x{h}, s | Cycles s to our error | speedup |",
+          "|---|---|---|---|---|"]
+    for r in rows:
+        t = r.get("cycles_hd_seconds_at_our_error")
+        speed = f"{r['speedup']:.1f}x" if r.get("speedup") else "–"
+        cycles = "–" if t is None else f"{t:.0f}"
+        L.append(f"| {r['scene']} | {r['ours_small']['rel_rmse_4']:.4f} | "
+                 f"{r['ours_hd']['seconds']:.1f} | {cycles} | {speed} |")
+    return L + ["", "![our seconds against Cycles' at equal error](production.png)"]
+
+
+def plot(rows, path, size):
+    """``path``: per scene, Cycles' seconds to reach our error against ours at ``size``,
+    log-log, with the lines of equal speedup 1x, 30x and 100x."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    pts = [(r["ours_hd"]["seconds"], r["cycles_hd_seconds_at_our_error"], r["scene"])
+           for r in rows if r.get("cycles_hd_seconds_at_our_error")]
+    fig, ax = plt.subplots(figsize=(7.5, 6.0))
+    if pts:
+        xs, ys, names = zip(*pts)
+        lo = min(min(xs), min(ys) / 100.0) / 2.0
+        hi = max(max(xs) * 100.0, max(ys)) * 2.0
+        for k, style in ((1.0, ":"), (30.0, "--"), (100.0, "-")):
+            ax.loglog([lo, hi], [lo * k, hi * k], style, color="grey", lw=0.8,
+                      label=f"{k:g}x")
+        ax.loglog(xs, ys, "o", color="C0")
+        for x, y, name in pts:
+            ax.annotate(name, (x, y), fontsize=6, xytext=(3, 2), textcoords="offset points")
+        ax.set_xlim(min(xs) / 2.0, max(xs) * 2.0)
+        ax.set_ylim(min(ys) / 2.0, max(ys) * 2.0)
+    w, h = size
+    ax.set_xlabel(f"ours at {w}x{h}, defaults (s)")
+    ax.set_ylabel(f"Cycles at {w}x{h} to our error (s)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7, title="equal-error speedup", title_fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def main(argv=None):

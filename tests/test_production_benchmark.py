@@ -44,3 +44,38 @@ def test_report_names_the_commits_its_rows_measured(tmp_path):
     assert "median 50.1x" in text
     production.write_report([_row("a", "abc1234")], str(tmp_path), (1920, 1080))
     assert "Commit measured: abc1234." in (tmp_path / "production.md").read_text()
+
+
+def test_report_writes_its_summary_into_error_vs_time_and_keeps_the_page(tmp_path):
+    page = tmp_path / "error_vs_time.md"
+    page.write_text("# Error against time\n\nintro\n\n## Summary\n\n| a | b |\n\n## cloud_vdb\n")
+    unreached = _row("b", "abc1234")     # Cycles' curve gave no sample count: no such keys
+    for key in ("speedup", "cycles_hd_seconds_at_our_error"):
+        del unreached[key]
+    rows = [_row("a", "abc1234"), unreached]
+    production.write_report(rows, str(tmp_path), (1920, 1080))
+    text = page.read_text()
+    begin, end = production.docblocks.markers("production")
+    assert text.count(begin) == 1 and text.count(end) == 1
+    assert text.index("intro") < text.index(begin) < text.index(end) < text.index("## Summary")
+    assert "| a | 0.0200 | 10.0 | 501 | 50.1x |" in text and "| b | 0.0200 | 10.0 | – | – |" in text
+    assert (tmp_path / "production.png").stat().st_size > 0
+    # a second report replaces the block, and the page's own rewrite carries it over
+    production.write_report([dict(_row("a", "fff0000"), speedup=120.0)], str(tmp_path),
+                            (1920, 1080))
+    text = page.read_text()
+    assert text.count(begin) == 1 and "120.0x" in text and "50.1x" not in text
+    kept = production.docblocks.kept_block(str(page), "production")
+    assert kept[0] == begin and kept[-2] == end and kept[-1] == ""
+    assert "| a | 0.0200 | 10.0 | 501 | 120.0x |" in kept
+
+
+def test_blocks_are_left_alone_where_the_page_or_block_is_missing(tmp_path):
+    docblocks = production.docblocks
+    assert not docblocks.put_block(str(tmp_path / "none.md"), "production", ["x"])
+    assert docblocks.kept_block(str(tmp_path / "none.md"), "production") == []
+    page = tmp_path / "p.md"
+    page.write_text("# t\n<!-- production:begin -->\nno end\n")
+    assert docblocks.find_block(page.read_text(), "production") is None
+    assert docblocks.put_block(str(page), "production", ["new"], after="## Nowhere")
+    assert page.read_text().endswith("<!-- production:begin -->\nnew\n<!-- production:end -->\n")
