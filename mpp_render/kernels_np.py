@@ -443,6 +443,44 @@ def segment_majorant(shape, bricks, lo, lv, s_a, s_b, brick=BRICK, least=False):
 LIGHT_VARIATION = 0.2  # relative change of a light's irradiance that keeps the steps short
 
 
+def area_omega(rec, x):
+    """(N,) the solid angle (sr) that the rectangular (or parallelogram) emitter of the area
+    light record ``rec`` subtends at the points ``x`` (N,3), from its emitting side (0 behind
+    it): Van Oosterom and Strackee's formula on its two triangles.  Twin of march.c's."""
+    c, ax, ay = rec[L_POS:L_POS + 3], rec[L_AX:L_AX + 3], rec[L_AY:L_AY + 3]
+    corners = np.array([c - ax - ay, c + ax - ay, c + ax + ay, c - ax + ay])
+    r = corners[None, :, :] - x[:, None, :]                              # (N,4,3)
+    ln = np.maximum(np.sqrt(np.einsum("nki,nki->nk", r, r)), 1e-300)
+    omega = np.zeros(len(x))
+    for i in (1, 2):
+        a, b, q = r[:, 0], r[:, i], r[:, i + 1]
+        num = np.abs(np.einsum("ni,ni->n", a, np.cross(b, q)))
+        den = (ln[:, 0] * ln[:, i] * ln[:, i + 1] + np.einsum("ni,ni->n", a, b) * ln[:, i + 1]
+               + np.einsum("ni,ni->n", a, q) * ln[:, i] + np.einsum("ni,ni->n", b, q) * ln[:, 0])
+        omega += 2.0 * np.arctan2(num, den)
+    front = (x - c) @ rec[L_NORMAL:L_NORMAL + 3] > 0.0
+    return np.where(front, omega, 0.0)
+
+
+def varies_value(rec, x, dirs, g):
+    """(N,) what light_varies weighs for the light record ``rec`` at the points ``x`` for rays
+    along ``dirs`` in a medium of anisotropy ``g``: the irradiance summed over the channels
+    times the HG phase.  A rectangular area light: its emitter's exact irradiance L_e Omega
+    (``area_omega``) seen along the direction from its centre; any other light: light_sample
+    at the middle of its draw.  Twin of march.c's."""
+    if int(rec[L_KIND]) == KIND_AREA and not rec[L_ROUND] > 0:
+        v = x - rec[L_POS:L_POS + 3]
+        dist = np.sqrt(np.einsum("ni,ni->n", v, v))
+        inv = 1.0 / np.maximum(dist, 1e-30)
+        area = rec[L_AREA]
+        norm = area if (rec[L_NORMALIZE] > 0 and area > 0) else 1.0
+        e = rec[L_STRENGTH:L_STRENGTH + 3].sum() / np.pi / norm * area_omega(rec, x)
+        return e * hg(-np.einsum("ni,ni->n", v, dirs) * inv, g)
+    half = np.full(len(x), 0.5)
+    wi, e = light_sample(rec, x, half, half)[:2]
+    return e.sum(axis=1) * hg(-np.einsum("ij,ij->i", wi, dirs), g)
+
+
 def light_varies(lights, origins, dirs, s_a, s_b, g):
     """(N,) whether the light a lit local light scatters towards the camera (its irradiance at
     its centre, before the media, times the HG phase of anisotropy ``g``) differs by more
@@ -451,16 +489,12 @@ def light_varies(lights, origins, dirs, s_a, s_b, g):
     miss."""
     xa = origins + dirs * s_a[:, None]
     xb = origins + dirs * s_b[:, None]
-    half = np.full(len(xa), 0.5)
     out = np.zeros(len(xa), bool)
     for rec in np.asarray(lights, np.float64).reshape(-1, LIGHT_FIELDS):
         if rec[L_CHANNEL] < 0 or int(rec[L_KIND]) == KIND_SUN:
             continue
-        va, vb = [], []
-        for x, acc in ((xa, va), (xb, vb)):
-            wi, e = light_sample(rec, x, half, half)[:2]
-            acc.append(e.sum(axis=1) * hg(-np.einsum("ij,ij->i", wi, dirs), g))
-        hi, lo = np.maximum(va[0], vb[0]), np.minimum(va[0], vb[0])
+        va, vb = varies_value(rec, xa, dirs, g), varies_value(rec, xb, dirs, g)
+        hi, lo = np.maximum(va, vb), np.minimum(va, vb)
         out |= (hi > 0.0) & ~(lo >= (1.0 - LIGHT_VARIATION) * hi)
     return out
 

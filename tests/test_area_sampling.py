@@ -114,3 +114,38 @@ def test_the_warp_density_integrates_to_one_and_maps_the_square_onto_itself():
     # E[1 / pdf(u', v')] over the warped points is the square's area, 1
     inv = 1.0 / pdf
     assert inv.mean() == pytest.approx(1.0, abs=5 * inv.std() / np.sqrt(n))
+
+
+def test_light_varies_weighs_a_rectangle_by_its_exact_irradiance():
+    """kernels_np.varies_value (light_varies' measure, the twin of march.c's) reads a
+    rectangle's irradiance as lights.area_incident integrates it over the emitter (Van
+    Oosterom and Strackee on its two triangles), seen from its centre, and 0 behind it; the
+    solid angle of a point 1 mm above a large square is nearly a hemisphere's."""
+    from mpp_render import kernels_np
+    from mpp_render.lights import area_incident
+    from mpp_render.phase import hg
+    c_, s_ = np.cos(0.3), np.sin(0.3)
+    m = np.array([[c_, 0, s_, 0.1], [0, 1, 0, 0.0], [-s_, 0, c_, 0.8], [0, 0, 0, 1.0]])
+    light = Light("AREA", "rect", np.array([300.0, 200.0, 100.0]), matrix=m,
+                  shape="RECTANGLE", size_x=0.6, size_y=0.4)
+    rec = pack_light(light)
+    rng = np.random.default_rng(3)
+    c, n = rec[L_POS:L_POS + 3], rec[L_NORMAL:L_NORMAL + 3]
+    pts = c + rng.normal(size=(200, 3)) * 0.8
+    dirs = rng.normal(size=(200, 3))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    _, e = area_incident(light, pts, direction=False)
+    omega = kernels_np.area_omega(rec, pts)
+    front = (pts - c) @ n > 0.0
+    assert front.any() and (~front).any()
+    assert np.all(omega[~front] == 0.0) and np.all(omega[front] > 0.0)
+    radiance = e[front].sum(axis=1) / omega[front]
+    assert np.allclose(radiance, radiance[0], rtol=1e-9)      # e = L_e Omega, one L_e
+    wi = (pts - c) / np.linalg.norm(pts - c, axis=1, keepdims=True)
+    for g in (0.0, 0.7):
+        want = e.sum(axis=1) * hg(-np.einsum("ij,ij->i", wi, dirs), g)
+        assert np.allclose(kernels_np.varies_value(rec, pts, dirs, g), want, rtol=1e-9, atol=0)
+    big = pack_light(Light("AREA", "big", np.full(3, 10.0), matrix=np.eye(4),
+                           shape="SQUARE", size_x=4.0, size_y=4.0))
+    above = np.array([[0.1, -0.2, -1e-3]]) if big[L_NORMAL + 2] < 0 else np.array([[0.1, -0.2, 1e-3]])
+    assert kernels_np.area_omega(big, above)[0] == pytest.approx(2.0 * np.pi, rel=2e-3)

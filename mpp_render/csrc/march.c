@@ -175,7 +175,51 @@ typedef struct {
     double s[MAX_LIGHTS], e[MAX_LIGHTS];
 } VaryMemo;
 
+/* The solid angle (sr) that a rectangular (or parallelogram) area light's emitter subtends
+ * at x, from its emitting side (0 behind it): Van Oosterom and Strackee's formula on its two
+ * triangles, two atan2 where the draw of the spherical rectangle takes four acos and a sincos.
+ * Twin: kernels_np.area_omega. */
+static double area_omega(const double *L, const double x[3]) {
+    const double *c = L + L_POS, *ax = L + L_AX, *ay = L + L_AY, *nl = L + L_NORMAL;
+    double front = (x[0] - c[0]) * nl[0] + (x[1] - c[1]) * nl[1] + (x[2] - c[2]) * nl[2];
+    if (!(front > 0.0)) return 0.0;
+    static const double SX[4] = {-1.0, 1.0, 1.0, -1.0}, SY[4] = {-1.0, -1.0, 1.0, 1.0};
+    double r[4][3], ln[4];
+    for (int k = 0; k < 4; k++) {
+        for (int a = 0; a < 3; a++) r[k][a] = c[a] + SX[k] * ax[a] + SY[k] * ay[a] - x[a];
+        ln[k] = sqrt(r[k][0] * r[k][0] + r[k][1] * r[k][1] + r[k][2] * r[k][2]);
+        if (!(ln[k] > 1e-300)) ln[k] = 1e-300;
+    }
+    double omega = 0.0;
+    for (int i = 1; i < 3; i++) {
+        const double *a = r[0], *b = r[i], *q = r[i + 1];
+        double cr[3] = {b[1] * q[2] - b[2] * q[1], b[2] * q[0] - b[0] * q[2], b[0] * q[1] - b[1] * q[0]};
+        double num = fabs(a[0] * cr[0] + a[1] * cr[1] + a[2] * cr[2]);
+        double ab = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        double aq = a[0] * q[0] + a[1] * q[1] + a[2] * q[2];
+        double bq = b[0] * q[0] + b[1] * q[1] + b[2] * q[2];
+        double den = ln[0] * ln[i] * ln[i + 1] + ab * ln[i + 1] + aq * ln[i] + bq * ln[0];
+        omega += 2.0 * atan2(num, den);
+    }
+    return omega;
+}
+
+/* What light_varies weighs for one light at x, for a ray along d in a medium of anisotropy g:
+ * the irradiance summed over the channels times the phase function.  A rectangular area
+ * light: its emitter's exact irradiance L_e Omega (area_omega), seen along the direction from
+ * its centre; any other light: light_sample at the middle of its draw. */
 static double varies_value(const double *L, const double x[3], const double d[3], double g) {
+    if ((int)L[L_KIND] == KIND_AREA && !(L[L_ROUND] > 0)) {
+        const double *c = L + L_POS;
+        double v[3] = {x[0] - c[0], x[1] - c[1], x[2] - c[2]};
+        double dist = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+        double inv = 1.0 / (dist > 1e-30 ? dist : 1e-30);
+        double area = L[L_AREA];
+        double norm = (L[L_NORMALIZE] > 0 && area > 0) ? area : 1.0;
+        double e = (L[L_STRENGTH] + L[L_STRENGTH + 1] + L[L_STRENGTH + 2]) / M_PI / norm *
+                   area_omega(L, x);
+        return e * hg_phase(-(v[0] * d[0] + v[1] * d[1] + v[2] * d[2]) * inv, g);
+    }
     double wi[3], e[3], wc[3], dc, ds;
     light_sample(L, x, 0.5, 0.5, wi, e, wc, &dc, &ds);
     return (e[0] + e[1] + e[2]) * hg_phase(-(wi[0] * d[0] + wi[1] * d[1] + wi[2] * d[2]), g);
