@@ -15,7 +15,7 @@ from .lightrecord import (KIND_AREA, KIND_POINT, KIND_SPOT, KIND_SUN, L_AREA, L_
                           L_NORMAL, L_NORMALIZE, L_POS, L_RADIUS, L_ROUND, L_STRENGTH, LIGHT_FIELDS)
 from .media import BRICK, density_from, trilinear
 from .walk import table_lookup
-from .lights import light_sample, path_stretch
+from .lights import light_sample, path_stretch, polygon_solid_angle
 from .rng import uniform
 from .phase import hg
 
@@ -448,16 +448,8 @@ def area_omega(rec, x):
     light record ``rec`` subtends at the points ``x`` (N,3), from its emitting side (0 behind
     it): Van Oosterom and Strackee's formula on its two triangles.  Twin of march.c's."""
     c, ax, ay = rec[L_POS:L_POS + 3], rec[L_AX:L_AX + 3], rec[L_AY:L_AY + 3]
-    corners = np.array([c - ax - ay, c + ax - ay, c + ax + ay, c - ax + ay])
-    r = corners[None, :, :] - x[:, None, :]                              # (N,4,3)
-    ln = np.maximum(np.sqrt(np.einsum("nki,nki->nk", r, r)), 1e-300)
-    omega = np.zeros(len(x))
-    for i in (1, 2):
-        a, b, q = r[:, 0], r[:, i], r[:, i + 1]
-        num = np.abs(np.einsum("ni,ni->n", a, np.cross(b, q)))
-        den = (ln[:, 0] * ln[:, i] * ln[:, i + 1] + np.einsum("ni,ni->n", a, b) * ln[:, i + 1]
-               + np.einsum("ni,ni->n", a, q) * ln[:, i] + np.einsum("ni,ni->n", b, q) * ln[:, 0])
-        omega += 2.0 * np.arctan2(num, den)
+    omega = polygon_solid_angle(np.array([c - ax - ay, c + ax - ay, c + ax + ay, c - ax + ay]),
+                                x)[2]
     front = (x - c) @ rec[L_NORMAL:L_NORMAL + 3] > 0.0
     return np.where(front, omega, 0.0)
 

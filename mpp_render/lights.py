@@ -446,6 +446,24 @@ def emitter_polygon(light: Light) -> np.ndarray:
     return c + np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], np.float64) @ np.stack([ax, ay])
 
 
+def polygon_solid_angle(polygon, points):
+    """(r, |r|, Omega): the vectors r (N,V,3) from the ``points`` (N,3) to the convex planar
+    ``polygon``'s corners (V,3, in order), their lengths (N,V), and the solid angle Omega
+    (N,, sr) the polygon subtends at each point, from either side: Van Oosterom and
+    Strackee's formula on the fan of triangles from its first corner."""
+    r = np.asarray(polygon, np.float64)[None, :, :] - np.asarray(points, np.float64)[:, None, :]
+    ln = np.maximum(np.linalg.norm(r, axis=2), 1e-300)
+    omega = np.zeros(len(r))
+    a, la = r[:, 0], ln[:, 0]
+    for i in range(1, r.shape[1] - 1):
+        b, c2, lb, lc = r[:, i], r[:, i + 1], ln[:, i], ln[:, i + 1]
+        num = np.abs(np.einsum("ij,ij->i", a, np.cross(b, c2)))
+        den = (la * lb * lc + np.einsum("ij,ij->i", a, b) * lc
+               + np.einsum("ij,ij->i", a, c2) * lb + np.einsum("ij,ij->i", b, c2) * la)
+        omega += 2.0 * np.arctan2(num, den)
+    return r, ln, omega
+
+
 def area_incident(light: Light, points, direction: bool = True):
     """(direction (N,3), irradiance RGB (N,3)) of an AREA light integrated over its emitter:
     a Lambertian emitter of radiance L (W/(m^2 sr)) brings sum of L cos(theta_l) dA / d^2 =
@@ -462,16 +480,7 @@ def area_incident(light: Light, points, direction: bool = True):
     area = rec[L_AREA]
     radiance = np.asarray(light.strength, np.float64).reshape(3) / np.pi / \
         (area if (light.normalize and area > 0.0) else 1.0)
-    r = emitter_polygon(light)[None, :, :] - points[:, None, :]      # (N,V,3)
-    ln = np.maximum(np.linalg.norm(r, axis=2), 1e-300)
-    omega = np.zeros(len(points))
-    a, la = r[:, 0], ln[:, 0]
-    for i in range(1, r.shape[1] - 1):
-        b, c2, lb, lc = r[:, i], r[:, i + 1], ln[:, i], ln[:, i + 1]
-        num = np.abs(np.einsum("ij,ij->i", a, np.cross(b, c2)))
-        den = (la * lb * lc + np.einsum("ij,ij->i", a, b) * lc
-               + np.einsum("ij,ij->i", a, c2) * lb + np.einsum("ij,ij->i", b, c2) * la)
-        omega += 2.0 * np.arctan2(num, den)
+    r, ln, omega = polygon_solid_angle(emitter_polygon(light), points)
     front = (points - c) @ normal > 0.0
     e = np.where(front, omega, 0.0)[:, None] * radiance[None, :]
     if not direction:
