@@ -137,6 +137,16 @@ def measure(name, size, cycles_spp, tmp):
     return row
 
 
+def measured_commits(rows) -> list:
+    """The commits the ``rows`` measured, sorted, each once ("unknown" for a row without)."""
+    return sorted({r.get("commit", "unknown") for r in rows})
+
+
+def slowest(rows) -> str:
+    """The scene of the ``rows`` with the lowest equal-error speedup (rows without one last)."""
+    return min(rows, key=lambda r: r.get("speedup") or 1e9)["scene"]
+
+
 def write_report(rows, out, size):
     w, h = size
     sp = [r["speedup"] for r in rows if r.get("speedup")]
@@ -151,12 +161,11 @@ def write_report(rows, out, size):
          "suite's resolution in the same run (our error measured there too: the large images "
          "have no reference). \"extrapolated\": Cycles did not reach our error within the "
          "curve's last point, and error ~ samples^-1/2 took it further.", ""]
-    commits = sorted({r.get("commit", "unknown") for r in rows})
+    commits = measured_commits(rows)
     L += [f"Commit{'s' if len(commits) > 1 else ''} measured: {', '.join(commits)}.", ""]
     if sp:
         L += [f"Equal-error speedup over the {len(sp)} scenes: median {np.median(sp):.1f}x, "
-              f"worst {min(sp):.1f}x ({min(rows, key=lambda r: r.get('speedup') or 1e9)['scene']}), "
-              f"best {max(sp):.1f}x.", ""]
+              f"worst {min(sp):.1f}x ({slowest(rows)}), best {max(sp):.1f}x.", ""]
     L += [f"| scene | our error (rel_rmse_4) | ours at {w}x{h}: s (precompute / march) | "
           "samples per pixel | march M samples/s/core | Cycles s per sample | Cycles fixed s | "
           "Cycles samples to our error | Cycles s to our error | speedup |",
@@ -187,16 +196,14 @@ def summary_lines(rows, size) -> list:
     Cycles' seconds to reach that error there and the speedup, then the median and worst."""
     w, h = size
     sp = [r["speedup"] for r in rows if r.get("speedup")]
-    commits = sorted({r.get("commit", "unknown") for r in rows})
     L = [f"## At {w}x{h}, the defaults (F12)", "",
          f"From [production.md](production.md) (`benchmarks/production.py`, commit "
-         f"{', '.join(commits)}; {time.strftime('%Y-%m-%d')}): ours at {w}x{h} as F12 renders "
+         f"{', '.join(measured_commits(rows))}; {time.strftime('%Y-%m-%d')}): ours at {w}x{h} as F12 renders "
          f"it, Cycles' seconds per sample at {w}x{h} in the same run, the samples it needs to "
          "reach our error from its curve at the suite's size, also in the same run."]
     if sp:
-        worst = min(rows, key=lambda r: r.get("speedup") or 1e9)["scene"]
         L += ["", f"Equal-error speedup over {len(sp)} scenes: median {np.median(sp):.1f}x, "
-              f"worst {min(sp):.1f}x ({worst}); {sum(v >= 100.0 for v in sp)} scenes at 100x "
+              f"worst {min(sp):.1f}x ({slowest(rows)}); {sum(v >= 100.0 for v in sp)} scenes at 100x "
               f"or more, {sum(v < 30.0 for v in sp)} below 30x."]
     L += ["", f"| scene | our error | ours at {w}x{h}, s | Cycles s to our error | speedup |",
           "|---|---|---|---|---|"]
