@@ -176,11 +176,13 @@ def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, r
     ``media_optical_depth(points, dirs, t_max)`` -> (N,3) optical depth through the media
     (the caller binds the prepared media); ``rng`` jitters area/sphere light points and the
     one cosine-weighted direction per point that gathers the sky and the volumes' light.
-    ``media_radiance(points, dirs, t_max)`` -> (N,3), when given, is the radiance the volumes
-    scatter and emit towards ``points`` along ``dirs`` up to ``t_max`` (m; a march, bound by
-    the caller): the light the smoke and fog around a surface throw onto it (single and
-    multiple scattering and emission; the sky and the lights seen through the volumes are
-    the terms above).  With the cosine-weighted direction the estimate of its reflection is
+    ``media_radiance(points, dirs, t_max)`` -> ((N,3), (N,3)), when given, is the radiance the
+    volumes scatter and emit towards ``points`` along ``dirs`` up to ``t_max`` (m; a march,
+    bound by the caller) and the transmittance along the same segment: the light the smoke and
+    fog around a surface throw onto it (single and multiple scattering and emission), and what
+    the sky and the other surfaces seen along that direction are seen through (the march's
+    own transmittance, an unbiased estimate of exp(-tau), instead of a second pass of
+    ``media_optical_depth`` along the same ray).  With the cosine-weighted direction the estimate of its reflection is
     the layers' directional albedo x that radiance, unbiased over samples per pixel.
 
     ``bounces``: surface-to-surface bounces gathered along that same direction.  Where it
@@ -248,23 +250,28 @@ def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, r
         t_hit, tri_hit = intersect(ss, pk, w, np.full(len(pk), np.inf))
         albedo = np.repeat(bsdf.albedo(), k, axis=0)[live] * weight[live, None]
         acc = np.zeros((len(pk), 3))
+        trans = None   # the transmittance along each gather, where the media's march gives it
+        if media_radiance is not None:
+            radiance, trans = media_radiance(pk, w, t_hit)
+            acc += albedo * radiance
+
+        def seen_through(idx, t_max):
+            if trans is not None:
+                return trans[idx]
+            return np.exp(-media_optical_depth(pk[idx], w[idx], t_max))
         if bounces > 0:
             hit = np.flatnonzero(tri_hit >= 0)
             if hit.size:
                 ph = pk[hit] + w[hit] * t_hit[hit, None]
                 seen = shade(ss, tri_hit[hit], ph, w[hit], lights, world_color,
                              media_optical_depth, rng, None, bounces - 1)
-                tau = media_optical_depth(pk[hit], w[hit], t_hit[hit])
-                acc[hit] += albedo[hit] * seen * np.exp(-tau)
+                acc[hit] += albedo[hit] * seen * seen_through(hit, t_hit[hit])
         if np.any(wc > 0):
             # the uniform sky seen through cosine-distributed directions, reflected by every
             # layer with its directional albedo (where no surface hides it)
             sky = np.flatnonzero(~np.isfinite(t_hit))
             if sky.size:
-                tau = media_optical_depth(pk[sky], w[sky], np.full(sky.size, np.inf))
-                acc[sky] += albedo[sky] * wc * np.exp(-tau)
-        if media_radiance is not None:
-            acc += albedo * media_radiance(pk, w, t_hit)
+                acc[sky] += albedo[sky] * wc * seen_through(sky, np.full(sky.size, np.inf))
         full = np.zeros((n_pts * k, 3))
         full[live] = acc
         out += full.reshape(n_pts, k, 3).sum(axis=1)

@@ -181,10 +181,12 @@ class FrameMarch:
         return tau
 
     def radiance_towards(self, index, k=0, steps: Optional[list] = None):
-        """``(points, dirs, t_max) -> (N,3)``: the radiance the volumes scatter and emit
-        towards ``points`` along ``dirs`` (a march of tile ``index``'s own random stream, of
-        its round ``k``): the light they throw onto a surface (surfaces.shade); None without
-        media.  Each march's samples are appended to ``steps`` where given."""
+        """``(points, dirs, t_max) -> ((N,3), (N,3))``: the radiance the volumes scatter and
+        emit towards ``points`` along ``dirs`` (a march of tile ``index``'s own random
+        stream, of its round ``k``), the light they throw onto a surface, and the same
+        march's transmittance to ``t_max`` (the fog beyond its grid included), through which
+        the surface sees the sky or another surface (surfaces.shade); None without media.
+        Each march's samples are appended to ``steps`` where given."""
         if self.ctx is None:
             return None
         ctx = self.ctx.for_gathers()
@@ -197,7 +199,7 @@ class FrameMarch:
             if steps is not None:
                 steps.append(float(r["steps"].sum()))
             r = self.fog_tail(r, p, d, np.zeros(n), t_max, nodes=GATHER_TAIL_NODES)
-            return r["single"] + r["multiple"] + r["emission"]
+            return r["single"] + r["multiple"] + r["emission"], r["T"]
         return radiance
 
     def fog_tail(self, r, o, d, tmin, t_end, nodes: int = worldfog.TAIL_NODES):

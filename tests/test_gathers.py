@@ -120,7 +120,7 @@ def test_a_ground_gathers_a_lamps_glow_unbiased_and_with_less_noise():
 
     def radiance(pts, dirs, t_max):
         asked.append(dirs[:, 2].min())
-        return np.repeat(glow(pts, dirs)[:, None], 3, axis=1)
+        return np.repeat(glow(pts, dirs)[:, None], 3, axis=1), np.ones((len(pts), 3))
 
     no_depth = lambda pts, dirs, t: np.zeros((len(pts), 3))
     guides = gathers.Guides(LAMP[None], np.ones(1))

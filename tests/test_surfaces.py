@@ -341,6 +341,42 @@ def test_volume_light_reaches_the_ground():
     assert abs(ground / want - 1.0) < 0.05, (ground, want)
 
 
+def test_the_sky_reaches_the_ground_through_the_gathers_own_transmittance():
+    """An absorbing layer (sigma_a, thickness H, 16 m wide, no scattering, no emission) just
+    above a Lambertian ground under a white sky: the ground reflects albedo/pi x
+    int exp(-sigma_a l(theta)) cos dw, l the path through the layer (quadrature as above).
+    The gathers read the sky through the transmittance of the same march that gathers the
+    media's light (tiles.FrameMarch.radiance_towards), not through a second pass of the
+    optical depth; a march whose transmittance were wrong (or 1) would miss this."""
+    sigma_a, H, half, albedo = 2.0, 0.5, 8.0, 0.5
+    n = (32, 32, 4)
+    i2w = np.eye(4)
+    i2w[:3, :3] = np.diag([2 * half / n[0], 2 * half / n[1], H / n[2]])
+    i2w[:3, 3] = [-half + half / n[0], -half + half / n[1], 0.001 + H / (2 * n[2])]
+    layer = Medium("dark", np.ones(n, np.float32), i2w, np.zeros(3), np.full(3, sigma_a), 0.0,
+                   source="MESH")
+    cam = Camera("ORTHO", np.eye(4), 8, 8, (-0.5, 0.5, -0.5, 0.5))
+    cam.cam_to_world[:3, 3] = [0, 0, 10]
+    desc = SceneDescription(cam, [], [layer], surfaces=[quad(0.0, 12.0, albedo=albedo)],
+                            world=World(np.ones(3)), settings=Settings(samples=64, multiple=False))
+    out = render(desc).passes
+    T = out["Transmittance"][..., 0]
+    assert np.allclose(T, math.exp(-sigma_a * H), rtol=1e-3)
+    ground = (out["Combined"][..., :3] / T[..., None]).mean()
+    th = (np.arange(2000) + 0.5) / 2000 * (math.pi / 2)
+    ph = (np.arange(720) + 0.5) / 720 * (2 * math.pi)
+    TH, PH = np.meshgrid(th, ph, indexing="ij")
+    up = np.cos(TH)
+    side = np.sin(TH) * np.maximum(np.abs(np.cos(PH)), np.abs(np.sin(PH)))
+    with np.errstate(divide="ignore"):
+        length = np.minimum(H / up, np.where(side > 0, half / side, np.inf))
+    seen = np.sum(np.exp(-sigma_a * length) * np.cos(TH) * np.sin(TH)) \
+        * (math.pi / 2 / 2000) * (2 * math.pi / 720)
+    want = albedo / math.pi * seen
+    print("ground / quadrature:", ground / want)
+    assert abs(ground / want - 1.0) < 0.05, (ground, want)
+
+
 def test_gathers_and_the_pixels_latin_hypercube_keep_the_mean_and_cut_the_noise():
     """A grey ground at the foot of a black wall under a uniform sky gathers half the sky
     (the wall hides the half of the cosine-weighted hemisphere beyond it): its radiance is
