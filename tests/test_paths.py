@@ -280,6 +280,46 @@ def test_a_medium_too_dense_for_paths_keeps_the_walk():
         assert max(float(lev.max()) for lev in msf.levels) > 0.0
 
 
+def test_more_paths_reach_a_small_medium(monkeypatch):
+    """lightpaths.path_budget: a medium whose lattice holds few points takes at most
+    PATHS_PER_POINT paths a point at the default Paths, and more Paths raise that cap in
+    proportion (below the default the cap stays; Paths still caps the total), so that an
+    artist's larger Paths adds paths to a small VDB too; the precompute traces what it gives."""
+    from mpp_render.media import prepare
+    from mpp_render.precompute import lightpaths, precompute
+    from mpp_render.scene import MULTIPLE_PATHS, Camera, Light, Medium, World
+    budget, per = lightpaths.path_budget, lightpaths.PATHS_PER_POINT
+    assert budget(MULTIPLE_PATHS, 20_000) == per * 20_000
+    assert budget(4 * MULTIPLE_PATHS, 20_000) == 4 * per * 20_000
+    assert budget(MULTIPLE_PATHS // 4, 20_000) == per * 20_000
+    assert budget(MULTIPLE_PATHS // 4, 5_000) == per * 5_000
+    assert budget(MULTIPLE_PATHS, 10 ** 6) == MULTIPLE_PATHS
+    asked = [budget(n, 30_000) for n in (10 ** 5, 10 ** 6, 3 * 10 ** 6, 6 * 10 ** 6, 2 * 10 ** 7)]
+    assert asked == sorted(asked) and asked[-1] > asked[2]
+    # a part of the Paths asked (the fog glow's deficit paths) keeps the setting's factor
+    assert budget(MULTIPLE_PATHS // 2, 20_000, 4 * MULTIPLE_PATHS) == MULTIPLE_PATHS // 2
+    assert budget(MULTIPLE_PATHS // 2, 20_000) == per * 20_000
+    traced = []
+    real = lightpaths._trace_all
+
+    def counting(sets, n_paths, *a, **k):
+        traced.append(n_paths)
+        return real(sets, n_paths, *a, **k)
+    monkeypatch.setattr(lightpaths, "_trace_all", counting)
+    cam = Camera("PERSP", np.eye(4), 4, 4, (-1, 1, -1, 1))
+    cam.cam_to_world[:3, 3] = [0.0, 0.0, 5.0]
+    sun = Light("SUN", "sun", np.full(3, 3.0), direction=np.array([0.3, 0.2, -0.93]))
+    i2w = np.eye(4)
+    i2w[:3, :3] *= 2.0 / 16
+    i2w[:3, 3] = -1.0 + 1.0 / 16
+    pm = prepare(Medium("m", np.ones((16, 16, 16), np.float32), i2w, np.full(3, 4.5),
+                        np.full(3, 0.5), 0.6))
+    for n in (MULTIPLE_PATHS, 4 * MULTIPLE_PATHS):
+        precompute([pm], [sun], World(), cam, multiple=True, multiple_paths=n,
+                   multiple_resolution=8)
+    assert len(traced) == 2 and traced[1] == 4 * traced[0] and traced[0] < MULTIPLE_PATHS
+
+
 def test_the_paths_lattice_counts_the_voxels_not_their_padding():
     """precompute.lattice.paths_lattice: at most Resolution points along the medium's longest
     side of voxels, its one-voxel padding left out (walk_lattice counts it: a mesh volume of

@@ -79,3 +79,13 @@ def test_blocks_are_left_alone_where_the_page_or_block_is_missing(tmp_path):
     assert docblocks.find_block(page.read_text(), "production") is None
     assert docblocks.put_block(str(page), "production", ["new"], after="## Nowhere")
     assert page.read_text().endswith("<!-- production:begin -->\nnew\n<!-- production:end -->\n")
+
+
+def test_the_report_says_which_cycles_samples_its_rows_timed():
+    """The text names the Cycles sample counts the rows' per-sample seconds came from (rows
+    of runs before HD_SPP was 4 hold 2), not the current constant alone."""
+    old = {"cycles_hd": {"seconds_1spp": 3.0, "seconds_2spp": 5.0}}
+    new = {"cycles_hd": {"seconds_1spp": 3.0, f"seconds_{production.HD_SPP}spp": 9.0}}
+    assert production.hd_samples([old]) == "2"
+    assert production.hd_samples([old, new]) == f"2 or {production.HD_SPP}"
+    assert production.hd_samples([new, new]) == str(production.HD_SPP)

@@ -38,8 +38,8 @@ class MPPRenderSettings(bpy.types.PropertyGroup):
                 "(public scenes: error median 0.023, worst 0.17; 10 s median at 160x120)"),
                ("REFERENCE", "Reference", "16 samples in every pixel (Noise Threshold 0), 12 "
                 "million paths per light on a lattice twice as fine: closest to Cycles, "
-                "3-10x Final's time (public scenes: error median 0.015, 90th percentile 0.05; "
-                "68 s median at 160x120)")],
+                "3-10x Final's time, 18-46x on VDBs (public scenes: error median 0.015, 90th "
+                "percentile 0.05; 69 s median at 160x120)")],
         description="Sets Samples, Noise Threshold, Multiple Scattering Paths and Resolution "
                     "together "
                     "(they stay editable). docs/usage.md gives each one's time and error on "

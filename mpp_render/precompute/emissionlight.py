@@ -42,7 +42,7 @@ from .. import kernels
 from ..media import PreparedMedium
 from ..scene import Tuning
 from .fogglow import fog_glow
-from .lightpaths import PATHS_PER_POINT, PathLattice, _trace_all
+from .lightpaths import PathLattice, _trace_all, path_budget
 from .pathstarts import Surroundings
 
 CHUNK = 1 << 20  # voxels interpolated at once when the lattice is added to the field
@@ -57,8 +57,8 @@ def emission_light(pm: PreparedMedium, camera, n_paths: int, resolution: int,
                    deposits: float = Tuning.path_deposits):
     """(stride, E1, Em, cross) on the light pyramid's lattice of ``pm`` (module docstring),
     float32 (LX,LY,LZ,3) W/(m^2 sr); Em None without ``multiple``.  ``n_paths`` paths (at
-    most lightpaths.PATHS_PER_POINT per lattice point the medium fills), ``around`` the
-    surfaces they reflect off, ``partners`` (PreparedMedium, PathLattice) the overlapping
+    most lightpaths.PATHS_PER_POINT per lattice point the medium fills, more with more Paths:
+    lightpaths.path_budget), ``around`` the surfaces they reflect off, ``partners`` (PreparedMedium, PathLattice) the overlapping
     media they fly through too (lightpaths.traced_multiple), ``cross`` per partner its
     (E1, Em) on its lattice.  None where nothing is emitted or the medium is too dense for
     paths.  ``deposits``: Tuning.path_deposits (lightpaths.PathLattice.of)."""
@@ -80,7 +80,7 @@ def emission_light(pm: PreparedMedium, camera, n_paths: int, resolution: int,
         return None
     lats = [lat] + [plat for _, plat in partners]
     # at most PATHS_PER_POINT per lattice point of every medium the light scatters in
-    n = max(1, min(int(n_paths), PATHS_PER_POINT * sum(la.cells for la in lats)))
+    n = max(1, path_budget(n_paths, sum(la.cells for la in lats)))
     first = _trace_all(sets, n, seed, threads, should_cancel, pm, lat, around, max_collisions=1,
                        partners=partners)
     later = [None] * len(lats)

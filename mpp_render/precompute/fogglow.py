@@ -87,7 +87,7 @@ def fog_glow(pm, camera, n_paths: int, resolution: int, multiple: bool, seed: in
         p, normal, exitance, albedo, jitter = got
         sets = [(p, exitance * (1.0 - albedo) * total, normal, jitter, 1, None,
                  nearness(pm, p))]
-        n = max(1, lat.paths(int(n_paths * DEFICIT_PATHS)))
+        n = max(1, lat.paths(int(n_paths * DEFICIT_PATHS), n_paths))
         first = _trace_all(sets, n, seed, threads, should_cancel, pm, lat, around,
                            max_collisions=1)[0]
         every = _trace_all(sets, n, seed, threads, should_cancel, pm, lat, around)[0]

@@ -16,18 +16,30 @@ from ..media import box_distance, density_from, trilinear
 from ..parallel import worker_count
 from ..paths import (MAX_COLLISIONS, PATH_MEDIA, PATHS_MAX_SPAN, PathInputs, PathMedium,
                      from_power, rate_span)
-from ..scene import Tuning
+from ..scene import MULTIPLE_PATHS, Tuning
 from .lattice import dilate, lattice_points, paths_lattice
 from .pathstarts import Surroundings, fog_starts, reach, surface_albedo, surface_starts
 from .source import (CELL_POINTS, light_direction, near_light_cells, source_and_density,
                      tent_restrict)
 
 
-# paths per lattice point the medium fills, at most (the Paths setting caps the total): a
-# 65-point lattice of a mesh cube holds 270 000 such points, past the default 3 000 000 paths
+# paths per lattice point the medium fills, at most, at the default Paths (the Paths setting
+# caps the total; path_budget): a 65-point lattice of a mesh cube holds 270 000 such points,
+# past the default 3 000 000 paths
 PATHS_PER_POINT = 32
 FAR_RESOLUTION = 32  # voxels along the longest side of the world fog's far box (worldfog.FarField)
 FAR_PATHS = 0.25     # the far box's paths, a fraction of the grid's
+
+
+def path_budget(n_paths: int, cells: int, setting: Optional[int] = None) -> int:
+    """The paths traced for ``n_paths`` asked on media whose lattices hold ``cells`` points
+    the media fill: at most ``PATHS_PER_POINT`` a point, and where the Paths ``setting``
+    (``n_paths`` when None) is above the default (scene.MULTIPLE_PATHS), that many times
+    more: a small grid (a VDB of under 128 voxels holds 20 000-60 000 such points) reaches
+    the cap at the default, and without the factor more Paths would add nothing to it."""
+    setting = int(n_paths) if setting is None else int(setting)
+    scale = max(1.0, setting / float(MULTIPLE_PATHS))
+    return min(int(n_paths), int(PATHS_PER_POINT * int(cells) * scale))
 
 
 def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: int,
@@ -274,9 +286,10 @@ class PathLattice:
                    towards, rate, mean_rho[..., None] * cell_volume(pm, stride),
                    int(np.count_nonzero(mean_rho > 0.0)), threshold)
 
-    def paths(self, n_paths: int) -> int:
-        """``n_paths``, at most ``PATHS_PER_POINT`` per lattice point the medium fills."""
-        return min(int(n_paths), PATHS_PER_POINT * self.cells)
+    def paths(self, n_paths: int, setting: Optional[int] = None) -> int:
+        """``n_paths``, at most ``PATHS_PER_POINT`` per lattice point the medium fills
+        (times the Paths ``setting`` over the default, where above it: path_budget)."""
+        return path_budget(n_paths, self.cells, setting)
 
     def mean(self, acc: np.ndarray) -> np.ndarray:
         """M (float32, W/(m^2 sr)) from the deposits ``acc``: divided by the density under each
