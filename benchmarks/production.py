@@ -169,8 +169,8 @@ def write_report(rows, out, size):
          "scene after the other; the machine is shared, so single timings carry some tens of "
          "per cent). Ours: the scene's own settings, as F12 renders them (Final quality, "
          f"adaptive sampling), at {w}x{h}. Cycles: the reference settings (CPU, no adaptive "
-         f"sampling, no denoising), its seconds per sample at {w}x{h} from 1- and {hd_samples(rows)}-sample "
-         "renders, the samples it needs to reach our error from its error curve at the "
+         f"sampling, no denoising), its seconds per sample at {w}x{h} from 1- and "
+         f"{hd_samples(rows)}-sample renders, the samples it needs to reach our error from its error curve at the "
          "suite's resolution in the same run (our error measured there too: the large images "
          "have no reference). \"extrapolated\": Cycles did not reach our error within the "
          "curve's last point, and error ~ samples^-1/2 took it further.", ""]

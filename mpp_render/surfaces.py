@@ -182,8 +182,9 @@ def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, r
     fog around a surface throw onto it (single and multiple scattering and emission), and what
     the sky and the other surfaces seen along that direction are seen through (the march's
     own transmittance, an unbiased estimate of exp(-tau), instead of a second pass of
-    ``media_optical_depth`` along the same ray).  With the cosine-weighted direction the estimate of its reflection is
-    the layers' directional albedo x that radiance, unbiased over samples per pixel.
+    ``media_optical_depth`` along the same ray).  With the cosine-weighted direction the
+    estimate of its reflection is the layers' directional albedo x that radiance, unbiased
+    over samples per pixel.
 
     ``bounces``: surface-to-surface bounces gathered along that same direction.  Where it
     hits a surface, that point's own light (``shade`` of it with ``bounces - 1``, without the

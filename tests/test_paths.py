@@ -256,19 +256,26 @@ def test_esc_stops_the_paths_between_chunks():
     assert kernels.trace_paths(inp, threads=2, should_cancel=lambda: False).shape[-1] == 3
 
 
-def test_a_medium_too_dense_for_paths_keeps_the_walk():
-    """Optical size beyond paths.PATHS_MAX_SPAN: the precompute keeps the walk (on the medium
-    itself, since the layout has no forward-peak channels with paths on) and the multiply
-    scattered light is there, finite; a thinner medium is traced."""
-    from mpp_render.media import prepare
-    from mpp_render.precompute import precompute
-    from mpp_render.scene import Camera, Light, Medium, World
+def small_cube_under_a_sun():
+    """(camera, sun, i2w) of a 2 m cube of 16^3 voxels at the origin, seen from 5 m above."""
+    from mpp_render.scene import Camera, Light
     cam = Camera("PERSP", np.eye(4), 4, 4, (-1, 1, -1, 1))
     cam.cam_to_world[:3, 3] = [0.0, 0.0, 5.0]
     sun = Light("SUN", "sun", np.full(3, 3.0), direction=np.array([0.3, 0.2, -0.93]))
     i2w = np.eye(4)
     i2w[:3, :3] *= 2.0 / 16
     i2w[:3, 3] = -1.0 + 1.0 / 16
+    return cam, sun, i2w
+
+
+def test_a_medium_too_dense_for_paths_keeps_the_walk():
+    """Optical size beyond paths.PATHS_MAX_SPAN: the precompute keeps the walk (on the medium
+    itself, since the layout has no forward-peak channels with paths on) and the multiply
+    scattered light is there, finite; a thinner medium is traced."""
+    from mpp_render.media import prepare
+    from mpp_render.precompute import precompute
+    from mpp_render.scene import Medium, World
+    cam, sun, i2w = small_cube_under_a_sun()
     for sigma, traced in ((700.0, False), (5.0, True)):   # 2400 and 17 along the diagonal
         pm = prepare(Medium("m", np.ones((16, 16, 16), np.float32), i2w, np.full(3, 0.9 * sigma),
                             np.full(3, 0.1 * sigma), 0.6))
@@ -287,7 +294,7 @@ def test_more_paths_reach_a_small_medium(monkeypatch):
     artist's larger Paths adds paths to a small VDB too; the precompute traces what it gives."""
     from mpp_render.media import prepare
     from mpp_render.precompute import lightpaths, precompute
-    from mpp_render.scene import MULTIPLE_PATHS, Camera, Light, Medium, World
+    from mpp_render.scene import MULTIPLE_PATHS, Medium, World
     budget, per = lightpaths.path_budget, lightpaths.PATHS_PER_POINT
     assert budget(MULTIPLE_PATHS, 20_000) == per * 20_000
     assert budget(4 * MULTIPLE_PATHS, 20_000) == 4 * per * 20_000
@@ -306,12 +313,7 @@ def test_more_paths_reach_a_small_medium(monkeypatch):
         traced.append(n_paths)
         return real(sets, n_paths, *a, **k)
     monkeypatch.setattr(lightpaths, "_trace_all", counting)
-    cam = Camera("PERSP", np.eye(4), 4, 4, (-1, 1, -1, 1))
-    cam.cam_to_world[:3, 3] = [0.0, 0.0, 5.0]
-    sun = Light("SUN", "sun", np.full(3, 3.0), direction=np.array([0.3, 0.2, -0.93]))
-    i2w = np.eye(4)
-    i2w[:3, :3] *= 2.0 / 16
-    i2w[:3, 3] = -1.0 + 1.0 / 16
+    cam, sun, i2w = small_cube_under_a_sun()
     pm = prepare(Medium("m", np.ones((16, 16, 16), np.float32), i2w, np.full(3, 4.5),
                         np.full(3, 0.5), 0.6))
     for n in (MULTIPLE_PATHS, 4 * MULTIPLE_PATHS):

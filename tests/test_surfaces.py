@@ -301,6 +301,40 @@ def test_fresnel_helpers():
         assert S.fresnel_dielectric_avg(eta) == pytest.approx(exact, abs=0.007)
 
 
+def layer_over_ground(sigma_a, H, half, albedo, world, emission=None, name="layer"):
+    """The passes of a homogeneous layer (sigma_a 1/m, thickness H m, 2 half m wide, 1 mm above
+    it) over a Lambertian ground of ``albedo``, seen from above by an 8x8 orthographic camera,
+    64 samples, single scattering only, world colour ``world``."""
+    n = (32, 32, 4)
+    i2w = np.eye(4)
+    i2w[:3, :3] = np.diag([2 * half / n[0], 2 * half / n[1], H / n[2]])
+    i2w[:3, 3] = [-half + half / n[0], -half + half / n[1], 0.001 + H / (2 * n[2])]
+    layer = Medium(name, np.ones(n, np.float32), i2w, np.zeros(3), np.full(3, sigma_a), 0.0,
+                   emission=np.zeros(3) if emission is None else np.full(3, emission),
+                   source="MESH")
+    cam = Camera("ORTHO", np.eye(4), 8, 8, (-0.5, 0.5, -0.5, 0.5))
+    cam.cam_to_world[:3, 3] = [0, 0, 10]
+    desc = SceneDescription(cam, [], [layer], surfaces=[quad(0.0, 12.0, albedo=albedo)],
+                            world=World(np.full(3, float(world))),
+                            settings=Settings(samples=64, multiple=False))
+    return render(desc).passes
+
+
+def cosine_integral_through_layer(f, H, half):
+    """int f(l(theta, phi)) cos dw over the hemisphere at the ground's centre, by quadrature
+    in (theta, phi), l the path through the layer of thickness H and half-width half (out
+    through its top or a side)."""
+    th = (np.arange(2000) + 0.5) / 2000 * (math.pi / 2)
+    ph = (np.arange(720) + 0.5) / 720 * (2 * math.pi)
+    TH, PH = np.meshgrid(th, ph, indexing="ij")
+    up = np.cos(TH)
+    side = np.sin(TH) * np.maximum(np.abs(np.cos(PH)), np.abs(np.sin(PH)))
+    with np.errstate(divide="ignore"):
+        length = np.minimum(H / up, np.where(side > 0, half / side, np.inf))
+    return float(np.sum(f(length) * np.cos(TH) * np.sin(TH)) * (math.pi / 2 / 2000)
+                 * (2 * math.pi / 720))
+
+
 def test_volume_light_reaches_the_ground():
     """A glowing, absorbing layer (emission e W/(m^3 sr), sigma_a, thickness H, 16 m wide)
     just above a Lambertian ground, no lights, black world: every direction above the ground
@@ -312,30 +346,12 @@ def test_volume_light_reaches_the_ground():
     is T x that radiance with T = exp(-sigma_a H).  Measured 0.998 of the quadrature with 64
     samples x 64 pixels (4096 gathering marches); 5 % allowed."""
     e, sigma_a, H, half, albedo = 0.4, 2.0, 0.5, 8.0, 0.5
-    n = (32, 32, 4)
-    i2w = np.eye(4)
-    i2w[:3, :3] = np.diag([2 * half / n[0], 2 * half / n[1], H / n[2]])
-    i2w[:3, 3] = [-half + half / n[0], -half + half / n[1], 0.001 + H / (2 * n[2])]
-    layer = Medium("glow", np.ones(n, np.float32), i2w, np.zeros(3), np.full(3, sigma_a), 0.0,
-                   emission=np.full(3, e), source="MESH")
-    cam = Camera("ORTHO", np.eye(4), 8, 8, (-0.5, 0.5, -0.5, 0.5))
-    cam.cam_to_world[:3, 3] = [0, 0, 10]
-    desc = SceneDescription(cam, [], [layer], surfaces=[quad(0.0, 12.0, albedo=albedo)],
-                            world=World(np.zeros(3)), settings=Settings(samples=64, multiple=False))
-    out = render(desc).passes
+    out = layer_over_ground(sigma_a, H, half, albedo, 0.0, emission=e, name="glow")
     T = out["Transmittance"][..., 0]
     assert np.allclose(T, math.exp(-sigma_a * H), rtol=1e-3)
     ground = ((out["Combined"][..., :3] - out["Emission"]) / T[..., None]).mean()
-    # quadrature: directions (theta, phi) from the ground at the centre
-    th = (np.arange(2000) + 0.5) / 2000 * (math.pi / 2)
-    ph = (np.arange(720) + 0.5) / 720 * (2 * math.pi)
-    TH, PH = np.meshgrid(th, ph, indexing="ij")
-    up = np.cos(TH)
-    side = np.sin(TH) * np.maximum(np.abs(np.cos(PH)), np.abs(np.sin(PH)))
-    with np.errstate(divide="ignore"):
-        length = np.minimum(H / up, np.where(side > 0, half / side, np.inf))   # through the top or a side
-    L = e / sigma_a * -np.expm1(-sigma_a * length)
-    irradiance = np.sum(L * np.cos(TH) * np.sin(TH)) * (math.pi / 2 / 2000) * (2 * math.pi / 720)
+    irradiance = cosine_integral_through_layer(
+        lambda length: e / sigma_a * -np.expm1(-sigma_a * length), H, half)
     want = albedo / math.pi * irradiance
     print("ground / quadrature:", ground / want)
     assert abs(ground / want - 1.0) < 0.05, (ground, want)
@@ -349,29 +365,11 @@ def test_the_sky_reaches_the_ground_through_the_gathers_own_transmittance():
     media's light (tiles.FrameMarch.radiance_towards), not through a second pass of the
     optical depth; a march whose transmittance were wrong (or 1) would miss this."""
     sigma_a, H, half, albedo = 2.0, 0.5, 8.0, 0.5
-    n = (32, 32, 4)
-    i2w = np.eye(4)
-    i2w[:3, :3] = np.diag([2 * half / n[0], 2 * half / n[1], H / n[2]])
-    i2w[:3, 3] = [-half + half / n[0], -half + half / n[1], 0.001 + H / (2 * n[2])]
-    layer = Medium("dark", np.ones(n, np.float32), i2w, np.zeros(3), np.full(3, sigma_a), 0.0,
-                   source="MESH")
-    cam = Camera("ORTHO", np.eye(4), 8, 8, (-0.5, 0.5, -0.5, 0.5))
-    cam.cam_to_world[:3, 3] = [0, 0, 10]
-    desc = SceneDescription(cam, [], [layer], surfaces=[quad(0.0, 12.0, albedo=albedo)],
-                            world=World(np.ones(3)), settings=Settings(samples=64, multiple=False))
-    out = render(desc).passes
+    out = layer_over_ground(sigma_a, H, half, albedo, 1.0, name="dark")
     T = out["Transmittance"][..., 0]
     assert np.allclose(T, math.exp(-sigma_a * H), rtol=1e-3)
     ground = (out["Combined"][..., :3] / T[..., None]).mean()
-    th = (np.arange(2000) + 0.5) / 2000 * (math.pi / 2)
-    ph = (np.arange(720) + 0.5) / 720 * (2 * math.pi)
-    TH, PH = np.meshgrid(th, ph, indexing="ij")
-    up = np.cos(TH)
-    side = np.sin(TH) * np.maximum(np.abs(np.cos(PH)), np.abs(np.sin(PH)))
-    with np.errstate(divide="ignore"):
-        length = np.minimum(H / up, np.where(side > 0, half / side, np.inf))
-    seen = np.sum(np.exp(-sigma_a * length) * np.cos(TH) * np.sin(TH)) \
-        * (math.pi / 2 / 2000) * (2 * math.pi / 720)
+    seen = cosine_integral_through_layer(lambda length: np.exp(-sigma_a * length), H, half)
     want = albedo / math.pi * seen
     print("ground / quadrature:", ground / want)
     assert abs(ground / want - 1.0) < 0.05, (ground, want)

@@ -58,8 +58,8 @@ def emission_light(pm: PreparedMedium, camera, n_paths: int, resolution: int,
     """(stride, E1, Em, cross) on the light pyramid's lattice of ``pm`` (module docstring),
     float32 (LX,LY,LZ,3) W/(m^2 sr); Em None without ``multiple``.  ``n_paths`` paths (at
     most lightpaths.PATHS_PER_POINT per lattice point the medium fills, more with more Paths:
-    lightpaths.path_budget), ``around`` the surfaces they reflect off, ``partners`` (PreparedMedium, PathLattice) the overlapping
-    media they fly through too (lightpaths.traced_multiple), ``cross`` per partner its
+    lightpaths.path_budget), ``around`` the surfaces they reflect off, ``partners``
+    (PreparedMedium, PathLattice) the overlapping media they fly through too (lightpaths.traced_multiple), ``cross`` per partner its
     (E1, Em) on its lattice.  None where nothing is emitted or the medium is too dense for
     paths.  ``deposits``: Tuning.path_deposits (lightpaths.PathLattice.of)."""
     if pm.endless:   # the world fog glows everywhere: its own estimate (fogglow.py)
