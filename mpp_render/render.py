@@ -120,13 +120,22 @@ def _render(desc, progress, should_cancel, any_camera) -> RenderOutput:
     t_march = time.perf_counter()
     threads = worker_count(st.threads)
     pilot_samples = 0.0
+    if frame.cache_chunks:
+        chunks = run_chunks(frame.cache_chunk, frame.cache_chunks, threads, cancel, progress,
+                            "Surface light")
+        timings["surface_cache"] = time.perf_counter() - t_march
+        if chunks is None:
+            return RenderOutput(out, timings, warnings, True)
+        frame.use_cache(chunks)
+        pilot_samples += sum(c[6] for c in chunks)
     if frame.wants_pilot:
-        chunks = run_pilot(frame, threads, cancel, progress)
+        chunks = run_chunks(frame.pilot_chunk, len(frame.pilot_pixels), threads, cancel,
+                            progress, "Pilot")
         timings["pilot"] = time.perf_counter() - t_march
         if chunks is None:
             return RenderOutput(out, timings, warnings, True)
         frame.use_plan(frame.make_plan(chunks), frame.pilot_cost(chunks))
-        pilot_samples = sum(c[4] for c in chunks)
+        pilot_samples += sum(c[4] for c in chunks)
     (march_samples, camera_samples), cancelled = march_tiles(frame.tile, len(frame.tiles),
                                                              threads, cancel, progress, out)
     timings["march"] = time.perf_counter() - t_march
@@ -208,12 +217,12 @@ def with_world_fog(desc: SceneDescription, fog, media: list, warnings: List[str]
     return world, lights, fog_pm
 
 
-def run_pilot(frame: FrameMarch, threads: int, cancel, progress) -> Optional[list]:
-    """The pilot of adaptive sampling (pilot.py): every chunk of ``frame.pilot_chunk`` on a
-    pool of ``threads`` threads; None when Esc (``cancel()``, polled between chunks)."""
-    n = len(frame.pilot_pixels)
+def run_chunks(work, n: int, threads: int, cancel, progress, label: str) -> Optional[list]:
+    """``work(j)`` for j < ``n`` on a pool of ``threads`` threads (the surface cache's and
+    the pilot's chunks), their results in order; None when Esc (``cancel()``, polled between
+    chunks).  ``progress`` says "``label`` j/n"."""
     with ThreadPoolExecutor(max_workers=threads) as pool:
-        futures = [pool.submit(frame.pilot_chunk, j) for j in range(n)]
+        futures = [pool.submit(work, j) for j in range(n)]
         chunks = []
         for j, f in enumerate(futures):
             if cancel():
@@ -222,7 +231,7 @@ def run_pilot(frame: FrameMarch, threads: int, cancel, progress) -> Optional[lis
                 return None
             chunks.append(f.result())
             if progress:
-                progress(0.0, f"Pilot {j + 1}/{n}")
+                progress(0.0, f"{label} {j + 1}/{n}")
     return chunks
 
 

@@ -299,7 +299,13 @@ class Tuning:
     0.096 -> 0.077) and held on three (p_sphere_gneg, p_point_in_cube, slab_isotropic);
     the first four of the eight chose it, the other four checked it.  At 0 (the majorant
     alone) the few deposits under a tent made spikes in M (colored_sphere 0.09-0.31);
-    docs/performance.md."""
+    docs/performance.md.    ``surface_cache``: the surfaces' gathered light is gathered once at points of a grid over
+    the image this many points across its width, and each camera sample on a surface
+    interpolates it (surfacecache.py); below 2: every sample gathers itself
+    (``surface_gathers``).  ``surface_cache_gathers``: the directions each grid point gathers
+    through; ``surface_cache_smooth``: passes of the 3 x 3 filter over the grid
+    (surfacecache.SurfaceCache.smooth).
+"""
 
     skip_min_voxels: int = 1 << 20
     spot_cull: bool = True
@@ -327,6 +333,9 @@ class Tuning:
     smooth_step_voxels: float = 1.0
     smooth_step_tau: float = 0.5
     path_deposits: float = 0.5
+    surface_cache: int = 240
+    surface_cache_gathers: int = 128
+    surface_cache_smooth: int = 1
 
 
 # The default Noise Threshold (pilot.py's unit: the standard error over sqrt(I S), S the
@@ -343,13 +352,15 @@ MULTIPLE_PATHS = 3_000_000
 # how close it comes on the public scenes).  Preview: the walk's smooth, biased multiple
 # scattering and few samples; Final (the defaults): traced paths, adaptive sampling;
 # Reference: every sample in every pixel, four times the paths on a lattice twice as fine,
-# for a converged look at 8x the memory per lattice.
+# the surfaces' light gathered by every sample (no surface cache), for a converged look at
+# 8x the memory per lattice.
 QUALITY_PRESETS = {
-    "PREVIEW": dict(samples=4, noise_threshold=NOISE_THRESHOLD, multiple_paths=0, multiple_resolution=64),
+    "PREVIEW": dict(samples=4, noise_threshold=NOISE_THRESHOLD, multiple_paths=0,
+                    multiple_resolution=64, surface_cache=True),
     "FINAL": dict(samples=16, noise_threshold=NOISE_THRESHOLD, multiple_paths=MULTIPLE_PATHS,
-                  multiple_resolution=64),
+                  multiple_resolution=64, surface_cache=True),
     "REFERENCE": dict(samples=16, noise_threshold=0.0, multiple_paths=4 * MULTIPLE_PATHS,
-                      multiple_resolution=128),
+                      multiple_resolution=128, surface_cache=False),
 }
 
 
@@ -379,6 +390,10 @@ class Settings:
     ``multiple``): the traced paths start on the lit surfaces and reflect off every surface
     (precompute.pathstarts); with the walk (``multiple_paths`` 0) flat surfaces become area
     lights (bounce.py; not under a world volume).
+    ``surface_cache``: the light a surface gathers from the sky, the volumes and the other
+    surfaces is gathered once on a grid over the image and interpolated (surfacecache.py,
+    ``Tuning.surface_cache``); False: every camera sample gathers it (unbiased per sample,
+    noisier, dearer where a ground is in view).
     ``memory_budget_mb``: megabytes (2^20 bytes) the precompute fields may take; larger grids
     are box-downsampled with a warning (budget.py); 0 means unlimited.
     ``tuning``: the method's speed and exactness knobs (Tuning; not in the user interface).
@@ -398,6 +413,7 @@ class Settings:
     voxel_resolution: int = 128
     memory_budget_mb: int = 2048
     surface_bounce: bool = True
+    surface_cache: bool = True
     tuning: Tuning = field(default_factory=Tuning)
 
 

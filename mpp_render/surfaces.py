@@ -170,7 +170,7 @@ def facing_normals(ss: SurfaceSet, tri, d):
 
 def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, rng,
           media_radiance=None, bounces: int = 1, gathers: int = 1, strata=None,
-          guides=None, guided: float = 0.5):
+          guides=None, guided: float = 0.5, cached=None):
     """Outgoing radiance (N,3) W/(m^2 sr) of surface points ``p`` hit by rays ``d``.
 
     ``media_optical_depth(points, dirs, t_max)`` -> (N,3) optical depth through the media
@@ -201,7 +201,12 @@ def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, r
     so the estimate stays unbiased where only some of a pixel's samples hit the surface.
     ``guides`` (gathers.Guides): lamps inside the media, about which a share ``guided`` of
     the gathers that read ``media_radiance`` are drawn (gathers.directions, weighed by the
-    balance heuristic); None: all cosine-weighted."""
+    balance heuristic); None: all cosine-weighted.
+
+    ``cached``: ``(po, nrm, tri) -> (incident (N,3), ok (N,) bool)``, the frame's cache of
+    the gathered light (surfacecache.SurfaceCache.lookup bound to the points' pixels): where
+    ``ok`` its ``incident`` stands for the gathers (``gathered``), which only the others
+    trace."""
     from .lights import is_dark, light_sample, pack_light
     from .phase import orthonormal_basis
 
@@ -233,47 +238,71 @@ def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, r
         out[lit] += bsdf.eval(to_l[lit], lit) * e[lit] * np.exp(-tau)
     wc = np.asarray(world_color, np.float64)
     if np.any(wc > 0) or media_radiance is not None or bounces > 0:
-        k = max(int(gathers), 1)
-        u = rng.random((n_pts, k, 2))
-        if strata is not None:   # the pixel's samples share out (r^2, phi)
-            count = max(int(strata[2]), 1)
-            u[..., 0] = (np.asarray(strata[0])[:, None] + u[..., 0]) / count
-            u[..., 1] = (np.asarray(strata[1])[:, None] + u[..., 1]) / count
-        if media_radiance is None or k * guided < 1.0:
-            guides = None
-        choose = rng.random((n_pts, k)) if guides is not None else None
-        w, weight = gather_directions(nrm, po, u, k, guides, choose, guided)
-        w, weight = w.reshape(-1, 3), weight.reshape(-1)
-        pk = np.repeat(po, k, axis=0)
-        # a guided direction below the surface gathers nothing: not traced
-        live = np.flatnonzero(weight > 0.0)
-        pk, w = pk[live], w[live]
-        t_hit, tri_hit = intersect(ss, pk, w, np.full(len(pk), np.inf))
-        albedo = np.repeat(bsdf.albedo(), k, axis=0)[live] * weight[live, None]
-        acc = np.zeros((len(pk), 3))
-        trans = None   # the transmittance along each gather, where the media's march gives it
-        if media_radiance is not None:
-            radiance, trans = media_radiance(pk, w, t_hit)
-            acc += albedo * radiance
-
-        def seen_through(idx, t_max):
-            if trans is not None:
-                return trans[idx]
-            return np.exp(-media_optical_depth(pk[idx], w[idx], t_max))
-        if bounces > 0:
-            hit = np.flatnonzero(tri_hit >= 0)
-            if hit.size:
-                ph = pk[hit] + w[hit] * t_hit[hit, None]
-                seen = shade(ss, tri_hit[hit], ph, w[hit], lights, world_color,
-                             media_optical_depth, rng, None, bounces - 1)
-                acc[hit] += albedo[hit] * seen * seen_through(hit, t_hit[hit])
-        if np.any(wc > 0):
-            # the uniform sky seen through cosine-distributed directions, reflected by every
-            # layer with its directional albedo (where no surface hides it)
-            sky = np.flatnonzero(~np.isfinite(t_hit))
-            if sky.size:
-                acc[sky] += albedo[sky] * wc * seen_through(sky, np.full(sky.size, np.inf))
-        full = np.zeros((n_pts * k, 3))
-        full[live] = acc
-        out += full.reshape(n_pts, k, 3).sum(axis=1)
+        albedo = bsdf.albedo()
+        todo = np.arange(n_pts)
+        if cached is not None:   # the frame's cache of the gathered light (surfacecache.py)
+            incident, ok = cached(po, nrm, tri)
+            out[ok] += albedo[ok] * incident[ok]
+            todo = np.flatnonzero(~ok)
+            if strata is not None:
+                strata = (np.asarray(strata[0])[todo], np.asarray(strata[1])[todo], strata[2])
+        if todo.size:
+            out[todo] += albedo[todo] * gathered(
+                ss, po[todo], nrm[todo], lights, wc, media_optical_depth, rng, media_radiance,
+                bounces, gathers, strata, guides, guided)
     return out
+
+
+def gathered(ss: SurfaceSet, po, nrm, lights, world_color, media_optical_depth, rng,
+             media_radiance=None, bounces: int = 1, gathers: int = 1, strata=None,
+             guides=None, guided: float = 0.5):
+    """The light that reaches points ``po`` (offset off their surfaces, (N,3) m) with
+    normals ``nrm`` through ``gathers`` directions each (their balance-heuristic weights
+    applied, gathers.directions): sum_k weight_k L_k (N,3) W/(m^2 sr), which times a
+    layer's directional albedo is what it reflects (``shade``, whose other arguments these
+    are).  It does not depend on the direction the point is seen from, so a cache may hold
+    it (surfacecache.py)."""
+    wc = np.asarray(world_color, np.float64)
+    n_pts = len(po)
+    k = max(int(gathers), 1)
+    u = rng.random((n_pts, k, 2))
+    if strata is not None:   # the pixel's samples share out (r^2, phi)
+        count = max(int(strata[2]), 1)
+        u[..., 0] = (np.asarray(strata[0])[:, None] + u[..., 0]) / count
+        u[..., 1] = (np.asarray(strata[1])[:, None] + u[..., 1]) / count
+    if media_radiance is None or k * guided < 1.0:
+        guides = None
+    choose = rng.random((n_pts, k)) if guides is not None else None
+    w, weight = gather_directions(nrm, po, u, k, guides, choose, guided)
+    w, weight = w.reshape(-1, 3), weight.reshape(-1)
+    pk = np.repeat(po, k, axis=0)
+    # a guided direction below the surface gathers nothing: not traced
+    live = np.flatnonzero(weight > 0.0)
+    pk, w = pk[live], w[live]
+    t_hit, tri_hit = intersect(ss, pk, w, np.full(len(pk), np.inf))
+    acc = np.zeros((len(pk), 3))
+    trans = None   # the transmittance along each gather, where the media's march gives it
+    if media_radiance is not None:
+        radiance, trans = media_radiance(pk, w, t_hit)
+        acc += radiance
+
+    def seen_through(idx, t_max):
+        if trans is not None:
+            return trans[idx]
+        return np.exp(-media_optical_depth(pk[idx], w[idx], t_max))
+    if bounces > 0:
+        hit = np.flatnonzero(tri_hit >= 0)
+        if hit.size:
+            ph = pk[hit] + w[hit] * t_hit[hit, None]
+            seen = shade(ss, tri_hit[hit], ph, w[hit], lights, wc,
+                         media_optical_depth, rng, None, bounces - 1)
+            acc[hit] += seen * seen_through(hit, t_hit[hit])
+    if np.any(wc > 0):
+        # the uniform sky seen through cosine-distributed directions (where no surface
+        # hides it)
+        sky = np.flatnonzero(~np.isfinite(t_hit))
+        if sky.size:
+            acc[sky] += wc * seen_through(sky, np.full(sky.size, np.inf))
+    full = np.zeros((n_pts * k, 3))
+    full[live] = acc * weight[live, None]
+    return full.reshape(n_pts, k, 3).sum(axis=1)

@@ -26,7 +26,8 @@ from .media import surrounds
 from .passes import DEPTH_MISS
 from .pixelsamples import PixelSamples, power_of_two_side, reverse_bits
 from .precompute.lightdepth import kernel_arrays, media_bricks, split_fog
-from .surfaces import SurfaceSet, intersect, shade
+from .surfacecache import CACHE_SEED, CACHE_TILE, CHUNK_POINTS, Grid, SurfaceCache
+from .surfaces import SurfaceSet, facing_normals, gathered, intersect, offset_points, shade
 
 SAMPLES_SEED = 0x27D4EB2F  # offsets the seed of the tiles' pixel samples (pixelsamples.py)
 GATHER_SEED = 0x5BD1E995  # offsets the seed of the rays that gather volume light onto surfaces
@@ -78,6 +79,7 @@ class FrameMarch:
     step: float
     out: dict
     plan: Optional[pilot.SamplePlan] = None
+    cache: Optional[SurfaceCache] = None
 
     def __post_init__(self):
         tun = self.st.tuning
@@ -103,6 +105,10 @@ class FrameMarch:
         self.pilot_shape, px, py = pilot.grid(W, H, self.pilot_stride)
         per = max(1, int(tun.tile_rays) // self.pilot_samples)   # the pilot's chunks
         self.pilot_pixels = [(px[i:i + per], py[i:i + per]) for i in range(0, len(px), per)]
+        # the surfaces' gathered light on a grid over the image (surfacecache.py)
+        self.cache_grid = Grid.over(W, H, min(int(tun.surface_cache), W + 1)) \
+            if not self.surf.empty and self.st.surface_cache and int(tun.surface_cache) >= 2 \
+            else None
 
     def cut(self, samples: float, samples_per_ray: Optional[float] = None) -> None:
         """Cut the frame into tiles (``self.tiles``, their corners; ``self.size``, their side)
@@ -120,6 +126,45 @@ class FrameMarch:
         each of ``samples_per_ray`` march samples (the pilot's, pilot_cost)."""
         self.plan = plan
         self.cut(plan.expected, samples_per_ray)
+
+    @property
+    def cache_chunks(self) -> int:
+        """How many chunks the surface cache's gathers take (cache_chunk); 0 without one."""
+        if self.cache_grid is None:
+            return 0
+        return -(-self.cache_grid.nx * self.cache_grid.ny // CHUNK_POINTS)
+
+    def cache_chunk(self, j):
+        """(j, grid points, their offset points, facing normals, surfaces, gathered light,
+        march samples) of chunk ``j`` of the surface cache's grid points whose rays meet a
+        surface (surfacecache.py): ``Tuning.surface_cache_gathers`` gathers each, on random
+        streams of their own."""
+        st, tun, grid = self.st, self.st.tuning, self.cache_grid
+        gx, gy = grid.pixels()
+        idx = np.arange(j * CHUNK_POINTS, min((j + 1) * CHUNK_POINTS, len(gx)))
+        o, d, tmin, tmax, _ = primary_rays(self.cam, gx[idx], gy[idx], None)
+        t_hit, tri = intersect(self.surf, o, d, np.where(tmax < tmin, tmin, tmax))
+        at = np.flatnonzero((tri >= 0) & (tmax >= tmin))
+        steps = []
+        if not at.size:
+            return j, idx[at], np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64), \
+                np.zeros((0, 3)), 0.0
+        nrm = facing_normals(self.surf, tri[at], d[at])
+        po = offset_points(self.surf, o[at] + d[at] * t_hit[at, None], nrm)
+        rng = np.random.default_rng([st.seed + CACHE_SEED, j])
+        g = gathered(self.surf, po, nrm, self.lights, self.bg, self.optical_depth, rng,
+                     self.radiance_towards(CACHE_TILE + j, 0, steps), 1,
+                     tun.surface_cache_gathers, None, self.guides, tun.guided_gathers)
+        return j, idx[at], po, nrm, self.surf.surface[tri[at]], g, float(sum(steps))
+
+    def use_cache(self, chunks) -> None:
+        """Read the surfaces' gathered light from the cache the ``chunks`` (cache_chunk's
+        results, any order) fill."""
+        cache = SurfaceCache.empty(self.cache_grid)
+        for c in chunks:
+            cache.fill(*c[1:6])
+        cache.smooth(self.st.tuning.surface_cache_smooth)
+        self.cache = cache
 
     @property
     def wants_pilot(self) -> bool:
@@ -144,12 +189,15 @@ class FrameMarch:
                                                (py[:, None] + offs[..., 1]).ravel(), lens)
         bands = np.argsort(rng.random((2, n, ns)), axis=2)
         keys = ray_keys(st.seed + pilot.PILOT_SEED, index, n * ns)
-        gathered = []
+        gathered_steps = []
         r, hit, behind = self.march(index, 0, rng, o, d, tmin, tmax, axial, keys,
-                                    (bands[0].ravel(), bands[1].ravel(), ns), gathered)
+                                    (bands[0].ravel(), bands[1].ravel(), ns), gathered_steps,
+                                    (px[:, None] + offs[..., 0]).ravel(),
+                                    (py[:, None] + offs[..., 1]).ravel())
         acc = Accumulator(n, {})
         acc.add(np.arange(n), ns, r, hit, behind, st.film_transparent)
-        return j, acc.lum, acc.lum2, acc.count, float(r["steps"].sum()), float(sum(gathered))
+        return (j, acc.lum, acc.lum2, acc.count, float(r["steps"].sum()),
+                float(sum(gathered_steps)))
 
     @staticmethod
     def pilot_cost(chunks) -> float:
@@ -268,7 +316,7 @@ class FrameMarch:
                 strata = (bands[0].ravel(), bands[1].ravel(), spp)
             ids = (active[:, None] * spp + batch[None, :]).ravel()
             r, hit, behind = self.march(index, k, rng, o, d, tmin, tmax, axial,
-                                        ray_keys_at(st.seed, index, ids), strata)
+                                        ray_keys_at(st.seed, index, ids), strata, None, px, py)
             acc.add(active, len(batch), r, hit, behind, st.film_transparent,
                     taken - len(batch))
             steps += float(r["steps"].sum())
@@ -289,9 +337,11 @@ class FrameMarch:
         return (index, (x0, y0, tw, th), acc.passes(st.film_transparent),
                 (steps, float(acc.count.sum())))
 
-    def march(self, index, k, rng, o, d, tmin, tmax, axial, keys, strata, gathered=None):
+    def march(self, index, k, rng, o, d, tmin, tmax, axial, keys, strata, gathered=None,
+              px=None, py=None):
         """Round ``k`` of tile ``index``: the rays' march through the media (random
-        ``keys``), their surface hits (gathering through the Latin hypercube ``strata``) and
+        ``keys``), their surface hits (gathering through the Latin hypercube ``strata``, or
+        reading the surface cache at the rays' pixel positions ``px``, ``py``) and
         what lies behind the media: (the march's per-ray results, hit, behind).  The
         gathers' march samples are appended to ``gathered`` where given."""
         st, fog_pm = self.st, self.fog_pm
@@ -313,11 +363,19 @@ class FrameMarch:
         if hit.any():
             # each pixel's samples gather through a Latin hypercube of directions
             ph = o[hit] + d[hit] * t_hit[hit, None]
+            cached = None
+            if self.cache is not None and px is not None:
+                hx, hy = np.asarray(px)[hit], np.asarray(py)[hit]
+                cache, owner = self.cache, self.surf.surface
+
+                def cached(po, nrm, tri_at):
+                    return cache.lookup(hx, hy, po, nrm, owner[tri_at])
             behind[hit] = shade(self.surf, tri[hit], ph, d[hit], self.lights, self.bg,
                                 self.optical_depth, rng, self.radiance_towards(index, k, gathered),
                                 gathers=st.tuning.surface_gathers,
                                 strata=(strata[0][hit], strata[1][hit], strata[2]),
-                                guides=self.guides, guided=st.tuning.guided_gathers)
+                                guides=self.guides, guided=st.tuning.guided_gathers,
+                                cached=cached)
             dh = t_hit[hit] * axial[hit]
             r["depth"][hit] = np.minimum(r["depth"][hit], dh)
         # the homogeneous fog beyond its grid, seen through the march

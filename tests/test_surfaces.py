@@ -301,10 +301,12 @@ def test_fresnel_helpers():
         assert S.fresnel_dielectric_avg(eta) == pytest.approx(exact, abs=0.007)
 
 
-def layer_over_ground(sigma_a, H, half, albedo, world, emission=None, name="layer"):
+def layer_over_ground(sigma_a, H, half, albedo, world, emission=None, name="layer",
+                      cache=True):
     """The passes of a homogeneous layer (sigma_a 1/m, thickness H m, 2 half m wide, 1 mm above
     it) over a Lambertian ground of ``albedo``, seen from above by an 8x8 orthographic camera,
-    64 samples, single scattering only, world colour ``world``."""
+    64 samples, single scattering only, world colour ``world``; the ground's gathered light
+    from the surface cache (surfacecache.py) or, without ``cache``, gathered per sample."""
     n = (32, 32, 4)
     i2w = np.eye(4)
     i2w[:3, :3] = np.diag([2 * half / n[0], 2 * half / n[1], H / n[2]])
@@ -316,7 +318,7 @@ def layer_over_ground(sigma_a, H, half, albedo, world, emission=None, name="laye
     cam.cam_to_world[:3, 3] = [0, 0, 10]
     desc = SceneDescription(cam, [], [layer], surfaces=[quad(0.0, 12.0, albedo=albedo)],
                             world=World(np.full(3, float(world))),
-                            settings=Settings(samples=64, multiple=False))
+                            settings=Settings(samples=64, multiple=False, surface_cache=cache))
     return render(desc).passes
 
 
@@ -335,7 +337,8 @@ def cosine_integral_through_layer(f, H, half):
                  * (2 * math.pi / 720))
 
 
-def test_volume_light_reaches_the_ground():
+@pytest.mark.parametrize("cache", [True, False])
+def test_volume_light_reaches_the_ground(cache):
     """A glowing, absorbing layer (emission e W/(m^3 sr), sigma_a, thickness H, 16 m wide)
     just above a Lambertian ground, no lights, black world: every direction above the ground
     sees L(theta) = e/sigma_a (1 - exp(-sigma_a l(theta))) with l the path through the layer,
@@ -346,7 +349,7 @@ def test_volume_light_reaches_the_ground():
     is T x that radiance with T = exp(-sigma_a H).  Measured 0.998 of the quadrature with 64
     samples x 64 pixels (4096 gathering marches); 5 % allowed."""
     e, sigma_a, H, half, albedo = 0.4, 2.0, 0.5, 8.0, 0.5
-    out = layer_over_ground(sigma_a, H, half, albedo, 0.0, emission=e, name="glow")
+    out = layer_over_ground(sigma_a, H, half, albedo, 0.0, emission=e, name="glow", cache=cache)
     T = out["Transmittance"][..., 0]
     assert np.allclose(T, math.exp(-sigma_a * H), rtol=1e-3)
     ground = ((out["Combined"][..., :3] - out["Emission"]) / T[..., None]).mean()
@@ -357,7 +360,8 @@ def test_volume_light_reaches_the_ground():
     assert abs(ground / want - 1.0) < 0.05, (ground, want)
 
 
-def test_the_sky_reaches_the_ground_through_the_gathers_own_transmittance():
+@pytest.mark.parametrize("cache", [True, False])
+def test_the_sky_reaches_the_ground_through_the_gathers_own_transmittance(cache):
     """An absorbing layer (sigma_a, thickness H, 16 m wide, no scattering, no emission) just
     above a Lambertian ground under a white sky: the ground reflects albedo/pi x
     int exp(-sigma_a l(theta)) cos dw, l the path through the layer (quadrature as above).
@@ -365,7 +369,7 @@ def test_the_sky_reaches_the_ground_through_the_gathers_own_transmittance():
     media's light (tiles.FrameMarch.radiance_towards), not through a second pass of the
     optical depth; a march whose transmittance were wrong (or 1) would miss this."""
     sigma_a, H, half, albedo = 2.0, 0.5, 8.0, 0.5
-    out = layer_over_ground(sigma_a, H, half, albedo, 1.0, name="dark")
+    out = layer_over_ground(sigma_a, H, half, albedo, 1.0, name="dark", cache=cache)
     T = out["Transmittance"][..., 0]
     assert np.allclose(T, math.exp(-sigma_a * H), rtol=1e-3)
     ground = (out["Combined"][..., :3] / T[..., None]).mean()

@@ -78,6 +78,7 @@ class MPP_PT_light_paths(MPPPanel, bpy.types.Panel):
         sub.prop(mpp, "multiple_resolution")
         sub.prop(mpp, "multiple_paths")
         sub.prop(mpp, "surface_bounce")
+        col.prop(mpp, "surface_cache")
         col.prop(mpp, "ambient_directions")
 
 

@@ -98,6 +98,13 @@ class MPPRenderSettings(bpy.types.PropertyGroup):
                     "Light Paths 0, flat surfaces reflect the lights once, as area lights, "
                     "none under a World volume). Indirect light: with Multiple Scattering on. "
                     "Off: the surfaces only absorb")
+    surface_cache: BoolProperty(
+        name="Surface Light Cache", default=True,
+        description="The light a surface (a ground, a wall) receives from the sky, the "
+                    "volumes and the other surfaces is gathered once on a grid over the image "
+                    "(240 points across) and interpolated: a ground under smoke or in fog "
+                    "renders several times faster and smoother. Off: every sample gathers "
+                    "it (unbiased, noisier, slower; the Reference quality)")
     ambient_directions: IntProperty(
         name="Ambient Directions", default=32, min=1, soft_max=512,
         description="Directions (count) per voxel used to integrate the world light's "
@@ -136,6 +143,7 @@ def settings_from_scene(scene) -> Settings:
         voxel_resolution=int(p.voxel_resolution),
         memory_budget_mb=int(p.memory_budget_mb),
         surface_bounce=bool(p.surface_bounce),
+        surface_cache=bool(p.surface_cache),
     )
 
 
