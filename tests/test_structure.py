@@ -13,7 +13,7 @@ LAYERS = [
     {"render", "tiles", "pixelsamples", "pilot", "cache", "bounce", "budget", "metrics",
      "exr"},                                                            # the frame; I/O
     {"precompute", "march", "firstflight", "pyramid", "parallel", "blasthreads",
-     "surfaces"},                                                       # the two stages
+     "surfaces", "surfacecache"},                                                     # the two stages
     {"kernels", "kernels_np", "_kernels", "paths"},                     # C kernels, numpy twins
     {"lights", "gathers", "principled", "worldfog", "media", "phase", "mpp", "walk",
      "lightrecord",
