@@ -47,13 +47,17 @@ class Stage:
     pixel; ``paths``: the share of the scene's light paths (multiple scattering);
     ``any_camera``: the precompute may be an earlier camera position's (render.render);
     ``resolution``: the share of the light pyramid's lattice points along a side
-    (``Settings.multiple_resolution``): fewer points, each gathering more of the paths."""
+    (``Settings.multiple_resolution``): fewer points, each gathering more of the paths;
+    ``surface_cache``: the stage may gather the surfaces' light once on a grid
+    (``Settings.surface_cache``, surfacecache.py), a fixed cost per frame that only a stage of
+    several samples a pixel earns back."""
 
     scale: int = 1
     samples: int = 1
     paths: float = 1.0
     any_camera: bool = False
     resolution: float = 1.0
+    surface_cache: bool = True
 
 
 def stages(samples: int) -> List[Stage]:
@@ -61,11 +65,13 @@ def stages(samples: int) -> List[Stage]:
     stage; the full resolution at 1 sample with the coarse stage's share of the paths (its
     precompute, already made for this view unless the view orbited); then the scene's own
     paths at 4, 16, ... samples, the last at ``samples``.  With 1 sample: the coarse stage
-    and the F12 render."""
-    out = [Stage(COARSE_SCALE, 1, COARSE_PATHS, True, COARSE_LATTICE)]
+    and the F12 render.  The one-sample stages gather the surfaces' light per sample: the
+    surface cache (a fixed cost per frame) would make them slower, not better."""
+    out = [Stage(COARSE_SCALE, 1, COARSE_PATHS, True, COARSE_LATTICE, False)]
     n = 1
     while n < samples:
-        out.append(Stage(1, n, COARSE_PATHS, False, COARSE_LATTICE) if n == 1 else Stage(1, n))
+        out.append(Stage(1, n, COARSE_PATHS, False, COARSE_LATTICE, False) if n == 1
+                   else Stage(1, n))
         n *= 4
     out.append(Stage(1, max(int(samples), 1)))
     return out
@@ -103,6 +109,7 @@ def stage_scene(desc: SceneDescription, stage: Stage) -> SceneDescription:
         desc, camera=dataclasses.replace(cam, width=w, height=h),
         settings=dataclasses.replace(
             st, samples=int(stage.samples), multiple_paths=paths,
+            surface_cache=bool(st.surface_cache and stage.surface_cache),
             multiple_resolution=max(8, int(round(st.multiple_resolution * stage.resolution)))))
 
 

@@ -33,9 +33,10 @@ def loop():
 def test_stages_go_from_coarse_to_the_viewport_samples():
     got = stages(16)
     coarse = (viewport.COARSE_PATHS, viewport.COARSE_LATTICE)
-    assert got[0] == Stage(viewport.COARSE_SCALE, 1, *coarse[:1], True, coarse[1])
-    assert [(s.scale, s.samples, s.paths, s.any_camera, s.resolution) for s in got[1:]] == \
-        [(1, 1, *coarse[:1], False, coarse[1]), (1, 4, 1.0, False, 1.0), (1, 16, 1.0, False, 1.0)]
+    assert got[0] == Stage(viewport.COARSE_SCALE, 1, *coarse[:1], True, coarse[1], False)
+    assert [(s.scale, s.samples, s.paths, s.any_camera, s.resolution, s.surface_cache)
+            for s in got[1:]] == [(1, 1, *coarse[:1], False, coarse[1], False),
+                                  (1, 4, 1.0, False, 1.0, True), (1, 16, 1.0, False, 1.0, True)]
     assert stages(1)[1:] == [Stage(1, 1, 1.0, False)]
     assert [s.samples for s in stages(6)[1:]] == [1, 4, 6]
     desc = small_scene()
@@ -43,6 +44,8 @@ def test_stages_go_from_coarse_to_the_viewport_samples():
     assert (coarse.camera.width, coarse.camera.height) == (10, 8)   # ceil(40/4), ceil(30/4)
     assert coarse.camera.plane == desc.camera.plane
     assert coarse.settings.multiple_paths == COARSE and coarse.settings.samples == 1
+    # the one-sample stages gather per sample; the others as the scene says
+    assert not coarse.settings.surface_cache and stage_scene(desc, got[2]).settings.surface_cache
     assert coarse.settings.multiple_resolution == \
         int(round(desc.settings.multiple_resolution * viewport.COARSE_LATTICE))
     assert desc.camera.width == 40 and desc.settings.multiple_paths == 16000   # not modified

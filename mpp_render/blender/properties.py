@@ -32,10 +32,10 @@ class MPPRenderSettings(bpy.types.PropertyGroup):
         name="Quality", default="FINAL", update=_apply_quality,
         items=[("PREVIEW", "Preview", "4 samples and the fast most-probable-path model of "
                 "multiple scattering: smooth, seconds, but biased (public scenes: error median "
-                "0.09, worst 1.7; 3 s median at 160x120)"),
+                "0.09, worst 1.7; 4 s median at 160x120)"),
                ("FINAL", "Final", "16 samples at most (adaptive, Noise Threshold 0.02) and 3 "
                 "million traced light paths per light for multiple scattering: the defaults "
-                "(public scenes: error median 0.023, worst 0.17; 10 s median at 160x120)"),
+                "(public scenes: error median 0.022, worst 0.17; 10 s median at 160x120)"),
                ("REFERENCE", "Reference", "16 samples in every pixel (Noise Threshold 0), 12 "
                 "million paths per light on a lattice twice as fine: closest to Cycles, "
                 "3-10x Final's time, 18-46x on VDBs (public scenes: error median 0.015, 90th "
