@@ -119,7 +119,7 @@ def _render(desc, progress, should_cancel, any_camera) -> RenderOutput:
                        fog_pm, far, ctx, step, out)
     t_march = time.perf_counter()
     threads = worker_count(st.threads)
-    pilot_samples = 0.0
+    before_tiles = 0.0   # march samples of the surface cache and the pilot
     if frame.cache_chunks:
         chunks = run_chunks(frame.cache_chunk, frame.cache_chunks, threads, cancel, progress,
                             "Surface light")
@@ -127,7 +127,7 @@ def _render(desc, progress, should_cancel, any_camera) -> RenderOutput:
         if chunks is None:
             return RenderOutput(out, timings, warnings, True)
         frame.use_cache(chunks)
-        pilot_samples += sum(c[6] for c in chunks)
+        before_tiles += sum(c[6] for c in chunks)
     if frame.wants_pilot:
         chunks = run_chunks(frame.pilot_chunk, len(frame.pilot_pixels), threads, cancel,
                             progress, "Pilot")
@@ -135,13 +135,13 @@ def _render(desc, progress, should_cancel, any_camera) -> RenderOutput:
         if chunks is None:
             return RenderOutput(out, timings, warnings, True)
         frame.use_plan(frame.make_plan(chunks), frame.pilot_cost(chunks))
-        pilot_samples += sum(c[4] for c in chunks)
+        before_tiles += sum(c[4] for c in chunks)
     (march_samples, camera_samples), cancelled = march_tiles(frame.tile, len(frame.tiles),
                                                              threads, cancel, progress, out)
     timings["march"] = time.perf_counter() - t_march
     stats = {"backend": kernels.backend(), "step": step, "tiles": len(frame.tiles),
              "passes": passes_on,
-             "march_samples": march_samples + pilot_samples, "threads": threads,
+             "march_samples": march_samples + before_tiles, "threads": threads,
              "pixel_samples": camera_samples / max(W * H, 1)}
     if pre is not None:
         stats.update(pre.stats)

@@ -299,13 +299,13 @@ class Tuning:
     0.096 -> 0.077) and held on three (p_sphere_gneg, p_point_in_cube, slab_isotropic);
     the first four of the eight chose it, the other four checked it.  At 0 (the majorant
     alone) the few deposits under a tent made spikes in M (colored_sphere 0.09-0.31);
-    docs/performance.md.    ``surface_cache``: the surfaces' gathered light is gathered once at points of a grid over
+    docs/performance.md.
+    ``surface_cache``: the surfaces' gathered light is gathered once at points of a grid over
     the image this many points across its width, and each camera sample on a surface
     interpolates it (surfacecache.py); below 2: every sample gathers itself
     (``surface_gathers``).  ``surface_cache_gathers``: the directions each grid point gathers
     through; ``surface_cache_smooth``: passes of the 3 x 3 filter over the grid
-    (surfacecache.SurfaceCache.smooth).
-"""
+    (surfacecache.SurfaceCache.smooth)."""
 
     skip_min_voxels: int = 1 << 20
     spot_cull: bool = True

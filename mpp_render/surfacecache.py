@@ -25,8 +25,8 @@ normals within ``COS_NORMAL`` of its own, in its plane (their distance from its 
 plane at most ``PLANE`` times their distance from it).  Elsewhere (an edge, a silhouette, a
 point the grid's rays did not see) the sample gathers itself as without the cache.  The
 cache's error is its interpolation over s pixels (a smooth G: second order in s) and the
-noise of its gathers, both falling as ``across`` and the gathers grow; ``across`` 0 turns it
-off (every sample gathers, unbiased per sample: the Reference quality).
+noise of its gathers, both falling as ``across`` and the gathers grow; ``across`` below 2
+turns it off (every sample gathers, unbiased per sample: the Reference quality).
 """
 from __future__ import annotations
 
@@ -42,13 +42,22 @@ CACHE_TILE = 1 << 25      # offsets the cache's chunks from the tiles' and the p
 CHUNK_POINTS = 256        # grid points a chunk of the cache's work gathers at
 
 
+def stands_for(q, nq, sq, p, n, s) -> np.ndarray:
+    """Whether points ``q`` (m) with unit normals ``nq`` on surfaces ``sq`` may stand for
+    points ``p`` with normals ``n`` on surfaces ``s`` (arrays broadcasting against each other,
+    the vectors along the last axis): the same surface (``s`` >= 0), normals within
+    COS_NORMAL, ``q`` within PLANE of ``p``'s tangent plane."""
+    rel = q - p
+    height = np.abs(np.einsum("...j,...j->...", rel, n))
+    return ((s >= 0) & (sq == s) & (np.einsum("...j,...j->...", nq, n) >= COS_NORMAL)
+            & (height <= PLANE * np.linalg.norm(rel, axis=-1)))
+
+
 @dataclass
 class Grid:
-    """The cache's grid over a ``width`` x ``height`` pixel image: ``nx`` x ``ny`` points
-    ``spacing`` pixels apart, the first at the image's top-left corner (0, 0)."""
+    """The cache's grid over an image: ``nx`` x ``ny`` points ``spacing`` pixels apart, the
+    first at the image's top-left corner (0, 0)."""
 
-    width: int
-    height: int
     nx: int
     ny: int
     spacing: float
@@ -58,7 +67,7 @@ class Grid:
         """``across`` (>= 2) points along the width, as many rows as cover the height."""
         across = max(2, int(across))
         s = float(width) / (across - 1)
-        return cls(int(width), int(height), across, int(math.ceil(height / s)) + 1, s)
+        return cls(across, int(math.ceil(height / s)) + 1, s)
 
     def pixels(self):
         """(px (P,), py (P,)) the grid's points in pixel coordinates, row-major."""
@@ -109,13 +118,9 @@ class SurfaceCache:
 
     def compatible(self, a, b) -> np.ndarray:
         """Whether grid points ``b`` may stand for grid points ``a`` (index arrays of the
-        same shape): the same surface, normals within COS_NORMAL, b within PLANE of a's
-        tangent plane."""
-        rel = self.point[b] - self.point[a]
-        height = np.abs(np.einsum("...j,...j->...", rel, self.normal[a]))
-        return ((self.surface[a] >= 0) & (self.surface[b] == self.surface[a])
-                & (np.einsum("...j,...j->...", self.normal[a], self.normal[b]) >= COS_NORMAL)
-                & (height <= PLANE * np.linalg.norm(rel, axis=-1)))
+        same shape; stands_for)."""
+        return stands_for(self.point[b], self.normal[b], self.surface[b],
+                          self.point[a], self.normal[a], self.surface[a])
 
     def smooth(self, passes: int = 1) -> None:
         """Filter ``incident`` ``passes`` times with the 3 x 3 binomial kernel (1 2 1)^2 / 16
@@ -145,14 +150,11 @@ class SurfaceCache:
         ``py`` whose rays met surface ``surface`` (N,) at ``point`` (N,3, offset as the
         cache's) with facing normals ``normal`` (N,3), interpolated where ``ok`` (module
         docstring); 0 elsewhere."""
-        index, weight = self.grid.corners(px, py)
-        cp = self.point[index]                                   # (N,4,3)
-        rel = cp - np.asarray(point, np.float64)[:, None, :]
-        height = np.abs(np.einsum("nkj,nj->nk", rel, normal))
-        dist = np.linalg.norm(rel, axis=2)
-        good = ((self.surface[index] == np.asarray(surface)[:, None])
-                & (np.einsum("nkj,nj->nk", self.normal[index], normal) >= COS_NORMAL)
-                & (height <= PLANE * dist))
+        index, weight = self.grid.corners(px, py)                # (N,4) each
+        good = stands_for(self.point[index], self.normal[index], self.surface[index],
+                          np.asarray(point, np.float64)[:, None, :],
+                          np.asarray(normal, np.float64)[:, None, :],
+                          np.asarray(surface)[:, None])
         ok = np.all(good | (weight <= 0.0), axis=1)
         incident = np.einsum("nk,nkj->nj", np.where(good, weight, 0.0), self.incident[index])
         incident[~ok] = 0.0

@@ -208,7 +208,6 @@ def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, r
     ``ok`` its ``incident`` stands for the gathers (``gathered``), which only the others
     trace."""
     from .lights import is_dark, light_sample, pack_light
-    from .phase import orthonormal_basis
 
     n_pts = len(p)
     nrm = facing_normals(ss, tri, d)

@@ -109,6 +109,7 @@ class FrameMarch:
         self.cache_grid = Grid.over(W, H, min(int(tun.surface_cache), W + 1)) \
             if not self.surf.empty and self.st.surface_cache and int(tun.surface_cache) >= 2 \
             else None
+        self.cache_pixels = self.cache_grid.pixels() if self.cache_grid is not None else None
 
     def cut(self, samples: float, samples_per_ray: Optional[float] = None) -> None:
         """Cut the frame into tiles (``self.tiles``, their corners; ``self.size``, their side)
@@ -139,12 +140,12 @@ class FrameMarch:
         march samples) of chunk ``j`` of the surface cache's grid points whose rays meet a
         surface (surfacecache.py): ``Tuning.surface_cache_gathers`` gathers each, on random
         streams of their own."""
-        st, tun, grid = self.st, self.st.tuning, self.cache_grid
-        gx, gy = grid.pixels()
+        st, tun = self.st, self.st.tuning
+        gx, gy = self.cache_pixels
         idx = np.arange(j * CHUNK_POINTS, min((j + 1) * CHUNK_POINTS, len(gx)))
         o, d, tmin, tmax, _ = primary_rays(self.cam, gx[idx], gy[idx], None)
-        t_hit, tri = intersect(self.surf, o, d, np.where(tmax < tmin, tmin, tmax))
-        at = np.flatnonzero((tri >= 0) & (tmax >= tmin))
+        t_hit, tri = intersect(self.surf, o, d, tmax)
+        at = np.flatnonzero((tri >= 0) & (tmax >= tmin))   # not a panoramic lens's void
         steps = []
         if not at.size:
             return j, idx[at], np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64), \
