@@ -127,10 +127,15 @@ def summary_lines(rows):
     return lines + [""]
 
 
-def write_report(rows, out, samples, merged_from=None):
+def write_report(rows, out, samples, merged_from=None, single_from=None):
     """accuracy.md and accuracy.json in ``out`` from ``rows``; ``merged_from``: the JSON
-    files the rows were merged from (--rows), named in the report."""
-    merged = [] if not merged_from else [
+    files the rows were merged from (--rows), ``single_from`` the one whose single-scattering
+    rows were kept (--keep-single), named in the report."""
+    kept = [] if not single_from else [
+        "The single-scattering rows are kept from an earlier run (`--keep-single`, from the "
+        "rows then in `docs/`): the change measured was to multiple scattering alone, which "
+        "a render with multiple scattering off does not run.", ""]
+    merged = kept if not merged_from else kept + [
         "Rows merged from earlier runs (`--rows`), each scene's from the last of "
         + ", ".join(f"`{os.path.relpath(p, REPO)}`" for p in merged_from)
         + " that holds it: a change that leaves some scenes' images the same bits is "
@@ -212,7 +217,7 @@ def main(argv=None):
             write_png(os.path.join(args.out, "images", f"{name}.png"), pic)
             rows.append(row)
             print(json.dumps(row), flush=True)
-    write_report(rows, args.out, args.samples)
+    write_report(rows, args.out, args.samples, single_from=args.keep_single)
     return 0
 
 

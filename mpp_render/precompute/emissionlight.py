@@ -54,17 +54,19 @@ EMISSION_PATHS = 250_000
 def emission_light(pm: PreparedMedium, camera, n_paths: int, resolution: int,
                    multiple: bool, seed: int = 0, threads: int = 0, should_cancel=None,
                    around: Optional[Surroundings] = None, partners=(),
-                   deposits: float = Tuning.path_deposits):
+                   deposits: float = Tuning.path_deposits, nodal: bool = Tuning.path_nodal):
     """(stride, E1, Em, cross) on the light pyramid's lattice of ``pm`` (module docstring),
     float32 (LX,LY,LZ,3) W/(m^2 sr); Em None without ``multiple``.  ``n_paths`` paths (at
     most lightpaths.PATHS_PER_POINT per lattice point the medium fills, more with more Paths:
     lightpaths.path_budget), ``around`` the surfaces they reflect off, ``partners``
     (PreparedMedium, PathLattice) the overlapping media they fly through too (lightpaths.traced_multiple), ``cross`` per partner its
     (E1, Em) on its lattice.  None where nothing is emitted or the medium is too dense for
-    paths.  ``deposits``: Tuning.path_deposits (lightpaths.PathLattice.of)."""
+    paths.  ``deposits``, ``nodal``: Tuning.path_deposits, Tuning.path_nodal
+    (lightpaths.PathLattice.of)."""
     if pm.endless:   # the world fog glows everywhere: its own estimate (fogglow.py)
         return fog_glow(pm, camera, n_paths, resolution, multiple, seed=seed, threads=threads,
-                        should_cancel=should_cancel, around=around, deposits=deposits)
+                        should_cancel=should_cancel, around=around, deposits=deposits,
+                        nodal=nodal)
     e = pm.emitted()
     if e is None or camera is None:
         return None
@@ -72,7 +74,8 @@ def emission_light(pm: PreparedMedium, camera, n_paths: int, resolution: int,
         return None   # nothing its light could scatter in
     pm = flown_through(pm)
     lat = PathLattice.of(pm, camera, resolution,
-                         None if around is None else around.enclosed(pm), deposits=deposits)
+                         None if around is None else around.enclosed(pm), deposits=deposits,
+                         nodal=nodal)
     if lat is None:
         return None
     sets = voxel_starts(pm, e, lat.stride)

@@ -54,18 +54,19 @@ DEFICIT_PATHS = 0.25
 
 def fog_glow(pm, camera, n_paths: int, resolution: int, multiple: bool, seed: int = 0,
              threads: int = 0, should_cancel=None, around: Optional[Surroundings] = None,
-             n_dirs: int = 32, deposits: float = Tuning.path_deposits):
+             n_dirs: int = 32, deposits: float = Tuning.path_deposits,
+             nodal: bool = Tuning.path_nodal):
     """(stride, E1, Em, []) on the path lattice of the endless fog ``pm`` (module
     docstring), float32 (LX,LY,LZ,3) W/(m^2 sr), Em None without ``multiple``; the empty
     list: no other medium's share (emissionlight.emission_light's ``cross``).  ``n_dirs``
     directions per lattice point find the surfaces round it (``surface_view``).  None where
-    the fog does not glow or its lattice cannot take paths.  ``deposits``:
-    Tuning.path_deposits (lightpaths.PathLattice.of)."""
+    the fog does not glow or its lattice cannot take paths.  ``deposits``, ``nodal``:
+    Tuning.path_deposits, Tuning.path_nodal (lightpaths.PathLattice.of)."""
     e1_inf, em_inf = glow_radiance(pm.medium, multiple)
     if camera is None or not np.any(e1_inf + em_inf > 0.0):
         return None
     lat = PathLattice.of(pm, camera, resolution, None if around is None else around.enclosed(pm),
-                         deposits=deposits)
+                         deposits=deposits, nodal=nodal)
     if lat is None:
         return None
     shape = tuple(lat.shape) + (3,)

@@ -17,6 +17,7 @@ from ..parallel import worker_count
 from ..paths import (MAX_COLLISIONS, PATH_MEDIA, PATHS_MAX_SPAN, PathInputs, PathMedium,
                      from_power, rate_span)
 from ..scene import MULTIPLE_PATHS, Tuning
+from .nodal import centroid_offsets, nodal_values
 from .lattice import dilate, lattice_points, paths_lattice
 from .pathstarts import Surroundings, fog_starts, reach, surface_albedo, surface_starts
 from .source import (CELL_POINTS, light_direction, near_light_cells, source_and_density,
@@ -45,7 +46,8 @@ def path_budget(n_paths: int, cells: int, setting: Optional[int] = None) -> int:
 def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: int,
                     resolution: int, seed: int = 0, threads: int = 0, should_cancel=None,
                     around: Optional[Surroundings] = None, moments: bool = True,
-                    partners=(), deposits: float = Tuning.path_deposits):
+                    partners=(), deposits: float = Tuning.path_deposits,
+                    nodal: bool = Tuning.path_nodal):
     """(stride, h, M, far, moments) for ``light`` on medium ``pm`` (its field ``fld``, the light's optical
     depth at ``channel``): M float32 (LX,LY,LZ,3) W/(m^2 sr) on the light pyramid's lattice
     (lattice.walk_lattice at ``resolution``), from ``n_paths`` paths (paths.py; at most
@@ -68,7 +70,8 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     sixth item, per partner, is what they deposited there as M (float32 (LX,LY,LZ,3), with the
     moments where these are made (LX,LY,LZ,15)), to be added to that medium's M for this
     light.  None where the medium is too dense for paths (paths.PATHS_MAX_SPAN): the caller
-    keeps the walk.  ``deposits``: Tuning.path_deposits (PathLattice.of)."""
+    keeps the walk.  ``deposits``, ``nodal``: Tuning.path_deposits, Tuning.path_nodal
+    (PathLattice.of)."""
     stride, shape, h = paths_lattice(pm, resolution)
     voxels = np.zeros(pm.grid.shape[:3], np.float32)
     base, _, pts = source_and_density(pm, fld, light, channel, stride, voxels=voxels,
@@ -100,7 +103,8 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     if not sets:
         return stride, h, np.zeros(tuple(shape) + (3,), np.float32), None, None, []
     lat = PathLattice.of(pm, camera, resolution,
-                         None if around is None else around.enclosed(pm), deposits=deposits)
+                         None if around is None else around.enclosed(pm), deposits=deposits,
+                         nodal=nodal)
     if lat is None:
         return None
     n_paths = lat.paths(n_paths)
@@ -176,11 +180,12 @@ def tentative_rate(majorant: float, h: float, deposits: float) -> float:
 
 
 def partner_lattice(pm, camera, resolution: int, around: Optional[Surroundings] = None,
-                    deposits: float = Tuning.path_deposits):
+                    deposits: float = Tuning.path_deposits, nodal: bool = Tuning.path_nodal):
     """The PathLattice other media's paths deposit on in ``pm`` (traced_multiple's
     ``partners``); None where it is too dense for paths."""
     return PathLattice.of(pm, camera, resolution,
-                          None if around is None else around.enclosed(pm), deposits=deposits)
+                          None if around is None else around.enclosed(pm), deposits=deposits,
+                          nodal=nodal)
 
 
 def tent_peak(voxels: np.ndarray, stride: int, shape) -> np.ndarray:
@@ -251,16 +256,19 @@ class PathLattice:
     tent_mass: np.ndarray
     cells: int
     threshold: float = -1.0
+    offsets: Optional[np.ndarray] = None
 
     @classmethod
     def of(cls, pm, camera, resolution: int, enclosed: Optional[np.ndarray] = None,
-           deposits: float = Tuning.path_deposits):
+           deposits: float = Tuning.path_deposits, nodal: bool = Tuning.path_nodal):
         """The lattice of medium ``pm`` at ``resolution`` seen from ``camera``; None where the
         medium is too dense for paths (paths.PATHS_MAX_SPAN).  ``enclosed``: None, or bool
         (X,Y,Z) the voxels behind the scene's surfaces (Surroundings.enclosed), left out of
         the tent mass: no light reaches them, and a lattice point by a ground is the mean of
         the medium above it.  ``deposits``: tentative collisions per lattice spacing h at
-        least (Tuning.path_deposits): the rate is max(majorant, deposits / h)."""
+        least (Tuning.path_deposits): the rate is max(majorant, deposits / h).  ``nodal``:
+        ``mean`` moves each point's value from its tent's centroid to the point
+        (Tuning.path_nodal, nodal.py)."""
         stride, shape, h = paths_lattice(pm, resolution)
         i2w = np.asarray(pm.i2w[:3, :3], np.float64)
         density = pm.path_density()
@@ -279,12 +287,14 @@ class PathLattice:
         mean_rho = sharp_fraction(pm.grid, threshold) if sharp else density.astype(np.float64)
         if enclosed is not None and enclosed.shape == mean_rho.shape:
             mean_rho[enclosed] = 0.0
+        rho = mean_rho
         for axis in range(3):
             mean_rho = tent_restrict(mean_rho, axis, stride, shape[axis], boxed=True)
+        offsets = centroid_offsets(rho, stride, shape, mean_rho) if nodal else None
         grid = np.ascontiguousarray(pm.grid, np.float32) if sharp else density
         return cls(stride, tuple(shape), h, grid, np.asarray(pm.w2i, np.float64), i2w,
                    towards, rate, mean_rho[..., None] * cell_volume(pm, stride),
-                   int(np.count_nonzero(mean_rho > 0.0)), threshold)
+                   int(np.count_nonzero(mean_rho > 0.0)), threshold, offsets)
 
     def paths(self, n_paths: int, setting: Optional[int] = None) -> int:
         """``n_paths``, at most ``PATHS_PER_POINT`` per lattice point the medium fills
@@ -294,8 +304,14 @@ class PathLattice:
     def mean(self, acc: np.ndarray) -> np.ndarray:
         """M (float32, W/(m^2 sr)) from the deposits ``acc``: divided by the density under each
         point's tent (the cell's mean), so that M is the medium's own average there and a point
-        beside the medium's surface is not diluted by the empty side."""
+        beside the medium's surface is not diluted by the empty side; with ``offsets`` (the
+        tents' centroids, nodal.py) moved from each centroid to its point.  ``acc``'s last
+        axis: 3 channels of light, or those and the 12 moments (paths.py), whose last 9, the
+        first order, are signed."""
         m = np.divide(acc, self.tent_mass, out=np.zeros_like(acc), where=self.tent_mass > 0.0)
+        if self.offsets is not None:
+            return nodal_values(m, self.offsets, self.tent_mass[..., 0],
+                                signed=9 if m.shape[-1] == 15 else 0)
         return np.ascontiguousarray(m, np.float32)
 
 

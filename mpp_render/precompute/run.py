@@ -89,7 +89,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
         for j in (partners_of[mi] if of is None else of):
             if j not in partner_lats:
                 partner_lats[j] = partner_lattice(media[j], camera, path_res[j], around,
-                                                  tuning.path_deposits)
+                                                  tuning.path_deposits, tuning.path_nodal)
             if partner_lats[j] is not None:
                 got.append((j, partner_lats[j]))
         return got
@@ -175,7 +175,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                  seed=seed + 7919 * mi + 6007, threads=threads,
                                  should_cancel=should_cancel, around=around,
                                  partners=[(media[j], lat) for j, lat in near],
-                                 deposits=tuning.path_deposits)
+                                 deposits=tuning.path_deposits, nodal=tuning.path_nodal)
             if got is not None:
                 stride, once, more, cross = got
                 glowed += [(j, lat.stride) + em for (j, lat), em in zip(near, cross)]
@@ -206,7 +206,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                              threads=threads, should_cancel=should_cancel,
                                              around=around, moments=tuning.gather_moments,
                                              partners=[(media[j], lat) for j, lat in near],
-                                             deposits=tuning.path_deposits)
+                                             deposits=tuning.path_deposits, nodal=tuning.path_nodal)
                     if traced is not None:
                         for (j, _), m in zip(near, traced[5]):
                             key = (j, li)

@@ -309,16 +309,17 @@ def _disc(disc, light: Light, pts, tau, pm: PreparedMedium) -> np.ndarray:
 
 
 def tent_restrict(a: np.ndarray, axis: int, stride: int, n_out: int,
-                  boxed: bool = False) -> np.ndarray:
+                  boxed: bool = False, weights: Optional[dict] = None) -> np.ndarray:
     """``a`` restricted along ``axis`` to every ``stride``-th point with the tent weights
     (stride - |t|) / stride^2, t = -(stride-1)..stride-1 (zero beyond the ends): each point's
     value shared among the lattice points around it in proportion to their nearness, so that
     the sum times the lattice spacing keeps the sum times the voxel size.  ``boxed``: the
     weights are the tent's integral over each voxel's width instead (``box_tent_weights``,
     t = -stride..stride), for a value that holds over the whole voxel (the paths' nearest-
-    voxel density)."""
-    weights = box_tent_weights(stride) if boxed else \
-        {t: (stride - abs(t)) / float(stride * stride) for t in range(-(stride - 1), stride)}
+    voxel density).  ``weights``: {t: w} given instead of either (nodal.py's moments)."""
+    if weights is None:
+        weights = box_tent_weights(stride) if boxed else \
+            {t: (stride - abs(t)) / float(stride * stride) for t in range(-(stride - 1), stride)}
     reach = max(weights)
     n = a.shape[axis]
     pad = [(0, 0)] * a.ndim

@@ -76,25 +76,32 @@ PATHS = 150_000   # multiple scattering's traced paths per light (a twentieth of
 # sets it: seeds 0-5 at the old setting 0.110 0.084 0.125 0.105 0.081 0.090 (seed 2 was past
 # the old bound), at the new 0.139 0.094 0.131 0.117 0.076 0.086; at the default setting it
 # went 0.028 -> 0.013 (docs/accuracy.md).  The other bounds hold and are kept.
+# The full bounds lowered when the traced paths' lattice values moved from their tents'
+# centroids to their points (precompute/nodal.py), at the new measurement x 1.15 + 0.01:
+# p_area_in_box 0.103 -> 0.075; p_backlit_slab 0.122 -> 0.121; p_dragon 0.056 -> 0.047; p_fog_area
+# 0.033 -> 0.031; p_fog_point 0.041 -> 0.040; p_glowing_smoke 0.087 -> 0.086; p_noise_cloud 0.024
+# -> 0.023; p_overlap 0.045 -> 0.041; p_point_in_plume 0.336 -> 0.318; p_slab_over_ground 0.074 ->
+# 0.065; p_sphere_gneg 0.060 -> 0.055; p_sphere_thick 0.099 -> 0.068; p_vdb_and_fogbox 0.022 ->
+# 0.019; the others hold and are kept.
 BOUND = {  # scene: (single, full)
-    "p_area_in_box": (0.101, 0.103),
-    "p_backlit_slab": (0.079, 0.122),
+    "p_area_in_box": (0.101, 0.075),
+    "p_backlit_slab": (0.079, 0.121),
     "p_backlit_vdb": (0.024, 0.056),
     "p_chromatic_box": (0.024, 0.059),
-    "p_dragon": (0.017, 0.056),
-    "p_fog_area": (0.017, 0.033),
-    "p_fog_point": (0.028, 0.041),
-    "p_glowing_smoke": (0.046, 0.087),
+    "p_dragon": (0.017, 0.047),
+    "p_fog_area": (0.017, 0.031),
+    "p_fog_point": (0.028, 0.040),
+    "p_glowing_smoke": (0.046, 0.086),
     "p_haze_sun_ground": (0.127, 0.144),
-    "p_noise_cloud": (0.024, 0.024),
-    "p_overlap": (0.018, 0.045),
+    "p_noise_cloud": (0.024, 0.023),
+    "p_overlap": (0.018, 0.041),
     "p_point_in_cube": (0.075, 0.088),
-    "p_point_in_plume": (0.158, 0.336),
-    "p_slab_over_ground": (0.035, 0.074),
-    "p_sphere_gneg": (0.026, 0.060),
-    "p_sphere_thick": (0.036, 0.099),
+    "p_point_in_plume": (0.158, 0.318),
+    "p_slab_over_ground": (0.035, 0.065),
+    "p_sphere_gneg": (0.026, 0.055),
+    "p_sphere_thick": (0.036, 0.068),
     "p_spot_in_fogbox": (0.125, 0.169),
-    "p_vdb_and_fogbox": (0.012, 0.022),
+    "p_vdb_and_fogbox": (0.012, 0.019),
 }
 SCENE_NAMES = sorted(BOUND)
 

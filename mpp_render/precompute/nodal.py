@@ -1,0 +1,122 @@
+"""The traced paths' lattice values at the lattice points themselves, not at their tents'
+centroids.
+
+A lattice point y's traced mean (lightpaths.PathLattice.mean) is
+
+    M̄(y) = ∫ ρ t_y S d³x / ∫ ρ t_y d³x,
+
+the density-weighted mean of the in-scattered light S under y's tent t_y.  Where the
+density under the tent is even it is S(y) to second order; where it is not (a mesh volume's
+surface, a cloud's edge, the voxels behind a ground left out) it is S at the tent's
+density-weighted centroid c(y) = ∫ ρ t_y x / ∫ ρ t_y, to first order: up to about a third of a
+lattice step inside the medium from a point on its surface.  The march reads M trilinearly
+between the lattice points, which is exact for a linear S only if each point holds S(y).
+So each point's value is moved along S's gradient from its centroid to itself:
+
+    M(y) = M̄(y) + ∇S · (y − c(y)),
+
+∇S fitted by least squares to the differences of the traced means of y's 26 neighbours
+against their centroids' offsets (``nodal_values``).  Where the density is even c(y) = y
+and nothing changes; as the lattice is refined the correction vanishes with the step.
+
+Units: offsets and centroids in lattice steps (index coordinates over the stride); M in
+whatever unit it comes (W/(m^2 sr)); the correction is linear in M, channel by channel.
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+
+from .source import tent_restrict
+
+# ridge (lattice steps^2) added to the least-squares normal matrix: an axis along which no
+# neighbour holds medium gets no gradient, not an ill-conditioned one
+RIDGE = 0.01
+
+
+@lru_cache(maxsize=16)
+def box_tent_moment_weights(stride: int) -> tuple:
+    """((t, w), ...): the first moment, in lattice steps, of the tent of half-width
+    ``stride`` voxels (height 1 / stride, integral 1) over the voxel [t - 1/2, t + 1/2],
+    t = -stride..stride: ∫ T(u) u / stride du over the voxel (source.box_tent_weights' twin
+    for the centroid).  Odd in t; exact (the integrand is piecewise quadratic: Simpson's
+    rule on each piece)."""
+    s = float(stride)
+
+    def piece(a, b):   # ∫_a^b T(u) u/s du with T linear on [a, b]
+        if b <= a:
+            return 0.0
+        f = lambda u: max(s - abs(u), 0.0) / (s * s) * u / s  # noqa: E731
+        return (b - a) / 6.0 * (f(a) + 4.0 * f(0.5 * (a + b)) + f(b))
+
+    out = []
+    for t in range(-stride, stride + 1):
+        lo, hi = t - 0.5, t + 0.5
+        cuts = sorted({lo, hi} | {c for c in (-s, 0.0, s) if lo < c < hi})
+        out.append((t, sum(piece(a, b) for a, b in zip(cuts, cuts[1:]))))
+    return tuple(out)
+
+
+def centroid_offsets(rho: np.ndarray, stride: int, shape, mass: np.ndarray) -> np.ndarray:
+    """float64 (LX,LY,LZ,3): each lattice point's tent centroid c(y) - y in lattice steps,
+    weighed by ``rho`` (X,Y,Z, the density over each voxel's cell, as the tent ``mass``
+    (LX,LY,LZ), its box-tent restriction, source.tent_restrict, takes it); 0 where the tent
+    holds no density."""
+    out = np.zeros(tuple(shape) + (3,))
+    moment_w = dict(box_tent_moment_weights(stride))
+    for a in range(3):
+        m = rho
+        for axis in range(3):
+            m = tent_restrict(m, axis, stride, shape[axis], boxed=True,
+                              weights=moment_w if axis == a else None)
+        np.divide(m, mass, out=out[..., a], where=mass > 0.0)
+    return out
+
+
+def nodal_values(mean: np.ndarray, offsets: np.ndarray, mass: np.ndarray,
+                 signed: int = 0) -> np.ndarray:
+    """``mean`` (LX,LY,LZ,C) of tent means moved to the lattice points (module docstring):
+    M̄ − ∇S · offsets at each point whose offset is not 0, ∇S per channel by least squares
+    on the differences to its 26 neighbours that hold ``mass`` (LX,LY,LZ) > 0, against their
+    centroids' offsets from its own; each neighbour weighs m_z / (m_z + m_y), so that a
+    neighbour holding a sliver of the medium (and few deposits) counts little; ridge
+    ``RIDGE``.  Points without mass keep their mean; the first C - ``signed`` channels
+    (light, which is never negative) stop at 0, the last ``signed`` (the moments' first
+    order, paths.py) do not.  Float32 out."""
+    mean = np.asarray(mean)
+    shape = mean.shape[:3]
+    d = np.asarray(offsets, np.float64)
+    sel = np.flatnonzero((np.abs(d).max(axis=-1) > 1e-6) & (mass > 0.0))
+    if not len(sel):
+        return np.ascontiguousarray(mean, np.float32)
+    C = mean.shape[-1]
+    # padded by one point on every side (no mass there), read at the selected points'
+    # neighbours by flat index
+    pm = np.pad(mean.astype(np.float64), ((1, 1),) * 3 + ((0, 0),)).reshape(-1, C)
+    pd = np.pad(d, ((1, 1),) * 3 + ((0, 0),)).reshape(-1, 3)
+    pw = np.pad(np.asarray(mass, np.float64), 1).reshape(-1)
+    ps = tuple(n + 2 for n in shape)
+    ijk = np.stack(np.unravel_index(sel, shape), axis=1) + 1
+    here = np.ravel_multi_index(ijk.T, ps)
+    m0, d0, w0 = pm[here], pd[here], pw[here]
+    A = np.zeros((len(sel), 3, 3))
+    b = np.zeros((len(sel), 3, C))
+    for step in np.argwhere(np.ones((3, 3, 3), bool)) - 1:
+        if not step.any():
+            continue
+        there = here + int(np.ravel_multi_index(step + 1, ps) - np.ravel_multi_index((1, 1, 1), ps))
+        wz = pw[there]
+        wt = np.divide(wz, wz + w0, out=np.zeros_like(wz), where=wz > 0.0)
+        dc = step + pd[there] - d0
+        dm = pm[there] - m0
+        A += wt[:, None, None] * dc[:, :, None] * dc[:, None, :]
+        b += wt[:, None, None] * dc[:, :, None] * dm[:, None, :]
+    A += RIDGE * np.eye(3)
+    grad = np.linalg.solve(A, b)                       # (N,3,C)
+    fixed = m0 - np.einsum("na,nac->nc", d0, grad)
+    if signed < C:
+        fixed[:, :C - signed] = np.maximum(fixed[:, :C - signed], 0.0)
+    out = mean.astype(np.float64).reshape(-1, C)
+    out[sel] = fixed
+    return np.ascontiguousarray(out.reshape(mean.shape), np.float32)
