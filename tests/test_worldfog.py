@@ -276,3 +276,51 @@ def test_a_varying_fog_is_boxed_to_the_depth_its_own_extinction_needs():
     assert 10.0 + 1.9 <= ball <= 12.0 + 2 * step
     assert worldfog.field_depth(cam, lambda p: np.zeros(len(p))) == pytest.approx(0.1 + 1e-3)
     assert worldfog.field_depth(cam, lambda p: np.full(len(p), 1e-4)) <= 100.0 + 1e-9
+
+
+def test_the_far_boxs_tent_mass_is_what_lies_inside_it_and_above_the_ground():
+    """lightpaths.far_lattice: voxels at the Multiple Scattering Resolution along the box's
+    longest side; a point's tent mass is a voxel's volume inside the box, 7/8 of it on a
+    face and (7/8)^3 at a corner (nothing is deposited beyond); under a ground 0, and a point
+    the ground passes through holds the part of its tent above it."""
+    from types import SimpleNamespace
+    from mpp_render.precompute.lightpaths import far_lattice
+    from mpp_render.precompute.pathstarts import Surroundings
+    f = fog(sigma_s=(0.2, 0.2, 0.2))
+    pm = SimpleNamespace(medium=f, sigma_t=np.full(3, 0.2))
+    cam = camera(16, 12)
+    lat = far_lattice(pm, cam, None, 24, nodal=False)
+    assert max(lat.shape) == 24
+    v3 = lat.h ** 3
+    m = lat.tent_mass[..., 0]
+    assert m[1:-1, 1:-1, 1:-1] == pytest.approx(v3)
+    assert m[0, 5, 5] == pytest.approx(7 / 8 * v3)
+    assert m[-1, -1, -1] == pytest.approx((7 / 8) ** 3 * v3)
+    assert lat.offsets is None
+    assert far_lattice(pm, cam, None, 48, nodal=False).shape[0] > lat.shape[0]
+    idx = np.stack(np.meshgrid(*[np.arange(s) for s in lat.shape], indexing="ij"), -1)
+    i2w = np.linalg.inv(np.vstack([lat.w2i, [0, 0, 0, 1]]))
+    z = (idx @ i2w[:3, :3].T + i2w[:3, 3])[..., 2]
+    level = float(np.unique(np.round(z, 9))[len(np.unique(np.round(z, 9))) // 3])
+    ground_z = level + 0.05 * lat.h      # just above a layer of points
+    ss = prepare_surfaces([Surface("ground", np.array([[-500.0, -500, ground_z],
+                                                       [500, -500, ground_z],
+                                                       [500, 500, ground_z],
+                                                       [-500, 500, ground_z]]),
+                                   np.array([[0, 1, 2], [0, 2, 3]]), np.full(3, 0.5))])
+    around = Surroundings([], np.full(3, 0.2), ss, 0.1)
+    cut = far_lattice(pm, cam, around, 24, nodal=True)
+    mc = cut.tent_mass[..., 0]
+    deep = z < ground_z - 1.6 * cut.h
+    high = z > ground_z + 1.6 * cut.h
+    on = np.abs(z - level) < 1e-6
+    assert deep.any() and high.any() and on.any()
+    assert np.all(mc[deep] == 0.0)
+    np.testing.assert_allclose(mc[high], m[high])
+    assert np.all(mc[on] > 0.3 * m[on]) and np.all(mc[on] < 0.7 * m[on])
+    # the ground's points' centroids lie above them: the nodal values move them down to it
+    up = cut.offsets[on] @ np.linalg.solve(cut.i2w, np.array([0.0, 0.0, 1.0]))
+    assert np.all(cut.offsets[high & (idx[..., 0] > 0) & (idx[..., 0] < cut.shape[0] - 1)
+                              & (idx[..., 1] > 0) & (idx[..., 1] < cut.shape[1] - 1)
+                              & (idx[..., 2] > 0) & (idx[..., 2] < cut.shape[2] - 1)] == 0.0)
+    assert np.all(up > 0.0)

@@ -49,10 +49,18 @@ def crossings(ss, o, d, t_max: float):
 def enclosed_voxels(pm, ss) -> np.ndarray:
     """bool (X,Y,Z): the voxels of prepared medium ``pm`` behind the opaque surfaces of the
     SurfaceSet ``ss`` (module docstring); all False without surfaces."""
-    shape = tuple(pm.grid.shape[:3])
+    return enclosed_cells(tuple(pm.grid.shape[:3]), pm.i2w, ss)
+
+
+def enclosed_cells(shape, i2w, ss) -> np.ndarray:
+    """bool ``shape``: the voxels of a grid of ``shape`` (index to world ``i2w``, 4x4 or
+    3x4, metres) behind the opaque surfaces of the SurfaceSet ``ss``; all False without
+    surfaces (``enclosed_voxels``: a medium's grid; the world fog's far box,
+    lightpaths._far_multiple)."""
+    shape = tuple(int(n) for n in shape)
     if ss is None or ss.empty:
         return np.zeros(shape, bool)
-    i2w = np.asarray(pm.i2w, np.float64)
+    i2w = np.asarray(i2w, np.float64)
     behind = np.zeros(shape, np.int16)
     front = np.zeros(shape, np.int16)
     for axis in range(3):
@@ -85,3 +93,21 @@ def enclosed_voxels(pm, ss) -> np.ndarray:
         behind += votes_behind.reshape(shape_cols).transpose(back)
         front += votes_front.reshape(shape_cols).transpose(back)
     return behind > front
+
+
+def enclosed_fraction(shape, i2w, ss, sub: int = 2) -> np.ndarray:
+    """float64 ``shape``: the part of each voxel of a grid of ``shape`` (index to world
+    ``i2w``) behind the surfaces of ``ss``, from ``enclosed_cells`` at the centres of
+    ``sub`` x ``sub`` x ``sub`` equal parts of it: a voxel the ground cuts holds the part
+    of its cell above it, not all or nothing by its centre."""
+    shape = tuple(int(n) for n in shape)
+    if ss is None or ss.empty or sub <= 1:
+        return enclosed_cells(shape, i2w, ss).astype(np.float64)
+    i2w = np.asarray(i2w, np.float64)
+    fine = np.eye(4)
+    fine[:3, :3] = i2w[:3, :3] / sub
+    # fine index f is coarse index (f + 1/2) / sub - 1/2
+    fine[:3, 3] = i2w[:3, 3] + i2w[:3, :3] @ np.full(3, 0.5 / sub - 0.5)
+    got = enclosed_cells(tuple(n * sub for n in shape), fine, ss)
+    return got.reshape(shape[0], sub, shape[1], sub, shape[2], sub).mean(axis=(1, 3, 5))
+

@@ -18,7 +18,7 @@ from ..paths import (MAX_COLLISIONS, PATH_MEDIA, PATHS_MAX_SPAN, PathInputs, Pat
                      from_power, rate_span)
 from ..scene import MULTIPLE_PATHS, Tuning
 from .nodal import centroid_offsets, nodal_values
-from .lattice import dilate, lattice_points, paths_lattice
+from .lattice import MULTIPLE_RESOLUTION, dilate, lattice_points, paths_lattice
 from .pathstarts import Surroundings, fog_starts, reach, surface_albedo, surface_starts
 from .source import (CELL_POINTS, light_direction, near_light_cells, source_and_density,
                      tent_restrict)
@@ -28,7 +28,6 @@ from .source import (CELL_POINTS, light_direction, near_light_cells, source_and_
 # caps the total; path_budget): a 65-point lattice of a mesh cube holds 270 000 such points,
 # past the default 3 000 000 paths
 PATHS_PER_POINT = 32
-FAR_RESOLUTION = 32  # voxels along the longest side of the world fog's far box (worldfog.FarField)
 FAR_PATHS = 0.25     # the far box's paths, a fraction of the grid's
 
 
@@ -47,7 +46,8 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
                     resolution: int, seed: int = 0, threads: int = 0, should_cancel=None,
                     around: Optional[Surroundings] = None, moments: bool = True,
                     partners=(), deposits: float = Tuning.path_deposits,
-                    nodal: bool = Tuning.path_nodal):
+                    nodal: bool = Tuning.path_nodal,
+                    far_resolution: int = MULTIPLE_RESOLUTION):
     """(stride, h, M, far, moments) for ``light`` on medium ``pm`` (its field ``fld``, the light's optical
     depth at ``channel``): M float32 (LX,LY,LZ,3) W/(m^2 sr) on the light pyramid's lattice
     (lattice.walk_lattice at ``resolution``), from ``n_paths`` paths (paths.py; at most
@@ -71,7 +71,8 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     moments where these are made (LX,LY,LZ,15)), to be added to that medium's M for this
     light.  None where the medium is too dense for paths (paths.PATHS_MAX_SPAN): the caller
     keeps the walk.  ``deposits``, ``nodal``: Tuning.path_deposits, Tuning.path_nodal
-    (PathLattice.of)."""
+    (PathLattice.of).  ``far_resolution``: the far box's voxels along its longest side (the
+    *Multiple Scattering Resolution* as set, not raised round a lamp)."""
     stride, shape, h = paths_lattice(pm, resolution)
     voxels = np.zeros(pm.grid.shape[:3], np.float32)
     base, _, pts = source_and_density(pm, fld, light, channel, stride, voxels=voxels,
@@ -117,7 +118,7 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     far = None
     if fog and camera is not None:
         far = _far_multiple(pm, sets, camera, n_paths, seed, threads, should_cancel, around,
-                            light=rec)
+                            light=rec, nodal=nodal, resolution=far_resolution)
     if not gathered:
         return stride, h, m, far, None, cross
     return (stride, h, np.ascontiguousarray(m[..., :3]), far,
@@ -385,18 +386,40 @@ def _own_grid(grid, lat) -> Optional[np.ndarray]:
 
 
 def _far_multiple(pm, sets, camera, n_paths, seed, threads, should_cancel, around,
-                  light=None):
+                  light=None, nodal: bool = Tuning.path_nodal,
+                  resolution: int = MULTIPLE_RESOLUTION):
     """worldfog.FarField of the fog ``pm`` for one light: ``FAR_PATHS`` of ``n_paths`` paths
-    from the same ``sets`` of starts, their M on the voxels of a coarse frustum box
-    (``FAR_RESOLUTION`` along its longest side) to the depth where the camera's transmittance
-    through the fog is e^-TAU_VIEW, for the tail beyond the fog's grid (worldfog.tail).  None
-    where the fog has no extinction (no such depth)."""
-    from ..worldfog import FarField, frustum_box, view_depth
+    from the same ``sets`` of starts, their M on the voxels of the far box (``far_lattice``)
+    for the tail beyond the fog's grid (worldfog.tail).  None where the fog has no
+    extinction (no such depth)."""
+    from ..worldfog import FarField
+    lat = far_lattice(pm, camera, around, resolution, nodal)
+    if lat is None:
+        return None
+    acc = _trace(sets, max(1, int(n_paths * FAR_PATHS)), int(seed) + 7, threads, should_cancel,
+                 pm, lat, around, light=light)
+    return FarField(lat.w2i, lat.mean(acc))
+
+
+def far_lattice(pm, camera, around: Optional[Surroundings] = None,
+                resolution: int = MULTIPLE_RESOLUTION,
+                nodal: bool = Tuning.path_nodal) -> Optional["PathLattice"]:
+    """The PathLattice of the world fog ``pm``'s far field: the voxels (stride 1) of a
+    frustum box of ``camera``, ``resolution`` voxels along its longest side (the *Multiple
+    Scattering Resolution*: a coarser box's tents, 2 m and more in the suite's fogs, had
+    smoothed the light by a ground), out to the depth where the camera's transmittance
+    through the fog is e^-TAU_VIEW; None where the fog has no extinction.  Its tent mass is
+    the part of each voxel's tent inside the box and in front of ``around``'s surfaces (the
+    box lies partly under a ground, as the fog's grid does, enclosed.py): nothing is
+    deposited beyond its faces or below the ground, and a point there had been the mean of
+    the light and the dark (p_fog_area's horizon 3-4 % dark).  ``nodal``: PathLattice.of."""
+    from ..worldfog import frustum_box, view_depth
     depth = view_depth(None, pm.medium)
     if not np.isfinite(depth):
         return None
     near = max(float(camera.clip_start), 0.0)
-    shape, i2w4, voxel = frustum_box(camera, near, max(depth, near + 1e-3), FAR_RESOLUTION)
+    shape, i2w4, voxel = frustum_box(camera, near, max(depth, near + 1e-3),
+                                     max(2, int(resolution)))
     w2i = np.linalg.inv(i2w4)[:3]
     density = np.ones(shape, np.float32)
     lidx = np.stack(np.meshgrid(*[np.arange(s) for s in shape], indexing="ij"), -1).reshape(-1, 3)
@@ -405,8 +428,14 @@ def _far_multiple(pm, sets, camera, n_paths, seed, threads, should_cancel, aroun
     # one deposit per voxel of the far box: Tuning.path_deposits was measured on the
     # media's own lattices only
     rate = tentative_rate(float(np.max(pm.sigma_t)), voxel, 1.0)
-    lat = PathLattice(1, tuple(shape), voxel, density, w2i, np.ascontiguousarray(i2w4[:3, :3]),
-                      towards, rate, np.full(tuple(shape) + (1,), voxel ** 3), int(density.size))
-    acc = _trace(sets, max(1, int(n_paths * FAR_PATHS)), int(seed) + 7, threads, should_cancel,
-                 pm, lat, around, light=light)
-    return FarField(w2i, np.ascontiguousarray(acc / voxel ** 3, np.float32))
+    rho = np.ones(shape)
+    if around is not None and around.surfaces is not None:
+        from .enclosed import enclosed_fraction
+        rho -= enclosed_fraction(shape, i2w4, around.surfaces)
+    mass = rho
+    for axis in range(3):
+        mass = tent_restrict(mass, axis, 1, shape[axis], boxed=True)
+    offsets = centroid_offsets(rho, 1, shape, mass) if nodal else None
+    return PathLattice(1, tuple(shape), voxel, density, w2i, np.ascontiguousarray(i2w4[:3, :3]),
+                       towards, rate, mass[..., None] * voxel ** 3,
+                       int(np.count_nonzero(mass > 0.0)), offsets=offsets)

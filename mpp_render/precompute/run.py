@@ -175,7 +175,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                  seed=seed + 7919 * mi + 6007, threads=threads,
                                  should_cancel=should_cancel, around=around,
                                  partners=[(media[j], lat) for j, lat in near],
-                                 deposits=tuning.path_deposits, nodal=tuning.path_nodal)
+                                 deposits=tuning.path_deposits,
+                                 nodal=tuning.path_nodal)
             if got is not None:
                 stride, once, more, cross = got
                 glowed += [(j, lat.stride) + em for (j, lat), em in zip(near, cross)]
@@ -206,7 +207,9 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                              threads=threads, should_cancel=should_cancel,
                                              around=around, moments=tuning.gather_moments,
                                              partners=[(media[j], lat) for j, lat in near],
-                                             deposits=tuning.path_deposits, nodal=tuning.path_nodal)
+                                             deposits=tuning.path_deposits,
+                                             nodal=tuning.path_nodal,
+                                             far_resolution=multiple_resolution)
                     if traced is not None:
                         for (j, _), m in zip(near, traced[5]):
                             key = (j, li)
