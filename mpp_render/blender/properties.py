@@ -84,7 +84,8 @@ class MPPRenderSettings(bpy.types.PropertyGroup):
                     "sharper multiply scattered light, slower precompute. The Volume Multiple "
                     "pass also shifts in brightness with it (measured between 16 and 128: "
                     "within 10% in the public smoke and clouds, up to 25% in thin slabs; "
-                    "docs/ms_resolution.md). The accuracy figures in the docs are at 64")
+                    "docs/ms_resolution.md). The world fog's far box takes as many voxels "
+                    "along its longest side. The accuracy figures in the docs are at 64")
     multiple_paths: IntProperty(
         name="Multiple Scattering Paths", default=MULTIPLE_PATHS, min=0, soft_max=20_000_000,
         description="Light paths (count) traced per light and volume for the multiply "
