@@ -166,3 +166,19 @@ def test_the_path_lattice_moves_its_means_only_when_asked():
     assert cut.any()
     np.testing.assert_array_equal(moved[~cut], plain[~cut])
     assert not np.allclose(moved[cut], plain[cut])
+
+
+def test_the_fit_a_chunk_of_points_at_a_time_is_the_fit_of_all(monkeypatch):
+    """nodal_values fits NODAL_CHUNK points at a time (memory): 7 at a time gives what all
+    at once do, to float32's rounding."""
+    import mpp_render.precompute.nodal as nodal
+    stride, n = 2, 24
+    shape = tuple((n - 1 + stride - 1) // stride + 1 for _ in range(3))
+    rho = half_space(n)
+    mass, d, mean, _ = exact_means(rho, stride, shape, 10.0, np.array([0.8, 0.3, -0.2]))
+    rng = np.random.default_rng(5)
+    noisy = mean[..., None] * rng.uniform(0.9, 1.1, mean.shape + (15,))
+    whole = nodal.nodal_values(noisy, d, mass, signed=9)
+    monkeypatch.setattr(nodal, "NODAL_CHUNK", 7)
+    np.testing.assert_allclose(nodal.nodal_values(noisy, d, mass, signed=9), whole,
+                               rtol=1e-6, atol=1e-6)
