@@ -130,6 +130,7 @@ BOX_TIE = 1e-9    # m (relative beyond 1 m): box faces this close are crossed to
 START_TRIES = 64  # offsets drawn for a first scattering until one is accepted
 # deposits with the moments: 3 towards the camera, 3 of order 0, 3 x 3 of order 1 (x, y, z)
 MOMENT_CHANNELS = 15
+SIGNED_CHANNELS = 9   # the last of them, the order-1 moments, may be below 0
 
 
 @dataclass

@@ -14,14 +14,13 @@ from ..camera import towards_camera
 from ..lights import pack_light
 from ..media import box_distance, density_from, trilinear
 from ..parallel import worker_count
-from ..paths import (MAX_COLLISIONS, PATH_MEDIA, PATHS_MAX_SPAN, PathInputs, PathMedium,
-                     from_power, rate_span)
+from ..paths import (MAX_COLLISIONS, MOMENT_CHANNELS, PATH_MEDIA, PATHS_MAX_SPAN,
+                     SIGNED_CHANNELS, PathInputs, PathMedium, from_power, rate_span)
 from ..scene import MULTIPLE_PATHS, Tuning
-from .nodal import centroid_offsets, nodal_values
 from .lattice import MULTIPLE_RESOLUTION, dilate, lattice_points, paths_lattice
+from .nodal import nodal_values, tent_mass
 from .pathstarts import Surroundings, fog_starts, reach, surface_albedo, surface_starts
-from .source import (CELL_POINTS, light_direction, near_light_cells, source_and_density,
-                     tent_restrict)
+from .source import CELL_POINTS, light_direction, near_light_cells, source_and_density
 
 
 # paths per lattice point the medium fills, at most, at the default Paths (the Paths setting
@@ -288,14 +287,11 @@ class PathLattice:
         mean_rho = sharp_fraction(pm.grid, threshold) if sharp else density.astype(np.float64)
         if enclosed is not None and enclosed.shape == mean_rho.shape:
             mean_rho[enclosed] = 0.0
-        rho = mean_rho
-        for axis in range(3):
-            mean_rho = tent_restrict(mean_rho, axis, stride, shape[axis], boxed=True)
-        offsets = centroid_offsets(rho, stride, shape, mean_rho) if nodal else None
+        mass, offsets = tent_mass(mean_rho, stride, shape, nodal)
         grid = np.ascontiguousarray(pm.grid, np.float32) if sharp else density
         return cls(stride, tuple(shape), h, grid, np.asarray(pm.w2i, np.float64), i2w,
-                   towards, rate, mean_rho[..., None] * cell_volume(pm, stride),
-                   int(np.count_nonzero(mean_rho > 0.0)), threshold, offsets)
+                   towards, rate, mass[..., None] * cell_volume(pm, stride),
+                   int(np.count_nonzero(mass > 0.0)), threshold, offsets)
 
     def paths(self, n_paths: int, setting: Optional[int] = None) -> int:
         """``n_paths``, at most ``PATHS_PER_POINT`` per lattice point the medium fills
@@ -312,7 +308,8 @@ class PathLattice:
         m = np.divide(acc, self.tent_mass, out=np.zeros_like(acc), where=self.tent_mass > 0.0)
         if self.offsets is not None:
             return nodal_values(m, self.offsets, self.tent_mass[..., 0],
-                                signed=9 if m.shape[-1] == 15 else 0)
+                                signed=SIGNED_CHANNELS if m.shape[-1] == MOMENT_CHANNELS
+                                else 0)
         return np.ascontiguousarray(m, np.float32)
 
 
@@ -428,14 +425,11 @@ def far_lattice(pm, camera, around: Optional[Surroundings] = None,
     # one deposit per voxel of the far box: Tuning.path_deposits was measured on the
     # media's own lattices only
     rate = tentative_rate(float(np.max(pm.sigma_t)), voxel, 1.0)
-    rho = np.ones(shape)
+    rho = density.astype(np.float64)
     if around is not None and around.surfaces is not None:
         from .enclosed import enclosed_fraction
         rho -= enclosed_fraction(shape, i2w4, around.surfaces)
-    mass = rho
-    for axis in range(3):
-        mass = tent_restrict(mass, axis, 1, shape[axis], boxed=True)
-    offsets = centroid_offsets(rho, 1, shape, mass) if nodal else None
+    mass, offsets = tent_mass(rho, 1, shape, nodal)
     return PathLattice(1, tuple(shape), voxel, density, w2i, np.ascontiguousarray(i2w4[:3, :3]),
                        towards, rate, mass[..., None] * voxel ** 3,
                        int(np.count_nonzero(mass > 0.0)), offsets=offsets)

@@ -75,6 +75,16 @@ def centroid_offsets(rho: np.ndarray, stride: int, shape, mass: np.ndarray) -> n
     return out
 
 
+def tent_mass(rho: np.ndarray, stride: int, shape, centroids: bool):
+    """(mass (LX,LY,LZ), offsets or None): the box-tent restriction of ``rho`` (X,Y,Z, the
+    density over each voxel's cell) to the lattice ``stride`` voxels apart of ``shape``
+    (source.tent_restrict), and with ``centroids`` each point's ``centroid_offsets``."""
+    mass = rho
+    for axis in range(3):
+        mass = tent_restrict(mass, axis, stride, shape[axis], boxed=True)
+    return mass, (centroid_offsets(rho, stride, shape, mass) if centroids else None)
+
+
 def nodal_values(mean: np.ndarray, offsets: np.ndarray, mass: np.ndarray,
                  signed: int = 0) -> np.ndarray:
     """``mean`` (LX,LY,LZ,C) of tent means moved to the lattice points (module docstring):
