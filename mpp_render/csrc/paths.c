@@ -236,6 +236,19 @@ static inline int survive(const Tracer *T, uint32_t key, long ev, double w[3], d
     return live && hits < T->max_hits && max_d(w[0], max_d(w[1], w[2])) > 0.0;
 }
 
+/* Whether world point p lies in grid G's box by more than INNER_MARGIN voxels on every
+ * axis: a flight that starts inside the box and ends there crosses none of its faces, and
+ * the margin keeps box_cross's rounding from ever putting a face before it. */
+#define INNER_MARGIN 1e-6
+static inline int well_inside(const PathGrid *G, const double p[3]) {
+    double idx[3];
+    grid_index(G, p, idx);
+    for (int r = 0; r < 3; r++)
+        if (!(idx[r] > -0.5 + INNER_MARGIN && idx[r] < (double)G->n[r] - 0.5 - INNER_MARGIN))
+            return 0;
+    return 1;
+}
+
 /* Whether world point p lies in grid G's box (the nearest-voxel domain). */
 static int in_box(const PathGrid *G, const double p[3]) {
     double idx[3];
@@ -345,7 +358,8 @@ static double deposit(const PathGrid *G, const double pos[3], const double w[3],
  * directions towards the camera).  The paths are bound by these reads' latency (a cloud's
  * density or a mesh's cell classes outgrow the core's cache); asked for one event ahead,
  * they arrive while the event before is worked out.  It changes no result. */
-static inline void prefetch_collision(const PathGrid *G, const double p[3]) {
+static inline void prefetch_collision(const PathGrid *G, const double p[3], uint32_t key,
+                                      long ev) {
     double idx[3];
     grid_index(G, p, idx);
     Py_ssize_t v[3], b[3];
@@ -368,6 +382,19 @@ static inline void prefetch_collision(const PathGrid *G, const double p[3]) {
     }
     if (b[0] < 0 || b[1] < 0 || b[2] < 0) return;
     Py_ssize_t s1 = G->ls[2], s0 = G->ls[1] * s1, base = b[0] * s0 + b[1] * s1 + b[2];
+    if (G->mom) {   /* the one corner the moments go to, drawn as deposit draws it */
+        double u = uniform01(key, ev, D_CORNER);
+        Py_ssize_t flat = base;
+        const Py_ssize_t st[3] = {s0, s1, 1};
+        for (int a = 0; a < 3; a++) {
+            double fr = idx[a] / (double)G->stride - (double)b[a];
+            int up = u < fr;
+            u = up ? u / fr : (u - fr) / (1.0 - fr);
+            flat += up ? st[a] : 0;
+        }
+        PREFETCH(G->mom + 12 * flat, 1);
+        PREFETCH(G->mom + 12 * flat + 11, 1);
+    }
     const Py_ssize_t pair[4] = {0, s1, s0, s0 + s1};   /* the 4 pairs of corners along z */
     for (int q = 0; q < 4; q++) {
         const Py_ssize_t f = 3 * (base + pair[q]);
@@ -456,7 +483,23 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
         /* with several media each keeps its own tentative collisions at its rate inside its
          * box: their sum is the rate of the whole, and a tentative point is medium j's with
          * probability mu_j over the sum */
-        double tb = INFINITY, tjs[PATH_MEDIA];
+        double tb = INFINITY, tjs[PATH_MEDIA], t_fast = -1.0;
+        /* one medium, inside it: where the flight ends inside its box by INNER_MARGIN the
+         * box's faces are all beyond it and its exit need not be worked out (the box is
+         * convex; the same bits as with the exit: the rate and the flight are the same, and
+         * min(t, exit) = t) */
+        if (T->nm == 1 && inside[0] && T->m[0].mu > 0.0) {
+            const double r1 = T->m[0].mu;
+            double t1 = ev == ahead_ev && r1 == ahead_rate ? ahead_t
+                      : -log(1.0 - uniform01(key, ev, D_FLY)) / r1;
+            double q[3];
+            for (int a = 0; a < 3; a++) q[a] = pos[a] + t1 * d[a];
+            if (well_inside(&T->m[0], q)) {
+                t_fast = t1;
+                tjs[0] = INFINITY;
+                goto flight;
+            }
+        }
         for (int j = 0; j < T->nm; j++) {
             double tj = box_cross(&T->m[j], pos, d, inside[j]);
             if (inside[j] && !(tj < INFINITY)) {
@@ -468,13 +511,15 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
             tjs[j] = tj;
             if (tj < tb) tb = tj;
         }
+    flight:;
         double rate = 0.0;
         if (T->nm == 1)
             rate = inside[0] ? T->m[0].mu : T->outside * T->m[0].st_max;
         else
             for (int j = 0; j < T->nm; j++)
                 if (inside[j]) rate += T->m[j].mu;
-        double t = !(rate > 0.0) ? INFINITY
+        double t = t_fast >= 0.0 ? t_fast
+                 : !(rate > 0.0) ? INFINITY
                  : ev == ahead_ev && rate == ahead_rate ? ahead_t   /* worked out the event before */
                  : -log(1.0 - uniform01(key, ev, D_FLY)) / rate;
         double tseg = min_d(t, tb);
@@ -583,7 +628,7 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
             ahead_t = -log(1.0 - uniform01(key, ev + 1, D_FLY)) / r1;
             double q[3];
             for (int a = 0; a < 3; a++) q[a] = pos[a] + ahead_t * d[a];
-            prefetch_collision(&T->m[0], q);
+            prefetch_collision(&T->m[0], q, key, ev + 1);
         }
     }
 }
