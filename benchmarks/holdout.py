@@ -56,6 +56,28 @@ VARIANTS = {
     "v_smoke_lamp": ("smoke_plume", "its point light (200 W, radius 0.15 m) inside the plume, "
                      "at 30 % of the grid's height",
                      [("lamp_in_volume", dict(energy=200.0, radius=0.15, height=0.3))]),
+    # the kinds the lamps above left out (2026-12-04): spheres, slabs, grounds, overlaps,
+    # world fog, a third-party grid and a fog box, each at other parameters
+    "v_sphere_fwd_thick": ("p_sphere_g95", "density 15, g 0.85",
+                           [("volume", dict(density=15.0, anisotropy=0.85))]),
+    "v_sphere_midalb": ("p_sphere_lowalbedo", "density 4, albedo 0.75, g -0.1",
+                        [("volume", dict(density=4.0, color=0.75, anisotropy=-0.1))]),
+    "v_slab_ground_thin": ("p_slab_over_ground", "density 1.5, g 0.3",
+                           [("volume", dict(density=1.5, anisotropy=0.3))]),
+    "v_backlit_slab_dense": ("p_backlit_slab", "density 8, g 0.75",
+                             [("volume", dict(density=8.0, anisotropy=0.75))]),
+    "v_overlap_dense": ("p_overlap", "both media density 5, g 0.3",
+                        [("volume", dict(density=5.0, anisotropy=0.3))]),
+    "v_fog_point_dense": ("p_fog_point", "world fog density 0.12, g 0.2",
+                          [("world_fog", dict(density=0.12, anisotropy=0.2))]),
+    "v_dragon_g2": ("p_dragon", "density 25, g 0.2",
+                    [("volume", dict(density=25.0, anisotropy=0.2))]),
+    "v_fogbox_spot_dense": ("p_spot_in_fogbox", "density 0.8, g 0.3",
+                            [("volume", dict(density=0.8, anisotropy=0.3))]),
+    "v_chromatic_dense": ("p_chromatic_box", "density 5, g 0",
+                          [("volume", dict(density=5.0, anisotropy=0.0))]),
+    "v_cloud_lowalb": ("cloud_vdb", "albedo 0.85, g 0.3",
+                       [("volume", dict(color=0.85, anisotropy=0.3))]),
 }
 
 

@@ -225,7 +225,9 @@ class MarchInputs:
     optical depth corrected by a march, kernels_np.disc_correction; None or 0: off) and
     ``scatter_channels`` (per medium the first channel of its scatter colour grid, or -1) and
     ``extinction_channels`` (per medium the first channel of its extinction density, or -1:
-    its extinction reads the density)."""
+    its extinction reads the density) and ``cell_tau`` (> 0: a density grid's cell whose
+    densest corner is at least that optical depth across reads each light's depth on the
+    plane of voxel centres towards it, kernels_np._plane_tau; 0: off)."""
     origins: np.ndarray
     dirs: np.ndarray
     t0: np.ndarray
@@ -253,6 +255,7 @@ class MarchInputs:
     disc_reach: Optional[list] = None
     scatter_channels: Optional[list] = None
     extinction_channels: Optional[list] = None
+    cell_tau: float = 0.0
 
     def replace(self, **changes) -> "MarchInputs":
         return dataclasses.replace(self, **changes)
@@ -278,7 +281,7 @@ def march(inputs: MarchInputs, *, backend=None) -> MarchResult:
             a.sigma_ts, a.gs, a.thresholds, a.voxels, a.lights, a.ambient, a.step,
             a.depth_opacity, a.depth_miss, a.multiple, a.emissions, a.bricks, a.adapt_tau,
             a.emission_channels, a.roulette, a.disc_reach, a.scatter_channels,
-            a.extinction_channels))
+            a.extinction_channels, a.cell_tau))
     n = len(a.origins)
     nl = len(np.asarray(a.lights).reshape(-1, LIGHT_FIELDS))
     packed = None
@@ -311,7 +314,8 @@ def march(inputs: MarchInputs, *, backend=None) -> MarchResult:
         float(a.roulette),
         None if a.disc_reach is None else [float(x) for x in a.disc_reach],
         None if a.scatter_channels is None else [int(c) for c in a.scatter_channels],
-        None if a.extinction_channels is None else [int(c) for c in a.extinction_channels])
+        None if a.extinction_channels is None else [int(c) for c in a.extinction_channels],
+        float(a.cell_tau))
     return MarchResult(np.frombuffer(s, np.float64).reshape(n, 3),
                        np.frombuffer(t, np.float64).reshape(n, 3),
                        np.frombuffer(d, np.float64).reshape(n),

@@ -277,21 +277,24 @@ EDGE_EPS = 1e-6        # occupancies within this of 0 or 1 count as outside / in
 T_MIN = 1e-6
 
 
-def _fetch(field, w2i, x, c0, nc):
+def _fetch(field, w2i, x, c0, nc, read=trilinear):
+    """(N, nc) channels c0.. of ``field`` read trilinearly at world points ``x`` (N,3) by
+    ``read`` (media.trilinear's contract; kernels.trilinear for the compiled one)."""
     idx = x @ w2i[:, :3].T + w2i[:, 3]
-    v = trilinear(field, idx) if field.ndim == 4 else trilinear(field, idx)[:, None]
+    v = read(field, idx)
+    v = v if np.ndim(v) == 2 else np.reshape(v, (-1, 1))
     return v[:, c0:c0 + nc]
 
 
-def _extinction(field, w2i, thr, sig_t, xc, x):
+def _extinction(field, w2i, thr, sig_t, xc, x, read=trilinear):
     """(N,3) extinction (1/m) of one medium at world points ``x``: its density
     (``density_from``) times ``sig_t``, or with an extinction channel ``xc`` >= 0 (None: none)
     channel c of the field's extinction density times ``sig_t[c]`` (csrc/march.c
-    extinction_at)."""
+    extinction_at).  ``read``: _fetch's."""
     st = np.asarray(sig_t, np.float64)[None, :]
     if xc is not None and xc >= 0:
-        return _fetch(field, w2i, x, xc, 3) * st
-    return density_from(_fetch(field, w2i, x, 0, 1)[:, 0], thr)[:, None] * st
+        return _fetch(field, w2i, x, xc, 3, read) * st
+    return density_from(_fetch(field, w2i, x, 0, 1, read)[:, 0], thr)[:, None] * st
 
 
 def _refined_tau(fields, w2is, thrs, sig_ts, mi, c, x, w, dist, delta, xcs=None):
@@ -317,6 +320,74 @@ def _refined_tau(fields, w2is, thrs, sig_ts, mi, c, x, w, dist, delta, xcs=None)
         fin = (occ <= EDGE_EPS) | (occ >= 1.0 - EDGE_EPS) | (seg < delta)
         done[todo[fin]] = True
     return tau + _fetch(fields[mi], w2is[mi], end, c, 3)
+
+
+def _corner_max(field, w2i, x, sig_t, xc, sig_max) -> np.ndarray:
+    """(N,) the largest extinction (1/m) among the 8 voxels of the cell holding each world
+    point ``x`` (N,3): the density (channel 0) times ``sig_max``, or with an extinction
+    channel ``xc`` >= 0 the largest of its 3 channels times ``sig_t``'s; 0 outside the grid's
+    cells (csrc/march.c medium_sources)."""
+    idx = x @ w2i[:, :3].T + w2i[:, 3]
+    shape = np.array(field.shape[:3])
+    f = np.floor(idx)
+    ok = np.all((idx >= 0.0) & (idx < shape - 1), axis=1)
+    i0 = np.where(ok[:, None], f, 0.0).astype(np.int64)
+    st = np.asarray(sig_t, np.float64)
+    top = np.zeros(len(x))
+    for corner in range(8):
+        o = np.array([(corner >> 2) & 1, (corner >> 1) & 1, corner & 1])
+        c = i0 + o
+        if xc is not None and xc >= 0:
+            v = field[c[:, 0], c[:, 1], c[:, 2], xc:xc + 3].astype(np.float64) * st[None, :]
+            top = np.maximum(top, v.max(axis=1))
+        else:
+            top = np.maximum(top, field[c[:, 0], c[:, 1], c[:, 2], 0].astype(np.float64)
+                             * float(sig_max))
+    return np.where(ok, top, 0.0)
+
+
+LAMP_PLANES = 1.25   # _plane_tau's reach before a lamp, in voxel steps (the C twin's)
+PLANE_EPS = 1e-9     # the grid's last plane is read this far inside it (the C twin's)
+
+
+def _plane_tau(fields, w2is, thrs, sig_ts, mi, c, x, w, dist, tau, xcs=None, read=trilinear):
+    """(N,3) the optical depth from points ``x`` (N,3) towards a light (unit directions ``w``,
+    its centre ``dist`` metres away) in medium mi's density grid: its field's channel c read
+    where the light's path crosses the next plane of voxel centres along the index axis it
+    runs most along, plus every medium's extinction over the segment to that plane (at its
+    midpoint); ``tau`` (the trilinear read) kept where that plane lies outside the grid or a
+    lamp lies within ``LAMP_PLANES`` steps along the axis beyond it (csrc/march.c
+    plane_tau).  ``read``: _fetch's."""
+    w2i = np.asarray(w2is[mi], np.float64)
+    idx = x @ w2i[:, :3].T + w2i[:, 3]
+    u = w @ w2i[:, :3].T
+    n = len(x)
+    a = np.zeros(n, np.int64)
+    for r in (1, 2):   # the first axis of the largest |u| (the C loop's strict >)
+        a = np.where(np.abs(u[:, r]) > np.abs(u[np.arange(n), a]), r, a)
+    rows = np.arange(n)
+    ua, ia = u[rows, a], idx[rows, a]
+    kp = np.where(ua > 0.0, np.ceil(ia), np.floor(ia))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (kp - ia) / ua
+    ip = idx + u * np.where(np.isfinite(t), t, 0.0)[:, None]
+    last = np.array(fields[mi].shape[:3]) - 1
+    ip[rows, a] = np.where(kp < last[a], kp, last[a] - PLANE_EPS)   # the last plane: from below
+    ok = (np.abs(ua) > 0.0) & (np.abs(ia) < 4.0e15) & (t >= 0.0) & \
+        ((dist - t) * np.abs(ua) > LAMP_PLANES) & \
+        np.all((ip >= 0.0) & (ip < last), axis=1)
+    out = np.array(tau, np.float64, copy=True)
+    if not ok.any():
+        return out
+    k = np.flatnonzero(ok)
+    v = np.asarray(read(fields[mi], ip[k]))[:, c:c + 3]
+    mid = x[k] + w[k] * (0.5 * t[k])[:, None]
+    seg = np.zeros((len(k), 3))
+    for j, (f, wj, thr, st) in enumerate(zip(fields, w2is, thrs, sig_ts)):
+        xc = None if xcs is None else xcs[j]
+        seg += t[k][:, None] * _extinction(f, wj, thr, st, xc, mid, read)
+    out[k] = v + seg
+    return out
 
 
 DISC_STEPS_MAX = 4096   # disc_correction's steps at most (the C twin's)
@@ -494,7 +565,7 @@ def light_varies(lights, origins, dirs, s_a, s_b, g):
 def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs, thresholds,
           voxels, lights, ambient, step, depth_opacity, depth_miss, multiple=None, emissions=None,
           bricks=None, adapt_tau=0.0, emission_channels=None, roulette=0.0, disc_reach=None,
-          scatter_channels=None, extinction_channels=None):
+          scatter_channels=None, extinction_channels=None, cell_tau=0.0):
     """March camera rays through media fields: the numpy twin of ``_kernels.march``.
 
     Rays ``origins + t dirs`` (N,3), t in [t0, t1] (N,) metres; ``axial`` (N,) turns t into
@@ -522,6 +593,9 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
     ``extinction_channels``: None or per medium the first of 3 field channels holding its
     extinction density (media.PreparedMedium.extinction_density: channel c's extinction is
     ``sigma_ts[c]`` times it), or -1 for none (the density's).
+    ``cell_tau`` > 0: in a density grid (threshold < 0), a sample whose cell's densest corner
+    times the medium's largest extinction times its voxel size is at least ``cell_tau`` reads
+    each light's optical depth by ``_plane_tau`` instead of trilinearly.
 
     Super-step K covers [t0 + SUPER K h, t0 + SUPER (K + 1) h] (the last one ends at t1) and
     is cut into n_sub equal steps of length H (the ray's last one cut at t1), step j read at
@@ -624,6 +698,10 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
                     src_em += (rho > 0)[:, None] * np.asarray(emissions[mi], np.float64)[None, :]
                 edge = np.flatnonzero((v[:, 0] > EDGE_EPS) & (v[:, 0] < 1.0 - EDGE_EPS) & (rho > 0)) \
                     if thresholds[mi] >= 0 else np.zeros(0, np.int64)
+                thick = np.zeros(0, np.int64)
+                if thresholds[mi] < 0 and cell_tau > 0.0:
+                    top = _corner_max(f, w2is[mi], x, sigma_ts[mi], xc, sig_max[mi])
+                    thick = np.flatnonzero((rho > 0) & (top * voxels[mi] >= cell_tau))
                 inc = np.zeros((m, 3))
                 beam_inc = np.zeros((m, 3))
                 ind_inc = np.zeros((m, 3))   # indirect lights' single scattering
@@ -639,6 +717,11 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
                         tau[edge] = _refined_tau(fields, w2is, thresholds, sigma_ts, mi, c, x[edge],
                                                  wc[edge], dc[edge], 0.5 * voxels[mi],
                                                  extinction_channels)
+                    if thick.size:
+                        tau = tau.copy() if tau is raw else tau
+                        tau[thick] = _plane_tau(fields, w2is, thresholds, sigma_ts, mi, c,
+                                                x[thick], wc[thick], dc[thick], tau[thick],
+                                                extinction_channels)
                     off = ds != dc  # light from an emitter point off the centre
                     if off.any():
                         tau = tau.copy() if tau is raw else tau

@@ -225,6 +225,7 @@ def march_rays(ctx: MarchContext, origins, dirs, t0, t1, axial, keys):
         em if any(np.any(e > 0) for e in em) else None,
         [m.march_bricks for m in ctx.media] if ctx.tuning.skip_empty else None,
         adapt_tau=ctx.tuning.adapt_tau, emission_channels=ec, roulette=ctx.tuning.roulette,
-        disc_reach=ctx.disc_reach, scatter_channels=sc, extinction_channels=xc))
+        disc_reach=ctx.disc_reach, scatter_channels=sc, extinction_channels=xc,
+        cell_tau=ctx.tuning.cell_tau))
     return {"single": r.single, "T": r.T, "depth": r.depth, "multiple": r.multiple,
             "steps": r.steps, "emission": r.emission}

@@ -151,6 +151,14 @@ def test_march_twins_agree_on_random_rays(lights, density):
         assert np.abs(lit - lit0).max() > 1e-3 * lit0.max()
     else:
         assert np.array_equal(d_c.single, b.single) and np.array_equal(d_c.multiple, b.multiple)
+    # the lights' depth read on the plane of voxel centres towards them in the smoke's
+    # optically thick cells (cell_tau): the twins agree, and the single scattering changes
+    ct = inputs.replace(cell_tau=0.05)
+    t_np, t_c = kernels.march(ct, backend="numpy"), kernels.march(ct, backend="c")
+    for x, y, name in zip(t_np, t_c, MarchResult._fields):
+        assert np.all(np.abs(x - y) <= 1e-4 * np.maximum(np.abs(x), 1e-6)), ("cell_tau", name)
+    if density > 1.0:
+        assert np.abs(t_c.single - b.single).max() > 1e-3 * b.single.max()
 
 
 @pytest.mark.parametrize("backend", ["c", "numpy"])
@@ -343,3 +351,53 @@ def test_numpy_backend_holds_in_every_thread_and_a_call_can_name_its_backend():
     assert kernels.trilinear(grid, idx, backend="numpy")[0] == 1.0
     with pytest.raises(ValueError):
         kernels.trilinear(grid, idx, backend="cuda")
+
+
+def _thick_step_single(up: int, cell_tau: float, backend: str) -> float:
+    """The mean single scattering of vertical rays through an optically thick step of density
+    (empty above, 1.5 from the middle voxel down, 0.4 m voxels, extinction 4 / m: 2.4 across
+    a voxel) under a slanting sun from above, the grid given as its ``up`` times finer
+    trilinear resampling (the same density field)."""
+    n = 9
+    coarse = np.zeros((n, n, n), np.float32)
+    coarse[:, :, :n // 2 + 1] = 1.5
+    from mpp_render.media import trilinear
+    fn = (n - 1) * up + 1
+    g = np.stack(np.meshgrid(*[np.arange(fn) / up] * 3, indexing="ij"), -1).reshape(-1, 3)
+    fine = np.reshape(trilinear(coarse.astype(np.float64), np.minimum(g, n - 1 - 1e-9)),
+                      (fn,) * 3).astype(np.float32)
+    i2w = np.eye(4)
+    i2w[:3, :3] *= 0.4 / up
+    i2w[:3, 3] = -1.6
+    med = prepare(Medium("step", fine, i2w, np.full(3, 3.2), np.full(3, 0.8), 0.0))
+    sun = [Light("SUN", "sun", np.full(3, 3.0), direction=np.array([0.35, 0.2, -0.915]))]
+    cam = Camera("PERSP", np.eye(4), 8, 8, (-0.5, 0.5, -0.5, 0.5))
+    cam.cam_to_world[:3, 3] = [0, 0, 6]
+    pre = precompute([med], sun, World(np.zeros(3)), cam, n_dirs=8, multiple=False)
+    rng = np.random.default_rng(4)
+    m = 400
+    o = np.column_stack([rng.uniform(-0.9, 0.9, (m, 2)), np.full(m, 4.0)])
+    d = np.tile([0.0, 0.0, -1.0], (m, 1))
+    inputs = MarchInputs(o, d, np.full(m, 2.0), np.full(m, 6.0), np.ones(m),
+                         rng.integers(0, 2**32, m, dtype=np.uint32), pre.fields, [med.w2i],
+                         [med.sigma_s], [med.sigma_t], [med.g], [med.threshold],
+                         [med.voxel_size], pack_lights(sun, pre.layout), -1, 0.01, 0.01, 1e10,
+                         cell_tau=cell_tau)
+    return float(kernels.march(inputs, backend=backend).single.mean())
+
+
+@pytest.mark.parametrize("backend", ["c", "numpy"])
+def test_light_entering_an_optically_thick_voxel_is_read_on_the_plane_of_centres(backend):
+    """Sunlight entering a step of density whose voxels are 2.4 deep: the depth read
+    trilinearly between the voxel centres leaves the step's lit layer a fifth dark against the
+    same density resampled eight times finer (each cell thin, read trilinearly); read on the
+    plane of centres towards the sun with the extinction on the way (cell_tau), the coarse
+    grid's light is within 1 % of the fine one's, where twice finer is still 3 % off."""
+    if backend == "c" and kernels._c is None:
+        pytest.skip("compiled kernels not built")
+    fine = _thick_step_single(8, 0.0, backend)
+    plain = _thick_step_single(1, 0.0, backend)
+    plane = _thick_step_single(1, 0.05, backend)
+    assert plain < 0.85 * fine
+    assert abs(plane / fine - 1.0) < 0.01
+    assert abs(_thick_step_single(2, 0.0, backend) / fine - 1.0) > 0.03   # still converging

@@ -47,3 +47,41 @@ def test_other_lights_are_read_at_the_centre():
     pts = np.array([[1.0, 0.2, 0.0], [0.5, -0.1, 0.3]])
     np.testing.assert_array_equal(voxel_irradiance(light, pts, np.eye(3) * 0.1),
                                   irradiance(light, pts))
+
+
+def test_a_density_grids_optically_thick_voxels_take_their_source_from_their_cells():
+    """source.thick_band_source: dense blocks (2.6 optical depth a voxel) under a sun.  The
+    first-scattering power the paths start from, read at each voxel's centre, misses the
+    light falling off within the lit voxels by about half; from their cells' 2 x 2 x 2
+    points it comes within 7 % of a fine sum over 4 x 4 x 4 points a voxel of
+    sigma_s rho E exp(-tau), rho read trilinearly and tau marched finely (which 8 x 8 x 8
+    points move by 1 %; 2 x 2 x 2 with that tau are 4 % over)."""
+    from mpp_render.media import prepare, trilinear
+    from mpp_render.precompute import lightdepth as P
+    from mpp_render.precompute.source import restricted_source, thick_band_source
+    from mpp_render.scene import Tuning
+    from test_sweep import dense_blocks
+    pm = prepare(dense_blocks())
+    sun = Light("SUN", "sun", np.full(3, 3.0), direction=np.array([0.45, 0.3, -0.84]))
+    f = np.zeros(pm.grid.shape + (4,), np.float32)
+    f[..., 0] = pm.grid
+    assert P.sweep_light([pm], pm, sun, f, 1, pm.voxel_size) is True
+    shape = pm.grid.shape
+    band = thick_band_source(pm, f, sun, 1, Tuning().cell_tau)
+    assert band is not None and band[0].size > 100
+    vol = abs(np.linalg.det(pm.i2w[:3, :3]))
+    centres = restricted_source(pm, f, sun, 1, 1, shape).sum() * vol
+    cells = restricted_source(pm, f, sun, 1, 1, shape, band=band).sum() * vol
+    k = 4
+    sub = (np.arange(k) + 0.5) / k - 0.5
+    offs = np.stack(np.meshgrid(sub, sub, sub, indexing="ij"), -1).reshape(-1, 3)
+    ijk = np.stack(np.meshgrid(*[np.arange(s, dtype=np.float64) for s in shape],
+                               indexing="ij"), -1).reshape(-1, 3)
+    idx = (ijk[:, None, :] + offs[None]).reshape(-1, 3)
+    idx = np.clip(idx, 0.0, np.array(shape) - 1.0 - 1e-9)
+    rho = np.reshape(trilinear(pm.grid, idx), -1)
+    live = rho > 0
+    tau = P.light_optical_depth([pm], sun, pm.to_world(idx[live]), 0.01)
+    want = (rho[live, None] * pm.sigma_s[None] * 3.0 * np.exp(-tau)).sum() * vol / len(offs)
+    assert abs(cells / want - 1.0) < 0.07
+    assert centres < 0.6 * want

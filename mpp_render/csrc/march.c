@@ -50,6 +50,50 @@ static void refined_tau(const Grid *f, const int *xcs, int nm, int mi, int c, co
     for (int a = 0; a < 3; a++) tau[a] += v[a];
 }
 
+/* The optical depth (RGB) from x towards a light (unit direction w, its centre dist metres
+ * away) in a density grid f[mi] (no sharp surface), for a sample whose cell is optically
+ * thick: the field's channel c (its depth at the voxel centres) read where the light's path
+ * from x crosses the next plane of voxel centres along the index axis that path runs most
+ * along (bilinearly: no fraction along that axis), plus the extinction of every medium over
+ * the segment from x to that plane (read at its midpoint).  Read trilinearly at x, the depth
+ * between the centres is linear along the light, but in a cell of optical depth d it bends
+ * with the density: where the light enters a dense voxel from an empty one it rises as the
+ * square of the way in, and the straight line over it darkens the cell's light by up to a
+ * fifth at d = 2.5 (docs/method.md, "Light in an optically thick voxel").  Leaves tau as it is
+ * (the trilinear read) where the plane lies outside the grid or a lamp lies within
+ * LAMP_PLANES steps along the axis beyond it (about a lamp the depth is a cone, which the
+ * plane's bilinear read would cut).  Twin of kernels_np._plane_tau. */
+#define LAMP_PLANES 1.25
+#define PLANE_EPS 1e-9
+static void plane_tau(const Grid *f, const int *xcs, int nm, int mi, int c, const double x[3],
+                      const double w[3], double dist, double tau[3]) {
+    const Grid *g = &f[mi];
+    double idx[3], u[3];
+    to_index(g, x, idx);
+    int a = 0;
+    for (int r = 0; r < 3; r++) {
+        u[r] = g->w2i[4 * r] * w[0] + g->w2i[4 * r + 1] * w[1] + g->w2i[4 * r + 2] * w[2];
+        if (fabs(u[r]) > fabs(u[a])) a = r;
+    }
+    if (!(fabs(u[a]) > 0.0) || !(fabs(idx[a]) < 4.0e15)) return;
+    double kp = u[a] > 0.0 ? -floor_within(-idx[a]) : floor_within(idx[a]);
+    double t = (kp - idx[a]) / u[a];
+    /* a lamp within LAMP_PLANES voxel steps beyond the plane (the depth's cone about it is no
+     * plane there) or before it: the trilinear read */
+    if (!(t >= 0.0 && (dist - t) * fabs(u[a]) > LAMP_PLANES)) return;
+    double ip[3], v[3], fx, fy, fz;
+    for (int r = 0; r < 3; r++) ip[r] = idx[r] + u[r] * t;
+    /* the grid's last plane (its padding, or a density reaching its face) read from the cell
+     * below it */
+    ip[a] = kp < g->last[a] ? kp : g->last[a] - PLANE_EPS;
+    if (!cell_floor(ip, g, &fx, &fy, &fz)) return;
+    trilinear(g, ip, c, 3, v);
+    double mid[3], seg[3] = {0.0, 0.0, 0.0};
+    for (int q = 0; q < 3; q++) mid[q] = x[q] + w[q] * (0.5 * t);
+    for (int m = 0; m < nm; m++) extinction_at(&f[m], xcs[m], mid, t, seg);
+    for (int q = 0; q < 3; q++) tau[q] = v[q] + seg[q];
+}
+
 /* Optical depth (RGB) over every medium from x to a lamp's disc point (unit direction wd,
  * distance ds) minus `stretch` times that to its centre (wc, dc): what the field's stretched
  * depth to the centre misses in a medium that is not homogeneous across the disc.  Both paths
@@ -271,6 +315,9 @@ typedef struct {
     int ambient;
     double step, depth_opacity, depth_miss, adapt_tau, thr_op;
     double roulette;                       /* Russian roulette below this transmittance; 0: off */
+    double cell_tau;                       /* a density grid's cell of at least this optical
+                                            * depth across reads the light's depth on the plane
+                                            * of voxel centres towards it (plane_tau); 0: off */
     double disc_step;                      /* disc_correction's step: DISC_STEP_VOXELS finest
                                             * voxels (m) */
     double disc_reach[MAX_LIGHTS];         /* per light, the distance (m) within which a disc
@@ -539,11 +586,16 @@ static int march_parse(March *c, PyObject *args) {
     int brick = 4;
     c->adapt_tau = 0.0;
     c->roulette = 0.0;
-    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOiddd|OOOidOdOOO", &po, &pd, &pt0, &pt1, &pax, &pk, &fields,
+    c->cell_tau = 0.0;
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOiddd|OOOidOdOOOd", &po, &pd, &pt0, &pt1, &pax, &pk, &fields,
                           &w2is, &sss, &sts, &gsl, &thrs, &vox, &plights, &c->ambient, &c->step,
                           &c->depth_opacity, &c->depth_miss, &pms, &pem, &pbk, &brick, &c->adapt_tau,
-                          &pec, &c->roulette, &pdr, &psc, &pxc))
+                          &pec, &c->roulette, &pdr, &psc, &pxc, &c->cell_tau))
         return -1;
+    if (!(c->cell_tau >= 0.0)) {
+        PyErr_SetString(PyExc_ValueError, "cell_tau must be >= 0");
+        return -1;
+    }
     if (!(c->roulette >= 0.0 && c->roulette < 1.0)) {
         PyErr_SetString(PyExc_ValueError, "roulette must be in [0, 1)");
         return -1;
@@ -702,12 +754,31 @@ static void medium_sources(const March *c, int m, const double x[3], const doubl
     if (c->use_em)
         for (int a = 0; a < 3; a++) s->src_em[a] += c->emit[m][a];
     int edge = g->thr >= 0.0 && v[0] > EDGE_EPS && v[0] < 1.0 - EDGE_EPS;
+    int thick = 0;   /* a density grid's cell whose most extinguishing corner is optically
+                        thick (its extinction density's channels where it has one) */
+    if (g->thr < 0.0 && c->cell_tau > 0.0) {
+        double top = 0.0;
+        for (int q = 0; q < 8; q++) {
+            const float *p = tw.p + tw.off[q];
+            if (c->xc[m] >= 0) {
+                for (int a = 0; a < 3; a++) {
+                    double r = (double)p[c->xc[m] + a] * g->sig[a];
+                    if (r > top) top = r;
+                }
+            } else {
+                double r = (double)p[0] * c->sig_max[m];
+                if (r > top) top = r;
+            }
+        }
+        thick = top * c->voxel[m] >= c->cell_tau;
+    }
     double inc[3] = {0, 0, 0}, beam_inc[3] = {0, 0, 0}, ind_inc[3] = {0, 0, 0};
     for (Py_ssize_t l = 0; l < c->nl; l++) {
         int ch = c->chan[l];
         if (ch < 0) continue;
         double tau[3] = {v[ch], v[ch + 1], v[ch + 2]};
         if (edge) refined_tau(c->g, c->xc, c->ng, m, ch, x, la->wc[l], la->dc[l], 0.5 * c->voxel[m], tau);
+        else if (thick) plane_tau(c->g, c->xc, c->ng, m, ch, x, la->wc[l], la->dc[l], tau);
         if (la->ds[l] != la->dc[l]) {  /* light from an emitter point off the centre */
             double st = path_stretch(la->ds[l], la->dc[l], c->voxel[m]);
             for (int a = 0; a < 3; a++) tau[a] *= st;

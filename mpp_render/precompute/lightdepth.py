@@ -325,6 +325,35 @@ def near_sharp_surfaces(pm: PreparedMedium, media: List[PreparedMedium]):
 
 
 SWEEP_CELLS = 16  # column cells per sweep chunk (at least): chunks run in parallel, Esc between
+# A lit voxel (swept depth below THICK_LIT) of a density grid whose 3 x 3 x 3 neighbourhood
+# holds an optically thick voxel (Tuning.cell_tau) marches its depth exactly
+THICK_LIT = 8.0
+# their march's step at most, in voxels: one read per step at its midpoint misses the kinks of
+# the trilinear density where a dense voxel meets an empty one (at a voxel a step the lit
+# voxels of a dragon at 2.5 a voxel came out up to 0.07 deep)
+THICK_STEP = 0.125
+
+
+def near_thick_cells(pm: PreparedMedium, depth: np.ndarray, cell_tau: float) -> np.ndarray:
+    """Flat indices of the voxels of ``pm``'s density grid (not a mesh volume's sharp surface,
+    not the world's fog) that are lit (``depth``, (X,Y,Z) their swept optical depth, below
+    THICK_LIT) and lie next to an optically thick voxel: one of their 27 neighbours'
+    extinction (its density times the largest coefficient, or its extinction density's
+    channels times theirs) times the voxel size at least ``cell_tau`` (> 0).
+    There the sweep's columns, interpolated bilinearly slab after slab, smooth the shadows
+    that sharp dense features cast a voxel apart (a third-party dragon of 1.2-2.5 optical
+    depth a voxel: its lit voxels' depth 0.03-0.05 too deep on average, their light 3-4 %
+    dark)."""
+    if pm.sharp or pm.endless or not cell_tau > 0.0:
+        return np.zeros(0, np.int64)
+    if pm.extinction_density is not None:   # each channel's own density
+        ext = (pm.extinction_density * np.asarray(pm.sigma_t, np.float32)).max(axis=-1)
+    else:
+        ext = pm.grid * float(np.max(pm.sigma_t))
+    thick = ext * float(pm.voxel_size) >= cell_tau
+    if not thick.any():
+        return np.zeros(0, np.int64)
+    return np.flatnonzero(dilate(thick) & (depth < THICK_LIT))
 
 
 def sweep_light(media: List[PreparedMedium], pm: PreparedMedium, light: Light, field: np.ndarray,
@@ -381,6 +410,12 @@ def sweep_light(media: List[PreparedMedium], pm: PreparedMedium, light: Light, f
         # stepped off the surface) march exactly.
         flat = near_sharp_surfaces(pm, media) if sharp is None else sharp
         tau = light_optical_depth(media, light, grid_points(pm, flat), step,
+                                  should_cancel=should_cancel, threads=threads, tuning=tuning)
+        field.reshape(-1, field.shape[-1])[flat, channel:channel + 3] = tau
+    flat = near_thick_cells(pm, field[..., channel:channel + 3].min(axis=-1), tuning.cell_tau)
+    if flat.size:
+        tau = light_optical_depth(media, light, grid_points(pm, flat),
+                                  min(step, THICK_STEP * float(pm.voxel_size)),
                                   should_cancel=should_cancel, threads=threads, tuning=tuning)
         field.reshape(-1, field.shape[-1])[flat, channel:channel + 3] = tau
     shadowed = surfaces is not None and not surfaces.empty

@@ -209,7 +209,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                              partners=[(media[j], lat) for j, lat in near],
                                              deposits=tuning.path_deposits,
                                              nodal=tuning.path_nodal,
-                                             far_resolution=multiple_resolution)
+                                             far_resolution=multiple_resolution,
+                                             cell_tau=tuning.cell_tau)
                     if traced is not None:
                         for (j, _), m in zip(near, traced[5]):
                             key = (j, li)
