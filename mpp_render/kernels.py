@@ -225,9 +225,10 @@ class MarchInputs:
     optical depth corrected by a march, kernels_np.disc_correction; None or 0: off) and
     ``scatter_channels`` (per medium the first channel of its scatter colour grid, or -1) and
     ``extinction_channels`` (per medium the first channel of its extinction density, or -1:
-    its extinction reads the density) and ``cell_tau`` (> 0: a density grid's cell whose
-    densest corner is at least that optical depth across reads each light's depth on the
-    plane of voxel centres towards it, kernels_np._plane_tau; 0: off)."""
+    its extinction reads the density) and ``cell_tau`` (> 0: a density grid's cell whose most
+    extinguishing corner is at least that optical depth across follows each light's path
+    cell by cell for at most ``cell_walk`` cells, then reads its depth on the next plane of
+    voxel centres along the light's main axis, kernels_np._walk_tau; 0: off)."""
     origins: np.ndarray
     dirs: np.ndarray
     t0: np.ndarray
@@ -256,6 +257,7 @@ class MarchInputs:
     scatter_channels: Optional[list] = None
     extinction_channels: Optional[list] = None
     cell_tau: float = 0.0
+    cell_walk: int = 0
 
     def replace(self, **changes) -> "MarchInputs":
         return dataclasses.replace(self, **changes)
@@ -281,7 +283,7 @@ def march(inputs: MarchInputs, *, backend=None) -> MarchResult:
             a.sigma_ts, a.gs, a.thresholds, a.voxels, a.lights, a.ambient, a.step,
             a.depth_opacity, a.depth_miss, a.multiple, a.emissions, a.bricks, a.adapt_tau,
             a.emission_channels, a.roulette, a.disc_reach, a.scatter_channels,
-            a.extinction_channels, a.cell_tau))
+            a.extinction_channels, a.cell_tau, a.cell_walk))
     n = len(a.origins)
     nl = len(np.asarray(a.lights).reshape(-1, LIGHT_FIELDS))
     packed = None
@@ -315,7 +317,7 @@ def march(inputs: MarchInputs, *, backend=None) -> MarchResult:
         None if a.disc_reach is None else [float(x) for x in a.disc_reach],
         None if a.scatter_channels is None else [int(c) for c in a.scatter_channels],
         None if a.extinction_channels is None else [int(c) for c in a.extinction_channels],
-        float(a.cell_tau))
+        float(a.cell_tau), int(a.cell_walk))
     return MarchResult(np.frombuffer(s, np.float64).reshape(n, 3),
                        np.frombuffer(t, np.float64).reshape(n, 3),
                        np.frombuffer(d, np.float64).reshape(n),

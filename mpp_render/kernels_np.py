@@ -346,8 +346,9 @@ def _corner_max(field, w2i, x, sig_t, xc, sig_max) -> np.ndarray:
     return np.where(ok, top, 0.0)
 
 
-LAMP_PLANES = 1.25   # _plane_tau's reach before a lamp, in voxel steps (the C twin's)
-PLANE_EPS = 1e-9     # the grid's last plane is read this far inside it (the C twin's)
+LAMP_PLANES = 1.25   # _walk_tau stops this many voxel steps before a lamp (the C twin's)
+WALK_IN = 1e-6       # _walk_tau tests the cell beyond a plane this many voxels in (the C twin's)
+PLANE_EPS = 1e-9     # _plane_tau reads the grid's last plane this far inside it (the C twin's)
 
 
 def _plane_tau(fields, w2is, thrs, sig_ts, mi, c, x, w, dist, tau, xcs=None, read=trilinear):
@@ -367,9 +368,10 @@ def _plane_tau(fields, w2is, thrs, sig_ts, mi, c, x, w, dist, tau, xcs=None, rea
         a = np.where(np.abs(u[:, r]) > np.abs(u[np.arange(n), a]), r, a)
     rows = np.arange(n)
     ua, ia = u[rows, a], idx[rows, a]
-    kp = np.where(ua > 0.0, np.ceil(ia), np.floor(ia))
+    # a point within WALK_IN of a plane (where _walk_tau ends) reads that plane itself
+    kp = np.where(ua > 0.0, np.ceil(ia - WALK_IN), np.floor(ia + WALK_IN))
     with np.errstate(divide="ignore", invalid="ignore"):
-        t = (kp - ia) / ua
+        t = np.maximum((kp - ia) / ua, 0.0)
     ip = idx + u * np.where(np.isfinite(t), t, 0.0)[:, None]
     last = np.array(fields[mi].shape[:3]) - 1
     ip[rows, a] = np.where(kp < last[a], kp, last[a] - PLANE_EPS)   # the last plane: from below
@@ -388,6 +390,77 @@ def _plane_tau(fields, w2is, thrs, sig_ts, mi, c, x, w, dist, tau, xcs=None, rea
         seg += t[k][:, None] * _extinction(f, wj, thr, st, xc, mid, read)
     out[k] = v + seg
     return out
+
+
+def _walk_tau(fields, w2is, thrs, sig_ts, mi, c, x, w, dist, tau, sig_max, voxel, cell_tau,
+              cells, xcs=None, read=trilinear):
+    """(N,3) the optical depth from points ``x`` (N,3) in optically thick cells of medium mi's
+    density grid towards a light (unit directions ``w``, its centre ``dist`` metres away): the
+    path followed cell by cell through the grid's cells (their faces the planes of voxel
+    centres), each piece integrated by Simpson's rule over every medium, for at most ``cells``
+    pieces and while the cells entered (tested ``WALK_IN`` voxels past each plane) have their
+    most extinguishing corner at least ``cell_tau`` deep (``_corner_max``); then the field's
+    channel c read by ``_plane_tau`` from where the path ends (the next plane along the axis
+    the light runs most along).  It ends before a piece that would leave the grid's cells or
+    whose plane lies within ``LAMP_PLANES`` voxel steps of a lamp; from ``x`` itself with
+    ``tau`` (the trilinear read there) where no piece was taken.  ``read``: _fetch's
+    (csrc/march.c walk_tau)."""
+    f = fields[mi]
+    w2i = np.asarray(w2is[mi], np.float64)
+    last = np.array(f.shape[:3]) - 1
+    i0 = x @ w2i[:, :3].T + w2i[:, 3]
+    u = w @ w2i[:, :3].T
+    umax = np.abs(u).max(axis=1)
+    n = len(x)
+    xcm = -1 if xcs is None or xcs[mi] is None else xcs[mi]
+    kk = np.where(u > 0.0, np.floor(i0) + 1.0, -np.floor(-i0) - 1.0)
+    step = np.where(u > 0.0, 1.0, -1.0)
+
+    def ext(p):
+        out = np.zeros((len(p), 3))
+        for j, (fj, wj, thr, st) in enumerate(zip(fields, w2is, thrs, sig_ts)):
+            out += _extinction(fj, wj, thr, st, None if xcs is None else xcs[j], p, read)
+        return out
+
+    going = (umax > 0.0) & np.all(np.abs(i0) < 4.0e15, axis=1)
+    s = np.zeros(n)
+    acc = np.zeros((n, 3))
+    ea = np.zeros((n, 3))
+    if going.any():
+        ea[going] = ext(x[going])
+    moved = np.zeros(n, bool)
+    for _ in range(int(cells)):
+        k = np.flatnonzero(going)
+        if not k.size:
+            break
+        with np.errstate(divide="ignore", invalid="ignore"):
+            sr = np.where(u[k] != 0.0, (kk[k] - i0[k]) / u[k], np.inf)
+        sn = sr.min(axis=1)
+        pin = i0[k] + u[k] * (sn + WALK_IN / umax[k])[:, None]
+        ok = ((dist[k] - sn) * umax[k] > LAMP_PLANES) & \
+            np.all((pin >= 0.0) & (pin < last), axis=1)
+        going[k[~ok]] = False
+        k, sn, sr, pin = k[ok], sn[ok], sr[ok], pin[ok]
+        if not k.size:
+            break
+        xm = x[k] + w[k] * (0.5 * (s[k] + sn))[:, None]
+        xe = x[k] + w[k] * sn[:, None]
+        em, ee = ext(xm), ext(xe)
+        acc[k] += (sn - s[k])[:, None] / 6.0 * (ea[k] + 4.0 * em + ee)
+        ea[k] = ee
+        kk[k] += np.where((u[k] != 0.0) & (sr <= sn[:, None]), step[k], 0.0)
+        s[k] = sn
+        moved[k] = True
+        ipin = pin   # index coordinates: _corner_max takes world points
+        wpin = (ipin - w2i[:, 3]) @ np.linalg.inv(w2i[:, :3]).T
+        going[k] &= _corner_max(f, w2i, wpin, sig_ts[mi], xcm, sig_max) * float(voxel) >= cell_tau
+    start = np.array(tau, np.float64, copy=True)
+    mv = np.flatnonzero(moved)
+    if mv.size:
+        pe = i0[mv] + u[mv] * s[mv][:, None]
+        start[mv] = np.asarray(read(f, pe))[:, c:c + 3]
+    xe = x + w * s[:, None]   # on along the light's main axis from where the path ends
+    return _plane_tau(fields, w2is, thrs, sig_ts, mi, c, xe, w, dist - s, start, xcs, read) + acc
 
 
 DISC_STEPS_MAX = 4096   # disc_correction's steps at most (the C twin's)
@@ -565,7 +638,7 @@ def light_varies(lights, origins, dirs, s_a, s_b, g):
 def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs, thresholds,
           voxels, lights, ambient, step, depth_opacity, depth_miss, multiple=None, emissions=None,
           bricks=None, adapt_tau=0.0, emission_channels=None, roulette=0.0, disc_reach=None,
-          scatter_channels=None, extinction_channels=None, cell_tau=0.0):
+          scatter_channels=None, extinction_channels=None, cell_tau=0.0, cell_walk=0):
     """March camera rays through media fields: the numpy twin of ``_kernels.march``.
 
     Rays ``origins + t dirs`` (N,3), t in [t0, t1] (N,) metres; ``axial`` (N,) turns t into
@@ -593,9 +666,10 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
     ``extinction_channels``: None or per medium the first of 3 field channels holding its
     extinction density (media.PreparedMedium.extinction_density: channel c's extinction is
     ``sigma_ts[c]`` times it), or -1 for none (the density's).
-    ``cell_tau`` > 0: in a density grid (threshold < 0), a sample whose cell's densest corner
-    times the medium's largest extinction times its voxel size is at least ``cell_tau`` reads
-    each light's optical depth by ``_plane_tau`` instead of trilinearly.
+    ``cell_tau`` > 0: in a density grid (threshold < 0), a sample whose cell's most
+    extinguishing corner (``_corner_max``) times its voxel size is at least ``cell_tau``
+    reads each light's optical depth by ``_walk_tau`` (at most ``cell_walk`` cells; 0: the
+    next plane alone) instead of trilinearly.
 
     Super-step K covers [t0 + SUPER K h, t0 + SUPER (K + 1) h] (the last one ends at t1) and
     is cut into n_sub equal steps of length H (the ray's last one cut at t1), step j read at
@@ -719,9 +793,10 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
                                                  extinction_channels)
                     if thick.size:
                         tau = tau.copy() if tau is raw else tau
-                        tau[thick] = _plane_tau(fields, w2is, thresholds, sigma_ts, mi, c,
-                                                x[thick], wc[thick], dc[thick], tau[thick],
-                                                extinction_channels)
+                        tau[thick] = _walk_tau(fields, w2is, thresholds, sigma_ts, mi, c,
+                                               x[thick], wc[thick], dc[thick], tau[thick],
+                                               sig_max[mi], voxels[mi], cell_tau, cell_walk,
+                                               extinction_channels)
                     off = ds != dc  # light from an emitter point off the centre
                     if off.any():
                         tau = tau.copy() if tau is raw else tau

@@ -226,6 +226,6 @@ def march_rays(ctx: MarchContext, origins, dirs, t0, t1, axial, keys):
         [m.march_bricks for m in ctx.media] if ctx.tuning.skip_empty else None,
         adapt_tau=ctx.tuning.adapt_tau, emission_channels=ec, roulette=ctx.tuning.roulette,
         disc_reach=ctx.disc_reach, scatter_channels=sc, extinction_channels=xc,
-        cell_tau=ctx.tuning.cell_tau))
+        cell_tau=ctx.tuning.cell_tau, cell_walk=ctx.tuning.cell_walk))
     return {"single": r.single, "T": r.T, "depth": r.depth, "multiple": r.multiple,
             "steps": r.steps, "emission": r.emission}

@@ -50,6 +50,10 @@ static void refined_tau(const Grid *f, const int *xcs, int nm, int mi, int c, co
     for (int a = 0; a < 3; a++) tau[a] += v[a];
 }
 
+/* a lamp within this many voxel steps of a plane of centres: the depth there is a cone about
+ * the lamp, which a bilinear read on the plane would cut (walk_tau stops before) */
+#define LAMP_PLANES 1.25
+
 /* The optical depth (RGB) from x towards a light (unit direction w, its centre dist metres
  * away) in a density grid f[mi] (no sharp surface), for a sample whose cell is optically
  * thick: the field's channel c (its depth at the voxel centres) read where the light's path
@@ -63,8 +67,9 @@ static void refined_tau(const Grid *f, const int *xcs, int nm, int mi, int c, co
  * (the trilinear read) where the plane lies outside the grid or a lamp lies within
  * LAMP_PLANES steps along the axis beyond it (about a lamp the depth is a cone, which the
  * plane's bilinear read would cut).  Twin of kernels_np._plane_tau. */
-#define LAMP_PLANES 1.25
 #define PLANE_EPS 1e-9
+#define WALK_IN 1e-6   /* walk_tau tests the cell beyond a plane this many voxels into it;
+                        * plane_tau reads a plane this near as its own */
 static void plane_tau(const Grid *f, const int *xcs, int nm, int mi, int c, const double x[3],
                       const double w[3], double dist, double tau[3]) {
     const Grid *g = &f[mi];
@@ -76,8 +81,10 @@ static void plane_tau(const Grid *f, const int *xcs, int nm, int mi, int c, cons
         if (fabs(u[r]) > fabs(u[a])) a = r;
     }
     if (!(fabs(u[a]) > 0.0) || !(fabs(idx[a]) < 4.0e15)) return;
-    double kp = u[a] > 0.0 ? -floor_within(-idx[a]) : floor_within(idx[a]);
+    /* a point within WALK_IN of a plane (where walk_tau ends) reads that plane itself */
+    double kp = u[a] > 0.0 ? -floor_within(-(idx[a] - WALK_IN)) : floor_within(idx[a] + WALK_IN);
     double t = (kp - idx[a]) / u[a];
+    if (t < 0.0) t = 0.0;
     /* a lamp within LAMP_PLANES voxel steps beyond the plane (the depth's cone about it is no
      * plane there) or before it: the trilinear read */
     if (!(t >= 0.0 && (dist - t) * fabs(u[a]) > LAMP_PLANES)) return;
@@ -92,6 +99,100 @@ static void plane_tau(const Grid *f, const int *xcs, int nm, int mi, int c, cons
     for (int q = 0; q < 3; q++) mid[q] = x[q] + w[q] * (0.5 * t);
     for (int m = 0; m < nm; m++) extinction_at(&f[m], xcs[m], mid, t, seg);
     for (int q = 0; q < 3; q++) tau[q] = v[q] + seg[q];
+}
+
+/* Whether grid g's cell at index coordinates idx lies in the grid and its most
+ * extinguishing corner is at least cell_tau deep (medium_sources' test). */
+static int thick_at(const Grid *g, int xc, double sig_max, double voxel, double cell_tau,
+                    const double idx[3]) {
+    Tri t;
+    if (!tri_setup(g, idx, &t)) return 0;
+    double top = 0.0;
+    for (int q = 0; q < 8; q++) {
+        const float *p = t.p + t.off[q];
+        if (xc >= 0) {
+            for (int a = 0; a < 3; a++) {
+                double r = (double)p[xc + a] * g->sig[a];
+                if (r > top) top = r;
+            }
+        } else {
+            double r = (double)p[0] * sig_max;
+            if (r > top) top = r;
+        }
+    }
+    return top * voxel >= cell_tau;
+}
+
+/* The optical depth (RGB) from x towards a light (unit direction w, its centre dist metres
+ * away) for a sample in an optically thick cell of density grid f[mi]: the light's path
+ * followed cell by cell through grid mi's cells (their faces are the planes of voxel centres,
+ * where an index crosses a whole number), each piece integrated by Simpson's rule over every
+ * medium (within one cell the trilinear density along a line is a cubic: exact for this
+ * medium), for at most `cells` pieces and while the cells entered stay thick (tested
+ * WALK_IN voxels past each plane, so that rounding on the plane cannot pick the cell left);
+ * then from where it ends plane_tau (the next plane of centres along the axis the light
+ * runs most along: a plane crossed last along another axis would read the depth's bend
+ * along the light again).  Where the path would leave the grid's cells, or a lamp lies
+ * within LAMP_PLANES voxel steps of the next plane, it ends at the last plane reached.  Twin
+ * of kernels_np._walk_tau. */
+static void walk_tau(const Grid *f, const int *xcs, int nm, int mi, int c, const double x[3],
+                     const double w[3], double dist, double sig_max, double voxel,
+                     double cell_tau, int cells, double tau[3]) {
+    const Grid *g = &f[mi];
+    double i0[3], u[3], kk[3], umax = 0.0;
+    to_index(g, x, i0);
+    for (int r = 0; r < 3; r++) {
+        u[r] = g->w2i[4 * r] * w[0] + g->w2i[4 * r + 1] * w[1] + g->w2i[4 * r + 2] * w[2];
+        if (fabs(u[r]) > umax) umax = fabs(u[r]);
+        if (!(fabs(i0[r]) < 4.0e15)) return;
+        /* the next plane of centres ahead along each axis */
+        kk[r] = u[r] > 0.0 ? floor_within(i0[r]) + 1.0 : -floor_within(-i0[r]) - 1.0;
+    }
+    if (!(umax > 0.0)) return;
+    double s = 0.0, acc[3] = {0.0, 0.0, 0.0}, ea[3] = {0.0, 0.0, 0.0};
+    int moved = 0;
+    for (int m = 0; m < nm; m++) extinction_at(&f[m], xcs[m], x, 1.0, ea);
+    for (int k = 0; k < cells; k++) {
+        double sn = INFINITY;
+        for (int r = 0; r < 3; r++)
+            if (u[r] != 0.0) {
+                double sr = (kk[r] - i0[r]) / u[r];
+                if (sr < sn) sn = sr;
+            }
+        if (!((dist - sn) * umax > LAMP_PLANES)) break;
+        /* the cell beyond that plane, a millionth of a voxel in: in the grid's cells? thick? */
+        double pin[3], fx, fy, fz;
+        for (int r = 0; r < 3; r++) pin[r] = i0[r] + u[r] * (sn + WALK_IN / umax);
+        if (!cell_floor(pin, g, &fx, &fy, &fz)) break;
+        double xe[3], xm[3], em[3] = {0.0, 0.0, 0.0}, ee[3] = {0.0, 0.0, 0.0};
+        for (int q = 0; q < 3; q++) {
+            xm[q] = x[q] + w[q] * 0.5 * (s + sn);
+            xe[q] = x[q] + w[q] * sn;
+        }
+        for (int m = 0; m < nm; m++) {
+            extinction_at(&f[m], xcs[m], xm, 1.0, em);
+            extinction_at(&f[m], xcs[m], xe, 1.0, ee);
+        }
+        for (int q = 0; q < 3; q++) {
+            acc[q] += (sn - s) / 6.0 * (ea[q] + 4.0 * em[q] + ee[q]);
+            ea[q] = ee[q];
+        }
+        for (int r = 0; r < 3; r++)   /* every axis whose plane lies there */
+            if (u[r] != 0.0 && (kk[r] - i0[r]) / u[r] <= sn) kk[r] += u[r] > 0.0 ? 1.0 : -1.0;
+        s = sn;
+        moved = 1;
+        if (!thick_at(g, xcs[mi], sig_max, voxel, cell_tau, pin)) break;
+    }
+    if (!moved) {
+        plane_tau(f, xcs, nm, mi, c, x, w, dist, tau);
+        return;
+    }
+    double pe[3], xe[3];
+    for (int r = 0; r < 3; r++) pe[r] = i0[r] + u[r] * s;
+    for (int q = 0; q < 3; q++) xe[q] = x[q] + w[q] * s;
+    trilinear(g, pe, c, 3, tau);
+    plane_tau(f, xcs, nm, mi, c, xe, w, dist - s, tau);   /* on along the light's main axis */
+    for (int q = 0; q < 3; q++) tau[q] += acc[q];
 }
 
 /* Optical depth (RGB) over every medium from x to a lamp's disc point (unit direction wd,
@@ -316,8 +417,9 @@ typedef struct {
     double step, depth_opacity, depth_miss, adapt_tau, thr_op;
     double roulette;                       /* Russian roulette below this transmittance; 0: off */
     double cell_tau;                       /* a density grid's cell of at least this optical
-                                            * depth across reads the light's depth on the plane
-                                            * of voxel centres towards it (plane_tau); 0: off */
+                                            * depth across follows the light's path cell by
+                                            * cell (walk_tau); 0: off */
+    int cell_walk;                         /* walk_tau's cells at most; 0: the next plane alone */
     double disc_step;                      /* disc_correction's step: DISC_STEP_VOXELS finest
                                             * voxels (m) */
     double disc_reach[MAX_LIGHTS];         /* per light, the distance (m) within which a disc
@@ -587,13 +689,14 @@ static int march_parse(March *c, PyObject *args) {
     c->adapt_tau = 0.0;
     c->roulette = 0.0;
     c->cell_tau = 0.0;
-    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOiddd|OOOidOdOOOd", &po, &pd, &pt0, &pt1, &pax, &pk, &fields,
+    c->cell_walk = 0;
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOiddd|OOOidOdOOOdi", &po, &pd, &pt0, &pt1, &pax, &pk, &fields,
                           &w2is, &sss, &sts, &gsl, &thrs, &vox, &plights, &c->ambient, &c->step,
                           &c->depth_opacity, &c->depth_miss, &pms, &pem, &pbk, &brick, &c->adapt_tau,
-                          &pec, &c->roulette, &pdr, &psc, &pxc, &c->cell_tau))
+                          &pec, &c->roulette, &pdr, &psc, &pxc, &c->cell_tau, &c->cell_walk))
         return -1;
-    if (!(c->cell_tau >= 0.0)) {
-        PyErr_SetString(PyExc_ValueError, "cell_tau must be >= 0");
+    if (!(c->cell_tau >= 0.0) || c->cell_walk < 0 || c->cell_walk > 4096) {
+        PyErr_SetString(PyExc_ValueError, "cell_tau must be >= 0 and cell_walk in [0, 4096]");
         return -1;
     }
     if (!(c->roulette >= 0.0 && c->roulette < 1.0)) {
@@ -754,31 +857,18 @@ static void medium_sources(const March *c, int m, const double x[3], const doubl
     if (c->use_em)
         for (int a = 0; a < 3; a++) s->src_em[a] += c->emit[m][a];
     int edge = g->thr >= 0.0 && v[0] > EDGE_EPS && v[0] < 1.0 - EDGE_EPS;
-    int thick = 0;   /* a density grid's cell whose most extinguishing corner is optically
-                        thick (its extinction density's channels where it has one) */
-    if (g->thr < 0.0 && c->cell_tau > 0.0) {
-        double top = 0.0;
-        for (int q = 0; q < 8; q++) {
-            const float *p = tw.p + tw.off[q];
-            if (c->xc[m] >= 0) {
-                for (int a = 0; a < 3; a++) {
-                    double r = (double)p[c->xc[m] + a] * g->sig[a];
-                    if (r > top) top = r;
-                }
-            } else {
-                double r = (double)p[0] * c->sig_max[m];
-                if (r > top) top = r;
-            }
-        }
-        thick = top * c->voxel[m] >= c->cell_tau;
-    }
+    /* a density grid's cell whose most extinguishing corner is optically thick */
+    int thick = g->thr < 0.0 && c->cell_tau > 0.0 &&
+                thick_at(g, c->xc[m], c->sig_max[m], c->voxel[m], c->cell_tau, idx);
     double inc[3] = {0, 0, 0}, beam_inc[3] = {0, 0, 0}, ind_inc[3] = {0, 0, 0};
     for (Py_ssize_t l = 0; l < c->nl; l++) {
         int ch = c->chan[l];
         if (ch < 0) continue;
         double tau[3] = {v[ch], v[ch + 1], v[ch + 2]};
         if (edge) refined_tau(c->g, c->xc, c->ng, m, ch, x, la->wc[l], la->dc[l], 0.5 * c->voxel[m], tau);
-        else if (thick) plane_tau(c->g, c->xc, c->ng, m, ch, x, la->wc[l], la->dc[l], tau);
+        else if (thick)
+            walk_tau(c->g, c->xc, c->ng, m, ch, x, la->wc[l], la->dc[l], c->sig_max[m], c->voxel[m],
+                     c->cell_tau, c->cell_walk, tau);
         if (la->ds[l] != la->dc[l]) {  /* light from an emitter point off the centre */
             double st = path_stretch(la->ds[l], la->dc[l], c->voxel[m]);
             for (int a = 0; a < 3; a++) tau[a] *= st;

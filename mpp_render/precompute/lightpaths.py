@@ -47,7 +47,7 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
                     partners=(), deposits: float = Tuning.path_deposits,
                     nodal: bool = Tuning.path_nodal,
                     far_resolution: int = MULTIPLE_RESOLUTION,
-                    cell_tau: float = Tuning.cell_tau):
+                    cell_tau: float = Tuning.cell_tau, cell_walk: int = Tuning.cell_walk):
     """(stride, h, M, far, moments) for ``light`` on medium ``pm`` (its field ``fld``, the light's optical
     depth at ``channel``): M float32 (LX,LY,LZ,3) W/(m^2 sr) on the light pyramid's lattice
     (lattice.walk_lattice at ``resolution``), from ``n_paths`` paths (paths.py; at most
@@ -72,14 +72,14 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     light.  None where the medium is too dense for paths (paths.PATHS_MAX_SPAN): the caller
     keeps the walk.  ``deposits``, ``nodal``: Tuning.path_deposits, Tuning.path_nodal
     (PathLattice.of).  ``far_resolution``: the far box's voxels along its longest side (the
-    *Multiple Scattering Resolution* as set, not raised round a lamp).  ``cell_tau``:
-    Tuning.cell_tau (source.thick_band_source)."""
+    *Multiple Scattering Resolution* as set, not raised round a lamp).  ``cell_tau``,
+    ``cell_walk``: Tuning's (source.thick_band_source)."""
     stride, shape, h = paths_lattice(pm, resolution)
     voxels = np.zeros(pm.grid.shape[:3], np.float32)
     base, _, pts = source_and_density(pm, fld, light, channel, stride, voxels=voxels,
                                       disc=None if around is None else around.disc,
                                       depth=None if around is None else around.optical_depth,
-                                      cell_tau=cell_tau)
+                                      cell_tau=cell_tau, cell_walk=cell_walk)
     vol = cell_volume(pm, stride)
     power = base * vol
     live = power.sum(axis=1) > 0.0

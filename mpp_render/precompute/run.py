@@ -210,7 +210,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                              deposits=tuning.path_deposits,
                                              nodal=tuning.path_nodal,
                                              far_resolution=multiple_resolution,
-                                             cell_tau=tuning.cell_tau)
+                                             cell_tau=tuning.cell_tau,
+                                             cell_walk=tuning.cell_walk)
                     if traced is not None:
                         for (j, _), m in zip(near, traced[5]):
                             key = (j, li)

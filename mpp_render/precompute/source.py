@@ -284,18 +284,18 @@ def surface_band_source(pm: PreparedMedium, fld: np.ndarray, light: Light, chann
 
 
 def thick_band_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int,
-                      cell_tau: float, disc=None) -> Optional[tuple]:
+                      cell_tau: float, disc=None, walk: int = Tuning.cell_walk) -> Optional[tuple]:
     """surface_band_source's for a density grid (a VDB, a shader's density): the voxels that
     lightdepth.near_thick_cells gives (lit, next to a voxel of at least ``cell_tau`` optical
     depth across), each the mean over its cell's CELL_POINTS of sigma_s rho E exp(-tau) with
-    rho read trilinearly and tau as the march reads it in such a cell (kernels_np._plane_tau
+    rho read trilinearly and tau as the march reads it in such a cell (kernels_np._walk_tau
     on the field, the medium's own extinction on the way): the light entering a dense voxel
     falls off within it, which its centre's read alone takes as the whole cell's (a
     third-party dragon of 1.2-2.5 optical depth a voxel: its multiple scattering 0.85x
     Cycles', docs/method.md, "Light in an optically thick voxel").  No deeper voxels' factors
     (empty arrays).  None where no voxel qualifies."""
     from ..kernels import trilinear
-    from ..kernels_np import _plane_tau
+    from ..kernels_np import _walk_tau
     from .lightdepth import near_thick_cells
     flat = near_thick_cells(pm, fld[..., channel:channel + 3].min(axis=-1), cell_tau)
     if not flat.size:
@@ -318,9 +318,9 @@ def thick_band_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel
             parts.append(pm.extinction_density)
         own = np.ascontiguousarray(np.concatenate(parts, axis=-1), np.float32)
         raw = trilinear(own, idx[live])[:, 1:4]
-        tau = _plane_tau([own], [pm.w2i], [pm.threshold], [pm.sigma_t], 0, 1, pts, w, dist,
-                         raw, xcs=[4 if pm.extinction_density is not None else -1],
-                         read=trilinear)
+        tau = _walk_tau([own], [pm.w2i], [pm.threshold], [pm.sigma_t], 0, 1, pts, w, dist,
+                        raw, float(np.max(pm.sigma_t)) or 1.0, pm.voxel_size, cell_tau, walk,
+                        xcs=[4 if pm.extinction_density is not None else -1], read=trilinear)
         q[live] = first_scattering(pm, rho[live], e, tau, None, _disc(disc, light, pts, tau, pm),
                                    pm.scatter_at(idx=idx[live]))
     return (flat, q.reshape(len(flat), len(CELL_POINTS), 3).mean(axis=1),
@@ -448,7 +448,7 @@ def source_and_density(pm: PreparedMedium, fld: np.ndarray, light: Light, channe
                    stride: int, beam: Optional[int] = None,
                    should_cancel: Optional[Callable[[], bool]] = None,
                    voxels: Optional[np.ndarray] = None, disc=None, depth=None,
-                   cell_tau: float = 0.0):
+                   cell_tau: float = 0.0, cell_walk: int = Tuning.cell_walk):
     """(source (N,3) W/m^3, density (N,), points (N,3) m) on the lattice ``stride`` voxels
     apart (C order of ``lattice_shape``): the first-scattering source of ``restricted_source``,
     averaged over the cells round a point or spot light (``cell_mean_source``), and the
@@ -460,14 +460,14 @@ def source_and_density(pm: PreparedMedium, fld: np.ndarray, light: Light, channe
     a dense mesh volume's surface voxels then take their source from points of their cells
     (surface_band_source; not for the walk's forward peak, ``beam``).  ``cell_tau`` > 0: a
     density grid's lit voxels by optically thick ones take theirs from points of their cells
-    (thick_band_source; Tuning.cell_tau)."""
+    (thick_band_source; Tuning.cell_tau, ``cell_walk`` Tuning.cell_walk)."""
     shape = lattice_shape(pm.grid.shape, stride)
     idx, pts = lattice_points(pm, shape, stride)
     rho = density_from(lattice_values(fld[..., 0], idx, stride), pm.threshold)
     band = None if depth is None or beam is not None else \
         surface_band_source(pm, fld, light, channel, depth, disc)
     if band is None and beam is None and cell_tau > 0.0:
-        band = thick_band_source(pm, fld, light, channel, cell_tau, disc)
+        band = thick_band_source(pm, fld, light, channel, cell_tau, disc, cell_walk)
     base = restricted_source(pm, fld, light, channel, stride, shape, should_cancel=should_cancel,
                           beam=beam, voxels=voxels, disc=disc, band=band)
     if light.kind in ("POINT", "SPOT"):
