@@ -322,18 +322,17 @@ def _refined_tau(fields, w2is, thrs, sig_ts, mi, c, x, w, dist, delta, xcs=None)
     return tau + _fetch(fields[mi], w2is[mi], end, c, 3)
 
 
-def _corner_max(field, w2i, x, sig_t, xc, sig_max) -> np.ndarray:
-    """(N,) the largest extinction (1/m) among the 8 voxels of the cell holding each world
-    point ``x`` (N,3): the density (channel 0) times ``sig_max``, or with an extinction
-    channel ``xc`` >= 0 the largest of its 3 channels times ``sig_t``'s; 0 outside the grid's
-    cells (csrc/march.c medium_sources)."""
-    idx = x @ w2i[:, :3].T + w2i[:, 3]
+def _corner_max(field, idx, sig_t, xc, sig_max) -> np.ndarray:
+    """(N,) the largest extinction (1/m) among the 8 voxels of the cell holding each point of
+    index coordinates ``idx`` (N,3): the density (channel 0) times ``sig_max``, or with an
+    extinction channel ``xc`` >= 0 the largest of its 3 channels times ``sig_t``'s; 0 outside
+    the grid's cells (csrc/march.c thick_tri)."""
     shape = np.array(field.shape[:3])
     f = np.floor(idx)
     ok = np.all((idx >= 0.0) & (idx < shape - 1), axis=1)
     i0 = np.where(ok[:, None], f, 0.0).astype(np.int64)
     st = np.asarray(sig_t, np.float64)
-    top = np.zeros(len(x))
+    top = np.zeros(len(idx))
     for corner in range(8):
         o = np.array([(corner >> 2) & 1, (corner >> 1) & 1, corner & 1])
         c = i0 + o
@@ -451,9 +450,7 @@ def _walk_tau(fields, w2is, thrs, sig_ts, mi, c, x, w, dist, tau, sig_max, voxel
         kk[k] += np.where((u[k] != 0.0) & (sr <= sn[:, None]), step[k], 0.0)
         s[k] = sn
         moved[k] = True
-        ipin = pin   # index coordinates: _corner_max takes world points
-        wpin = (ipin - w2i[:, 3]) @ np.linalg.inv(w2i[:, :3]).T
-        going[k] &= _corner_max(f, w2i, wpin, sig_ts[mi], xcm, sig_max) * float(voxel) >= cell_tau
+        going[k] &= _corner_max(f, pin, sig_ts[mi], xcm, sig_max) * float(voxel) >= cell_tau
     start = np.array(tau, np.float64, copy=True)
     mv = np.flatnonzero(moved)
     if mv.size:
@@ -774,7 +771,9 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
                     if thresholds[mi] >= 0 else np.zeros(0, np.int64)
                 thick = np.zeros(0, np.int64)
                 if thresholds[mi] < 0 and cell_tau > 0.0:
-                    top = _corner_max(f, w2is[mi], x, sigma_ts[mi], xc, sig_max[mi])
+                    w2i = np.asarray(w2is[mi], np.float64)
+                    top = _corner_max(f, x @ w2i[:, :3].T + w2i[:, 3], sigma_ts[mi], xc,
+                                      sig_max[mi])
                     thick = np.flatnonzero((rho > 0) & (top * voxels[mi] >= cell_tau))
                 inc = np.zeros((m, 3))
                 beam_inc = np.zeros((m, 3))

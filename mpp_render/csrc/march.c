@@ -101,15 +101,14 @@ static void plane_tau(const Grid *f, const int *xcs, int nm, int mi, int c, cons
     for (int q = 0; q < 3; q++) tau[q] = v[q] + seg[q];
 }
 
-/* Whether grid g's cell at index coordinates idx lies in the grid and its most
- * extinguishing corner is at least cell_tau deep (medium_sources' test). */
-static int thick_at(const Grid *g, int xc, double sig_max, double voxel, double cell_tau,
-                    const double idx[3]) {
-    Tri t;
-    if (!tri_setup(g, idx, &t)) return 0;
+/* Whether the cell of grid g whose stencil is t has its most extinguishing corner at least
+ * cell_tau deep: the density times sig_max, or with an extinction channel xc >= 0 its
+ * channels times g's coefficients, times the voxel size (twin: kernels_np._corner_max). */
+static int thick_tri(const Grid *g, const Tri *t, int xc, double sig_max, double voxel,
+                     double cell_tau) {
     double top = 0.0;
     for (int q = 0; q < 8; q++) {
-        const float *p = t.p + t.off[q];
+        const float *p = t->p + t->off[q];
         if (xc >= 0) {
             for (int a = 0; a < 3; a++) {
                 double r = (double)p[xc + a] * g->sig[a];
@@ -121,6 +120,13 @@ static int thick_at(const Grid *g, int xc, double sig_max, double voxel, double 
         }
     }
     return top * voxel >= cell_tau;
+}
+
+/* thick_tri of the cell at index coordinates idx; 0 where it lies outside the grid. */
+static int thick_at(const Grid *g, int xc, double sig_max, double voxel, double cell_tau,
+                    const double idx[3]) {
+    Tri t;
+    return tri_setup(g, idx, &t) && thick_tri(g, &t, xc, sig_max, voxel, cell_tau);
 }
 
 /* The optical depth (RGB) from x towards a light (unit direction w, its centre dist metres
@@ -859,7 +865,7 @@ static void medium_sources(const March *c, int m, const double x[3], const doubl
     int edge = g->thr >= 0.0 && v[0] > EDGE_EPS && v[0] < 1.0 - EDGE_EPS;
     /* a density grid's cell whose most extinguishing corner is optically thick */
     int thick = g->thr < 0.0 && c->cell_tau > 0.0 &&
-                thick_at(g, c->xc[m], c->sig_max[m], c->voxel[m], c->cell_tau, idx);
+                thick_tri(g, &tw, c->xc[m], c->sig_max[m], c->voxel[m], c->cell_tau);
     double inc[3] = {0, 0, 0}, beam_inc[3] = {0, 0, 0}, ind_inc[3] = {0, 0, 0};
     for (Py_ssize_t l = 0; l < c->nl; l++) {
         int ch = c->chan[l];

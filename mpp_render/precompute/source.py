@@ -268,19 +268,32 @@ def surface_band_source(pm: PreparedMedium, fld: np.ndarray, light: Light, chann
         return None
     deep = np.flatnonzero(inside & ~surface & (shallow < SURFACE_DEEP))
     from ..media import trilinear
+    q = cell_points_source(pm, flat, light,
+                           lambda idx: density_from(trilinear(pm.grid, idx), pm.threshold),
+                           lambda idx, pts: depth(light, pts), disc)
+    return flat, q, deep, cell_depth_factor(fld[..., channel:channel + 3], deep)
+
+
+def cell_points_source(pm: PreparedMedium, flat: np.ndarray, light: Light, density: Callable,
+                       depth: Callable, disc=None) -> np.ndarray:
+    """(N,3) W/m^3: the first-scattering source of the voxels ``flat`` (N,) of ``pm``, each the
+    mean over its cell's CELL_POINTS (index coordinates kept within [0, n-1] per axis: the
+    padding, density 0, beyond) of sigma_s rho E exp(-tau), rho from ``density(idx)`` and tau
+    from ``depth(idx, world points)`` at the points with density (the lamp's disc through
+    ``disc`` as in restricted_source)."""
     ijk = np.stack(np.unravel_index(flat, pm.grid.shape), axis=1).astype(np.float64)
     idx = (ijk[:, None, :] + CELL_POINTS[None]).reshape(-1, 3)
-    rho = density_from(trilinear(pm.grid, idx), pm.threshold).astype(np.float64)
+    idx = np.clip(idx, 0.0, np.array(pm.grid.shape, np.float64) - 1.0 - 1e-9)
+    rho = np.reshape(np.asarray(density(idx), np.float64), -1)
     live = rho > 0.0
     q = np.zeros((len(idx), 3))
     if np.any(live):
         pts = pm.to_world(idx[live])
         _, e = incident(light, pts)
-        tau = depth(light, pts)
+        tau = depth(idx[live], pts)
         q[live] = first_scattering(pm, rho[live], e, tau, None, _disc(disc, light, pts, tau, pm),
                                    pm.scatter_at(idx=idx[live]))
-    return (flat, q.reshape(len(flat), len(CELL_POINTS), 3).mean(axis=1), deep,
-            cell_depth_factor(fld[..., channel:channel + 3], deep))
+    return q.reshape(len(flat), len(CELL_POINTS), 3).mean(axis=1)
 
 
 def thick_band_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int,
@@ -300,31 +313,22 @@ def thick_band_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel
     flat = near_thick_cells(pm, fld[..., channel:channel + 3].min(axis=-1), cell_tau)
     if not flat.size:
         return None
-    ijk = np.stack(np.unravel_index(flat, pm.grid.shape), axis=1).astype(np.float64)
-    idx = (ijk[:, None, :] + CELL_POINTS[None]).reshape(-1, 3)
-    idx = np.clip(idx, 0.0, np.array(pm.grid.shape, np.float64) - 1.0 - 1e-9)
-    rho = np.reshape(trilinear(np.ascontiguousarray(pm.grid, np.float32), idx),
-                     -1).astype(np.float64)
-    live = rho > 0.0
-    q = np.zeros((len(idx), 3))
-    if np.any(live):
-        pts = pm.to_world(idx[live])
-        _, e = incident(light, pts)
+    # the density, the light's depth and any extinction density alone, read by the compiled
+    # trilinear kernel
+    parts = [fld[..., [0, channel, channel + 1, channel + 2]]]
+    if pm.extinction_density is not None:
+        parts.append(pm.extinction_density)
+    own = np.ascontiguousarray(np.concatenate(parts, axis=-1), np.float32)
+
+    def depth(idx, pts):
         w, dist = towards_light(light, pts)
-        # the density, the light's depth and any extinction density alone, read by the
-        # compiled trilinear kernel
-        parts = [fld[..., [0, channel, channel + 1, channel + 2]]]
-        if pm.extinction_density is not None:
-            parts.append(pm.extinction_density)
-        own = np.ascontiguousarray(np.concatenate(parts, axis=-1), np.float32)
-        raw = trilinear(own, idx[live])[:, 1:4]
-        tau = _walk_tau([own], [pm.w2i], [pm.threshold], [pm.sigma_t], 0, 1, pts, w, dist,
-                        raw, float(np.max(pm.sigma_t)) or 1.0, pm.voxel_size, cell_tau, walk,
-                        xcs=[4 if pm.extinction_density is not None else -1], read=trilinear)
-        q[live] = first_scattering(pm, rho[live], e, tau, None, _disc(disc, light, pts, tau, pm),
-                                   pm.scatter_at(idx=idx[live]))
-    return (flat, q.reshape(len(flat), len(CELL_POINTS), 3).mean(axis=1),
-            np.zeros(0, np.int64), np.ones((0, 3)))
+        return _walk_tau([own], [pm.w2i], [pm.threshold], [pm.sigma_t], 0, 1, pts, w, dist,
+                         trilinear(own, idx)[:, 1:4], float(np.max(pm.sigma_t)) or 1.0,
+                         pm.voxel_size, cell_tau, walk,
+                         xcs=[4 if pm.extinction_density is not None else -1], read=trilinear)
+
+    q = cell_points_source(pm, flat, light, lambda idx: trilinear(own, idx)[:, 0], depth, disc)
+    return flat, q, np.zeros(0, np.int64), np.ones((0, 3))
 
 
 def cell_depth_factor(tau: np.ndarray, flat: np.ndarray) -> np.ndarray:
