@@ -414,6 +414,8 @@ def _walk_tau(fields, w2is, thrs, sig_ts, mi, c, x, w, dist, tau, sig_max, voxel
     xcm = -1 if xcs is None or xcs[mi] is None else xcs[mi]
     kk = np.where(u > 0.0, np.floor(i0) + 1.0, -np.floor(-i0) - 1.0)
     step = np.where(u > 0.0, 1.0, -1.0)
+    with np.errstate(divide="ignore"):   # 1 / u: a plane's distance to the next per axis
+        iu = np.where(u != 0.0, 1.0 / np.where(u != 0.0, u, 1.0), 0.0)
 
     def ext(p):
         out = np.zeros((len(p), 3))
@@ -432,8 +434,7 @@ def _walk_tau(fields, w2is, thrs, sig_ts, mi, c, x, w, dist, tau, sig_max, voxel
         k = np.flatnonzero(going)
         if not k.size:
             break
-        with np.errstate(divide="ignore", invalid="ignore"):
-            sr = np.where(u[k] != 0.0, (kk[k] - i0[k]) / u[k], np.inf)
+        sr = np.where(u[k] != 0.0, (kk[k] - i0[k]) * iu[k], np.inf)
         sn = sr.min(axis=1)
         pin = i0[k] + u[k] * (sn + WALK_IN / umax[k])[:, None]
         ok = ((dist[k] - sn) * umax[k] > LAMP_PLANES) & \

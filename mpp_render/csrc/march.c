@@ -66,11 +66,12 @@ static void refined_tau(const Grid *f, const int *xcs, int nm, int mi, int c, co
  * fifth at d = 2.5 (docs/method.md, "Light in an optically thick voxel").  Leaves tau as it is
  * (the trilinear read) where the plane lies outside the grid or a lamp lies within
  * LAMP_PLANES steps along the axis beyond it (about a lamp the depth is a cone, which the
- * plane's bilinear read would cut).  Twin of kernels_np._plane_tau. */
+ * plane's bilinear read would cut).  Returns whether it wrote tau.  Twin of
+ * kernels_np._plane_tau. */
 #define PLANE_EPS 1e-9
 #define WALK_IN 1e-6   /* walk_tau tests the cell beyond a plane this many voxels into it;
                         * plane_tau reads a plane this near as its own */
-static void plane_tau(const Grid *f, const int *xcs, int nm, int mi, int c, const double x[3],
+static int plane_tau(const Grid *f, const int *xcs, int nm, int mi, int c, const double x[3],
                       const double w[3], double dist, double tau[3]) {
     const Grid *g = &f[mi];
     double idx[3], u[3];
@@ -80,25 +81,28 @@ static void plane_tau(const Grid *f, const int *xcs, int nm, int mi, int c, cons
         u[r] = g->w2i[4 * r] * w[0] + g->w2i[4 * r + 1] * w[1] + g->w2i[4 * r + 2] * w[2];
         if (fabs(u[r]) > fabs(u[a])) a = r;
     }
-    if (!(fabs(u[a]) > 0.0) || !(fabs(idx[a]) < 4.0e15)) return;
+    if (!(fabs(u[a]) > 0.0) || !(fabs(idx[a]) < 4.0e15)) return 0;
     /* a point within WALK_IN of a plane (where walk_tau ends) reads that plane itself */
     double kp = u[a] > 0.0 ? -floor_within(-(idx[a] - WALK_IN)) : floor_within(idx[a] + WALK_IN);
     double t = (kp - idx[a]) / u[a];
     if (t < 0.0) t = 0.0;
     /* a lamp within LAMP_PLANES voxel steps beyond the plane (the depth's cone about it is no
      * plane there) or before it: the trilinear read */
-    if (!(t >= 0.0 && (dist - t) * fabs(u[a]) > LAMP_PLANES)) return;
+    if (!(t >= 0.0 && (dist - t) * fabs(u[a]) > LAMP_PLANES)) return 0;
     double ip[3], v[3], fx, fy, fz;
     for (int r = 0; r < 3; r++) ip[r] = idx[r] + u[r] * t;
     /* the grid's last plane (its padding, or a density reaching its face) read from the cell
      * below it */
     ip[a] = kp < g->last[a] ? kp : g->last[a] - PLANE_EPS;
-    if (!cell_floor(ip, g, &fx, &fy, &fz)) return;
+    if (!cell_floor(ip, g, &fx, &fy, &fz)) return 0;
     trilinear(g, ip, c, 3, v);
     double mid[3], seg[3] = {0.0, 0.0, 0.0};
-    for (int q = 0; q < 3; q++) mid[q] = x[q] + w[q] * (0.5 * t);
-    for (int m = 0; m < nm; m++) extinction_at(&f[m], xcs[m], mid, t, seg);
+    if (t > 0.0) {   /* (none from a point on the plane: where walk_tau ends on it) */
+        for (int q = 0; q < 3; q++) mid[q] = x[q] + w[q] * (0.5 * t);
+        for (int m = 0; m < nm; m++) extinction_at(&f[m], xcs[m], mid, t, seg);
+    }
     for (int q = 0; q < 3; q++) tau[q] = v[q] + seg[q];
+    return 1;
 }
 
 /* Whether the cell of grid g whose stencil is t has its most extinguishing corner at least
@@ -122,11 +126,60 @@ static int thick_tri(const Grid *g, const Tri *t, int xc, double sig_max, double
     return top * voxel >= cell_tau;
 }
 
-/* thick_tri of the cell at index coordinates idx; 0 where it lies outside the grid. */
-static int thick_at(const Grid *g, int xc, double sig_max, double voxel, double cell_tau,
-                    const double idx[3]) {
-    Tri t;
-    return tri_setup(g, idx, &t) && thick_tri(g, &t, xc, sig_max, voxel, cell_tau);
+/* One cell of a density grid as walk_tau reads it: its corners' density (or with an
+ * extinction channel its three channels) loaded once, for the thickness test and for the
+ * extinction at any point of the cell, its faces included. */
+typedef struct {
+    double v[8][3];   /* corner q's density (v[q][0]) or extinction channels, as stored */
+    double base[3];   /* the index coordinates of its first corner */
+} WalkCell;
+
+/* Loads the cell of grid g holding index coordinates idx (xc: g's extinction channel, or < 0)
+ * into wc and returns whether its most extinguishing corner is at least cell_tau deep (as
+ * thick_tri); -1 where the cell lies outside the grid. */
+static int walk_cell(const Grid *g, int xc, double sig_max, double voxel, double cell_tau,
+                     const double idx[3], WalkCell *wc) {
+    double fx, fy, fz;
+    if (!cell_floor(idx, g, &fx, &fy, &fz)) return -1;
+    Py_ssize_t sz = g->nc, sy = g->nz * sz, sx = g->ny * sy;
+    const float *p = g->data + (Py_ssize_t)fx * sx + (Py_ssize_t)fy * sy + (Py_ssize_t)fz * sz;
+    Py_ssize_t off[8] = {0, sz, sy, sy + sz, sx, sx + sz, sx + sy, sx + sy + sz};
+    wc->base[0] = fx; wc->base[1] = fy; wc->base[2] = fz;
+    double top = 0.0;
+    for (int q = 0; q < 8; q++) {
+        const float *pq = p + off[q];
+        if (xc >= 0) {
+            for (int a = 0; a < 3; a++) {
+                wc->v[q][a] = (double)pq[xc + a];
+                double r = wc->v[q][a] * g->sig[a];
+                if (r > top) top = r;
+            }
+        } else {
+            wc->v[q][0] = (double)pq[0];
+            double r = wc->v[q][0] * sig_max;
+            if (r > top) top = r;
+        }
+    }
+    return top * voxel >= cell_tau;
+}
+
+/* The extinction (1/m, RGB) of grid g (xc as walk_cell) at index coordinates idx within the
+ * loaded cell wc (trilinear from its corners; on its faces as well), added to out. */
+static inline void walk_cell_ext(const Grid *g, int xc, const WalkCell *wc, const double idx[3],
+                                 double out[3]) {
+    double tx = idx[0] - wc->base[0], ty = idx[1] - wc->base[1], tz = idx[2] - wc->base[2];
+    /* nested interpolation: along z, then y, then x (corner q = 4 x + 2 y + z) */
+    for (int a = 0; a < (xc >= 0 ? 3 : 1); a++) {
+        double z0 = wc->v[0][a] + tz * (wc->v[1][a] - wc->v[0][a]);
+        double z1 = wc->v[2][a] + tz * (wc->v[3][a] - wc->v[2][a]);
+        double z2 = wc->v[4][a] + tz * (wc->v[5][a] - wc->v[4][a]);
+        double z3 = wc->v[6][a] + tz * (wc->v[7][a] - wc->v[6][a]);
+        double y0 = z0 + ty * (z1 - z0), y1 = z2 + ty * (z3 - z2);
+        double v = y0 + tx * (y1 - y0);
+        if (xc >= 0) out[a] += v * g->sig[a];
+        else
+            for (int b = 0; b < 3; b++) out[b] += v * g->sig[b];
+    }
 }
 
 /* The optical depth (RGB) from x towards a light (unit direction w, its centre dist metres
@@ -139,8 +192,9 @@ static int thick_at(const Grid *g, int xc, double sig_max, double voxel, double 
  * then from where it ends plane_tau (the next plane of centres along the axis the light
  * runs most along: a plane crossed last along another axis would read the depth's bend
  * along the light again).  Where the path would leave the grid's cells, or a lamp lies
- * within LAMP_PLANES voxel steps of the next plane, it ends at the last plane reached.  Twin
- * of kernels_np._walk_tau. */
+ * within LAMP_PLANES voxel steps of the next plane, it ends at the last plane reached.  Each
+ * cell's corners are read once (walk_cell): its thickness and grid mi's extinction at the
+ * piece's middle and end come from them.  Twin of kernels_np._walk_tau. */
 static void walk_tau(const Grid *f, const int *xcs, int nm, int mi, int c, const double x[3],
                      const double w[3], double dist, double sig_max, double voxel,
                      double cell_tau, int cells, double tau[3]) {
@@ -155,39 +209,59 @@ static void walk_tau(const Grid *f, const int *xcs, int nm, int mi, int c, const
         kk[r] = u[r] > 0.0 ? floor_within(i0[r]) + 1.0 : -floor_within(-i0[r]) - 1.0;
     }
     if (!(umax > 0.0)) return;
-    double s = 0.0, acc[3] = {0.0, 0.0, 0.0}, ea[3] = {0.0, 0.0, 0.0};
+    double iu[3];   /* 1 / u: the distance from one plane of centres to the next along each axis */
+    for (int r = 0; r < 3; r++) iu[r] = u[r] != 0.0 ? 1.0 / u[r] : 0.0;
+    int xm_c = xcs[mi];
+    WalkCell cell;
+    /* the sample's own cell (thick: the caller tested it) */
+    if (walk_cell(g, xm_c, sig_max, voxel, cell_tau, i0, &cell) < 0) return;
+    double s = 0.0, acc[3] = {0.0, 0.0, 0.0}, ea[3] = {0.0, 0.0, 0.0}, pin[3];
     int moved = 0;
-    for (int m = 0; m < nm; m++) extinction_at(&f[m], xcs[m], x, 1.0, ea);
+    walk_cell_ext(g, xm_c, &cell, i0, ea);
+    for (int m = 0; m < nm; m++)
+        if (m != mi) extinction_at(&f[m], xcs[m], x, 1.0, ea);
     for (int k = 0; k < cells; k++) {
-        double sn = INFINITY;
+        if (k > 0) {  /* the cell entered at the last plane: thick? (in the grid: tested there) */
+            if (walk_cell(g, xm_c, sig_max, voxel, cell_tau, pin, &cell) != 1) break;
+        }
+        double sn = INFINITY, sr[3] = {INFINITY, INFINITY, INFINITY};
         for (int r = 0; r < 3; r++)
             if (u[r] != 0.0) {
-                double sr = (kk[r] - i0[r]) / u[r];
-                if (sr < sn) sn = sr;
+                sr[r] = (kk[r] - i0[r]) * iu[r];
+                if (sr[r] < sn) sn = sr[r];
             }
         if (!((dist - sn) * umax > LAMP_PLANES)) break;
-        /* the cell beyond that plane, a millionth of a voxel in: in the grid's cells? thick? */
-        double pin[3], fx, fy, fz;
+        /* the cell beyond that plane, a millionth of a voxel in: in the grid's cells? */
+        double fx, fy, fz;
         for (int r = 0; r < 3; r++) pin[r] = i0[r] + u[r] * (sn + WALK_IN / umax);
         if (!cell_floor(pin, g, &fx, &fy, &fz)) break;
-        double xe[3], xm[3], em[3] = {0.0, 0.0, 0.0}, ee[3] = {0.0, 0.0, 0.0};
+        double xe[3], xm[3], im[3], ie[3], em[3] = {0.0, 0.0, 0.0}, ee[3] = {0.0, 0.0, 0.0};
+        double sm = 0.5 * (s + sn);
         for (int q = 0; q < 3; q++) {
-            xm[q] = x[q] + w[q] * 0.5 * (s + sn);
-            xe[q] = x[q] + w[q] * sn;
+            im[q] = i0[q] + u[q] * sm;
+            ie[q] = i0[q] + u[q] * sn;
         }
-        for (int m = 0; m < nm; m++) {
-            extinction_at(&f[m], xcs[m], xm, 1.0, em);
-            extinction_at(&f[m], xcs[m], xe, 1.0, ee);
+        walk_cell_ext(g, xm_c, &cell, im, em);
+        walk_cell_ext(g, xm_c, &cell, ie, ee);
+        if (nm > 1) {
+            for (int q = 0; q < 3; q++) {
+                xm[q] = x[q] + w[q] * sm;
+                xe[q] = x[q] + w[q] * sn;
+            }
+            for (int m = 0; m < nm; m++)
+                if (m != mi) {
+                    extinction_at(&f[m], xcs[m], xm, 1.0, em);
+                    extinction_at(&f[m], xcs[m], xe, 1.0, ee);
+                }
         }
         for (int q = 0; q < 3; q++) {
             acc[q] += (sn - s) / 6.0 * (ea[q] + 4.0 * em[q] + ee[q]);
             ea[q] = ee[q];
         }
         for (int r = 0; r < 3; r++)   /* every axis whose plane lies there */
-            if (u[r] != 0.0 && (kk[r] - i0[r]) / u[r] <= sn) kk[r] += u[r] > 0.0 ? 1.0 : -1.0;
+            if (sr[r] <= sn) kk[r] += u[r] > 0.0 ? 1.0 : -1.0;
         s = sn;
         moved = 1;
-        if (!thick_at(g, xcs[mi], sig_max, voxel, cell_tau, pin)) break;
     }
     if (!moved) {
         plane_tau(f, xcs, nm, mi, c, x, w, dist, tau);
@@ -196,8 +270,8 @@ static void walk_tau(const Grid *f, const int *xcs, int nm, int mi, int c, const
     double pe[3], xe[3];
     for (int r = 0; r < 3; r++) pe[r] = i0[r] + u[r] * s;
     for (int q = 0; q < 3; q++) xe[q] = x[q] + w[q] * s;
-    trilinear(g, pe, c, 3, tau);
-    plane_tau(f, xcs, nm, mi, c, xe, w, dist - s, tau);   /* on along the light's main axis */
+    /* on along the light's main axis; where that cannot be read, the field where it ends */
+    if (!plane_tau(f, xcs, nm, mi, c, xe, w, dist - s, tau)) trilinear(g, pe, c, 3, tau);
     for (int q = 0; q < 3; q++) tau[q] += acc[q];
 }
 
