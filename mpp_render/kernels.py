@@ -186,6 +186,33 @@ def trilinear(grid, idx, *, backend=None):
     return out[:, 0] if flat else out
 
 
+def walk_tau(grid, w2i, sigma_t, xc: int, channel: int, x, w, dist, tau, sig_max: float,
+             voxel: float, cell_tau: float, cells: int, *, backend=None) -> np.ndarray:
+    """(N,3) the optical depth towards a light from points ``x`` (N,3, world) in optically
+    thick cells of one density grid, as the march takes it there (kernels_np._walk_tau with
+    this grid alone): ``grid`` (X,Y,Z,C) float32 with the density in channel 0, the light's
+    depth at the voxel centres in ``channel``..+2 and the extinction density in ``xc``..+2
+    (or ``xc`` -1), ``w2i`` (3,4) world to index, ``sigma_t`` (3,) 1/m per unit density, ``w``
+    (N,3) unit directions to the light, ``dist`` (N,) its centre's distance (m, inf for a
+    sun), ``tau`` (N,3) the trilinear read at ``x``; ``sig_max``, ``voxel`` (m), ``cell_tau``
+    and ``cells`` as Tuning's."""
+    x = _f64(x).reshape(-1, 3)
+    n = len(x)
+    if not _on_c(backend) or not hasattr(_c, "walk_depth") or np.asarray(grid).dtype != np.float32:
+        return kernels_np._walk_tau([np.asarray(grid)], [np.asarray(w2i, np.float64)], [-1.0],
+                                    [np.asarray(sigma_t, np.float64)], 0, int(channel), x,
+                                    np.asarray(w, np.float64).reshape(n, 3),
+                                    np.asarray(dist, np.float64).reshape(n),
+                                    np.asarray(tau, np.float64).reshape(n, 3), float(sig_max),
+                                    float(voxel), float(cell_tau), int(cells), xcs=[int(xc)],
+                                    read=kernels_np.trilinear)
+    out = _c.walk_depth(np.ascontiguousarray(grid), _f64(w2i).reshape(3, 4),
+                        _f64(sigma_t).reshape(3), int(xc), int(channel), x,
+                        _f64(w).reshape(n, 3), _f64(dist).reshape(n), _f64(tau).reshape(n, 3),
+                        float(sig_max), float(voxel), float(cell_tau), int(cells))
+    return np.frombuffer(out, np.float64).reshape(n, 3).copy()
+
+
 class LevelField(NamedTuple):
     """One light's multiple-scattering pyramid in one medium, as the march reads it."""
     levels: list    # float32 (X,Y,Z,3) lattices; level k's spacing is h 2^k

@@ -423,7 +423,9 @@ def _walk_tau(fields, w2is, thrs, sig_ts, mi, c, x, w, dist, tau, sig_max, voxel
             out += _extinction(fj, wj, thr, st, None if xcs is None else xcs[j], p, read)
         return out
 
-    going = (umax > 0.0) & np.all(np.abs(i0) < 4.0e15, axis=1)
+    # no piece from a point outside the grid's cells (the march's samples lie in them)
+    going = (umax > 0.0) & np.all(np.abs(i0) < 4.0e15, axis=1) & \
+        np.all((i0 >= 0.0) & (i0 < last), axis=1)
     s = np.zeros(n)
     acc = np.zeros((n, 3))
     ea = np.zeros((n, 3))

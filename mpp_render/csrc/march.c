@@ -213,8 +213,11 @@ static void walk_tau(const Grid *f, const int *xcs, int nm, int mi, int c, const
     for (int r = 0; r < 3; r++) iu[r] = u[r] != 0.0 ? 1.0 / u[r] : 0.0;
     int xm_c = xcs[mi];
     WalkCell cell;
-    /* the sample's own cell (thick: the caller tested it) */
-    if (walk_cell(g, xm_c, sig_max, voxel, cell_tau, i0, &cell) < 0) return;
+    /* the sample's own cell (thick: the caller tested it); outside the grid's cells no piece */
+    if (walk_cell(g, xm_c, sig_max, voxel, cell_tau, i0, &cell) < 0) {
+        plane_tau(f, xcs, nm, mi, c, x, w, dist, tau);
+        return;
+    }
     double s = 0.0, acc[3] = {0.0, 0.0, 0.0}, ea[3] = {0.0, 0.0, 0.0}, pin[3];
     int moved = 0;
     walk_cell_ext(g, xm_c, &cell, i0, ea);
@@ -1103,6 +1106,68 @@ static long march_ray(const March *c, Py_ssize_t r, RaySums *sums) {
         K++;
     }
     return taken;
+}
+
+const char walk_depth_doc[] =
+    "walk_depth(grid, w2i, sig, xc, c, x, w, dist, tau, sig_max, voxel, cell_tau, cells) -> bytes\n"
+    "Twin of kernels_np._walk_tau for one density grid: grid (X,Y,Z,C) float32 (channel 0 the\n"
+    "density, c..c+2 the light's depth at the voxel centres, xc..xc+2 the extinction density or\n"
+    "xc -1), w2i (3,4) world to index, sig (3,) extinction per unit density (1/m); x, w (N,3)\n"
+    "float64 points and unit directions towards the light, dist (N,) its centre's distance\n"
+    "(inf for a sun), tau (N,3) the trilinear read at x; sig_max, voxel (m), cell_tau and cells\n"
+    "as the march's.  (N,3) float64 as bytes: the optical depth from each point, walk_tau's.";
+
+PyObject *walk_depth(PyObject *self, PyObject *args) {
+    PyObject *pg, *pm, *ps, *px, *pw, *pd, *pt;
+    int xc, c, cells;
+    double sig_max, voxel, cell_tau;
+    if (!PyArg_ParseTuple(args, "OOOiiOOOOdddi", &pg, &pm, &ps, &xc, &c, &px, &pw, &pd, &pt,
+                          &sig_max, &voxel, &cell_tau, &cells))
+        return NULL;
+    Buf bg = {0}, bm = {0}, bs = {0}, bx = {0}, bw = {0}, bd = {0}, bt = {0};
+    PyObject *result = NULL;
+    Py_ssize_t sg[4] = {-1, -1, -1, -1}, sm[2] = {3, 4}, ss[1] = {3}, sx[2] = {-1, 3};
+    if (get_buf(pg, &bg, 'f', 4, sg, "grid") < 0 || get_buf(pm, &bm, 'd', 2, sm, "w2i") < 0 ||
+        get_buf(ps, &bs, 'd', 1, ss, "sig") < 0 || get_buf(px, &bx, 'd', 2, sx, "x") < 0)
+        goto done;
+    Py_ssize_t n = sx[0], sw[2] = {n, 3}, sd[1] = {n}, st[2] = {n, 3}, nc = sg[3];
+    if (get_buf(pw, &bw, 'd', 2, sw, "w") < 0 || get_buf(pd, &bd, 'd', 1, sd, "dist") < 0 ||
+        get_buf(pt, &bt, 'd', 2, st, "tau") < 0)
+        goto done;
+    if (nc < 1 || c < 0 || (Py_ssize_t)c + 3 > nc || xc < -1 || (xc >= 0 && (Py_ssize_t)xc + 3 > nc) ||
+        cells < 0 || cells > (1 << 20) || !(voxel > 0.0) || !(sig_max >= 0.0)) {
+        PyErr_SetString(PyExc_ValueError, "walk_depth: bad channels, cells or voxel size");
+        goto done;
+    }
+    if (n > PY_SSIZE_T_MAX / (Py_ssize_t)(3 * sizeof(double))) {
+        PyErr_SetString(PyExc_ValueError, "walk_depth: too many points");
+        goto done;
+    }
+    result = PyBytes_FromStringAndSize(NULL, n * 3 * (Py_ssize_t)sizeof(double));
+    if (!result) goto done;
+    {
+        double *out = (double *)PyBytes_AS_STRING(result);
+        const double *X = bx.view.buf, *W = bw.view.buf, *D = bd.view.buf, *T = bt.view.buf;
+        Grid g;
+        memset(&g, 0, sizeof g);
+        g.data = (const float *)bg.view.buf;
+        grid_shape(&g, sg[0], sg[1], sg[2], nc);
+        memcpy(g.w2i, bm.view.buf, sizeof g.w2i);
+        memcpy(g.sig, bs.view.buf, sizeof g.sig);
+        g.thr = -1.0;   /* a density grid: no sharp surface */
+        int xcs[1] = {xc};
+        Py_BEGIN_ALLOW_THREADS
+        for (Py_ssize_t q = 0; q < n; q++) {
+            for (int a = 0; a < 3; a++) out[3 * q + a] = T[3 * q + a];
+            walk_tau(&g, xcs, 1, 0, c, X + 3 * q, W + 3 * q, D[q], sig_max, voxel, cell_tau,
+                     cells, out + 3 * q);
+        }
+        Py_END_ALLOW_THREADS
+    }
+done:
+    buf_release(&bg); buf_release(&bm); buf_release(&bs); buf_release(&bx);
+    buf_release(&bw); buf_release(&bd); buf_release(&bt);
+    return result;
 }
 
 const char march_doc[] =

@@ -44,6 +44,7 @@ static PyMethodDef methods[] = {
     {"trace_paths", trace_paths, METH_VARARGS, trace_paths_doc},
     {"intersect", intersect, METH_VARARGS, intersect_doc},
     {"union_interval", union_interval, METH_VARARGS, union_interval_doc},
+    {"walk_depth", walk_depth, METH_VARARGS, walk_depth_doc},
     {"light_layout", light_layout, METH_NOARGS, light_layout_doc},
     {NULL, NULL, 0, NULL},
 };

@@ -301,14 +301,13 @@ def thick_band_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel
     """surface_band_source's for a density grid (a VDB, a shader's density): the voxels that
     lightdepth.near_thick_cells gives (lit, next to a voxel of at least ``cell_tau`` optical
     depth across), each the mean over its cell's CELL_POINTS of sigma_s rho E exp(-tau) with
-    rho read trilinearly and tau as the march reads it in such a cell (kernels_np._walk_tau
-    on the field, the medium's own extinction on the way): the light entering a dense voxel
+    rho read trilinearly and tau as the march reads it in such a cell (kernels.walk_tau on
+    the field, the medium's own extinction on the way): the light entering a dense voxel
     falls off within it, which its centre's read alone takes as the whole cell's (a
     third-party dragon of 1.2-2.5 optical depth a voxel: its multiple scattering 0.85x
     Cycles', docs/method.md, "Light in an optically thick voxel").  No deeper voxels' factors
     (empty arrays).  None where no voxel qualifies."""
-    from ..kernels import trilinear
-    from ..kernels_np import _walk_tau
+    from ..kernels import trilinear, walk_tau
     from .lightdepth import near_thick_cells
     flat = near_thick_cells(pm, fld[..., channel:channel + 3].min(axis=-1), cell_tau)
     if not flat.size:
@@ -322,10 +321,9 @@ def thick_band_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel
 
     def depth(idx, pts):
         w, dist = towards_light(light, pts)
-        return _walk_tau([own], [pm.w2i], [pm.threshold], [pm.sigma_t], 0, 1, pts, w, dist,
-                         trilinear(own, idx)[:, 1:4], float(np.max(pm.sigma_t)) or 1.0,
-                         pm.voxel_size, cell_tau, walk,
-                         xcs=[4 if pm.extinction_density is not None else -1], read=trilinear)
+        return walk_tau(own, pm.w2i, pm.sigma_t, 4 if pm.extinction_density is not None else -1,
+                        1, pts, w, dist, trilinear(own, idx)[:, 1:4],
+                        float(np.max(pm.sigma_t)) or 1.0, pm.voxel_size, cell_tau, walk)
 
     q = cell_points_source(pm, flat, light, lambda idx: trilinear(own, idx)[:, 0], depth, disc)
     return flat, q, np.zeros(0, np.int64), np.ones((0, 3))
