@@ -130,6 +130,40 @@ def test_fuzz_light_sweep():
     assert ran > ROUNDS // 3
 
 
+def test_fuzz_walk_depth():
+    """The compiled walk through thick cells (kernels.walk_tau): random grids down to one
+    voxel an axis, spoiled densities, transforms, points, directions and distances, any walk
+    length up to 64 cells: it reads only inside the grid (ASan checks this in
+    test_sanitizers.py) and returns one depth a point, or raises ValueError."""
+    rng = np.random.default_rng(4242)
+    ran = 0
+    for _ in range(ROUNDS):
+        shape = tuple(int(x) for x in rng.integers(1, 7, 3))
+        nc = int(rng.integers(4, 9))
+        grid = spoil((rng.random(shape + (nc,)) * 4).astype(np.float32), rng, 0.02).astype(np.float32)
+        w2i = np.hstack([np.diag(rng.uniform(0.5, 3, 3)), rng.uniform(-3, 3, (3, 1))])
+        if rng.random() < 0.3:
+            w2i = spoil(w2i, rng, 0.1)
+        n = int(rng.integers(0, 30))
+        x = spoil(rng.uniform(-3, 3, (n, 3)), rng)
+        w = spoil(rng.normal(size=(n, 3)), rng)
+        dist = spoil(rng.uniform(0, 5, n), rng)
+        tau = spoil(rng.uniform(0, 3, (n, 3)), rng)
+        xc = int(rng.choice([-1, 1, nc - 3, nc - 2]))
+        c = int(rng.integers(0, nc - 1))
+        try:
+            out = kernels._c.walk_depth(grid, w2i, spoil(rng.uniform(0, 5, 3), rng, 0.1), xc, c,
+                                        x, w, dist, tau, float(rng.uniform(0, 5)),
+                                        float(rng.choice([0.01, 0.3, 1.0])),
+                                        float(rng.choice([0.0, 0.25, 1e-9])),
+                                        int(rng.integers(0, 65)))
+        except ValueError:
+            continue
+        assert len(out) == 8 * 3 * n
+        ran += 1
+    assert ran > ROUNDS // 3
+
+
 def test_wrong_types_and_shapes_raise():
     c = kernels._c
     with pytest.raises(ValueError):
