@@ -462,6 +462,9 @@ def area_transmittance(light: Light, x, tau, voxel: float, nodes: int = AREA_NOD
         normal = -normal
     dc = np.linalg.norm(x - c, axis=1)
     out = np.exp(-tau)
+    # a grey depth (the channels equal) takes its transmittance once for the three
+    grey = tau.shape[1] == 3 and bool(np.all(tau[:, 0] == tau[:, 1]) and
+                                       np.all(tau[:, 1] == tau[:, 2]))
     for n, lo, hi in ((AREA_NEAR_NODES, 0.0, AREA_NEAR), (int(nodes), AREA_NEAR, AREA_MID),
                       (AREA_FAR_NODES, AREA_MID, np.inf)):
         sel = np.flatnonzero((dc >= lo * half) & (dc < hi * half))
@@ -471,10 +474,13 @@ def area_transmittance(light: Light, x, tau, voxel: float, nodes: int = AREA_NOD
         for a0 in range(0, len(sel), 4096):
             idx = sel[a0:a0 + 4096]
             v = x[idx, None, :] - pts[None, :, :]                       # emitter -> point
-            d = np.maximum(np.linalg.norm(v, axis=2), 1e-9)
-            w = wa[None, :] * np.maximum(np.einsum("nkc,c->nk", v, normal), 0.0) / d ** 3
+            d = np.maximum(np.sqrt(np.einsum("nkc,nkc->nk", v, v)), 1e-9)
+            w = wa[None, :] * np.maximum(v @ normal, 0.0) / (d * d * d)
             st = path_stretch(d, dc[idx, None], voxel)                   # (n,K)
-            num = np.einsum("nk,nkc->nc", w, np.exp(-tau[idx, None, :] * st[..., None]))
+            if grey:
+                num = np.einsum("nk,nk->n", w, np.exp(-tau[idx, 0, None] * st))[:, None]
+            else:
+                num = np.einsum("nk,nkc->nc", w, np.exp(-tau[idx, None, :] * st[..., None]))
             den = w.sum(axis=1)
             ok = den > 0.0
             out[idx[ok]] = num[ok] / den[ok, None]
