@@ -32,14 +32,14 @@ class MPPRenderSettings(bpy.types.PropertyGroup):
         name="Quality", default="FINAL", update=_apply_quality,
         items=[("PREVIEW", "Preview", "4 samples and the fast most-probable-path model of "
                 "multiple scattering: smooth, seconds, but biased (public scenes: error median "
-                "0.09, worst 1.7; 4 s median at 160x120)"),
+                "0.09, worst 1.8; 3 s median at 160x120)"),
                ("FINAL", "Final", "16 samples at most (adaptive, Noise Threshold 0.02) and 3 "
                 "million traced light paths per light for multiple scattering: the defaults "
-                "(public scenes: error median 0.022, worst 0.17; 10 s median at 160x120)"),
+                "(public scenes: error median 0.018, worst 0.18; 10 s median at 160x120)"),
                ("REFERENCE", "Reference", "16 samples in every pixel (Noise Threshold 0), 12 "
                 "million paths per light on a lattice twice as fine: closest to Cycles, "
-                "3-10x Final's time, 18-46x on VDBs (public scenes: error median 0.015, 90th "
-                "percentile 0.05; 69 s median at 160x120)")],
+                "3-11x Final's time, 12-22x on VDBs (public scenes: error median 0.016, 90th "
+                "percentile 0.05; 67 s median at 160x120)")],
         description="Sets Samples, Noise Threshold, Multiple Scattering Paths and Resolution "
                     "together "
                     "(they stay editable). docs/usage.md gives each one's time and error on "
