@@ -75,12 +75,10 @@ static int plane_tau(const Grid *f, const int *xcs, int nm, int mi, int c, const
                       const double w[3], double dist, double tau[3]) {
     const Grid *g = &f[mi];
     double idx[3], u[3];
-    to_index(g, x, idx);
+    ray_to_index(g, x, w, idx, u);
     int a = 0;
-    for (int r = 0; r < 3; r++) {
-        u[r] = g->w2i[4 * r] * w[0] + g->w2i[4 * r + 1] * w[1] + g->w2i[4 * r + 2] * w[2];
+    for (int r = 1; r < 3; r++)
         if (fabs(u[r]) > fabs(u[a])) a = r;
-    }
     if (!(fabs(u[a]) > 0.0) || !(fabs(idx[a]) < 4.0e15)) return 0;
     /* a point within WALK_IN of a plane (where walk_tau ends) reads that plane itself */
     double kp = u[a] > 0.0 ? -floor_within(-(idx[a] - WALK_IN)) : floor_within(idx[a] + WALK_IN);
@@ -105,23 +103,27 @@ static int plane_tau(const Grid *f, const int *xcs, int nm, int mi, int c, const
     return 1;
 }
 
-/* Whether the cell of grid g whose stencil is t has its most extinguishing corner at least
- * cell_tau deep: the density times sig_max, or with an extinction channel xc >= 0 its
- * channels times g's coefficients, times the voxel size (twin: kernels_np._corner_max). */
+/* The largest extinction (1/m) of one corner's voxel pq of grid g: its density times
+ * sig_max, or with an extinction channel xc >= 0 its channels times g's coefficients. */
+static inline double corner_extinction(const Grid *g, const float *pq, int xc, double sig_max) {
+    if (xc < 0) return (double)pq[0] * sig_max;
+    double top = (double)pq[xc] * g->sig[0];
+    for (int a = 1; a < 3; a++) {
+        double r = (double)pq[xc + a] * g->sig[a];
+        if (r > top) top = r;
+    }
+    return top;
+}
+
+/* Whether the cell of grid g whose stencil is t has its most extinguishing corner
+ * (corner_extinction) at least cell_tau deep across the voxel size (twin:
+ * kernels_np._corner_max). */
 static int thick_tri(const Grid *g, const Tri *t, int xc, double sig_max, double voxel,
                      double cell_tau) {
     double top = 0.0;
     for (int q = 0; q < 8; q++) {
-        const float *p = t->p + t->off[q];
-        if (xc >= 0) {
-            for (int a = 0; a < 3; a++) {
-                double r = (double)p[xc + a] * g->sig[a];
-                if (r > top) top = r;
-            }
-        } else {
-            double r = (double)p[0] * sig_max;
-            if (r > top) top = r;
-        }
+        double r = corner_extinction(g, t->p + t->off[q], xc, sig_max);
+        if (r > top) top = r;
     }
     return top * voxel >= cell_tau;
 }
@@ -141,24 +143,16 @@ static int walk_cell(const Grid *g, int xc, double sig_max, double voxel, double
                      const double idx[3], WalkCell *wc) {
     double fx, fy, fz;
     if (!cell_floor(idx, g, &fx, &fy, &fz)) return -1;
-    Py_ssize_t sz = g->nc, sy = g->nz * sz, sx = g->ny * sy;
-    const float *p = g->data + (Py_ssize_t)fx * sx + (Py_ssize_t)fy * sy + (Py_ssize_t)fz * sz;
-    Py_ssize_t off[8] = {0, sz, sy, sy + sz, sx, sx + sz, sx + sy, sx + sy + sz};
+    Py_ssize_t off[8];
+    grid_offsets(g, off);
+    const float *p = g->data + (Py_ssize_t)fx * off[4] + (Py_ssize_t)fy * off[2] + (Py_ssize_t)fz * off[1];
     wc->base[0] = fx; wc->base[1] = fy; wc->base[2] = fz;
     double top = 0.0;
     for (int q = 0; q < 8; q++) {
         const float *pq = p + off[q];
-        if (xc >= 0) {
-            for (int a = 0; a < 3; a++) {
-                wc->v[q][a] = (double)pq[xc + a];
-                double r = wc->v[q][a] * g->sig[a];
-                if (r > top) top = r;
-            }
-        } else {
-            wc->v[q][0] = (double)pq[0];
-            double r = wc->v[q][0] * sig_max;
-            if (r > top) top = r;
-        }
+        for (int a = 0; a < (xc >= 0 ? 3 : 1); a++) wc->v[q][a] = (double)pq[xc >= 0 ? xc + a : 0];
+        double r = corner_extinction(g, pq, xc, sig_max);
+        if (r > top) top = r;
     }
     return top * voxel >= cell_tau;
 }
@@ -200,9 +194,8 @@ static void walk_tau(const Grid *f, const int *xcs, int nm, int mi, int c, const
                      double cell_tau, int cells, double tau[3]) {
     const Grid *g = &f[mi];
     double i0[3], u[3], kk[3], umax = 0.0;
-    to_index(g, x, i0);
+    ray_to_index(g, x, w, i0, u);
     for (int r = 0; r < 3; r++) {
-        u[r] = g->w2i[4 * r] * w[0] + g->w2i[4 * r + 1] * w[1] + g->w2i[4 * r + 2] * w[2];
         if (fabs(u[r]) > umax) umax = fabs(u[r]);
         if (!(fabs(i0[r]) < 4.0e15)) return;
         /* the next plane of centres ahead along each axis */
