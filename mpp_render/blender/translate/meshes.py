@@ -25,7 +25,7 @@ from ...scene import Medium, Surface
 from .materials import has_fields, is_linked, merge_by_field, realise, volume_shading
 from .surfaceshading import surface_shading
 from .shadergraph import FieldContext
-from .voxelise import inside, is_closed, lattice
+from .voxelise import is_closed, lattice, occupancy
 
 
 def mesh_arrays(mesh):
@@ -136,17 +136,21 @@ class MeshTranslator:
             return []
         shape, i2o = lat
         key = (cache_key, shape) if cache_key is not None else None
-        mask = self._cache.get(key) if key is not None else None
-        if mask is None:
-            mask = inside(verts, tris, i2o, shape).astype(np.float32)
+        # a plain volume's medium is the sharp one-half level of its occupancy (voxelise.
+        # occupancy); a field's density is its value at the voxel centres inside, 0 outside
+        occ = self._cache.get(key) if key is not None else None
+        if occ is None:
+            occ = occupancy(verts, tris, i2o, shape)
             if key is not None:
-                self._cache[key] = mask
+                self._cache[key] = occ
+        mask = (occ >= 0.5).astype(np.float32)
         groups = merge_by_field(shading)
         fields = FieldContext(texspace, store=self._cache if key is not None else None)
         sampler = fields.sampler(shape, i2o, world_matrix)
         media = []
         for i, coeff in enumerate(groups):
-            density, grid, scatter, fielded = mask, None, None, has_fields(coeff)
+            fielded = has_fields(coeff)
+            density, grid, scatter = (mask if fielded else occ), None, None
             extinction = None
             varies = coeff.density_field is not None
             if fielded:
