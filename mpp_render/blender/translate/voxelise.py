@@ -7,12 +7,15 @@ cubic in *world* metres as the box allows: ``resolution`` voxels along the longe
 
 Inside/outside is the even-odd rule along index axis k: for every voxel column (i, j) the
 triangles' crossings of the column's line are found (vectorised over triangle/column pairs),
-and a voxel centre is inside when an odd number of crossings lie below it.
+and a voxel centre is inside when an odd number of crossings lie below it (``inside``).  The
+medium's occupancy (``occupancy``) is that 1 / 0, except within half a voxel of the surface,
+where the centres hold their signed distance to it, so that the trilinear one-half level
+follows the mesh within the voxel.
 """
 from __future__ import annotations
 
 import math
-from typing import Optional, Tuple
+from typing import Tuple
 
 import numpy as np
 
@@ -171,19 +174,6 @@ def occupancy(vertices: np.ndarray, triangles: np.ndarray, index_to_object: np.n
     # the even-odd rule decides the side: a centre inside stays at or above one half
     occ[near] = np.where(inn, 0.5 + d, np.minimum(0.5 - d, 0.5 - 1e-6))
     return occ.reshape(shape)
-
-
-def voxelise(vertices: np.ndarray, triangles: np.ndarray, matrix: np.ndarray,
-             resolution: int) -> Optional[Tuple[np.ndarray, np.ndarray]]:
-    """``(density float32 (nx, ny, nz), index_to_world 4x4)`` of the mesh interior: 1 at voxel
-    centres inside, 0 outside.  ``vertices`` (N,3) are in object space, ``matrix`` is the
-    object's world matrix.  None when the mesh is flat (no interior)."""
-    lat = lattice(vertices, matrix, resolution)
-    if lat is None:
-        return None
-    shape, i2o = lat
-    density = inside(vertices, triangles, i2o, shape).astype(np.float32)
-    return density, np.asarray(matrix, dtype=np.float64) @ i2o
 
 
 def is_closed(triangles: np.ndarray) -> bool:
