@@ -32,7 +32,7 @@ class MPPRenderSettings(bpy.types.PropertyGroup):
         name="Quality", default="FINAL", update=_apply_quality,
         items=[("PREVIEW", "Preview", "4 samples and the fast most-probable-path model of "
                 "multiple scattering: smooth, seconds, but biased (public scenes: error median "
-                "0.09, worst 1.8; 3 s median at 160x120)"),
+                "0.09, worst 1.8; 4 s median at 160x120)"),
                ("FINAL", "Final", "16 samples at most (adaptive, Noise Threshold 0.02) and 3 "
                 "million traced light paths per light for multiple scattering: the defaults "
                 "(public scenes: error median 0.018, worst 0.18; 10 s median at 160x120)"),
