@@ -80,13 +80,12 @@ def test_a_box_face_is_the_half_level_within_a_tenth_of_a_voxel(angles):
     half = np.array([1.0, 0.7, 0.5])
     v, t = box_mesh(half, rot)
     shape, i2o = lattice(v, np.eye(4), 40)
-    shape_o, i2o_o = shape, i2o
-    occ = occupancy(v, t, i2o_o, shape_o)
+    occ = occupancy(v, t, i2o, shape)
     assert occ.dtype == np.float32 and occ.min() >= 0.0 and occ.max() <= 1.0
     # the voxel centres at or above one half are the even-odd rule's inside ones
-    np.testing.assert_array_equal(occ >= 0.5, inside(v, t, i2o_o, shape_o))
+    np.testing.assert_array_equal(occ >= 0.5, inside(v, t, i2o, shape))
     voxel = float(i2o[0, 0])
-    binary = inside(v, t, i2o_o, shape_o).astype(np.float32)
+    binary = inside(v, t, i2o, shape).astype(np.float32)
     rng = np.random.default_rng(4)
     errs, errs_bin = [], []
     for axis in range(3):
@@ -98,8 +97,8 @@ def test_a_box_face_is_the_half_level_within_a_tenth_of_a_voxel(angles):
             n[axis] = sign
             pts, nrm = uv @ rot.T, np.tile(rot @ n, (400, 1))
             # the padded grid the march reads (zeros beyond the lattice)
-            errs.append(level_offsets(np.pad(occ, 1), i2o_o @ _shift(1), pts, nrm, voxel))
-            errs_bin.append(level_offsets(np.pad(binary, 1), i2o_o @ _shift(1), pts, nrm,
+            errs.append(level_offsets(np.pad(occ, 1), i2o @ _shift(1), pts, nrm, voxel))
+            errs_bin.append(level_offsets(np.pad(binary, 1), i2o @ _shift(1), pts, nrm,
                                           voxel))
     e, eb = np.concatenate(errs), np.concatenate(errs_bin)
     assert not np.any(np.isnan(e))
@@ -122,15 +121,14 @@ def _shift(pad):
 def test_a_sphere_is_round_within_a_tenth_of_a_voxel():
     v, t = sphere_mesh(1.0, 192)
     shape, i2o = lattice(v, np.eye(4), 48)
-    shape_o, i2o_o = shape, i2o
-    occ = occupancy(v, t, i2o_o, shape_o)
-    binary = inside(v, t, i2o_o, shape_o).astype(np.float32)
+    occ = occupancy(v, t, i2o, shape)
+    binary = inside(v, t, i2o, shape).astype(np.float32)
     voxel = float(i2o[0, 0])
     rng = np.random.default_rng(5)
     n = rng.normal(size=(2000, 3))
     n /= np.linalg.norm(n, axis=1)[:, None]
-    e = level_offsets(np.pad(occ, 1), i2o_o @ _shift(1), n, n, voxel)
-    eb = level_offsets(np.pad(binary, 1), i2o_o @ _shift(1), n, n, voxel)
+    e = level_offsets(np.pad(occ, 1), i2o @ _shift(1), n, n, voxel)
+    eb = level_offsets(np.pad(binary, 1), i2o @ _shift(1), n, n, voxel)
     # the mesh's facets lie inside the round sphere by up to 1 - cos(pi / 192) of its radius
     print(f"sphere: the half level off the surface by rms {np.sqrt(np.mean(e ** 2)):.4f} "
           f"voxels, worst {np.abs(e).max():.4f} (binary centres rms "
@@ -142,6 +140,5 @@ def test_a_sphere_is_round_within_a_tenth_of_a_voxel():
 def test_an_empty_or_flat_mesh_gives_no_inside():
     v, t = box_mesh([1.0, 1.0, 1.0], np.eye(3))
     shape, i2o = lattice(v, np.eye(4), 8)
-    shape_o, i2o_o = shape, i2o
-    occ = occupancy(v, t[:0], i2o_o, shape_o)   # no triangles: nothing inside, no ramp
-    assert occ.shape == shape_o and not np.any(occ >= 0.5) and np.all(occ == 0.0)
+    occ = occupancy(v, t[:0], i2o, shape)   # no triangles: nothing inside, no ramp
+    assert occ.shape == shape and not np.any(occ >= 0.5) and np.all(occ == 0.0)

@@ -143,13 +143,15 @@ class MeshTranslator:
             occ = occupancy(verts, tris, i2o, shape)
             if key is not None:
                 self._cache[key] = occ
-        mask = (occ >= 0.5).astype(np.float32)
+        mask = None   # the centres inside, for a field's density (made once, if one has a field)
         groups = merge_by_field(shading)
         fields = FieldContext(texspace, store=self._cache if key is not None else None)
         sampler = fields.sampler(shape, i2o, world_matrix)
         media = []
         for i, coeff in enumerate(groups):
             fielded = has_fields(coeff)
+            if fielded and mask is None:
+                mask = (occ >= 0.5).astype(np.float32)
             density, grid, scatter = (mask if fielded else occ), None, None
             extinction = None
             varies = coeff.density_field is not None

@@ -91,8 +91,15 @@ def _column_hits(p: np.ndarray, triangles: np.ndarray, shape: Tuple[int, int, in
 def inside(vertices: np.ndarray, triangles: np.ndarray, index_to_object: np.ndarray,
            shape: Tuple[int, int, int]) -> np.ndarray:
     """Boolean (nx, ny, nz): whether each voxel centre lies inside the mesh (even-odd rule)."""
+    hits = _column_hits(_index_points(vertices, index_to_object), triangles, shape)
+    return _parity(hits[:3], shape)
+
+
+def _parity(hits, shape: Tuple[int, int, int]) -> np.ndarray:
+    """Boolean (nx, ny, nz) from the crossings (i, j, z) of the column lines along index axis
+    2 (``_column_hits``): a centre is inside when an odd number of them lie below it."""
     nx, ny, nz = shape
-    i, j, z, _ = _column_hits(_index_points(vertices, index_to_object), triangles, shape)
+    i, j, z = hits
     toggles = np.zeros((nx, ny, nz + 1), np.uint8)  # crossings per column, mod 256
     # one toggle at the first voxel centre above each crossing
     np.add.at(toggles, (i, j, np.clip(np.floor(z).astype(np.int64) + 1, 0, nz)), 1)
@@ -141,7 +148,6 @@ def occupancy(vertices: np.ndarray, triangles: np.ndarray, index_to_object: np.n
     voxel only where some axis crosses it within that): exact for a flat face and for a
     convex edge's inside, and to first order on a curved surface.  Inside / outside is
     ``inside``'s even-odd rule, so the set of centres at or above one half is the same."""
-    ins = inside(vertices, triangles, index_to_object, shape)
     p = _index_points(vertices, index_to_object)
     tri = p[np.asarray(triangles, np.int64).reshape(-1, 3)]
     nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])   # unit normals (0 if flat)
@@ -152,6 +158,8 @@ def occupancy(vertices: np.ndarray, triangles: np.ndarray, index_to_object: np.n
         perm = [(ax + 1) % 3, (ax + 2) % 3, ax]      # the column axis last
         sh = tuple(shape[q] for q in perm)
         i, j, z, t = _column_hits(p[:, perm], triangles, sh)
+        if ax == 2:   # the columns along axis 2 are inside's: its even-odd rule from them
+            ins = _parity((i, j, z), shape)
         for k in (np.floor(z).astype(np.int64), np.floor(z).astype(np.int64) + 1):
             ok = (k >= 0) & (k < sh[2]) & (np.abs(k - z) <= 1.0)
             cell = np.zeros((int(ok.sum()), 3), np.int64)
