@@ -255,7 +255,9 @@ class MarchInputs:
     its extinction reads the density) and ``cell_tau`` (> 0: a density grid's cell whose most
     extinguishing corner is at least that optical depth across follows each light's path
     cell by cell for at most ``cell_walk`` cells, then reads its depth on the next plane of
-    voxel centres along the light's main axis, kernels_np._walk_tau; 0: off)."""
+    voxel centres along the light's main axis, kernels_np._walk_tau; 0: off) and
+    ``jitter_bands`` (per ray its stratum, 0 .. ``jitter_count`` - 1, shuffled per step by
+    its pixel's key ``jitter_keys``, kernels_np.step_stratum; None: the whole step)."""
     origins: np.ndarray
     dirs: np.ndarray
     t0: np.ndarray
@@ -285,6 +287,9 @@ class MarchInputs:
     extinction_channels: Optional[list] = None
     cell_tau: float = 0.0
     cell_walk: int = 0
+    jitter_bands: Optional[np.ndarray] = None
+    jitter_count: int = 1
+    jitter_keys: Optional[np.ndarray] = None
 
     def replace(self, **changes) -> "MarchInputs":
         return dataclasses.replace(self, **changes)
@@ -310,7 +315,8 @@ def march(inputs: MarchInputs, *, backend=None) -> MarchResult:
             a.sigma_ts, a.gs, a.thresholds, a.voxels, a.lights, a.ambient, a.step,
             a.depth_opacity, a.depth_miss, a.multiple, a.emissions, a.bricks, a.adapt_tau,
             a.emission_channels, a.roulette, a.disc_reach, a.scatter_channels,
-            a.extinction_channels, a.cell_tau, a.cell_walk))
+            a.extinction_channels, a.cell_tau, a.cell_walk, a.jitter_bands, a.jitter_count,
+            a.jitter_keys))
     n = len(a.origins)
     nl = len(np.asarray(a.lights).reshape(-1, LIGHT_FIELDS))
     packed = None
@@ -344,7 +350,11 @@ def march(inputs: MarchInputs, *, backend=None) -> MarchResult:
         None if a.disc_reach is None else [float(x) for x in a.disc_reach],
         None if a.scatter_channels is None else [int(c) for c in a.scatter_channels],
         None if a.extinction_channels is None else [int(c) for c in a.extinction_channels],
-        float(a.cell_tau), int(a.cell_walk))
+        float(a.cell_tau), int(a.cell_walk),
+        None if a.jitter_bands is None else
+        np.ascontiguousarray(a.jitter_bands, np.uint32).reshape(n), int(a.jitter_count),
+        None if a.jitter_bands is None else
+        np.ascontiguousarray(a.jitter_keys, np.uint32).reshape(n))
     return MarchResult(np.frombuffer(s, np.float64).reshape(n, 3),
                        np.frombuffer(t, np.float64).reshape(n, 3),
                        np.frombuffer(d, np.float64).reshape(n),

@@ -272,6 +272,7 @@ def upsample_into(field, channel, lattice, stride, flat):
 
 DIM_JITTER = 1000       # random dimension of the step jitter; lights use 2*i, 2*i + 1
 DIM_ROULETTE = 1001     # random dimension of the march's Russian roulette
+DIM_STRATUM = 1002      # random dimension of the shuffle of the steps' strata (step_stratum)
 REFINE_STEPS = 8
 EDGE_EPS = 1e-6        # occupancies within this of 0 or 1 count as outside / inside
 T_MIN = 1e-6
@@ -635,10 +636,23 @@ def light_varies(lights, origins, dirs, s_a, s_b, g):
     return out
 
 
+def step_stratum(bands, keys, k: int, n: int) -> np.ndarray:
+    """The strata (0 .. n - 1, int64) of step ``k`` of rays on strata ``bands`` whose pixels'
+    keys are ``keys`` (uint32): each band shuffled by a bijection of the n strata drawn per
+    pixel and step (XOR with a mask when n is a power of two, which keeps the adaptive
+    rounds' first 2^m samples on distinct 2^m-ths of the step; a shift modulo n otherwise):
+    a pixel's samples cover every stratum of each step, one ray's steps lie on unrelated
+    strata (so a ray's points are no more alike from step to step than independent ones)."""
+    m = np.minimum((uniform(keys, k, DIM_STRATUM) * n).astype(np.int64), n - 1)
+    b = np.asarray(bands, np.int64)
+    return b ^ m if n & (n - 1) == 0 else (b + m) % n
+
+
 def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, gs, thresholds,
           voxels, lights, ambient, step, depth_opacity, depth_miss, multiple=None, emissions=None,
           bricks=None, adapt_tau=0.0, emission_channels=None, roulette=0.0, disc_reach=None,
-          scatter_channels=None, extinction_channels=None, cell_tau=0.0, cell_walk=0):
+          scatter_channels=None, extinction_channels=None, cell_tau=0.0, cell_walk=0,
+          jitter_bands=None, jitter_count=1, jitter_keys=None):
     """March camera rays through media fields: the numpy twin of ``_kernels.march``.
 
     Rays ``origins + t dirs`` (N,3), t in [t0, t1] (N,) metres; ``axial`` (N,) turns t into
@@ -670,6 +684,11 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
     extinguishing corner (``_corner_max``) times its voxel size is at least ``cell_tau``
     reads each light's optical depth by ``_walk_tau`` (at most ``cell_walk`` cells; 0: the
     next plane alone) instead of trilinearly.
+    ``jitter_bands``: None, or per ray its stratum b (0 .. ``jitter_count`` - 1), with
+    ``jitter_keys`` (N,) uint32 its pixel's key: the ray's point on step k is drawn
+    uniformly on the step's fraction [b_k / jitter_count, (b_k + 1) / jitter_count) instead
+    of on the whole step, b_k = ``step_stratum`` (b, key, k) (a pixel's samples on
+    different strata cover each step: their mean varies less than independent draws').
 
     Super-step K covers [t0 + SUPER K h, t0 + SUPER (K + 1) h] (the last one ends at t1) and
     is cut into n_sub equal steps of length H (the ray's last one cut at t1), step j read at
@@ -698,6 +717,14 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
     trans = np.ones((n, 3))
     depth = np.full(n, float(depth_miss))
     keys = np.asarray(keys, np.uint32)
+    bands, jitter_w = None, 1.0   # each ray's stratum of its steps
+    if jitter_bands is not None:
+        bands = np.asarray(jitter_bands).reshape(n).astype(np.int64)
+        if not 1 <= int(jitter_count) <= 1 << 24 or np.any(bands < 0) or \
+                np.any(bands >= int(jitter_count)):
+            raise ValueError("jitter_bands must lie in [0, jitter_count), count in [1, 2^24]")
+        jitter_keys = np.asarray(jitter_keys, np.uint32).reshape(n)
+        jitter_w = 1.0 / int(jitter_count)
     lights = np.asarray(lights, np.float64).reshape(-1, LIGHT_FIELDS)
     h = float(step)
     t0 = np.asarray(t0, np.float64)
@@ -747,7 +774,12 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
             o, d = origins[alive], dirs[alive]
             ka = keys[alive]
             hl = np.minimum(Hs, t1[alive] - seg)
-            ts = seg + uniform(ka, k, DIM_JITTER) * hl   # uniform on the step, the last one too
+            # uniform on the ray's stratum of the step, the last one too
+            u = uniform(ka, k, DIM_JITTER)   # on the rays' strata of the step, where given
+            if bands is not None:
+                u = (step_stratum(bands[alive], jitter_keys[alive], k, int(jitter_count)) + u) \
+                    * jitter_w
+            ts = seg + u * hl
             x = o + d * ts[:, None]
             m = len(alive)
             sig_t = np.zeros((m, 3))

@@ -208,8 +208,11 @@ def _channels(per_medium):
     return [-1 if c is None else c for c in per_medium]
 
 
-def march_rays(ctx: MarchContext, origins, dirs, t0, t1, axial, keys):
-    """March rays; returns dict of per-ray arrays: 'single' (N,3), 'T' (N,3), 'depth' (N,)."""
+def march_rays(ctx: MarchContext, origins, dirs, t0, t1, axial, keys, jitter=None):
+    """March rays; returns dict of per-ray arrays: 'single' (N,3), 'T' (N,3), 'depth' (N,).
+    ``jitter``: None, or (bands (N,), count, keys (N,)): each ray's stratum of its steps'
+    jitter and its pixel's key (kernels.MarchInputs.jitter_bands), the pixel's samples
+    spread over ``count`` strata."""
     amb = ctx.layout.ambient_channel
     em = [np.maximum(np.asarray(m.medium.emission, np.float64).reshape(3), 0.0) for m in ctx.media]
     ec, sc, xc = (_channels(ctx.layout.emission_channels),
@@ -226,6 +229,9 @@ def march_rays(ctx: MarchContext, origins, dirs, t0, t1, axial, keys):
         [m.march_bricks for m in ctx.media] if ctx.tuning.skip_empty else None,
         adapt_tau=ctx.tuning.adapt_tau, emission_channels=ec, roulette=ctx.tuning.roulette,
         disc_reach=ctx.disc_reach, scatter_channels=sc, extinction_channels=xc,
-        cell_tau=ctx.tuning.cell_tau, cell_walk=ctx.tuning.cell_walk))
+        cell_tau=ctx.tuning.cell_tau, cell_walk=ctx.tuning.cell_walk,
+        jitter_bands=None if jitter is None else jitter[0],
+        jitter_count=1 if jitter is None else int(jitter[1]),
+        jitter_keys=None if jitter is None else jitter[2]))
     return {"single": r.single, "T": r.T, "depth": r.depth, "multiple": r.multiple,
             "steps": r.steps, "emission": r.emission}

@@ -15,6 +15,11 @@ whichever adaptive round takes the sample, and nothing drawn for the samples no 
   ``spp`` a power of two, the sample taken t-th gets the band bitreverse(t) XOR a random mask
   per pixel and dimension, so the first 2^m samples taken hold one sample in each of 2^m
   equal bands; otherwise a random Latin hypercube per pixel (a permutation of the bands).
+* Step strata (march.march_rays' ``jitter``): the same, in a dimension of their own: the
+  sample's stratum of the march's steps, the part of a step its jittered point lies on
+  (shuffled per step by the pixel's key, ``pixel_keys``: kernels_np.step_stratum), so that
+  a pixel's samples read each step at points spread over it (the jitter's noise, the most
+  of a dense medium's, falls faster than 1 / n in the samples taken).
 """
 from __future__ import annotations
 
@@ -28,6 +33,7 @@ from .rng import hash32
 
 _M32 = 0xFFFFFFFF
 D_OFFSET, D_LENS, D_BAND, D_CELL_MASK, D_BAND_MASK = 0, 2, 4, 6, 8   # dimensions of the draws
+D_STEP_BAND, D_STEP_MASK, D_STEP_KEY = 10, 11, 12
 
 
 def power_of_two_side(spp: int) -> int:
@@ -72,6 +78,7 @@ class PixelSamples:
             self.rev = reverse_bits(np.arange(self.spp), self.spp.bit_length() - 1)
             self.band_mask = np.stack([self._bits(pix, 0, D_BAND_MASK + a) % self.spp
                                        for a in (0, 1)])                     # (2, npx)
+            self.step_mask = self._bits(pix, 0, D_STEP_MASK) % self.spp      # (npx,)
 
     def _bits(self, pixels, samples, dim: int) -> np.ndarray:
         """uint32 hashes of (pixel, sample, dim), as int64."""
@@ -105,11 +112,27 @@ class PixelSamples:
 
     def bands(self, pixels, samples) -> np.ndarray:
         """(2, len(pixels), len(samples)) the gather bands (0 .. spp - 1) of those samples."""
+        return np.stack([self._strata(pixels, samples, None if self.rank is None else
+                                      self.band_mask[a], D_BAND + a) for a in (0, 1)])
+
+    def step_bands(self, pixels, samples) -> np.ndarray:
+        """(len(pixels), len(samples)) the march steps' strata (0 .. spp - 1) of those
+        samples (module docstring)."""
+        return self._strata(pixels, samples, None if self.rank is None else self.step_mask,
+                            D_STEP_BAND)
+
+    def pixel_keys(self, pixels) -> np.ndarray:
+        """(len(pixels),) uint32 keys of those pixels, the same for all their samples (the
+        march shuffles each step's strata by them: kernels_np.step_stratum)."""
+        return self._bits(pixels, 0, D_STEP_KEY).astype(np.uint32)
+
+    def _strata(self, pixels, samples, mask, dim: int) -> np.ndarray:
+        """(len(pixels), len(samples)) strata (0 .. spp - 1): with adaptive rounds the
+        sample's turn bit-reversed XOR the pixel's ``mask``, else a permutation per pixel
+        drawn in dimension ``dim``."""
         pixels = np.asarray(pixels, np.int64)
         samples = np.asarray(samples, np.int64)
         if self.rank is not None:
-            turn = self.rev[self.rank[samples]]
-            return turn[None, None, :] ^ self.band_mask[:, pixels][:, :, None]
+            return self.rev[self.rank[samples]][None, :] ^ mask[pixels][:, None]
         p, s = self._grid(pixels, np.arange(self.spp))
-        perm = np.stack([np.argsort(self._uniform(p, s, D_BAND + a), axis=1) for a in (0, 1)])
-        return perm[:, :, samples]
+        return np.argsort(self._uniform(p, s, dim), axis=1)[:, samples]

@@ -199,6 +199,10 @@ def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, r
     samples: a pixel's gathers are then a Latin hypercube over (r^2, phi) that shares out
     the hemisphere instead of drawing it independently, and each sample's band is uniform,
     so the estimate stays unbiased where only some of a pixel's samples hit the surface.
+    The lights' emitter points (a lamp's disc, an area light) are drawn on the same bands,
+    crossed (band_phi for the first number, band_r for the second): the direct light and the
+    gathered light are separate terms of the sum, each drawn uniformly, so sharing the bands
+    costs no bias, and a pixel's samples share out the emitter (its soft shadow's noise).
     ``guides`` (gathers.Guides): lamps inside the media, about which a share ``guided`` of
     the gathers that read ``media_radiance`` are drawn (gathers.directions, weighed by the
     balance heuristic); None: all cosine-weighted.
@@ -218,6 +222,10 @@ def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, r
         if is_dark(light):
             continue
         u = rng.random((n_pts, 2))
+        if strata is not None:   # the pixel's samples share out the emitter, as the gathers
+            count = max(int(strata[2]), 1)
+            u = np.stack([(np.asarray(strata[1]) + u[:, 0]) / count,
+                          (np.asarray(strata[0]) + u[:, 1]) / count], -1)
         # the emitter point drawn (a lamp's disc, an area light's solid angle) and its
         # distance: the shadow ray and its optical depth run to that point, not as far as
         # the centre along the drawn direction (in smoke round a lamp, or fog under a large

@@ -316,8 +316,11 @@ class FrameMarch:
                 bands = draws.bands(active, batch)
                 strata = (bands[0].ravel(), bands[1].ravel(), spp)
             ids = (active[:, None] * spp + batch[None, :]).ravel()
+            jitter = (draws.step_bands(active, batch).ravel(), spp,
+                      np.repeat(draws.pixel_keys(active), len(batch)))
             r, hit, behind = self.march(index, k, rng, o, d, tmin, tmax, axial,
-                                        ray_keys_at(st.seed, index, ids), strata, None, px, py)
+                                        ray_keys_at(st.seed, index, ids), strata, None, px, py,
+                                        jitter)
             acc.add(active, len(batch), r, hit, behind, st.film_transparent,
                     taken - len(batch))
             steps += float(r["steps"].sum())
@@ -339,12 +342,13 @@ class FrameMarch:
                 (steps, float(acc.count.sum())))
 
     def march(self, index, k, rng, o, d, tmin, tmax, axial, keys, strata, gathered=None,
-              px=None, py=None):
+              px=None, py=None, jitter=None):
         """Round ``k`` of tile ``index``: the rays' march through the media (random
         ``keys``), their surface hits (gathering through the Latin hypercube ``strata``, or
         reading the surface cache at the rays' pixel positions ``px``, ``py``) and
         what lies behind the media: (the march's per-ray results, hit, behind).  The
-        gathers' march samples are appended to ``gathered`` where given."""
+        gathers' march samples are appended to ``gathered`` where given; ``jitter``: the
+        rays' strata of their march steps (march.march_rays), or None."""
         st, fog_pm = self.st, self.fog_pm
         n = len(o)
         t_hit, tri = intersect(self.surf, o, d, tmax)
@@ -355,7 +359,7 @@ class FrameMarch:
         t_end = np.where(void, tmin, t_end)
         if self.ctx is not None:
             t0, t1 = kernels.union_interval(self.media, o, d, tmin, t_end)
-            r = march_rays(self.ctx, o, d, t0, t1, axial, keys)
+            r = march_rays(self.ctx, o, d, t0, t1, axial, keys, jitter)
         else:
             r = {"single": np.zeros((n, 3)), "T": np.ones((n, 3)), "depth": np.full(n, DEPTH_MISS),
                  "multiple": np.zeros((n, 3)), "steps": np.zeros(n), "emission": np.zeros((n, 3))}

@@ -101,13 +101,15 @@ def test_every_round_prefix_is_stratified_over_the_pixel_and_the_gather_bands():
     assert sorted(order.tolist()) == list(range(16))
     draws = PixelSamples(16, 50, 3, order)
     offs = draws.offsets(np.arange(50), np.arange(16))
-    bands = draws.bands(np.arange(50), np.arange(16))
+    bands = np.concatenate([draws.bands(np.arange(50), np.arange(16)),
+                            draws.step_bands(np.arange(50), np.arange(16))[None]])
+    assert len({tuple(bands[d].ravel()) for d in range(3)}) == 3   # each dimension its own
     for n, cells in ((4, 2), (16, 4)):
         first = offs[:, order[:n]]                     # (pixels, n, 2)
         cell = np.floor(first * cells).astype(int)
         for p in range(50):                            # one sample in each of n cells
             assert len({(a, b) for a, b in cell[p]}) == n
-            for dim in range(2):                       # and in each of n equal bands
+            for dim in range(3):                       # and in each of n equal bands
                 assert len(set((bands[dim, p, order[:n]] * n // 16).tolist())) == n
     # unbiased: the first 4 samples are spread uniformly over the pixel
     big = PixelSamples(16, 20000, 4, order).offsets(np.arange(20000), order[:4])
@@ -263,7 +265,14 @@ def test_a_sample_is_drawn_the_same_whichever_round_takes_it(spp, adaptive):
     draws = PixelSamples(spp, 300, 11, order)
     every = np.arange(300), np.arange(spp)
     offs, lens, bands = draws.offsets(*every), draws.lens(*every), draws.bands(*every)
+    steps = draws.step_bands(*every)
     some_p, some_s = np.array([5, 17, 299]), np.array([spp - 1, 0, 2])
+    np.testing.assert_array_equal(draws.step_bands(some_p, some_s), steps[some_p][:, some_s])
+    assert np.all(np.sort(steps, axis=1) == np.arange(spp))
+    assert not np.array_equal(steps, bands[0]) and not np.array_equal(steps, bands[1])
+    keys = draws.pixel_keys(np.arange(300))
+    assert keys.dtype == np.uint32 and len(np.unique(keys)) == 300
+    np.testing.assert_array_equal(draws.pixel_keys(some_p), keys[some_p])
     np.testing.assert_array_equal(draws.offsets(some_p, some_s), offs[some_p][:, some_s])
     np.testing.assert_array_equal(draws.lens(some_p, some_s), lens[some_p][:, some_s])
     np.testing.assert_array_equal(draws.bands(some_p, some_s), bands[:, some_p][:, :, some_s])

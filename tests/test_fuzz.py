@@ -70,6 +70,17 @@ def test_fuzz_march_and_optical_depth():
             kernels._c.march(*args, None, None, bricks, 4, float(rng.choice([0.0, 0.1, 5.0])))
         except ValueError:
             pass
+        # the pixels' strata of the steps and the lights: random counts and bands (some
+        # beyond the count), keys of the wrong length now and then
+        n_rays = len(args[0])
+        count = int(rng.choice([1, 4, 6, 16, 1 << 24, 0, -3]))
+        bands = rng.integers(0, max(count, 1) + int(rng.random() < 0.2), n_rays).astype(np.uint32)
+        keys = rng.integers(0, 2 ** 32, n_rays + int(rng.random() < 0.1), dtype=np.uint32)
+        try:
+            kernels._c.march(*args, None, None, None, 4, 0.0, None, 0.0, None, None, None, 0.0,
+                             0, bands, count, keys)
+        except (ValueError, OverflowError):
+            pass
         n = len(args[0])
         assert len(s) == 24 * n and len(t) == 24 * n and len(dep) == 8 * n
         fields, w2is, st, thr = args[6], args[7], args[9], args[11]

@@ -411,6 +411,46 @@ def test_gathers_and_the_pixels_latin_hypercube_keep_the_mean_and_cut_the_noise(
 
 
 @pytest.mark.parametrize("kind", ["AREA", "POINT"])
+def test_a_pixels_samples_share_out_the_emitter_in_a_soft_shadow(kind):
+    """surfaces.shade with a pixel's bands (``strata``): its samples draw the emitter point
+    (an area light, a lamp's disc) on the bands too.  A ground point in the penumbra of a
+    black wall under the light: the pixels' mean stays that of independent draws (within its
+    standard error) and the pixels' means spread less than half as much."""
+    ground = quad(0.0, 10.0, albedo=0.5, name="ground")
+    wall = Surface("wall", np.array([[0, -10, 0.5], [0, 10, 0.5], [0, 10, 5], [0, -10, 5]],
+                                    float), np.array([[0, 1, 2], [0, 2, 3]]), np.zeros(3))
+    ss = prepare_surfaces([ground, wall])
+    m = np.eye(4)
+    m[:3, 3] = [0.0, 0.0, 2.0]
+    if kind == "AREA":
+        light = Light("AREA", "a", np.full(3, 100.0), matrix=m, shape="SQUARE", size_x=1.0,
+                      size_y=1.0, direction=np.array([0.0, 0.0, -1.0]))
+    else:
+        light = Light("POINT", "p", np.full(3, 100.0), position=m[:3, 3], radius=0.5)
+    spp, pixels = 16, 1000
+    n = spp * pixels
+    p = np.tile([[0.12, 0.0, 0.0]], (n, 1))       # the wall hides part of the emitter
+    d = np.tile([[0.0, 0.0, -1.0]], (n, 1))
+    _, tri = intersect(ss, p - 2 * d, d, np.full(n, 5.0))
+    no_media = lambda pts, dirs, t: np.zeros((len(pts), 3))
+    rng = np.random.default_rng(8)
+    means, spreads = [], []
+    for strata in (None, "bands"):
+        st = None
+        if strata:
+            bands = np.argsort(rng.random((2, pixels, spp)), axis=2).reshape(2, n)
+            st = (bands[0], bands[1], spp)
+        out = surfaces.shade(ss, tri, p, d, [light], np.zeros(3), no_media, rng, None,
+                             bounces=0, gathers=1, strata=st)[:, 0]
+        per_pixel = out.reshape(pixels, spp).mean(axis=1)
+        means.append(per_pixel.mean())
+        spreads.append(per_pixel.std())
+    assert 0.1 < means[0] and np.ptp(out) > 0.2 * means[0]   # a penumbra: some draws hidden
+    assert abs(means[1] - means[0]) <= 4 * np.hypot(*spreads) / np.sqrt(pixels)
+    assert spreads[1] < 0.5 * spreads[0], spreads
+
+
+@pytest.mark.parametrize("kind", ["AREA", "POINT"])
 def test_a_surfaces_shadow_ray_runs_to_the_emitter_point_drawn(kind):
     """surfaces.shade: the light's optical depth and visibility are taken along the drawn
     direction as far as the emitter point drawn (an area light's solid angle, a lamp's

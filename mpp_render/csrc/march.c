@@ -6,6 +6,7 @@
 #define MAX_LIGHTS 64
 #define MAX_CH 256
 #define DIM_JITTER 1000
+#define DIM_STRATUM 1002  /* the steps' strata's shuffle (kernels_np.DIM_STRATUM) */
 #define DIM_ROULETTE 1001   /* kernels_np.DIM_ROULETTE */
 #define REFINE_STEPS 8
 #define EDGE_EPS 1e-6
@@ -476,6 +477,10 @@ typedef struct {
     Py_ssize_t n;                          /* rays */
     const double *O, *D, *T0, *T1, *AX;    /* origins, dirs (n, 3); t0, t1, axial (n) */
     const uint32_t *K;                     /* each ray's random key */
+    const uint32_t *JB;                    /* each ray's jitter stratum (0 .. nj - 1), or NULL */
+    const uint32_t *JK;                    /* each ray's pixel's key (the steps' shuffles) */
+    int nj;                                /* the strata (1 without) */
+    double jw;                             /* a stratum's width 1 / nj */
     int ng, skip;                          /* media; skip: brick bounds were given */
     Grid g[MAX_MEDIA];
     Bricks bks[MAX_MEDIA];
@@ -511,7 +516,7 @@ typedef struct {
     double sig_max[MAX_MEDIA];             /* largest extinction per unit density, over channels */
     double g_lobe;                         /* the most anisotropic medium's g (light_varies) */
     int adapt;                             /* longer steps in thin media */
-    Buf bo, bd, b0, b1, bax, bk, bl, btab, gb[MAX_MEDIA], btabs[MAX_MEDIA], kb[MAX_MEDIA];
+    Buf bo, bd, b0, b1, bax, bk, bjb, bjk, bl, btab, gb[MAX_MEDIA], btabs[MAX_MEDIA], kb[MAX_MEDIA];
     int ntabs, nkb, nlv;
     Buf *lvb;
     int sun[MAX_LIGHTS];                   /* a sun: the same light at every point */
@@ -524,7 +529,7 @@ static void march_release(March *c) {
     if (c->lvb) for (int i = 0; i < c->nlv; i++) buf_release(&c->lvb[i]);
     free(c->lvb); free(c->lv);
     buf_release(&c->bo); buf_release(&c->bd); buf_release(&c->b0); buf_release(&c->b1);
-    buf_release(&c->bax); buf_release(&c->bk); buf_release(&c->bl);
+    buf_release(&c->bax); buf_release(&c->bk); buf_release(&c->bjb); buf_release(&c->bjk); buf_release(&c->bl);
     for (int m = 0; m < c->ng; m++) buf_release(&c->gb[m]);
     for (int m = 0; m < c->nkb; m++) buf_release(&c->kb[m]);
 }
@@ -760,16 +765,17 @@ static int parse_multiple(March *c, PyObject *pms) {
 static int march_parse(March *c, PyObject *args) {
     PyObject *po, *pd, *pt0, *pt1, *pax, *pk, *fields, *w2is, *sss, *sts, *gsl, *thrs, *vox, *plights;
     PyObject *pms = Py_None, *pem = Py_None, *pbk = Py_None, *pec = Py_None, *pdr = Py_None;
-    PyObject *psc = Py_None, *pxc = Py_None;
-    int brick = 4;
+    PyObject *psc = Py_None, *pxc = Py_None, *pjb = Py_None, *pjk = Py_None;
+    int brick = 4, nj = 1;
     c->adapt_tau = 0.0;
     c->roulette = 0.0;
     c->cell_tau = 0.0;
     c->cell_walk = 0;
-    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOiddd|OOOidOdOOOdi", &po, &pd, &pt0, &pt1, &pax, &pk, &fields,
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOiddd|OOOidOdOOOdiOiO", &po, &pd, &pt0, &pt1, &pax, &pk, &fields,
                           &w2is, &sss, &sts, &gsl, &thrs, &vox, &plights, &c->ambient, &c->step,
                           &c->depth_opacity, &c->depth_miss, &pms, &pem, &pbk, &brick, &c->adapt_tau,
-                          &pec, &c->roulette, &pdr, &psc, &pxc, &c->cell_tau, &c->cell_walk))
+                          &pec, &c->roulette, &pdr, &psc, &pxc, &c->cell_tau, &c->cell_walk,
+                          &pjb, &nj, &pjk))
         return -1;
     if (!(c->cell_tau >= 0.0) || c->cell_walk < 0 || c->cell_walk > 4096) {
         PyErr_SetString(PyExc_ValueError, "cell_tau must be >= 0 and cell_walk in [0, 4096]");
@@ -796,6 +802,27 @@ static int march_parse(March *c, PyObject *args) {
     if (get_buf(pt1, &c->b1, 'd', 1, s_n2, "t1") < 0) return -1;
     if (get_buf(pax, &c->bax, 'd', 1, s_n3, "axial") < 0) return -1;
     if (get_buf(pk, &c->bk, 'I', 1, s_n4, "keys") < 0) return -1;
+    c->JB = c->JK = NULL;
+    c->nj = 1;
+    c->jw = 1.0;
+    if (pjb != Py_None) {
+        Py_ssize_t s_n5[1] = {n}, s_n6[1] = {n};
+        if (nj < 1 || nj > (1 << 24)) {
+            PyErr_SetString(PyExc_ValueError, "jitter_count must be in [1, 2^24]");
+            return -1;
+        }
+        if (get_buf(pjb, &c->bjb, 'I', 1, s_n5, "jitter_bands") < 0) return -1;
+        if (get_buf(pjk, &c->bjk, 'I', 1, s_n6, "jitter_keys") < 0) return -1;
+        c->JK = (const uint32_t *)c->bjk.view.buf;
+        c->nj = nj;
+        c->JB = (const uint32_t *)c->bjb.view.buf;
+        for (Py_ssize_t r = 0; r < n; r++)
+            if (c->JB[r] >= (uint32_t)nj) {
+                PyErr_SetString(PyExc_ValueError, "jitter_bands must lie in [0, jitter_count)");
+                return -1;
+            }
+        c->jw = 1.0 / (double)nj;
+    }
     if (parse_grids(fields, w2is, sts, thrs, c->g, c->gb, &c->ng, 1) < 0) return -1;
     if (parse_bricks(pbk, brick, c->g, c->ng, c->bks, c->kb, &c->nkb) < 0) return -1;
     c->skip = pbk != Py_None;
@@ -894,6 +921,25 @@ static int super_step_count(const March *c, const double o[3], const double d[3]
             n_sub = SUPER;
     }
     return n_sub;
+}
+
+/* The stratum (0 .. n - 1) of step k of a ray whose pixel's key is pk and whose stratum is
+ * b: b shuffled by a bijection of the strata drawn per pixel and step (XOR with a mask when
+ * n is a power of two, which keeps the adaptive rounds' first 2^m samples on distinct
+ * 2^m-ths of the step; a shift modulo n otherwise), so that a pixel's samples cover every
+ * stratum of each step while one ray's steps lie on unrelated strata (twin:
+ * kernels_np.step_stratum). */
+static inline uint32_t step_stratum(uint32_t b, uint32_t pk, long k, int n) {
+    uint32_t m = (uint32_t)(uniform01(pk, k, DIM_STRATUM) * (double)n);
+    if (m >= (uint32_t)n) m = (uint32_t)n - 1;
+    return (n & (n - 1)) == 0 ? (b ^ m) : (uint32_t)(((uint64_t)b + m) % (uint32_t)n);
+}
+
+/* u in [0, 1) moved onto the stratum of step k of ray r, where the rays have strata
+ * (else u). */
+static inline double on_stratum(const March *c, Py_ssize_t r, long k, double u) {
+    if (!c->JB) return u;
+    return ((double)step_stratum(c->JB[r], c->JK[r], k, c->nj) + u) * c->jw;
 }
 
 /* Every light at x, march step k of the ray with random key `key`; with `again`, the ray's
@@ -1073,7 +1119,9 @@ static long march_ray(const March *c, Py_ssize_t r, RaySums *sums) {
             double seg = s_lo + (double)jj * H;
             if (!(seg < t1)) break;
             double hl = t1 - seg < H ? t1 - seg : H;   /* the last step may end early, at t1 */
-            double ts = seg + uniform01(key, k, DIM_JITTER) * hl, x[3];  /* uniform on it */
+            /* uniform on it, on the ray's stratum of it where it has strata */
+            double ts = seg + on_stratum(c, r, k, uniform01(key, k, DIM_JITTER)) * hl,
+                   x[3];
             for (int q = 0; q < 3; q++) x[q] = o[q] + d[q] * ts;
             sample_lights(c, x, key, k, sampled, &la);
             sampled = 1;
