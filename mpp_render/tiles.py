@@ -271,7 +271,8 @@ class FrameMarch:
         camera samples)).
 
         Each pixel has ``samples`` samples whose offsets in the pixel, lens points, random
-        keys and surface-gather bands are counter-based draws of (tile, pixel, sample)
+        keys, surface-gather bands and strata of the march's steps (with the pixel's key
+        that shuffles them per step) are counter-based draws of (tile, pixel, sample)
         (pixelsamples.py), so a sample is the same whichever round takes it, and only the
         samples taken are drawn.  Adaptive sampling (``Settings.noise_threshold`` > 0): with the
         pilot's ``plan`` (pilot.py) every pixel first takes one sample, and the pixels the
