@@ -774,8 +774,8 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
             o, d = origins[alive], dirs[alive]
             ka = keys[alive]
             hl = np.minimum(Hs, t1[alive] - seg)
-            # uniform on the ray's stratum of the step, the last one too
-            u = uniform(ka, k, DIM_JITTER)   # on the rays' strata of the step, where given
+            # uniform on the step (the last one too), on the ray's stratum of it where given
+            u = uniform(ka, k, DIM_JITTER)
             if bands is not None:
                 u = (step_stratum(bands[alive], jitter_keys[alive], k, int(jitter_count)) + u) \
                     * jitter_w

@@ -223,9 +223,7 @@ def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, r
             continue
         u = rng.random((n_pts, 2))
         if strata is not None:   # the pixel's samples share out the emitter, as the gathers
-            count = max(int(strata[2]), 1)
-            u = np.stack([(np.asarray(strata[1]) + u[:, 0]) / count,
-                          (np.asarray(strata[0]) + u[:, 1]) / count], -1)
+            u = on_bands(u, strata, crossed=True)
         # the emitter point drawn (a lamp's disc, an area light's solid angle) and its
         # distance: the shadow ray and its optical depth run to that point, not as far as
         # the centre along the drawn direction (in smoke round a lamp, or fog under a large
@@ -260,6 +258,19 @@ def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, r
     return out
 
 
+def on_bands(u: np.ndarray, strata, crossed: bool = False) -> np.ndarray:
+    """``u`` (N, ..., 2) numbers in [0, 1) moved onto each point's bands of ``strata``
+    ((band_r (N,), band_phi (N,), count), ``shade``): number a on [b_a / count,
+    (b_a + 1) / count); ``crossed``: band_phi for the first number, band_r for the second."""
+    count = max(int(strata[2]), 1)
+    bands = (strata[1], strata[0]) if crossed else (strata[0], strata[1])
+    lead = (slice(None),) + (None,) * (u.ndim - 2)    # a point's bands over its other axes
+    out = np.empty_like(u)
+    for a in (0, 1):
+        out[..., a] = (np.asarray(bands[a])[lead] + u[..., a]) / count
+    return out
+
+
 def gathered(ss: SurfaceSet, po, nrm, lights, world_color, media_optical_depth, rng,
              media_radiance=None, bounces: int = 1, gathers: int = 1, strata=None,
              guides=None, guided: float = 0.5):
@@ -274,9 +285,7 @@ def gathered(ss: SurfaceSet, po, nrm, lights, world_color, media_optical_depth, 
     k = max(int(gathers), 1)
     u = rng.random((n_pts, k, 2))
     if strata is not None:   # the pixel's samples share out (r^2, phi)
-        count = max(int(strata[2]), 1)
-        u[..., 0] = (np.asarray(strata[0])[:, None] + u[..., 0]) / count
-        u[..., 1] = (np.asarray(strata[1])[:, None] + u[..., 1]) / count
+        u = on_bands(u, strata)
     if media_radiance is None or k * guided < 1.0:
         guides = None
     choose = rng.random((n_pts, k)) if guides is not None else None

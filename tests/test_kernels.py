@@ -208,6 +208,20 @@ def test_a_thin_mesh_volume_takes_longer_steps_inside_and_short_ones_at_its_surf
     np.testing.assert_allclose(long.T, short.T, rtol=0.01)
 
 
+def smoke_before_a_lamp(rng, density):
+    """(media, lights, precomputed) of one random smoke at ``density`` lit by a lamp behind
+    it (from the camera at z = 6) and a sun, without multiple scattering."""
+    media = random_media(rng, density)[:1]
+    lamp = Light("POINT", "behind", np.array([400.0, 300.0, 200.0]),
+                 position=np.array([0.2, 0.1, -1.0]))
+    lights = [lamp, all_lights()[0]]
+    cam = Camera("PERSP", np.eye(4), 8, 8, (-0.5, 0.5, -0.5, 0.5))
+    cam.cam_to_world[:3, 3] = [0, 0, 6]
+    pre = precompute(media, lights, World(np.array([0.2, 0.3, 0.5])), cam, n_dirs=8,
+                     multiple=False)
+    return media, lights, pre
+
+
 @pytest.mark.parametrize("backend", ["c", "numpy"])
 def test_the_roulette_keeps_the_mean_and_saves_steps(backend):
     """Tuning.roulette: below the threshold a ray goes on with probability T / roulette (T
@@ -217,14 +231,7 @@ def test_the_roulette_keeps_the_mean_and_saves_steps(backend):
     if backend == "c" and kernels._c is None:
         pytest.skip("compiled kernels not built")
     rng = np.random.default_rng(11)
-    media = random_media(rng, 8.0)[:1]
-    lamp = Light("POINT", "behind", np.array([400.0, 300.0, 200.0]),
-                 position=np.array([0.2, 0.1, -1.0]))
-    lights = [lamp, all_lights()[0]]
-    cam = Camera("PERSP", np.eye(4), 8, 8, (-0.5, 0.5, -0.5, 0.5))
-    cam.cam_to_world[:3, 3] = [0, 0, 6]
-    pre = precompute(media, lights, World(np.array([0.2, 0.3, 0.5])), cam, n_dirs=8,
-                     multiple=False)
+    media, lights, pre = smoke_before_a_lamp(rng, 8.0)
     n = 4000 if backend == "c" else 1500
     o = np.tile([0.1, 0.0, 2.0], (n, 1))
     d = np.tile([0.0, 0.0, -1.0], (n, 1))
@@ -258,14 +265,7 @@ def test_a_pixels_samples_on_the_steps_strata_keep_the_mean_with_less_noise(back
     if backend == "c" and kernels._c is None:
         pytest.skip("compiled kernels not built")
     rng = np.random.default_rng(12)
-    media = random_media(rng, 4.0)[:1]
-    lamp = Light("POINT", "behind", np.array([400.0, 300.0, 200.0]),
-                 position=np.array([0.2, 0.1, -1.0]))
-    lights = [lamp, all_lights()[0]]
-    cam = Camera("PERSP", np.eye(4), 8, 8, (-0.5, 0.5, -0.5, 0.5))
-    cam.cam_to_world[:3, 3] = [0, 0, 6]
-    pre = precompute(media, lights, World(np.array([0.2, 0.3, 0.5])), cam, n_dirs=8,
-                     multiple=False)
+    media, lights, pre = smoke_before_a_lamp(rng, 4.0)
     groups = 1500
     n = 4 * groups
     o = np.tile([0.1, 0.0, 2.0], (n, 1))
