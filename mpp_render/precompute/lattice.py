@@ -122,7 +122,8 @@ def dilate(mask):
 
 def coarse_lattice(pm: PreparedMedium, stride: int):
     """Index points of ``pm``'s padded grid taken every ``stride`` voxels (covering the whole
-    grid) whose neighbourhood of radius ``stride`` holds density.  Returns (shape, flat
+    grid: the last may lie beyond its last voxel, by less than ``stride``) whose neighbourhood
+    of radius ``stride`` holds density (for a point beyond the grid: its last voxel's).  Returns (shape, flat
     indices into that coarse shape, world positions (K,3))."""
     shape = lattice_shape(pm.grid.shape, stride)
     occ = pm.grid > 0.0
@@ -132,9 +133,9 @@ def coarse_lattice(pm: PreparedMedium, stride: int):
         for s in range(1, stride + 1):
             acc |= np.roll(dil, s, axis=ax) | np.roll(dil, -s, axis=ax)
         dil = acc
-    sub = np.zeros(shape, bool)
-    picked = dil[::stride, ::stride, ::stride]
-    sub[:picked.shape[0], :picked.shape[1], :picked.shape[2]] = picked
-    flat = np.flatnonzero(sub)
+    # a last point beyond the grid's last voxel (where stride does not divide the grid) is
+    # taken where that voxel is: the voxels before it interpolate towards it
+    at = [np.minimum(np.arange(n) * stride, s - 1) for n, s in zip(shape, pm.grid.shape)]
+    flat = np.flatnonzero(dil[np.ix_(*at)])
     ijk = np.stack(np.unravel_index(flat, shape), axis=1).astype(np.float64) * stride
     return shape, flat, pm.to_world(ijk)

@@ -2,9 +2,12 @@
 after the phase function towards the camera and the attenuation through all media,
 A(x) = L_world * integral p(w_in . w_cam(x)) T(x, -w_in) dw_in, estimated with directions
 drawn from the phase lobe (so the estimate is the mean transmittance).  w_cam(x) points from x
-to the camera, which is exact for camera rays through x.  It is smooth: computed on a coarse
-lattice (``AMBIENT_RESOLUTION`` points along the grid's longest side) and interpolated to the
-voxels whose trilinear support touches non-zero density (lattice.needed_flat; the rest stay 0).
+to the camera, which is exact for camera rays through x.  It is mostly smooth: computed on a
+coarse lattice (``AMBIENT_RESOLUTION`` points along the grid's longest side) and interpolated
+to the voxels whose trilinear support touches non-zero density (lattice.needed_flat; the rest
+stay 0).  Where it is not (the sky's lit layer of a medium optically thick across a lattice
+cell, where A falls by a large factor between the cell's corners), the voxels of that cell
+get their own value (``refine_flat``, ``Tuning.ambient_refine``).
 """
 from __future__ import annotations
 
@@ -19,11 +22,13 @@ from ..parallel import run_chunks
 from ..phase import sample_hg
 from ..scene import Camera, Tuning, World
 from ..surfaces import intersect, occluded
-from .lattice import coarse_lattice
+from .lattice import coarse_lattice, grid_points
 from .lightdepth import SHADOW_TAU, density_lengths, depth_rows
 
 
 AMBIENT_RESOLUTION = 32  # lattice points along the longest side for the world light
+REFINE_SEED = 104729  # offsets the refined voxels' streams from the lattice's
+REFINE_CHUNK = 1 << 20  # voxels whose cells refine_flat looks up at a time
 WORLD_RNG_BLOCK = 1 << 11  # points sharing one random stream in world_light
 WORLD_CHUNK_RAYS = 1 << 14  # rays (points x directions) per world-light chunk, for a quick Esc
 GOLDEN = 0.6180339887498949  # the golden ratio's fraction: the directions' azimuth sequence
@@ -124,17 +129,82 @@ def fill_world_light(f: np.ndarray, channels, media: List[PreparedMedium], pm: P
                      should_cancel=None, surfaces=None, threads=0, tuning: Tuning = Tuning()):
     """Write the world light (``world_light`` through ``media``, on ``coarse_lattice``,
     interpolated trilinearly to the needed voxels ``flat``) into ``pm``'s field ``f`` at
-    ``channels`` = (A's first channel, A_ms's or None).  Returns the number of lattice
-    points."""
+    ``channels`` = (A's first channel, A_ms's or None); the voxels of the lattice cells
+    that ``refine_flat`` picks (``tuning.ambient_refine``) get A computed at their own
+    centres instead.  Returns the number of points computed (lattice and voxels)."""
     amb, amb_ms = channels
     stride, cshape, cflat, cpts = world_lattice(pm)
-    a = world_light(media, pm, world, camera, cpts, n_dirs, step, seed=seed,
-                    should_cancel=should_cancel, surfaces=surfaces, threads=threads,
-                    multiple=amb_ms is not None, tuning=tuning)
-    up = kernels.upsample_into
-    for ch, vals in zip((amb, amb_ms), a if amb_ms is not None else (a,)):
-        up(f, ch, on_lattice(cshape, cflat, vals), stride, flat)
-    return len(cpts)
+
+    def light(points, s):
+        return world_light(media, pm, world, camera, points, n_dirs, step, seed=s,
+                           should_cancel=should_cancel, surfaces=surfaces, threads=threads,
+                           multiple=amb_ms is not None, tuning=tuning)
+    a = light(cpts, seed)
+    pairs = a if amb_ms is not None else (a,)
+    for ch, vals in zip((amb, amb_ms), pairs):
+        kernels.upsample_into(f, ch, on_lattice(cshape, cflat, vals), stride, flat)
+    have = np.zeros(int(np.prod(cshape)), bool)
+    have[cflat] = True
+    fine = refine_flat(on_lattice(cshape, cflat, pairs[0]), have.reshape(cshape), stride,
+                       pm.grid.shape, flat, world.color, tuning.ambient_refine)
+    if len(fine):
+        b = light(grid_points(pm, fine), seed + REFINE_SEED)
+        view = f.reshape(-1, f.shape[-1])
+        for ch, vals in zip((amb, amb_ms), b if amb_ms is not None else (b,)):
+            view[fine, ch:ch + 3] = vals
+    return len(cpts) + len(fine)
+
+
+def interpolation_error(hi: np.ndarray, lo: np.ndarray) -> np.ndarray:
+    """The error of interpolating linearly, at the middle, a quantity that falls
+    exponentially from ``hi`` to ``lo`` (>= 0, elementwise): hi ((1 + r) / 2 - sqrt(r)),
+    r = lo / hi (0 where hi is 0).  The sky's light falls so into a medium's lit layer."""
+    hi = np.asarray(hi, np.float64)
+    r = np.divide(lo, hi, out=np.zeros_like(hi), where=hi > 0.0)
+    r = np.clip(r, 0.0, 1.0)
+    return hi * (0.5 * (1.0 + r) - np.sqrt(r))
+
+
+def refine_flat(values: np.ndarray, have: np.ndarray, stride: int, shape, flat, colour,
+                tol: float) -> np.ndarray:
+    """The voxels of ``flat`` (flat indices into a padded grid of ``shape``) that lie in a
+    cell of the world light's lattice (``stride`` voxels a side; ``values`` (LX,LY,LZ,3) the
+    light at its points, ``have`` (LX,LY,LZ) bool where it was computed) whose
+    ``interpolation_error`` between its computed corners' largest and smallest values is
+    above ``tol`` times the world's radiance ``colour`` in some channel; the lattice's own
+    points left out (they hold their value).  Empty where ``tol`` <= 0, the lattice is one
+    voxel apart or has fewer than 2 points along an axis."""
+    none = np.zeros(0, np.int64)
+    shp = np.asarray(have.shape)
+    flat = np.asarray(flat, np.int64)
+    if not (tol > 0.0) or stride <= 1 or np.any(shp < 2) or len(flat) == 0:
+        return none
+    col = np.asarray(colour, np.float64).reshape(3)
+    v = np.asarray(values, np.float64)
+    hi = np.full(tuple(shp - 1) + (3,), -np.inf)
+    lo = np.full(tuple(shp - 1) + (3,), np.inf)
+    for di in (0, 1):
+        for dj in (0, 1):
+            for dk in (0, 1):
+                sl = (slice(di, shp[0] - 1 + di), slice(dj, shp[1] - 1 + dj),
+                      slice(dk, shp[2] - 1 + dk))
+                h = have[sl][..., None]
+                hi = np.maximum(hi, np.where(h, v[sl], -np.inf))
+                lo = np.minimum(lo, np.where(h, v[sl], np.inf))
+    some = np.isfinite(hi[..., 0])
+    err = interpolation_error(np.where(some[..., None], hi, 0.0),
+                              np.where(some[..., None], lo, 0.0))
+    scale = np.where(col > 0.0, col, np.inf)
+    coarse = np.any(err > tol * scale, axis=-1)
+    if not coarse.any():
+        return none
+    pick = np.zeros(len(flat), bool)
+    for a in range(0, len(flat), REFINE_CHUNK):   # bounded memory on a large grid
+        ijk = np.unravel_index(flat[a:a + REFINE_CHUNK], tuple(shape))
+        cell = [np.minimum(i // stride, n - 2) for i, n in zip(ijk, shp)]
+        on_point = (ijk[0] % stride == 0) & (ijk[1] % stride == 0) & (ijk[2] % stride == 0)
+        pick[a:a + REFINE_CHUNK] = coarse[cell[0], cell[1], cell[2]] & ~on_point
+    return flat[pick]
 
 
 def world_lattice(pm: PreparedMedium):
