@@ -332,10 +332,10 @@ class Tuning:
     0.919 on the next plane alone, 0.940 / 0.945 following up to 4 / 8 cells (docs/method.md
     §5; 8 cost p_dragon's render at 1920x1080 6.7 s against 4's 5.7 s for 0.0195 against
     0.0203), 0.975 with every sample's depth marched to the light.
-    ``ambient_refine``: the sky's light A (precompute/worldlight.py) is computed on a lattice
-    about 32 points along the grid's longest side and interpolated to the voxels; the voxels
-    of a lattice cell between whose corners A falls so steeply that interpolating it
-    linearly would miss, at the cell's middle, more than this fraction of the world's
+    ``ambient_resolution``: the sky's light A (precompute/worldlight.py) is computed on a
+    lattice about this many points along a grid's longest side and interpolated to the
+    voxels.  ``ambient_refine``: the voxels of a lattice cell between whose corners A
+    falls so steeply that interpolating it linearly would miss, at the cell's middle, more than this fraction of the world's
     radiance if it fell exponentially (worldlight.interpolation_error) get A at their own
     centres (0: off; smaller: more voxels, converging on A at every voxel).  In a medium
     optically thick across a lattice cell the sky's lit layer is thinner than the cell and
@@ -372,6 +372,7 @@ class Tuning:
     path_nodal: bool = True
     cell_tau: float = 0.25
     cell_walk: int = 4
+    ambient_resolution: int = 32
     ambient_refine: float = 0.1
     surface_cache: int = 240
     surface_cache_gathers: int = 128

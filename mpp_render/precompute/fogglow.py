@@ -110,7 +110,8 @@ def glow_on_medium(fog, solid, pm, camera, n_dirs: int, step: float, multiple: b
     the sky (§7, §9.8).  Left out: the fog's deficit round the surfaces (its first flight,
     which ``fog_glow`` gives the fog itself) and the medium's shade on the fog round it."""
     e1_inf, em_inf = glow_radiance(fog.medium, multiple)
-    stride, cshape, cflat, cpts = world_lattice(pm)
+    stride, cshape, cflat, cpts = world_lattice(
+        pm, Tuning.ambient_resolution if tuning is None else tuning.ambient_resolution)
     kw = {} if tuning is None else {"tuning": tuning}
     u, c = world_light(solid, pm, World(np.ones(3)), camera, cpts, n_dirs, step, seed=seed,
                        should_cancel=should_cancel, surfaces=surfaces, threads=threads,

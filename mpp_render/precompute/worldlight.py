@@ -3,7 +3,7 @@ after the phase function towards the camera and the attenuation through all medi
 A(x) = L_world * integral p(w_in . w_cam(x)) T(x, -w_in) dw_in, estimated with directions
 drawn from the phase lobe (so the estimate is the mean transmittance).  w_cam(x) points from x
 to the camera, which is exact for camera rays through x.  It is mostly smooth: computed on a
-coarse lattice (``AMBIENT_RESOLUTION`` points along the grid's longest side) and interpolated
+coarse lattice (``Tuning.ambient_resolution`` points along the grid's longest side) and interpolated
 to the voxels whose trilinear support touches non-zero density (lattice.needed_flat; the rest
 stay 0).  Where it is not (the sky's lit layer of a medium optically thick across a lattice
 cell, where A falls by a large factor between the cell's corners), the voxels of that cell
@@ -26,7 +26,6 @@ from .lattice import coarse_lattice, grid_points
 from .lightdepth import SHADOW_TAU, density_lengths, depth_rows
 
 
-AMBIENT_RESOLUTION = 32  # lattice points along the longest side for the world light
 REFINE_SEED = 104729  # offsets the refined voxels' streams from the lattice's
 REFINE_CHUNK = 1 << 20  # voxels whose cells refine_flat looks up at a time
 WORLD_RNG_BLOCK = 1 << 11  # points sharing one random stream in world_light
@@ -133,7 +132,7 @@ def fill_world_light(f: np.ndarray, channels, media: List[PreparedMedium], pm: P
     that ``refine_flat`` picks (``tuning.ambient_refine``) get A computed at their own
     centres instead.  Returns the number of points computed (lattice and voxels)."""
     amb, amb_ms = channels
-    stride, cshape, cflat, cpts = world_lattice(pm)
+    stride, cshape, cflat, cpts = world_lattice(pm, tuning.ambient_resolution)
 
     def light(points, s):
         return world_light(media, pm, world, camera, points, n_dirs, step, seed=s,
@@ -207,10 +206,10 @@ def refine_flat(values: np.ndarray, have: np.ndarray, stride: int, shape, flat, 
     return flat[pick]
 
 
-def world_lattice(pm: PreparedMedium):
+def world_lattice(pm: PreparedMedium, resolution: int = Tuning.ambient_resolution):
     """(stride, shape, flat, points) of the world light's coarse lattice on ``pm``: about
-    ``AMBIENT_RESOLUTION`` points along the grid's longest side (lattice.coarse_lattice)."""
-    stride = max(1, int(round(max(pm.grid.shape) / AMBIENT_RESOLUTION)))
+    ``resolution`` points along the grid's longest side (lattice.coarse_lattice)."""
+    stride = max(1, int(round(max(pm.grid.shape) / max(1, int(resolution)))))
     return (stride,) + tuple(coarse_lattice(pm, stride))
 
 
