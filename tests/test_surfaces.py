@@ -410,6 +410,18 @@ def test_gathers_and_the_pixels_latin_hypercube_keep_the_mean_and_cut_the_noise(
     assert spreads[1] < 0.6 * spreads[0] and spreads[2] < 0.6 * spreads[0], spreads
 
 
+def emitter_above(kind, height, size, radius):
+    """A 100 W emitter at ``height`` metres over the origin: an area light (a square of side
+    ``size`` facing down) or a point light with ``radius``."""
+    if kind == "AREA":
+        m = np.eye(4)
+        m[:3, 3] = [0.0, 0.0, height]
+        return Light("AREA", "a", np.full(3, 100.0), matrix=m, shape="SQUARE", size_x=size,
+                     size_y=size, direction=np.array([0.0, 0.0, -1.0]))
+    return Light("POINT", "p", np.full(3, 100.0), position=np.array([0.0, 0.0, height]),
+                 radius=radius)
+
+
 @pytest.mark.parametrize("kind", ["AREA", "POINT"])
 def test_a_pixels_samples_share_out_the_emitter_in_a_soft_shadow(kind):
     """surfaces.shade with a pixel's bands (``strata``): its samples draw the emitter point
@@ -420,13 +432,7 @@ def test_a_pixels_samples_share_out_the_emitter_in_a_soft_shadow(kind):
     wall = Surface("wall", np.array([[0, -10, 0.5], [0, 10, 0.5], [0, 10, 5], [0, -10, 5]],
                                     float), np.array([[0, 1, 2], [0, 2, 3]]), np.zeros(3))
     ss = prepare_surfaces([ground, wall])
-    m = np.eye(4)
-    m[:3, 3] = [0.0, 0.0, 2.0]
-    if kind == "AREA":
-        light = Light("AREA", "a", np.full(3, 100.0), matrix=m, shape="SQUARE", size_x=1.0,
-                      size_y=1.0, direction=np.array([0.0, 0.0, -1.0]))
-    else:
-        light = Light("POINT", "p", np.full(3, 100.0), position=m[:3, 3], radius=0.5)
+    light = emitter_above(kind, 2.0, size=1.0, radius=0.5)
     spp, pixels = 16, 1000
     n = spp * pixels
     p = np.tile([[0.12, 0.0, 0.0]], (n, 1))       # the wall hides part of the emitter
@@ -462,14 +468,7 @@ def test_a_surfaces_shadow_ray_runs_to_the_emitter_point_drawn(kind):
     p = np.tile([[0.3, -0.2, 0.0]], (n, 1))
     d = np.tile([[0.0, 0.0, -1.0]], (n, 1))
     _, tri = intersect(ss, p + 2 * np.array([0.0, 0.0, 1.0]), d, np.full(n, 5.0))
-    m = np.eye(4)
-    m[:3, 3] = [0.0, 0.0, 1.0]
-    if kind == "AREA":
-        light = Light("AREA", "a", np.full(3, 100.0), matrix=m, shape="SQUARE", size_x=3.0,
-                      size_y=3.0, direction=np.array([0.0, 0.0, -1.0]))
-    else:
-        light = Light("POINT", "p", np.full(3, 100.0), position=m[:3, 3].copy(), matrix=m,
-                      radius=0.6)
+    light = emitter_above(kind, 1.0, size=3.0, radius=0.6)
     seen = []
 
     def media(pts, dirs, t):
@@ -483,10 +482,11 @@ def test_a_surfaces_shadow_ray_runs_to_the_emitter_point_drawn(kind):
         np.testing.assert_allclose(end[:, 2], 1.0, atol=1e-9)
         assert np.all(np.abs(end[:, :2]) <= 1.5 + 1e-9)
     else:                # on the lamp's disc facing the point, at most 0.6 m from its centre
-        w = m[:3, 3] - pts
+        c = light.position
+        w = c - pts
         w /= np.linalg.norm(w, axis=1)[:, None]
-        np.testing.assert_allclose(np.einsum("ij,ij->i", end - m[:3, 3], w), 0.0, atol=1e-9)
-        assert np.all(np.linalg.norm(end - m[:3, 3], axis=1) <= 0.6 + 1e-9)
+        np.testing.assert_allclose(np.einsum("ij,ij->i", end - c, w), 0.0, atol=1e-9)
+        assert np.all(np.linalg.norm(end - c, axis=1) <= 0.6 + 1e-9)
     # and not all of the same length as the centre's
     assert np.ptp(t) > 0.05
 

@@ -139,13 +139,13 @@ def fill_world_light(f: np.ndarray, channels, media: List[PreparedMedium], pm: P
                            should_cancel=should_cancel, surfaces=surfaces, threads=threads,
                            multiple=amb_ms is not None, tuning=tuning)
     a = light(cpts, seed)
-    pairs = a if amb_ms is not None else (a,)
-    for ch, vals in zip((amb, amb_ms), pairs):
-        kernels.upsample_into(f, ch, on_lattice(cshape, cflat, vals), stride, flat)
+    lattices = [on_lattice(cshape, cflat, vals) for vals in (a if amb_ms is not None else (a,))]
+    for ch, lat in zip((amb, amb_ms), lattices):
+        kernels.upsample_into(f, ch, lat, stride, flat)
     have = np.zeros(int(np.prod(cshape)), bool)
     have[cflat] = True
-    fine = refine_flat(on_lattice(cshape, cflat, pairs[0]), have.reshape(cshape), stride,
-                       pm.grid.shape, flat, world.color, tuning.ambient_refine)
+    fine = refine_flat(lattices[0], have.reshape(cshape), stride, pm.grid.shape, flat,
+                       world.color, tuning.ambient_refine)
     if len(fine):
         b = light(grid_points(pm, fine), seed + REFINE_SEED)
         view = f.reshape(-1, f.shape[-1])
