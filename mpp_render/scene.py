@@ -306,6 +306,16 @@ class Tuning:
     (``surface_gathers``).  ``surface_cache_gathers``: the directions each grid point gathers
     through; ``surface_cache_smooth``: passes of the 3 x 3 filter over the grid
     (surfacecache.SurfaceCache.smooth).
+    ``surface_bounces``: surface-to-surface bounces a surface's gathers follow
+    (surfaces.shade's ``bounces``): where a gather meets another surface, that point's own
+    light, and with 2 its own one-direction gather of the surfaces it sees, is reflected
+    (Cycles' diffuse bounces, which count no volume bounce, so they are in its
+    single-scattering references: 4 in the suite's files).  Pillars standing on a spot-lit
+    ground in fog (p_fog_spot_shafts), lit only by the ground, single scattering at 16 spp:
+    0.0317 (bias -0.0118) at 1, 0.0274 (-0.0083) at 2, 0.0277 / 0.0271 (-0.0084 / -0.0083)
+    at 3 / 4; p_fog_point 0.0088 -> 0.0082; the suite's other 26 scenes the same bits (a
+    lone ground sees no other surface).  Its 1920x1080 march 54.5 s at 1 and 2
+    (docs/method.md §8).
     ``path_nodal``: each point of the traced paths' lattice holds the light at the point, not
     at its tent's density-weighted centroid, which lies inside the medium by up to a third of
     a step where the medium ends or changes under the tent (precompute/nodal.py: moved along
@@ -377,6 +387,7 @@ class Tuning:
     surface_cache: int = 240
     surface_cache_gathers: int = 128
     surface_cache_smooth: int = 1
+    surface_bounces: int = 2
 
 
 # The default Noise Threshold (pilot.py's unit: the standard error over sqrt(I S), S the

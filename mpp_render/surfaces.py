@@ -12,7 +12,7 @@ normal (turned towards the viewer) and the direction w_l to the light, T_media t
 transmittance through the media, V the surface visibility, and for the sky one
 cosine-distributed direction per point whose visibility and transmittance stand for the
 whole sky; along that direction a surface it hits adds its own light, reflected the same way
-(one bounce by default: ``shade``'s ``bounces``).  There is no glass or transmission.
+(``shade``'s ``bounces``; a render follows ``Tuning.surface_bounces``, 2).  There is no glass or transmission.
 
 f is Cycles' Principled BSDF (principled.py).
 

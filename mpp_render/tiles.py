@@ -154,7 +154,8 @@ class FrameMarch:
         po = offset_points(self.surf, o[at] + d[at] * t_hit[at, None], nrm)
         rng = np.random.default_rng([st.seed + CACHE_SEED, j])
         g = gathered(self.surf, po, nrm, self.lights, self.bg, self.optical_depth, rng,
-                     self.radiance_towards(CACHE_TILE + j, 0, steps), 1,
+                     self.radiance_towards(CACHE_TILE + j, 0, steps),
+                     tun.surface_bounces,
                      tun.surface_cache_gathers, None, self.guides, tun.guided_gathers)
         return j, idx[at], po, nrm, self.surf.surface[tri[at]], g, float(sum(steps))
 
@@ -378,6 +379,7 @@ class FrameMarch:
                     return cache.lookup(hx, hy, po, nrm, owner[tri_at])
             behind[hit] = shade(self.surf, tri[hit], ph, d[hit], self.lights, self.bg,
                                 self.optical_depth, rng, self.radiance_towards(index, k, gathered),
+                                bounces=st.tuning.surface_bounces,
                                 gathers=st.tuning.surface_gathers,
                                 strata=(strata[0][hit], strata[1][hit], strata[2]),
                                 guides=self.guides, guided=st.tuning.guided_gathers,

@@ -48,3 +48,25 @@ def test_a_lone_plane_gets_no_bounce():
     tri = np.zeros(n, np.int64)
     one = shade(ss, tri, p, d, [], np.zeros(3), no_media, np.random.default_rng(2), None, 1)
     assert np.allclose(one, 1.0)   # its emission; it cannot see itself
+
+
+def test_a_render_follows_tuning_surface_bounces():
+    """A frame taken from inside the closed emitting box, through the renderer (the surface
+    cache's gathers and each sample's own): every pixel is Le (1 + a + ... + a^n) for
+    ``Tuning.surface_bounces`` = n, whichever gathers it."""
+    import dataclasses
+
+    from mpp_render.render import render
+    from mpp_render.scene import Camera, SceneDescription, Settings, Tuning, World
+
+    a, le = 0.6, 2.0
+    cam = Camera("PERSP", np.eye(4), 16, 12, (-0.6, 0.6, -0.45, 0.45))
+    for cache in (True, False):
+        for n in (1, 2):
+            st = Settings(samples=2, noise_threshold=0.0, multiple=False, surface_cache=cache,
+                          tuning=dataclasses.replace(Tuning(), surface_bounces=n))
+            out = render(SceneDescription(cam, [], [], surfaces=[box(a, le)],
+                                          world=World(np.zeros(3)), settings=st))
+            img = out.passes["Combined"][..., :3]
+            want = le * sum(a ** k for k in range(n + 1))
+            assert np.allclose(img, want, rtol=1e-5), (cache, n, img.min(), img.max(), want)
