@@ -308,14 +308,17 @@ class Tuning:
     (surfacecache.SurfaceCache.smooth).
     ``surface_bounces``: surface-to-surface bounces a surface's gathers follow
     (surfaces.shade's ``bounces``): where a gather meets another surface, that point's own
-    light, and with 2 its own one-direction gather of the surfaces it sees, is reflected
-    (Cycles' diffuse bounces, which count no volume bounce, so they are in its
-    single-scattering references: 4 in the suite's files).  Pillars standing on a spot-lit
-    ground in fog (p_fog_spot_shafts), lit only by the ground, single scattering at 16 spp:
-    0.0317 (bias -0.0118) at 1, 0.0274 (-0.0083) at 2, 0.0277 / 0.0271 (-0.0084 / -0.0083)
-    at 3 / 4; p_fog_point 0.0088 -> 0.0082; the suite's other 26 scenes the same bits (a
-    lone ground sees no other surface).  Its 1920x1080 march 54.5 s at 1 and 2
-    (docs/method.md §8).
+    light is reflected: its lights, the volumes' light along its own one gather, and with 2
+    the surfaces that gather meets (Cycles' diffuse bounces, which count no volume bounce,
+    so they are in its single-scattering references: 4 in the suite's files).  Pillars
+    standing on a spot-lit ground in fog (p_fog_spot_shafts), lit only by the ground,
+    single scattering at 16 spp (rel_rmse_4, bias): 0.0317 (-0.0118) with one bounce that
+    left out the fog's glow on the ground; with it 0.0262 (-0.0077) at 1, 0.0239 (-0.0041)
+    at 2, 0.0240 (-0.0037) at 3; p_fog_point 0.0088 (-0.0017), 0.0058, 0.0054 (-0.0001),
+    0.0055; the suite's other 26 scenes the same bits (a lone ground sees no other
+    surface).  Its cost at 1920x1080, F12: the second bounce without the glow nothing
+    measurable (p_fog_spot_shafts 67.1 -> 67.6 s), the glow at 2 bounces p_fog_point 43.0 ->
+    44.7 s, p_fog_spot_shafts 67.6 -> 71.8 s (docs/method.md §8).
     ``path_nodal``: each point of the traced paths' lattice holds the light at the point, not
     at its tent's density-weighted centroid, which lies inside the medium by up to a third of
     a step where the medium ends or changes under the tent (precompute/nodal.py: moved along

@@ -187,10 +187,12 @@ def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, r
     over samples per pixel.
 
     ``bounces``: surface-to-surface bounces gathered along that same direction.  Where it
-    hits a surface, that point's own light (``shade`` of it with ``bounces - 1``, without the
-    volumes' light, ``media_radiance``) seen through the media is reflected the same way: a lit
-    ground brightens the pillars that stand on it, as Cycles' diffuse bounces do (they count
-    no volume bounce, so they are in its single-scattering images).
+    hits a surface, that point's own light (``shade`` of it with ``bounces - 1`` and one
+    gather, which reads ``media_radiance`` along its own direction as well) seen through the
+    media is reflected the same way: a lit ground brightens the pillars that stand on it, and
+    the fog's glow on that ground brightens them too, as Cycles' diffuse bounces do (they
+    count no volume bounce, and the light a volume scatters once towards the last surface is
+    direct light there, so both are in its single-scattering images).
 
     ``gathers``: cosine-weighted directions per point (their mean), stratified in the radial
     coordinate (``gathers`` equal bands of cos^2); the bounces' own points gather one.
@@ -311,7 +313,7 @@ def gathered(ss: SurfaceSet, po, nrm, lights, world_color, media_optical_depth, 
         if hit.size:
             ph = pk[hit] + w[hit] * t_hit[hit, None]
             seen = shade(ss, tri_hit[hit], ph, w[hit], lights, wc,
-                         media_optical_depth, rng, None, bounces - 1)
+                         media_optical_depth, rng, media_radiance, bounces - 1)
             acc[hit] += seen * seen_through(hit, t_hit[hit])
     if np.any(wc > 0):
         # the uniform sky seen through cosine-distributed directions (where no surface

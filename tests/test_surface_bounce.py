@@ -70,3 +70,24 @@ def test_a_render_follows_tuning_surface_bounces():
             img = out.passes["Combined"][..., :3]
             want = le * sum(a ** k for k in range(n + 1))
             assert np.allclose(img, want, rtol=1e-5), (cache, n, img.min(), img.max(), want)
+
+
+def test_a_bounce_reads_the_volumes_light_at_its_surface_too():
+    """Inside the closed box with dark walls of albedo a, the volumes' light R reaching every
+    point from every direction (``media_radiance``, transmittance 1): a wall leaves a R, and
+    each bounce reflects what the wall it meets gathers, its own R included:
+    a R (1 + a + ... + a^n) for n bounces."""
+    a, r = 0.6, 1.5
+    ss = prepare_surfaces([box(a, 0.0)])
+
+    def media(p, d, t_max):
+        return np.full((len(p), 3), r), np.ones((len(p), 3))
+
+    rng = np.random.default_rng(3)
+    n = 300
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    t, tri = intersect(ss, np.zeros((n, 3)), d, np.full(n, np.inf))
+    for bounces in (0, 1, 2):
+        got = shade(ss, tri, d * t[:, None], d, [], np.zeros(3), no_media, rng, media, bounces)
+        assert np.allclose(got, a * r * sum(a ** k for k in range(bounces + 1)), rtol=1e-6)
