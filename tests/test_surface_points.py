@@ -1,6 +1,7 @@
 """Points on the surfaces where light paths start (pathstarts.surface_points): a ground far
 wider than the reach sphere gets its points inside the sphere, and the areas the points stand
-for add up, in the mean, to the area inside the sphere, small triangles included."""
+for add up, in the mean, to the area inside the sphere, small triangles included; drawn
+denser near the medium (``scale``), they still do, while most of them lie near it."""
 import numpy as np
 import pytest
 
@@ -24,14 +25,15 @@ def square(half, z=0.0, n=1, albedo=0.5):
 def test_a_wide_ground_gets_its_points_inside_the_reach_sphere():
     ss = prepare_surfaces([square(500.0, z=-1.0)])
     centre, radius = np.array([3.0, -2.0, 0.5]), 4.0
-    p, tri, area = surface_points(ss, centre, radius, 4096, np.random.default_rng(1))
+    p, tri, w = surface_points(ss, centre, radius, 4096, np.random.default_rng(1))
     # its two triangles each draw over the sphere's disc and keep what falls in them: half;
     # drawn over the whole ground, 4096 points would put 0.1 in the sphere
     assert len(p) > 0.45 * 4096
     assert np.all(np.linalg.norm(p - centre, axis=1) <= radius + 1e-9)
     np.testing.assert_allclose(p[:, 2], -1.0)
     disc = np.pi * (radius ** 2 - 1.5 ** 2)
-    assert area * len(p) == pytest.approx(disc, rel=0.05)
+    assert np.all(w == w[0])
+    assert w.sum() == pytest.approx(disc, rel=0.05)
 
 
 def test_the_points_stand_for_the_area_inside_the_sphere():
@@ -42,8 +44,38 @@ def test_the_points_stand_for_the_area_inside_the_sphere():
     centre, radius = np.array([0.5, 0.0, 0.3]), 1.5
     inside = np.pi * (radius ** 2 - 0.3 ** 2)
     got = [surface_points(ss, centre, radius, 1000, np.random.default_rng(s)) for s in range(40)]
-    totals = [area * len(p) for p, _, area in got]
+    totals = [w.sum() for _, _, w in got]
     assert np.mean(totals) == pytest.approx(inside, rel=0.01)
     dark = prepare_surfaces([square(2.0, n=4, albedo=0.0)])
     assert surface_points(dark, centre, radius, 100, np.random.default_rng(0),
                           albedo_min=0.0) is None
+
+
+@pytest.mark.parametrize("n", [1, 50])
+def test_points_denser_near_the_medium_integrate_its_light_with_less_noise(n):
+    """With ``scale`` r0 the density per area follows (r0^2 / (r0^2 + d^2))^(3/2): over a
+    sphere 40 r0 wide, on a ground of two triangles or of 5 000 (cut into pieces across
+    which the density changes little), the weighted points integrate a 1/d^3 falloff (the
+    light a surface sends into the medium) to its exact value in the mean of 40 seeds
+    (within 3 of its standard errors), with under a tenth of the spread between seeds of
+    uniform points, and a third of the points lie within 2 r0 of the centre, against
+    under 1 % drawn uniformly."""
+    ss = prepare_surfaces([square(40.0, z=-0.5, n=n)])
+    centre, radius, r0 = np.array([1.0, -2.0, 0.5]), 40.0, 1.0
+    falloff = lambda p: 1.0 / (1.0 + np.sum((p - centre) ** 2, axis=1)) ** 1.5
+    # the integral of the falloff over the plane 1 m below the centre, out to the sphere
+    exact = 2.0 * np.pi * (1.0 / np.sqrt(2.0) - 1.0 / np.sqrt(1.0 + radius ** 2))
+
+    def spread(scale):
+        got = [surface_points(ss, centre, radius, 2000, np.random.default_rng(s), scale=scale)
+               for s in range(40)]
+        each = np.array([np.sum(w * falloff(p)) for p, _, w in got])
+        near = np.mean([np.mean(np.linalg.norm(p - centre, axis=1) < 2.0 * r0)
+                        for p, _, _ in got])
+        return each, near
+
+    each, near = spread(r0)
+    flat, near_flat = spread(None)
+    assert abs(each.mean() - exact) < 3.0 * each.std(ddof=1) / np.sqrt(len(each))
+    assert each.std() < 0.1 * flat.std()
+    assert near > 0.3 and near_flat < 0.01

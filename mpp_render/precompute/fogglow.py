@@ -219,4 +219,4 @@ def deficit_starts(pm, around: Optional[Surroundings], seed: int):
     n = ss.normal[tri]
     albedo = surface_albedo(ss)[tri] if around.bounce else np.zeros((len(tri), 3))
     return (p + n * (LIFT * ss.scale), np.ascontiguousarray(n),
-            np.full((len(tri), 1), np.pi * share), albedo, float(np.sqrt(share)))
+            np.pi * share[:, None], albedo, float(np.sqrt(share.min())))

@@ -12,9 +12,10 @@
   the fog, the other media and the surfaces' shadows (lightdepth.light_optical_depth).
 * **Lit surfaces** (``surface_starts``).  A diffuse surface sends back R E cos(theta) of the
   light it receives (R its diffuse albedo, base colour x (1 - metallic), W/m^2), a cosine
-  lobe about its normal on the lit side.  Points are drawn uniformly over the area A of the
-  triangles within reach of the medium (``surface_points``), each with power
-  R E cos(theta) e^(-tau) A / M (W).
+  lobe about its normal on the lit side.  Points are drawn over the triangles within
+  ``SURFACE_REACH`` bounding radii of a bounded medium, denser near it as the light it
+  gets from them falls (``surface_points``), and uniformly within a world fog's reach; each
+  carries power R E cos(theta) e^(-tau) w (W), w the area it stands for (m^2).
 
 Both return (points (N,3) m, power (N,3) W, directions (N,3) unit): the light's propagation
 for fog points, the lit side's normal for surface points.  All lengths in metres.
@@ -36,6 +37,11 @@ from .source import light_direction
 
 FOG_POINTS = 16384       # first scatterings drawn round a light in the fog, per light
 SURFACE_POINTS = 16384   # points drawn on the surfaces within reach, per light
+# How far from a bounded medium (in its bounding sphere's radii) the surfaces' light that
+# reaches it is drawn (surface_points' 1/d^3 density about it): from a surface of uniform
+# irradiance the light arriving from beyond distance R falls as r0 / R, so 64 leaves out at
+# most about 1.6 % of it (docs/method.md §8)
+SURFACE_REACH = 64.0
 REACH_MFP = 10.0         # a path in the fog this many mean free paths beyond the grid ends
 LIFT = 1e-6              # surface points are lifted this fraction of the scene's size
 
@@ -180,16 +186,28 @@ def surface_albedo(ss) -> np.ndarray:
     return np.ascontiguousarray(base[ss.surface], np.float64)
 
 
-def surface_points(ss, centre, radius: float, m: int, rng, albedo_min: float = -1.0):
-    """(points (N,3) m, triangles (N,) int, area m^2): about ``m`` points spread uniformly
-    over the parts of the SurfaceSet ``ss``'s triangles inside the sphere (``centre``,
-    ``radius``), each standing for ``area`` of them (the estimate of the integral of f over
-    those parts is area x the sum of f over the points).  A triangle smaller than the disc
-    the sphere cuts from its plane is drawn over whole, else that disc is, and the draws
-    outside the triangle or the sphere are dropped: a ground far wider than the sphere gets
-    its points where the sphere is, not over all of it.  Triangles whose largest diffuse
-    albedo is not above ``albedo_min`` (surface_albedo) are left out; None where nothing
-    remains."""
+def surface_points(ss, centre, radius: float, m: int, rng, albedo_min: float = -1.0,
+                   scale: Optional[float] = None):
+    """(points (N,3) m, triangles (N,) int, weights (N,) m^2): about ``m`` points on the parts
+    of the SurfaceSet ``ss``'s triangles inside the sphere (``centre``, ``radius``), each
+    standing for ``weight`` of their area (the estimate of the integral of f over those
+    parts is the sum of weight x f over the points).  Triangles whose largest diffuse albedo
+    is not above ``albedo_min`` (surface_albedo) are left out; None where nothing remains.
+
+    ``scale`` None: the points spread uniformly, all of the same weight.  A triangle smaller
+    than the disc the sphere cuts from its plane is drawn over whole, else that disc is, and
+    the draws outside the triangle or the sphere are dropped: a ground far wider than the
+    sphere gets its points where the sphere is, not over all of it.
+
+    ``scale`` r0 (m): the points' density per area follows g(d) = (r0^2 / (r0^2 + d^2))^(3/2),
+    d their distance from ``centre``: the light a diffuse surface sends into a medium of
+    radius about r0 from distance d falls as 1/d^3 per area (its solid angle 1/d^2 times the
+    grazing cosine, about the height over d), so each point's share of that light stays
+    about the same however far the sphere reaches.  The triangles are cut in four (at their
+    sides' midpoints) until each piece's longest side is under ``PIECE_SIDE`` sqrt(r0^2 +
+    d^2), d at its centroid (so g changes little across it), or ``PIECES_MOST`` pieces;
+    a piece is picked by its area times g at its centroid and drawn over uniformly, and a
+    point's weight is one over m times its density there: the estimate stays unbiased."""
     centre = np.asarray(centre, np.float64)
     corners = np.stack([ss.v0, ss.v0 + ss.e1, ss.v0 + ss.e2], axis=1)
     lo, hi = corners.min(axis=1), corners.max(axis=1)
@@ -199,6 +217,8 @@ def surface_points(ss, centre, radius: float, m: int, rng, albedo_min: float = -
                           (surface_albedo(ss).max(axis=1) > albedo_min))
     if not cand.size:
         return None
+    if scale is not None:
+        return _points_about(corners[cand], cand, centre, radius, m, rng, float(scale))
     area = 0.5 * np.linalg.norm(np.cross(ss.e1[cand], ss.e2[cand]), axis=1)
     disc_r = np.sqrt(np.maximum(radius * radius - dist[cand] ** 2, 0.0))
     disc = np.pi * disc_r ** 2
@@ -237,19 +257,75 @@ def surface_points(ss, centre, radius: float, m: int, rng, albedo_min: float = -
         return None
     # each draw stands for total / m of the domains (their expected share; a triangle's
     # realised count would lose the small triangles that no draw falls on)
-    return p[keep], tri[keep], total / m
+    return p[keep], tri[keep], np.full(int(keep.sum()), total / m)
+
+
+PIECE_SIDE = 0.5         # surface_points: a piece's longest side over sqrt(r0^2 + d^2)
+PIECES_MOST = 1 << 17    # ... and the pieces cut at most
+
+
+def _points_about(corners, tri, centre, radius: float, m: int, rng, r0: float):
+    """surface_points with ``scale`` r0: ``corners`` (T,3,3) of the triangles ``tri``."""
+    while True:   # cut the pieces across which g changes too much, in four
+        mid = corners.mean(axis=1)
+        d_mid = np.linalg.norm(mid - centre, axis=1)
+        side = np.max(np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2), axis=1)
+        near = np.linalg.norm(np.maximum(np.maximum(corners.min(axis=1) - centre,
+                                                    centre - corners.max(axis=1)), 0.0),
+                              axis=1) <= radius
+        corners, tri, mid, d_mid, side = (x[near] for x in (corners, tri, mid, d_mid, side))
+        cut = side > PIECE_SIDE * np.sqrt(r0 * r0 + d_mid ** 2)
+        if not np.any(cut) or len(tri) + 3 * int(cut.sum()) > PIECES_MOST:
+            break
+        c = corners[cut]
+        m01, m12, m20 = (0.5 * (c[:, i] + c[:, (i + 1) % 3]) for i in range(3))
+        kids = np.concatenate([np.stack(x, axis=1) for x in
+                               ((c[:, 0], m01, m20), (m01, c[:, 1], m12),
+                                (m20, m12, c[:, 2]), (m01, m12, m20))])
+        corners = np.concatenate([corners[~cut], kids])
+        tri = np.concatenate([tri[~cut], np.tile(tri[cut], 4)])
+    if not len(tri):
+        return None
+    e1, e2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+    g = _falloff(d_mid, r0)
+    mass = 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1) * g
+    total = float(mass.sum())
+    if not (total > 0.0):
+        return None
+    pick = np.minimum(np.searchsorted(np.cumsum(mass) / total, rng.random(m), side="right"),
+                      len(tri) - 1)
+    a, b = rng.random(m), rng.random(m)
+    flip = a + b > 1.0
+    a, b = np.where(flip, 1.0 - a, a), np.where(flip, 1.0 - b, b)
+    p = corners[pick, 0] + a[:, None] * e1[pick] + b[:, None] * e2[pick]
+    keep = np.linalg.norm(p - centre, axis=1) <= radius
+    if not np.any(keep):
+        return None
+    # a point's density per area is g(piece) / total over m draws
+    return p[keep], tri[pick[keep]], total / (m * g[pick[keep]])
+
+
+def _falloff(d, r0: float) -> np.ndarray:
+    """g(d) = (r0^2 / (r0^2 + d^2))^(3/2) (surface_points), 1 at d = 0."""
+    d = np.asarray(d, np.float64)
+    return (r0 * r0 / (r0 * r0 + d * d)) ** 1.5
 
 
 def surface_starts(pm, light: Light, around: Surroundings, seed: int):
     """(points, power, normals, jitter m) of the light ``light`` reflects off the surfaces
-    within ``reach(pm)`` (module docstring; the points: ``surface_points``), or None when
+    within ``SURFACE_REACH`` bounding radii of a bounded medium, denser near it, or within a
+    world fog's ``reach(pm)`` (module docstring; the points: ``surface_points``), or None when
     they reflect none."""
     ss = around.surfaces
     if ss is None or not around.bounce:
         return None
     centre, radius = reach(pm)
+    scale = None
+    if not pm.endless:   # the surfaces' light reaching a bounded medium from afar
+        scale = 0.5 * radius
+        radius = SURFACE_REACH * scale
     rng = np.random.default_rng(seed)
-    got = surface_points(ss, centre, radius, SURFACE_POINTS, rng, albedo_min=0.0)
+    got = surface_points(ss, centre, radius, SURFACE_POINTS, rng, albedo_min=0.0, scale=scale)
     if got is None:
         return None
     p, pick, share = got
@@ -265,8 +341,9 @@ def surface_starts(pm, light: Light, around: Surroundings, seed: int):
     tau = light_optical_depth(around.solid, light, p, around.step, surfaces=ss,
                               fog_sigma_t=around.fog_sigma_t)
     power = albedo[pick[lit]] * e[lit] * np.abs(cos[lit])[:, None] * \
-        around.disc(light, p, tau) * share
+        around.disc(light, p, tau) * share[lit, None]
     live = np.all(np.isfinite(power), axis=1) & (power.sum(axis=1) > 0.0)
     if not np.any(live):
         return None
-    return p[live], power[live], n[lit][live], float(np.sqrt(share))
+    # the starts' tent: the points' spacing where they lie closest (by the medium)
+    return p[live], power[live], n[lit][live], float(np.sqrt(share.min()))
