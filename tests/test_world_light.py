@@ -119,3 +119,41 @@ def test_the_lattice_reaches_past_the_grids_far_faces():
     a = f[..., 0]
     near, far = a[20:100, 1, 3:9].mean(), a[20:100, 10, 3:9].mean()
     assert far == pytest.approx(near, rel=0.2)
+
+
+def test_the_medium_before_a_ground_still_scatters_the_skys_light():
+    """A cube of thin isotropic medium (albedo 1, g 0) standing on a wide ground, under a
+    constant sky: the ground hides the sky below it from the cube's centre (half the
+    sphere, sky_share), and the sky's direct light A through those directions is 0, but the
+    medium between the centre and the ground still scatters the sky's light it gets from
+    above: its collided part A_ms counts there at the centre's share of the sky.  By the
+    cube's symmetry the lower half's collided light equals the upper half's, so with the
+    ground A_ms is 3/4 of A_ms without it (it was 1/2 when the ground hid it all), and A half."""
+    from mpp_render.precompute.worldlight import sky_share
+    from mpp_render.scene import Surface
+    from mpp_render.surfaces import prepare_surfaces
+
+    n = 16
+    i2w = np.eye(4)
+    i2w[:3, :3] = np.diag([1.0 / n] * 3)
+    i2w[:3, 3] = [-0.5 + 0.5 / n, -0.5 + 0.5 / n, 0.5 / n]
+    pm = prepare(Medium("cube", np.full((n, n, n), 0.5, np.float32), i2w, np.full(3, 0.5),
+                        np.zeros(3), 0.0))
+    v = np.array([[-50, -50, 0], [50, -50, 0], [50, 50, 0], [-50, 50, 0]], float)
+    ground = prepare_surfaces([Surface("ground", v, np.array([[0, 1, 2], [0, 2, 3]]),
+                                       np.zeros(3))])
+    centre = np.array([[0.0, 0.0, 0.5]])
+    assert sky_share(ground, centre, 1, 0, 1, 64)[0] == pytest.approx(0.5, abs=0.02)
+    camera = Camera("PERSP", np.eye(4), 4, 4, (-1, 1, -1, 1))
+    world = World(color=np.ones(3))
+    pts = np.repeat(centre, 64, axis=0)   # 64 points, their directions' strata shifted apart
+
+    def sky(surfaces):
+        a, ms = world_light([pm], pm, world, camera, pts, 64, 0.01, seed=2,
+                            surfaces=surfaces, multiple=True)
+        return a.mean(), ms.mean()
+
+    (a_open, ms_open), (a_ground, ms_ground) = sky(None), sky(ground)
+    assert ms_open > 0.05
+    assert a_ground / a_open == pytest.approx(0.5, rel=0.03)
+    assert ms_ground / ms_open == pytest.approx(0.75, rel=0.03)

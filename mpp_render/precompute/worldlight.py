@@ -23,10 +23,11 @@ from ..phase import sample_hg
 from ..scene import Camera, Tuning, World
 from ..surfaces import intersect, occluded
 from .lattice import coarse_lattice, grid_points
-from .lightdepth import SHADOW_TAU, density_lengths, depth_rows
+from .lightdepth import density_lengths, depth_rows
 
 
 REFINE_SEED = 104729  # offsets the refined voxels' streams from the lattice's
+SHARE_SEED = 15485863  # offsets sky_share's directions' streams from the sky's own
 REFINE_CHUNK = 1 << 20  # voxels whose cells refine_flat looks up at a time
 WORLD_RNG_BLOCK = 1 << 11  # points sharing one random stream in world_light
 WORLD_CHUNK_RAYS = 1 << 14  # rays (points x directions) per world-light chunk, for a quick Esc
@@ -69,6 +70,16 @@ def phase_directions(seed: int, a: int, b: int, n_dirs: int, g: float, to_cam) -
     return sample_hg(u1, u2, g, np.repeat(np.asarray(to_cam, np.float64), n_dirs, axis=0))
 
 
+def sky_share(surfaces, points, seed: int, a: int, b: int, n_dirs: int) -> np.ndarray:
+    """(b - a,) the share of the sphere of directions from ``points`` (points a..b-1 of the
+    lattice) that no surface hides: ``n_dirs`` directions each, uniform and stratified as
+    ``phase_directions`` draws them (g = 0) on a stream of their own."""
+    m = len(points)
+    w = phase_directions(seed + SHARE_SEED, a, b, n_dirs, 0.0, np.tile([0.0, 0.0, 1.0], (m, 1)))
+    hit = occluded(surfaces, np.repeat(points, n_dirs, axis=0), w, np.full(m * n_dirs, np.inf))
+    return 1.0 - hit.reshape(m, n_dirs).mean(axis=1)
+
+
 def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, camera: Camera,
                 points, n_dirs, step, seed=0, chunk=None, should_cancel=None, surfaces=None,
                 threads=0, multiple=False, tuning: Tuning = Tuning(), fog_sigma_t=None):
@@ -108,15 +119,28 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
             t_max = np.where(tri >= 0, t, np.inf)
             seen = np.where((tri >= 0)[:, None],
                             -np.expm1(-np.asarray(fog_sigma_t)[None, :] * t[:, None]), 1.0)
+        hidden = None
+        if walled and fog_sigma_t is None:
+            # a surface hides the sky beyond it; the medium before it still scatters
+            # the sky's light it gets from elsewhere along the direction (below)
+            t, tri = intersect(surfaces, pp, d, t_max)
+            hidden = tri >= 0
+            t_max = np.where(hidden, t, np.inf)
         lengths = density_lengths(tracks, pp, d, t_max, step, tuning) \
             if tracks else np.zeros((len(pp), 0))
         tau = lengths @ sig_t
-        if walled and fog_sigma_t is None:
-            tau += SHADOW_TAU * occluded(surfaces, pp, d, t_max)[:, None]
-        out[a:b] = (np.exp(-tau) * seen).reshape(m, n_dirs, 3).mean(axis=1) * colour
+        direct = np.exp(-tau) if hidden is None else \
+            np.where(hidden[:, None], 0.0, np.exp(-tau))
+        out[a:b] = (direct * seen).reshape(m, n_dirs, 3).mean(axis=1) * colour
         if multiple:
             tau_s = np.minimum(lengths @ sig_s, tau)
             collided = np.exp(-(tau - tau_s)) * -np.expm1(-tau_s) * seen
+            if hidden is not None and np.any(hidden):
+                # the medium between the point and a surface is lit by the share of the
+                # sky the point itself sees (half over a wide ground)
+                vis = sky_share(surfaces, p, seed, a, b, n_dirs)
+                collided = np.where(hidden[:, None],
+                                    collided * np.repeat(vis, n_dirs)[:, None], collided)
             out_ms[a:b] = collided.reshape(m, n_dirs, 3).mean(axis=1) * colour
 
     run_chunks(n, chunk, work, threads, should_cancel)
