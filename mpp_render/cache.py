@@ -298,8 +298,14 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
               bool(surface_bounce) if multiple else None)
     # the light pyramids are moved towards what the camera sees (precompute.lightpyramid.drift_levels)
     seeded = int(seed) if multiple and multiple_paths > 0 else None
+    # the sky's light off the surfaces starts paths too (pathstarts.sky_surface_starts): the
+    # lights' part then holds the sky's colour
+    sky_paths = bool(multiple and multiple_paths > 0 and surface_bounce and surfaces is not None
+                     and not surfaces.empty and np.any(np.asarray(world.color) > 0)
+                     and not any(pm.endless for pm in media))
     light_key = digest("lights", common, list(lights), has_world,
-                       camera_key(camera) if multiple else None, seeded)
+                       camera_key(camera) if multiple else None, seeded,
+                       np.asarray(world.color, np.float64) if sky_paths else None)
     scene_key = digest("scene", common, list(lights), has_world, seeded)
     world_key = digest("world", common, np.asarray(world.color, np.float64), camera_key(camera),
                        int(n_dirs), int(seed)) if has_world else None
@@ -343,7 +349,9 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
         donor = cache.get("precompute", donor_key) if donor_key is not None else None
     if donor is not None and (donor["world"] == world_key or any_camera) and \
             donor["pre"].layout.light_channels == light_channels(lights):
-        part = pre_mod.precompute(media, lights, World(), camera, glow=False, **kw)  # a light changed
+        # a light changed (the sky's light off the surfaces still starts the lights' paths)
+        part = pre_mod.precompute(media, lights, World(), camera, glow=False,
+                                  sky=np.asarray(world.color, np.float64), **kw)
         old = donor["pre"]
         first = old.layout.world_first
         fields = []

@@ -237,3 +237,27 @@ def test_a_cancelled_render_keeps_nothing(warm):
 
     out = render(scene(), progress=progress, should_cancel=esc)
     assert out.cancelled and len(cache.CACHE) == 0
+
+
+@pytest.mark.parametrize("change", ["world", "light"])
+def test_the_skys_path_starts_follow_the_world_colour(warm, change):
+    """With traced paths, a ground and a lit sky, the sky's light off the ground starts paths
+    (pathstarts.sky_surface_starts), so the lights' part holds the sky's colour: another
+    world colour recomputes it, and a changed light, whose world channels are copied from
+    the cache, still starts the sky's paths: both equal a cold precompute."""
+    kw = dict(n_dirs=8, seed=3, threads=2, multiple=True, multiple_paths=20_000,
+              surface_bounce=True)
+    first = scene()
+    media, surf = prepared(first)
+    cache.precompute_cached(media, first.lights, first.world, first.camera, surfaces=surf, **kw)
+    second = scene(world=(0.4, 0.5, 0.6)) if change == "world" else scene(power=400.0)
+    media, surf = prepared(second)
+    got = cache.precompute_cached(media, second.lights, second.world, second.camera,
+                                  surfaces=surf, **kw)
+    assert got.stats["reused"] == ([] if change == "world" else ["world"])
+    cold = pre_mod.precompute(media, second.lights, second.world, second.camera, surfaces=surf,
+                              **kw)
+    assert_same_precompute(got, cold)
+    dark = pre_mod.precompute(media, second.lights, second.world, second.camera, surfaces=surf,
+                              sky=np.zeros(3), **kw)
+    assert not np.array_equal(cold.multiple[0][0].levels[0], dark.multiple[0][0].levels[0])

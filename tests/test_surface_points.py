@@ -2,6 +2,8 @@
 wider than the reach sphere gets its points inside the sphere, and the areas the points stand
 for add up, in the mean, to the area inside the sphere, small triangles included; drawn
 denser near the medium (``scale``), they still do, while most of them lie near it."""
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -79,3 +81,49 @@ def test_points_denser_near_the_medium_integrate_its_light_with_less_noise(n):
     assert abs(each.mean() - exact) < 3.0 * each.std(ddof=1) / np.sqrt(len(each))
     assert each.std() < 0.1 * flat.std()
     assert near > 0.3 and near_flat < 0.01
+
+
+def test_the_sky_lit_ground_sends_its_light_into_a_medium_above_it():
+    """pathstarts.sky_surface_starts: a grey ground under a constant sky and a thick cube of
+    medium above it.  Far from the cube a point's irradiance is pi L_w (all the sky), so its
+    power over the area it stands for is R pi L_w; under the cube, whose shadow the
+    directions cross, it is less; with a dark sky, a black ground, no bounce or no sky
+    there are no starts."""
+    from mpp_render.media import prepare
+    from mpp_render.precompute.pathstarts import Surroundings, sky_surface_starts
+    from mpp_render.scene import Medium
+
+    n = 16
+    i2w = np.eye(4)
+    i2w[:3, :3] = np.diag([1.0 / n] * 3)
+    i2w[:3, 3] = [-0.5 + 0.5 / n, -0.5 + 0.5 / n, 0.2 + 0.5 / n]
+    pm = prepare(Medium("cube", np.full((n, n, n), 1.0, np.float32), i2w, np.full(3, 8.0),
+                        np.full(3, 2.0), 0.0))
+    ground = prepare_surfaces([square(30.0, z=0.0, albedo=0.5)])
+    sky = np.array([0.2, 0.3, 0.4])
+    around = Surroundings([pm], None, ground, 0.02, True, sky=sky)
+    p, power, normals, jitter = sky_surface_starts(pm, around, seed=4)
+    w = surface_points(ground, *_reach_of(pm), 16384, np.random.default_rng([4, 3571]),
+                       albedo_min=0.0, scale=_reach_of(pm)[1] / 64.0)[2]
+    assert len(p) == len(w) and jitter > 0.0
+    np.testing.assert_allclose(normals, np.tile([0.0, 0.0, 1.0], (len(p), 1)))
+    per_area = power / w[:, None]
+    full = 0.5 * np.pi * sky
+    far = np.hypot(p[:, 0], p[:, 1]) > 6.0
+    under = np.hypot(p[:, 0], p[:, 1]) < 0.2
+    assert far.sum() > 100 and under.sum() > 50
+    np.testing.assert_allclose(per_area[far].mean(axis=0), full, rtol=0.01)
+    assert np.all(per_area <= full * (1.0 + 1e-9))
+    assert np.all(per_area[under] < 0.8 * full)
+    for off in (dict(sky=np.zeros(3)), dict(sky=None), dict(bounce=False)):
+        assert sky_surface_starts(pm, dataclasses.replace(around, **off), seed=4) is None
+    black = Surroundings([pm], None, prepare_surfaces([square(30.0, albedo=0.0)]), 0.02, True,
+                         sky=sky)
+    assert sky_surface_starts(pm, black, seed=4) is None
+
+
+def _reach_of(pm):
+    """(centre, radius) within which sky_surface_starts draws: SURFACE_REACH bounding radii."""
+    from mpp_render.precompute.pathstarts import SURFACE_REACH, reach
+    centre, r = reach(pm)
+    return centre, SURFACE_REACH * 0.5 * r

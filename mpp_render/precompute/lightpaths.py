@@ -19,7 +19,8 @@ from ..paths import (MAX_COLLISIONS, MOMENT_CHANNELS, PATH_MEDIA, PATHS_MAX_SPAN
 from ..scene import MULTIPLE_PATHS, Tuning
 from .lattice import MULTIPLE_RESOLUTION, dilate, lattice_points, paths_lattice
 from .nodal import nodal_values, tent_mass
-from .pathstarts import Surroundings, fog_starts, reach, surface_albedo, surface_starts
+from .pathstarts import (Surroundings, fog_starts, reach, sky_surface_starts,
+                         surface_albedo, surface_starts)
 from .source import CELL_POINTS, light_direction, near_light_cells, source_and_density
 
 
@@ -47,7 +48,8 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
                     partners=(), deposits: float = Tuning.path_deposits,
                     nodal: bool = Tuning.path_nodal,
                     far_resolution: int = MULTIPLE_RESOLUTION,
-                    cell_tau: float = Tuning.cell_tau, cell_walk: int = Tuning.cell_walk):
+                    cell_tau: float = Tuning.cell_tau, cell_walk: int = Tuning.cell_walk,
+                    sky: bool = False):
     """(stride, h, M, far, moments) for ``light`` on medium ``pm`` (its field ``fld``, the light's optical
     depth at ``channel``): M float32 (LX,LY,LZ,3) W/(m^2 sr) on the light pyramid's lattice
     (lattice.walk_lattice at ``resolution``), from ``n_paths`` paths (paths.py; at most
@@ -73,7 +75,9 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     keeps the walk.  ``deposits``, ``nodal``: Tuning.path_deposits, Tuning.path_nodal
     (PathLattice.of).  ``far_resolution``: the far box's voxels along its longest side (the
     *Multiple Scattering Resolution* as set, not raised round a lamp).  ``cell_tau``,
-    ``cell_walk``: Tuning's (source.thick_band_source)."""
+    ``cell_walk``: Tuning's (source.thick_band_source).  ``sky``: the paths also start where
+    the surfaces reflect the constant sky's light (``around.sky``, pathstarts.sky_surface_starts);
+    the caller asks it of one light per medium, whose M then holds that light too."""
     stride, shape, h = paths_lattice(pm, resolution)
     voxels = np.zeros(pm.grid.shape[:3], np.float32)
     base, _, pts = source_and_density(pm, fld, light, channel, stride, voxels=voxels,
@@ -101,6 +105,9 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
                 sets.append(got + (0.0, 0))
         if around.surfaces is not None:
             got = surface_starts(pm, light, around, seed + 2)
+            if got is not None:
+                sets.append(got[:3] + (got[3], 1))
+            got = sky_surface_starts(pm, around, seed + 3) if sky else None
             if got is not None:
                 sets.append(got[:3] + (got[3], 1))
     if not sets:

@@ -56,7 +56,9 @@ class Surroundings:
     (Settings.surface_bounce; else they only absorb it), ``disc_exact`` the lamp radii within
     which a lamp's disc points get their own optical depth (Tuning.disc_exact,
     lights.disc_transmittance; 0: off), at least ``disc_voxels`` of the finest voxel
-    (Tuning.disc_voxels; media.disc_reaches)."""
+    (Tuning.disc_voxels; media.disc_reaches), ``sky`` the constant world's RGB radiance
+    (W/(m^2 sr)) where it lights the surfaces (None: dark, or under a world fog, whose glow
+    is fogglow.py's)."""
 
     solid: List
     fog_sigma_t: Optional[np.ndarray]
@@ -65,6 +67,7 @@ class Surroundings:
     bounce: bool = True
     disc_exact: float = 0.0
     disc_voxels: float = 0.0
+    sky: Optional[np.ndarray] = None
 
     def __post_init__(self):
         if self.surfaces is not None and self.surfaces.empty:
@@ -309,6 +312,67 @@ def _falloff(d, r0: float) -> np.ndarray:
     """g(d) = (r0^2 / (r0^2 + d^2))^(3/2) (surface_points), 1 at d = 0."""
     d = np.asarray(d, np.float64)
     return (r0 * r0 / (r0 * r0 + d * d)) ** 1.5
+
+
+SKY_DIRECTIONS = 16       # cosine-weighted directions per point for the sky's irradiance
+
+
+def sky_surface_starts(pm, around: Surroundings, seed: int, tuning=None):
+    """(points, power, normals, jitter m) of the constant sky's light that the surfaces round
+    the bounded medium ``pm`` reflect, drawn as ``surface_starts`` draws the lights' (its
+    points, on the side of each surface that faces the medium's centre), or None without a
+    sky or surfaces.  A point's irradiance from the sky is pi L_w times the mean, over
+    ``SKY_DIRECTIONS`` cosine-weighted directions stratified in cos^2 and azimuth, of each
+    direction's transmittance through the media where no surface hides the sky (the media's
+    own shadows on the ground); its power R E w (W) leaves in a cosine lobe, as light that
+    has bounced."""
+    from ..scene import Tuning
+    from ..surfaces import intersect
+    from .lightdepth import density_lengths, depth_rows
+    ss = around.surfaces
+    if ss is None or not around.bounce or around.sky is None or pm.endless:
+        return None
+    sky = np.asarray(around.sky, np.float64)
+    if not np.any(sky > 0.0):
+        return None
+    centre, radius = reach(pm)
+    scale = 0.5 * radius
+    rng = np.random.default_rng([seed, 3571])
+    got = surface_points(ss, centre, SURFACE_REACH * scale, SURFACE_POINTS, rng,
+                         albedo_min=0.0, scale=scale)
+    if got is None:
+        return None
+    p, pick, share = got
+    n = ss.normal[pick]
+    n = np.where((np.einsum("ij,ij->i", centre[None, :] - p, n) < 0.0)[:, None], -n, n)
+    p = p + n * (LIFT * ss.scale)
+    k = SKY_DIRECTIONS
+    j = np.arange(k)
+    u = rng.random((len(p), 2))
+    u1 = np.mod((j[None, :] + 0.5) / k + u[:, :1], 1.0)        # cos^2 theta, stratified
+    u2 = np.mod(j[None, :] * 0.6180339887498949 + u[:, 1:], 1.0)
+    t1, t2 = orthonormal_basis(n)
+    r, phi = np.sqrt(1.0 - u1), 2.0 * np.pi * u2
+    d = (t1[:, None, :] * (r * np.cos(phi))[..., None] + t2[:, None, :] * (r * np.sin(phi))[..., None]
+         + n[:, None, :] * np.sqrt(u1)[..., None]).reshape(-1, 3)
+    pp = np.repeat(p, k, axis=0)
+    _, tri = intersect(ss, pp, d, np.full(len(pp), np.inf))
+    open_ = tri < 0
+    trans = np.zeros((len(pp), 3))
+    tracks, sig_t, _ = depth_rows(around.solid)
+    if np.any(open_):
+        if tracks:
+            lengths = density_lengths(tracks, pp[open_], d[open_], np.full(int(open_.sum()), np.inf),
+                                      around.step, Tuning() if tuning is None else tuning)
+            trans[open_] = np.exp(-(lengths @ sig_t))
+        else:
+            trans[open_] = 1.0
+    e = np.pi * sky[None, :] * trans.reshape(len(p), k, 3).mean(axis=1)
+    power = surface_albedo(ss)[pick] * e * share[:, None]
+    live = np.all(np.isfinite(power), axis=1) & (power.sum(axis=1) > 0.0)
+    if not np.any(live):
+        return None
+    return p[live], power[live], n[live], float(np.sqrt(share.min()))
 
 
 def surface_starts(pm, light: Light, around: Surroundings, seed: int):

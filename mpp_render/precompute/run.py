@@ -45,7 +45,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                surfaces=None, threads: int = 0, multiple: bool = False,
                multiple_resolution: int = MULTIPLE_RESOLUTION, multiple_paths: int = 0,
                tuning: Tuning = Tuning(), surface_bounce: bool = True,
-               glow: bool = True) -> Precomputed:
+               glow: bool = True, sky=None) -> Precomputed:
     """Field arrays for every medium, and with ``multiple`` the light pyramids; raises
     cancel.Cancelled when ``should_cancel`` says so.  ``surfaces`` (a SurfaceSet or None)
     shadow the lights and the sky.  Media that cannot scatter (sigma_s = 0) get no
@@ -55,12 +55,15 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
     start on the lit surfaces and reflect off them (else the surfaces only absorb them).
     ``glow``: the light the media give off, scattered in them (precompute.emissionlight), is
     added to the world channels (cache.precompute_cached's part without the world leaves it
-    out)."""
+    out).  ``sky``: the constant sky's RGB radiance whose light off the surfaces starts
+    traced paths (pathstarts.sky_surface_starts); None: ``world.color`` (the cache's part
+    without the world gives the world's)."""
     t_start = time.perf_counter()
     delta = [delta_scaled(pm) for pm in media]
     layout = field_layout(media, lights, world.color, multiple, delta, peak=multiple_paths <= 0,
                           glow=glow)
     world_lit = bool(np.any(np.asarray(world.color) > 0))
+    sky_colour = np.asarray(world.color if sky is None else sky, np.float64)
     chans, beams = layout.light_channels, layout.beam_channels or [None] * len(lights)
     c = layout.channels
     ms_all = []
@@ -72,7 +75,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
     fog_delta = None if fog is None else delta_of[id(fog)].sigma_t
     shadowed = surfaces is not None and not surfaces.empty
     around = Surroundings(solid, fog_st, surfaces, step, bool(surface_bounce),
-                          tuning.disc_exact, tuning.disc_voxels)
+                          tuning.disc_exact, tuning.disc_voxels,
+                          sky=sky_colour if np.any(sky_colour > 0) and fog is None else None)
     # the traced paths' lattice of each medium, finer round a lamp inside it
     path_res = [lamp_resolution(pm, lights, multiple_resolution) for pm in media]
     # traced paths fly through every medium whose box overlaps theirs and deposit on it too
@@ -192,6 +196,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
             add_glow(f, layout, stride, once, more, flat)
         ms = [None] * len(lights)
         if multiple and np.any(pm.sigma_s > 0):
+            # the sky's light off the surfaces rides with the first light that has paths
+            sky_li = next((li for li in range(len(lights)) if chans[li] is not None), None)
             for li, light in enumerate(lights):
                 if chans[li] is None:
                     continue
@@ -211,7 +217,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                              nodal=tuning.path_nodal,
                                              far_resolution=multiple_resolution,
                                              cell_tau=tuning.cell_tau,
-                                             cell_walk=tuning.cell_walk)
+                                             cell_walk=tuning.cell_walk,
+                                             sky=li == sky_li)
                     if traced is not None:
                         for (j, _), m in zip(near, traced[5]):
                             key = (j, li)
