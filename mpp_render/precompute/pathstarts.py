@@ -27,12 +27,15 @@ from typing import List, Optional
 
 import numpy as np
 
+from ..gathers import directions as gather_directions
 from ..lights import disc_transmittance, incident
-from ..scene import Light
+from ..scene import Light, Tuning
+from ..surfaces import intersect
 from .. import kernels
 from ..media import disc_reaches
 from ..phase import orthonormal_basis
-from .lightdepth import kernel_arrays, light_optical_depth, light_position
+from .lightdepth import (density_lengths, depth_rows, kernel_arrays, light_optical_depth,
+                         light_position)
 from .source import light_direction
 
 FOG_POINTS = 16384       # first scatterings drawn round a light in the fog, per light
@@ -322,13 +325,10 @@ def sky_surface_starts(pm, around: Surroundings, seed: int, tuning=None):
     the bounded medium ``pm`` reflect, drawn as ``surface_starts`` draws the lights' (its
     points, on the side of each surface that faces the medium's centre), or None without a
     sky or surfaces.  A point's irradiance from the sky is pi L_w times the mean, over
-    ``SKY_DIRECTIONS`` cosine-weighted directions stratified in cos^2 and azimuth, of each
+    ``SKY_DIRECTIONS`` cosine-weighted directions stratified in cos^2 (gathers.directions), of each
     direction's transmittance through the media where no surface hides the sky (the media's
     own shadows on the ground); its power R E w (W) leaves in a cosine lobe, as light that
     has bounced."""
-    from ..scene import Tuning
-    from ..surfaces import intersect
-    from .lightdepth import density_lengths, depth_rows
     ss = around.surfaces
     if ss is None or not around.bounce or around.sky is None or pm.endless:
         return None
@@ -347,14 +347,8 @@ def sky_surface_starts(pm, around: Surroundings, seed: int, tuning=None):
     n = np.where((np.einsum("ij,ij->i", centre[None, :] - p, n) < 0.0)[:, None], -n, n)
     p = p + n * (LIFT * ss.scale)
     k = SKY_DIRECTIONS
-    j = np.arange(k)
-    u = rng.random((len(p), 2))
-    u1 = np.mod((j[None, :] + 0.5) / k + u[:, :1], 1.0)        # cos^2 theta, stratified
-    u2 = np.mod(j[None, :] * 0.6180339887498949 + u[:, 1:], 1.0)
-    t1, t2 = orthonormal_basis(n)
-    r, phi = np.sqrt(1.0 - u1), 2.0 * np.pi * u2
-    d = (t1[:, None, :] * (r * np.cos(phi))[..., None] + t2[:, None, :] * (r * np.sin(phi))[..., None]
-         + n[:, None, :] * np.sqrt(u1)[..., None]).reshape(-1, 3)
+    # cosine-weighted, stratified in 1 - cos^2 theta (the surfaces' gathers' directions)
+    d = gather_directions(n, p, rng.random((len(p), k, 2)), k)[0].reshape(-1, 3)
     pp = np.repeat(p, k, axis=0)
     _, tri = intersect(ss, pp, d, np.full(len(pp), np.inf))
     open_ = tri < 0
