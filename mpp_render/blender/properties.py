@@ -95,7 +95,8 @@ class MPPRenderSettings(bpy.types.PropertyGroup):
     surface_bounce: BoolProperty(
         name="Surface Bounce", default=True,
         description="Surfaces (a ground, a wall) reflect light into the volumes, diffusely: "
-                    "the light paths start on the lit surfaces and bounce off them (with "
+                    "the light paths start where the lights and the sky light the surfaces, "
+                    "out to 64 times a volume's size, and bounce off them (with "
                     "Light Paths 0, flat surfaces reflect the lights once, as area lights, "
                     "none under a World volume). Indirect light: with Multiple Scattering on. "
                     "Off: the surfaces only absorb")

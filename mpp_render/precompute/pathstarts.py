@@ -200,7 +200,7 @@ def surface_points(ss, centre, radius: float, m: int, rng, albedo_min: float = -
     parts is the sum of weight x f over the points).  Triangles whose largest diffuse albedo
     is not above ``albedo_min`` (surface_albedo) are left out; None where nothing remains.
 
-    ``scale`` None: the points spread uniformly, all of the same weight.  A triangle smaller
+    ``scale`` None (or not above 0): the points spread uniformly, all of the same weight.  A triangle smaller
     than the disc the sphere cuts from its plane is drawn over whole, else that disc is, and
     the draws outside the triangle or the sphere are dropped: a ground far wider than the
     sphere gets its points where the sphere is, not over all of it.
@@ -223,7 +223,7 @@ def surface_points(ss, centre, radius: float, m: int, rng, albedo_min: float = -
                           (surface_albedo(ss).max(axis=1) > albedo_min))
     if not cand.size:
         return None
-    if scale is not None:
+    if scale is not None and float(scale) > 0.0:
         return _points_about(corners[cand], cand, centre, radius, m, rng, float(scale))
     area = 0.5 * np.linalg.norm(np.cross(ss.e1[cand], ss.e2[cand]), axis=1)
     disc_r = np.sqrt(np.maximum(radius * radius - dist[cand] ** 2, 0.0))
