@@ -90,7 +90,8 @@ def test_the_sky_lit_ground_sends_its_light_into_a_medium_above_it():
     directions cross, it is less; with a dark sky, a black ground, no bounce or no sky
     there are no starts."""
     from mpp_render.media import prepare
-    from mpp_render.precompute.pathstarts import Surroundings, sky_surface_starts
+    from mpp_render.precompute.pathstarts import (Surroundings, sky_surface_starts,
+                                                  surface_reach)
     from mpp_render.scene import Medium
 
     n = 16
@@ -103,8 +104,9 @@ def test_the_sky_lit_ground_sends_its_light_into_a_medium_above_it():
     sky = np.array([0.2, 0.3, 0.4])
     around = Surroundings([pm], None, ground, 0.02, True, sky=sky)
     p, power, normals, jitter = sky_surface_starts(pm, around, seed=4)
-    w = surface_points(ground, *_reach_of(pm), 16384, np.random.default_rng([4, 3571]),
-                       albedo_min=0.0, scale=_reach_of(pm)[1] / 64.0)[2]
+    centre, radius, scale = surface_reach(pm)
+    w = surface_points(ground, centre, radius, 16384, np.random.default_rng([4, 3571]),
+                       albedo_min=0.0, scale=scale)[2]
     assert len(p) == len(w) and jitter > 0.0
     np.testing.assert_allclose(normals, np.tile([0.0, 0.0, 1.0], (len(p), 1)))
     per_area = power / w[:, None]
@@ -121,9 +123,3 @@ def test_the_sky_lit_ground_sends_its_light_into_a_medium_above_it():
                          sky=sky)
     assert sky_surface_starts(pm, black, seed=4) is None
 
-
-def _reach_of(pm):
-    """(centre, radius) within which sky_surface_starts draws: SURFACE_REACH bounding radii."""
-    from mpp_render.precompute.pathstarts import SURFACE_REACH, reach
-    centre, r = reach(pm)
-    return centre, SURFACE_REACH * 0.5 * r

@@ -29,7 +29,7 @@ import numpy as np
 
 from ..gathers import directions as gather_directions
 from ..lights import disc_transmittance, incident
-from ..scene import Light, Tuning
+from ..scene import Light
 from ..surfaces import intersect
 from .. import kernels
 from ..media import disc_reaches
@@ -134,6 +134,18 @@ def reach(pm, grid=None) -> tuple:
         st = np.asarray(pm.sigma_t, np.float64)
         return centre, half + REACH_MFP / float(st[st > 0].min())
     return centre, 2.0 * half
+
+
+def surface_reach(pm) -> tuple:
+    """(centre (3,) m, radius m, scale r0 m or None) of the sphere within which the surfaces'
+    light that reaches medium ``pm`` is drawn (surface_points): a bounded medium's
+    ``SURFACE_REACH`` bounding radii, its points denser near it (r0 its bounding radius); a
+    world fog's ``reach``, its points uniform (its paths end beyond it)."""
+    centre, radius = reach(pm)
+    if pm.endless:
+        return centre, radius, None
+    scale = 0.5 * radius
+    return centre, SURFACE_REACH * scale, scale
 
 
 def _cone(light: Light):
@@ -320,7 +332,7 @@ def _falloff(d, r0: float) -> np.ndarray:
 SKY_DIRECTIONS = 16       # cosine-weighted directions per point for the sky's irradiance
 
 
-def sky_surface_starts(pm, around: Surroundings, seed: int, tuning=None):
+def sky_surface_starts(pm, around: Surroundings, seed: int):
     """(points, power, normals, jitter m) of the constant sky's light that the surfaces round
     the bounded medium ``pm`` reflect, drawn as ``surface_starts`` draws the lights' (its
     points, on the side of each surface that faces the medium's centre), or None without a
@@ -335,11 +347,9 @@ def sky_surface_starts(pm, around: Surroundings, seed: int, tuning=None):
     sky = np.asarray(around.sky, np.float64)
     if not np.any(sky > 0.0):
         return None
-    centre, radius = reach(pm)
-    scale = 0.5 * radius
+    centre, radius, scale = surface_reach(pm)
     rng = np.random.default_rng([seed, 3571])
-    got = surface_points(ss, centre, SURFACE_REACH * scale, SURFACE_POINTS, rng,
-                         albedo_min=0.0, scale=scale)
+    got = surface_points(ss, centre, radius, SURFACE_POINTS, rng, albedo_min=0.0, scale=scale)
     if got is None:
         return None
     p, pick, share = got
@@ -356,8 +366,8 @@ def sky_surface_starts(pm, around: Surroundings, seed: int, tuning=None):
     tracks, sig_t, _ = depth_rows(around.solid)
     if np.any(open_):
         if tracks:
-            lengths = density_lengths(tracks, pp[open_], d[open_], np.full(int(open_.sum()), np.inf),
-                                      around.step, Tuning() if tuning is None else tuning)
+            lengths = density_lengths(tracks, pp[open_], d[open_],
+                                      np.full(int(open_.sum()), np.inf), around.step)
             trans[open_] = np.exp(-(lengths @ sig_t))
         else:
             trans[open_] = 1.0
@@ -377,11 +387,7 @@ def surface_starts(pm, light: Light, around: Surroundings, seed: int):
     ss = around.surfaces
     if ss is None or not around.bounce:
         return None
-    centre, radius = reach(pm)
-    scale = None
-    if not pm.endless:   # the surfaces' light reaching a bounded medium from afar
-        scale = 0.5 * radius
-        radius = SURFACE_REACH * scale
+    centre, radius, scale = surface_reach(pm)
     rng = np.random.default_rng(seed)
     got = surface_points(ss, centre, radius, SURFACE_POINTS, rng, albedo_min=0.0, scale=scale)
     if got is None:

@@ -114,18 +114,17 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
         t_max = np.full(len(pp), np.inf)
         seen = 1.0
         walled = surfaces is not None and not surfaces.empty
-        if walled and fog_sigma_t is not None:   # the fog before the surface still glows
+        hidden = None
+        if walled:   # the media's path ends at the surface
             t, tri = intersect(surfaces, pp, d, t_max)
             t_max = np.where(tri >= 0, t, np.inf)
-            seen = np.where((tri >= 0)[:, None],
-                            -np.expm1(-np.asarray(fog_sigma_t)[None, :] * t[:, None]), 1.0)
-        hidden = None
-        if walled and fog_sigma_t is None:
-            # a surface hides the sky beyond it; the medium before it still scatters
-            # the sky's light it gets from elsewhere along the direction (below)
-            t, tri = intersect(surfaces, pp, d, t_max)
-            hidden = tri >= 0
-            t_max = np.where(hidden, t, np.inf)
+            if fog_sigma_t is not None:   # the fog before the surface still glows
+                seen = np.where((tri >= 0)[:, None],
+                                -np.expm1(-np.asarray(fog_sigma_t)[None, :] * t[:, None]), 1.0)
+            else:
+                # a surface hides the sky beyond it; the medium before it still scatters
+                # the sky's light it gets from elsewhere along the direction (below)
+                hidden = tri >= 0
         lengths = density_lengths(tracks, pp, d, t_max, step, tuning) \
             if tracks else np.zeros((len(pp), 0))
         tau = lengths @ sig_t
