@@ -9,9 +9,11 @@ two images' means is the sky's multiply scattered light.  Ours renders it at the
 (16 spp); its Volume Multiple pass's mean is ours.  Prints, per scene, the means and the
 ratio.  Minutes (Cycles); not a test.
 
-What it showed (2026-12-05, 512 spp, 160x120): ours over Cycles' 0.616 (p_sphere_lowalbedo),
-0.843 (p_sphere_thick), 0.973 (p_dragon), 0.989 (cloud_vdb), 1.092 (slab_isotropic), 1.239
-(p_sphere_gneg): the collided-light model of docs/method.md §9.8.
+What it showed (512 spp, 160x120), ours over Cycles': with the collided model
+(2026-12-05) 0.616 (p_sphere_lowalbedo), 0.843 (p_sphere_thick), 0.973 (p_dragon), 0.989
+(cloud_vdb), 1.092 (slab_isotropic), 1.239 (p_sphere_gneg); with the absorption's flights
+traced (precompute/skydeficit.py, 2026-12-06) 0.961, 0.978, 0.979, 0.990, 0.965, 0.972, and
+the image means within 0.2 % of Cycles' on twelve scenes (docs/method.md §9.8).
 """
 from __future__ import annotations
 

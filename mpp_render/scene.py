@@ -354,7 +354,19 @@ class Tuning:
     optically thick across a lattice cell the sky's lit layer is thinner than the cell and
     the interpolation, a chord under a convex fall, was too bright: p_sphere_g95's single
     scattering 0.0139 (bias +0.0043) at 0, 0.0041 at 0.1, 0.0027 at 0.03, with about 56 000
-    and 217 000 of its 1.2 M voxels computed (docs/method.md §7)."""
+    and 217 000 of its 1.2 M voxels computed (docs/method.md §7).
+    ``sky_deficit_paths``: the paths of the fictitious emission sigma_a L_w whose later flights
+    are the sky's light an absorbing medium loses (precompute/skydeficit.py), as a share of
+    the Paths setting (at least emissionlight.EMISSION_PATHS).  The sky's multiple scattering
+    alone over Cycles' (benchmarks/sky_split.py, 160x120) at all the 3 000 000 paths, 1/8
+    and 1/32: p_sphere_gneg 0.976 / 0.979 / 0.976, p_sphere_thick 0.977 / 0.973 / 0.970,
+    p_sphere_lowalbedo 0.964 / 0.936 at the first two (the thick sphere's render with the
+    sky alone 45 / 7.7 s at the first two; measured before the lattice's points were left
+    signed, after which 1/8 gives 0.972, 0.978 and 0.961: docs/method.md §9.8).  A share times the medium's absorbed fraction
+    (1 - albedo; 1/4 of the paths at albedo 0) saved cloud_vdb's 0.7 s at 1920x1080 but took
+    its full render 0.0161 -> 0.0215, p_sphere_g95 0.0827 -> 0.0916 and slab_forward
+    0.0403 -> 0.0458: the deficit of a thick white medium is not small deep inside, and
+    its few paths' noise showed."""
 
     skip_min_voxels: int = 1 << 20
     spot_cull: bool = True
@@ -391,6 +403,7 @@ class Tuning:
     surface_cache_gathers: int = 128
     surface_cache_smooth: int = 1
     surface_bounces: int = 2
+    sky_deficit_paths: float = 0.125
 
 
 # The default Noise Threshold (pilot.py's unit: the standard error over sqrt(I S), S the

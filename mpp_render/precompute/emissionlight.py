@@ -68,7 +68,24 @@ def emission_light(pm: PreparedMedium, camera, n_paths: int, resolution: int,
                         should_cancel=should_cancel, around=around, deposits=deposits,
                         nodal=nodal)
     e = pm.emitted()
-    if e is None or camera is None:
+    return scattered_glow(pm, None if e is None else emitting_voxels(e), camera, n_paths,
+                          resolution, multiple, seed=seed, threads=threads,
+                          should_cancel=should_cancel, around=around, partners=partners,
+                          deposits=deposits, nodal=nodal)
+
+
+def scattered_glow(pm: PreparedMedium, emitting, camera, n_paths: int,
+                   resolution: int, multiple: bool, seed: int = 0, threads: int = 0,
+                   should_cancel=None, around: Optional[Surroundings] = None, partners=(),
+                   deposits: float = Tuning.path_deposits, nodal: bool = Tuning.path_nodal,
+                   setting: Optional[int] = None, signed: bool = False):
+    """``emission_light``'s (stride, E1, Em, cross) for the emission ``emitting`` = (flat, e):
+    the C-order indices (N,) of the emitting voxels of ``pm``'s padded grid and their
+    emission (N,3) W/(m^3 sr) (``emitting_voxels``), or None (nothing emitted, no camera,
+    nowhere to scatter, too dense for paths); ``setting``: the Paths setting that scales the
+    paths' cap (lightpaths.path_budget; None: ``n_paths``); ``signed``: the lattice's values
+    are not stopped at 0 where the nodal move takes them below (PathLattice.mean)."""
+    if emitting is None or not len(emitting[0]) or camera is None:
         return None
     if not pm.scatters and not partners:
         return None   # nothing its light could scatter in
@@ -78,20 +95,18 @@ def emission_light(pm: PreparedMedium, camera, n_paths: int, resolution: int,
                          nodal=nodal)
     if lat is None:
         return None
-    sets = voxel_starts(pm, e, lat.stride)
-    if sets is None:
-        return None
+    sets = voxel_starts(pm, emitting[0], emitting[1], lat.stride)
     lats = [lat] + [plat for _, plat in partners]
     # at most PATHS_PER_POINT per lattice point of every medium the light scatters in
-    n = max(1, path_budget(n_paths, sum(la.cells for la in lats)))
+    n = max(1, path_budget(n_paths, sum(la.cells for la in lats), setting))
     first = _trace_all(sets, n, seed, threads, should_cancel, pm, lat, around, max_collisions=1,
                        partners=partners)
     later = [None] * len(lats)
     if multiple:
         every = _trace_all(sets, n, seed, threads, should_cancel, pm, lat, around,
                            partners=partners)
-        later = [la.mean(np.maximum(e - f, 0.0)) for la, e, f in zip(lats, every, first)]
-    once = [la.mean(f) for la, f in zip(lats, first)]
+        later = [la.mean(np.maximum(e - f, 0.0), signed) for la, e, f in zip(lats, every, first)]
+    once = [la.mean(f, signed) for la, f in zip(lats, first)]
     return lat.stride, once[0], later[0], list(zip(once[1:], later[1:]))
 
 
@@ -105,17 +120,22 @@ def flown_through(pm: PreparedMedium) -> PreparedMedium:
                                sigma_t=np.ones(3), emission_grid=None)
 
 
-def voxel_starts(pm: PreparedMedium, e: np.ndarray, stride: int):
-    """[(points (N,3) m, power (N,3) W, directions, jitter, lobe 2)]: the emitting voxels,
-    each of power 4 pi e V (V the voxel's volume) and offset by a tent of half-width one
-    voxel (``jitter`` 1 / ``stride`` lattice steps), so that the starts follow the emission
-    interpolated trilinearly, as the march reads it; None where nothing glows."""
+def emitting_voxels(e: np.ndarray):
+    """(flat, rows): the C-order indices (N,) of the voxels of ``e`` (X,Y,Z,3) that emit and
+    their emission (N,3)."""
     flat = np.flatnonzero(e.sum(axis=-1) > 0.0)
-    if not flat.size:
-        return None
+    return flat, e.reshape(-1, 3)[flat]
+
+
+def voxel_starts(pm: PreparedMedium, flat: np.ndarray, e: np.ndarray, stride: int):
+    """[(points (N,3) m, power (N,3) W, directions, jitter, lobe 2)]: the emitting voxels
+    ``flat`` (C-order indices into ``pm``'s padded grid) of emission ``e`` (N,3)
+    W/(m^3 sr), each of power 4 pi e V (V the voxel's volume) and offset by a tent of
+    half-width one voxel (``jitter`` 1 / ``stride`` lattice steps), so that the starts
+    follow the emission interpolated trilinearly, as the march reads it."""
     vox = float(abs(np.linalg.det(np.asarray(pm.i2w[:3, :3], np.float64))))
-    power = 4.0 * np.pi * vox * e.reshape(-1, 3)[flat]
-    ijk = np.stack(np.unravel_index(flat, e.shape[:3]), axis=1).astype(np.float64)
+    power = 4.0 * np.pi * vox * np.asarray(e, np.float64)
+    ijk = np.stack(np.unravel_index(flat, pm.grid.shape[:3]), axis=1).astype(np.float64)
     up = np.zeros((len(flat), 3))
     up[:, 2] = 1.0                                      # any axis: the lobe is uniform
     return [(pm.to_world(ijk), power, up, 1.0 / stride, 2)]

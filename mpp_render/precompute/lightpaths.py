@@ -308,18 +308,19 @@ class PathLattice:
         (times the Paths ``setting`` over the default, where above it: path_budget)."""
         return path_budget(n_paths, self.cells, setting)
 
-    def mean(self, acc: np.ndarray) -> np.ndarray:
+    def mean(self, acc: np.ndarray, signed: bool = False) -> np.ndarray:
         """M (float32, W/(m^2 sr)) from the deposits ``acc``: divided by the density under each
         point's tent (the cell's mean), so that M is the medium's own average there and a point
         beside the medium's surface is not diluted by the empty side; with ``offsets`` (the
         tents' centroids, nodal.py) moved from each centroid to its point.  ``acc``'s last
         axis: 3 channels of light, or those and the 12 moments (paths.py), whose last 9, the
-        first order, are signed."""
+        first order, are signed.  ``signed``: the light channels too are left as moved, not
+        stopped at 0 (unbiased where the light is taken off another estimate: skydeficit.py)."""
         m = np.divide(acc, self.tent_mass, out=np.zeros_like(acc), where=self.tent_mass > 0.0)
         if self.offsets is not None:
             return nodal_values(m, self.offsets, self.tent_mass[..., 0],
-                                signed=SIGNED_CHANNELS if m.shape[-1] == MOMENT_CHANNELS
-                                else 0)
+                                signed=m.shape[-1] if signed else
+                                SIGNED_CHANNELS if m.shape[-1] == MOMENT_CHANNELS else 0)
         return np.ascontiguousarray(m, np.float32)
 
 

@@ -18,9 +18,10 @@ from .lightdepth import (SHADOW_TAU, light_optical_depth, near_sharp_surfaces, s
                          split_fog, sweep_light)
 from .flatten import flattened
 from .fogglow import glow_on_medium
-from .emissionlight import EMISSION_PATHS, add_glow, emission_light
+from .emissionlight import EMISSION_PATHS, add_glow, add_lattice, emission_light
 from .lightpaths import lit_by_glow, overlapping, partner_lattice, traced_multiple
 from .pathstarts import Surroundings
+from .skydeficit import deficit_paths, sky_deficit
 from .lightpyramid import MultipleField, multiple_field
 from .source import peak_light
 from .worldlight import fill_world_light
@@ -100,6 +101,11 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
 
     crossed = {}   # (medium, light) -> M (and moments) deposited there by other media's paths
     glowed = []    # (medium, stride, E1, Em): other media's glow scattered in that medium
+    lost = []      # (medium, stride, D): other media's absorption of the sky (skydeficit.py)
+    # the absorption's share of the sky's multiply scattered light is traced (skydeficit.py):
+    # with multiple scattering, a camera, and no world fog (which hides the sky)
+    deficit = bool(multiple and camera is not None and fog is None and world_lit
+                   and layout.ambient_multiple_channel is not None)
     fields = []
     n_pts = 0
     n_ambient = 0
@@ -165,8 +171,24 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
             got = fill_world_light(f, (layout.ambient_channel, layout.ambient_multiple_channel),
                                    solid, pm, world, camera, flat, n_dirs, 2.0 * step,
                                    seed=seed + mi, should_cancel=should_cancel,
-                                   surfaces=surfaces, threads=threads, tuning=tuning)
+                                   surfaces=surfaces, threads=threads, tuning=tuning,
+                                   deficit=deficit)
             n_ambient += got
+            if deficit:
+                if progress:
+                    progress(0.0, f"Sky light absorbed in {pm.medium.name}")
+                near = partners(mi, lit_by_glow(media, mi))
+                n_lost = deficit_paths(multiple_paths, EMISSION_PATHS, tuning.sky_deficit_paths)
+                got = sky_deficit(pm, world.color, camera, n_lost, path_res[mi],
+                                  seed=seed + 7919 * mi + 3001, threads=threads,
+                                  should_cancel=should_cancel, around=around,
+                                  partners=[(media[j], lat) for j, lat in near],
+                                  surfaces=surfaces, n_dirs=n_dirs,
+                                  setting=max(int(multiple_paths), n_lost), tuning=tuning)
+                if got is not None:
+                    stride, own, cross = got
+                    add_lattice(f, layout.ambient_multiple_channel, -own, stride, flat)
+                    lost += [(j, lat.stride, d) for (j, lat), d in zip(near, cross)]
         if glow and layout.ambient_channel is not None and \
                 (pm.glows if pm.endless else pm.emits):
             if progress:
@@ -248,6 +270,9 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
         if layout.ambient_channel is None:
             continue
         add_glow(fields[j], layout, stride, once, more, needed_flat(media[j]))
+    for j, stride, d in lost:
+        add_lattice(fields[j], layout.ambient_multiple_channel, -d, stride,
+                    needed_flat(media[j]))
     for (j, li), m in crossed.items():
         mf = ms_all[j][li]
         if mf is None or not mf.traced:   # a medium without paths of its own (too dense)

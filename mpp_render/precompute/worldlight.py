@@ -82,12 +82,15 @@ def sky_share(surfaces, points, seed: int, a: int, b: int, n_dirs: int) -> np.nd
 
 def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, camera: Camera,
                 points, n_dirs, step, seed=0, chunk=None, should_cancel=None, surfaces=None,
-                threads=0, multiple=False, tuning: Tuning = Tuning(), fog_sigma_t=None):
+                threads=0, multiple=False, tuning: Tuning = Tuning(), fog_sigma_t=None,
+                deficit: bool = False):
     """A(x) (N,3): world radiance scattered towards the camera per unit sigma_s, attenuated;
     with ``multiple`` also A_ms(x) (N,3), the same for the sky light that has scattered on
-    its way in (the collided part exp(-tau_a) (1 - exp(-tau_s)), see docs/method.md), and the
-    pair is returned.  Points draw their jitter from streams seeded by (seed, block of
-    ``WORLD_RNG_BLOCK`` points), so the result depends on neither the thread count nor the
+    its way in, and the pair is returned: with ``deficit`` (the absorption's later flights
+    are traced and taken off, precompute.skydeficit) the collided part of a furnace less the
+    absorption's first flight, (tau_s / tau_t)(1 - exp(-tau_t)); without (the world fog's
+    glow, or no camera) the model exp(-tau_a) (1 - exp(-tau_s)) (docs/method.md §9.8).
+    Points draw their jitter from streams seeded by (seed, block of ``WORLD_RNG_BLOCK`` points), so the result depends on neither the thread count nor the
     chunk size (by default ``world_chunk(n_dirs)``, short enough to serve Esc quickly).
     ``fog_sigma_t``: None for the sky (the surfaces cut it off), or the RGB extinction (1/m)
     of the endless fog whose glow ``world.color`` is (precompute.fogglow.glow_on_medium): a
@@ -133,7 +136,11 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
         out[a:b] = (direct * seen).reshape(m, n_dirs, 3).mean(axis=1) * colour
         if multiple:
             tau_s = np.minimum(lengths @ sig_s, tau)
-            collided = np.exp(-(tau - tau_s)) * -np.expm1(-tau_s) * seen
+            if deficit:
+                collided = np.divide(tau_s, tau, out=np.zeros_like(tau), where=tau > 0.0) * \
+                    -np.expm1(-tau) * seen
+            else:
+                collided = np.exp(-(tau - tau_s)) * -np.expm1(-tau_s) * seen
             if hidden is not None and np.any(hidden):
                 # the medium between the point and a surface is lit by the share of the
                 # sky the point itself sees (half over a wide ground)
@@ -148,19 +155,21 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
 
 def fill_world_light(f: np.ndarray, channels, media: List[PreparedMedium], pm: PreparedMedium,
                      world: World, camera: Camera, flat, n_dirs, step, seed=0,
-                     should_cancel=None, surfaces=None, threads=0, tuning: Tuning = Tuning()):
+                     should_cancel=None, surfaces=None, threads=0, tuning: Tuning = Tuning(),
+                     deficit: bool = False):
     """Write the world light (``world_light`` through ``media``, on ``coarse_lattice``,
     interpolated trilinearly to the needed voxels ``flat``) into ``pm``'s field ``f`` at
     ``channels`` = (A's first channel, A_ms's or None); the voxels of the lattice cells
     that ``refine_flat`` picks (``tuning.ambient_refine``) get A computed at their own
-    centres instead.  Returns the number of points computed (lattice and voxels)."""
+    centres instead; ``deficit``: world_light's.  Returns the number of points computed
+    (lattice and voxels)."""
     amb, amb_ms = channels
     stride, cshape, cflat, cpts = world_lattice(pm, tuning.ambient_resolution)
 
     def light(points, s):
         return world_light(media, pm, world, camera, points, n_dirs, step, seed=s,
                            should_cancel=should_cancel, surfaces=surfaces, threads=threads,
-                           multiple=amb_ms is not None, tuning=tuning)
+                           multiple=amb_ms is not None, tuning=tuning, deficit=deficit)
     a = light(cpts, seed)
     lattices = [on_lattice(cshape, cflat, vals) for vals in (a if amb_ms is not None else (a,))]
     for ch, lat in zip((amb, amb_ms), lattices):

@@ -1,0 +1,96 @@
+"""The sky's light that absorbing media lose, once it has scattered (docs/method.md §9.8).
+
+Under a constant sky of radiance L_w (W/(m^2 sr)), a medium that absorbs nothing has the
+radiance L_w everywhere in it, along every direction, whatever its phase function and
+density (the furnace: what a straight path loses by scattering, others scatter into it).
+Where it absorbs, its radiance falls short of L_w by D(x, w), and D obeys the transfer
+equation of the same medium with the source sigma_a(x) L_w (W/(m^3 sr)) and nothing coming
+in from outside: D is the light of a fictitious emission sigma_a L_w, spread by the medium.
+So the sky's light arriving at x along w after one scattering or more is
+
+    A_ms(x, w) = L_w (1 - e^{-tau_t}) - D(x, w)                     [W/(m^2 sr)]
+
+(tau_t the optical depth from x to the sky along -w). D's first flight, the fictitious
+emission unscattered, is L_w integral sigma_a e^{-tau_t(s)} ds = L_w (tau_a / tau_t)
+(1 - e^{-tau_t}) where the albedo is the same along the path (one medium), so
+worldlight.world_light takes L_w (tau_s / tau_t)(1 - e^{-tau_t}) for the collided part (in
+closed form, along its own directions), and the fictitious emission's later flights D_2+,
+traced as a glow's (emissionlight.scattered_glow, its Em), are taken off the world light's
+multiply scattered channel here.  The estimate converges with the paths; the first flight,
+most of D where the medium absorbs much, has no noise.
+
+Where a surface hides part of the sky, a white medium's radiance at x is about L_w times the
+share s(x) of the sky x sees (worldlight.sky_share, as the collided part along a hidden
+direction takes it), and the emission is sigma_a L_w s(x): s on the world light's lattice,
+interpolated to the voxels.
+"""
+from __future__ import annotations
+
+from typing import Optional
+
+import numpy as np
+
+from .. import kernels
+from ..media import PreparedMedium, density_from
+from ..scene import Tuning
+from .emissionlight import scattered_glow
+from .worldlight import sky_share, world_lattice
+
+SHARE_CHUNK = 1 << 11   # lattice points whose sky share is found at a time
+
+
+def deficit_paths(multiple_paths: int, floor: int, share: float) -> int:
+    """The paths traced for the fictitious emission: ``share`` (Tuning.sky_deficit_paths)
+    of the Paths setting ``multiple_paths``, at least ``floor`` (the walk's Preview has no
+    paths of its own)."""
+    return max(int(floor), int(share * max(0, int(multiple_paths))))
+
+
+def sky_deficit(pm: PreparedMedium, colour, camera, n_paths: int, resolution: int,
+                seed: int = 0, threads: int = 0, should_cancel=None, around=None, partners=(),
+                surfaces=None, n_dirs: int = 64, setting: Optional[int] = None,
+                tuning: Tuning = Tuning()):
+    """(stride, D, cross) or None: D_2+ (float32 (LX,LY,LZ,3), W/(m^2 sr), phase-weighted
+    towards the camera, module docstring) on ``pm``'s light-path lattice from the
+    fictitious emission sigma_a rho L_w s of ``pm`` (``colour`` L_w, RGB), and ``cross``
+    the same on each of the ``partners``' lattices ((PreparedMedium, PathLattice), the media
+    its paths fly through).  None where ``pm`` absorbs nothing, the sky is black, there is
+    no camera or nowhere to scatter.  ``n_paths`` paths (``setting`` the Paths setting that
+    scales their cap), ``around`` the surfaces they reflect off; ``surfaces`` those that
+    hide the sky (s: ``n_dirs`` directions a point of the world light's lattice)."""
+    colour = np.asarray(colour, np.float64).reshape(3)
+    sigma_a = np.maximum(np.asarray(pm.sigma_a, np.float64).reshape(3), 0.0)
+    if camera is None or pm.endless or not np.any(colour * sigma_a > 0.0):
+        return None
+    rho = density_from(pm.grid, pm.threshold).reshape(-1)
+    flat = np.flatnonzero(rho > 0.0)
+    if not len(flat):
+        return None
+    e = rho[flat, None] * (sigma_a * colour)[None, :]
+    if surfaces is not None and not surfaces.empty:
+        e *= seen_share(pm, flat, surfaces, n_dirs, seed, tuning.ambient_resolution)[:, None]
+    got = scattered_glow(pm, (flat, e), camera, n_paths, resolution, True, seed=seed,
+                         threads=threads, should_cancel=should_cancel, around=around,
+                         partners=partners, deposits=tuning.path_deposits,
+                         nodal=tuning.path_nodal, setting=setting, signed=True)
+    if got is None:
+        return None
+    stride, _, later, cross = got
+    return stride, later, [m for _, m in cross]
+
+
+def seen_share(pm: PreparedMedium, flat: np.ndarray, surfaces, n_dirs: int, seed: int,
+               resolution: int) -> np.ndarray:
+    """(N,) the share of the sky the voxels ``flat`` of ``pm`` see past the ``surfaces``:
+    worldlight.sky_share at the points of the world light's lattice, interpolated
+    trilinearly."""
+    stride, shape, cflat, cpts = world_lattice(pm, resolution)
+    share = np.zeros(len(cpts))
+    for a in range(0, len(cpts), SHARE_CHUNK):
+        b = min(len(cpts), a + SHARE_CHUNK)
+        share[a:b] = sky_share(surfaces, cpts[a:b], seed, a, b, n_dirs)
+    lattice = np.zeros((int(np.prod(shape)), 3), np.float32)
+    lattice[cflat] = share[:, None]
+    lattice = lattice.reshape(tuple(shape) + (3,))
+    ijk = np.stack(np.unravel_index(flat, pm.grid.shape[:3]), axis=1).astype(np.float64)
+    return np.clip(kernels.trilinear(lattice, ijk / stride)[:, 0].astype(np.float64), 0.0, 1.0)
