@@ -357,7 +357,9 @@ class Tuning:
     and 217 000 of its 1.2 M voxels computed (docs/method.md §7).
     ``sky_deficit_paths``: the paths of the fictitious emission sigma_a L_w whose later flights
     are the sky's light an absorbing medium loses (precompute/skydeficit.py), as a share of
-    the Paths setting (at least emissionlight.EMISSION_PATHS).  The sky's multiple scattering
+    the Paths setting (or of emissionlight.EMISSION_PATHS where that is more: the Preview's
+    walk has no paths; its render of p_sphere_lowalbedo at 480x270 took 1.1 s more with all
+    250 000).  The sky's multiple scattering
     alone over Cycles' (benchmarks/sky_split.py, 160x120) at all the 3 000 000 paths, 1/8
     and 1/32: p_sphere_gneg 0.976 / 0.979 / 0.976, p_sphere_thick 0.977 / 0.973 / 0.970,
     p_sphere_lowalbedo 0.964 / 0.936 at the first two (the thick sphere's render with the

@@ -107,11 +107,11 @@ def test_a_white_medium_or_a_black_sky_loses_nothing():
     assert sky_deficit(sphere(0.5), np.ones(3), None, 10_000, 16) is None
 
 
-def test_the_deficit_takes_a_share_of_the_paths_and_never_fewer_than_its_floor():
+def test_the_deficit_takes_a_share_of_the_paths_or_of_the_glows_number():
     assert deficit_paths(3_000_000, 250_000, 0.125) == 375_000
     assert deficit_paths(12_000_000, 250_000, 0.125) == 1_500_000
     # the walk's Preview has no paths of its own: the glow's number stands for them
-    assert deficit_paths(0, 250_000, 0.125) == 250_000
+    assert deficit_paths(0, 250_000, 0.125) == 31_250
 
 
 def test_the_lattice_leaves_a_signed_light_below_0_when_asked():

@@ -78,13 +78,16 @@ def scattered_glow(pm: PreparedMedium, emitting, camera, n_paths: int,
                    resolution: int, multiple: bool, seed: int = 0, threads: int = 0,
                    should_cancel=None, around: Optional[Surroundings] = None, partners=(),
                    deposits: float = Tuning.path_deposits, nodal: bool = Tuning.path_nodal,
-                   setting: Optional[int] = None, signed: bool = False):
+                   setting: Optional[int] = None, signed: bool = False,
+                   first_order: bool = True):
     """``emission_light``'s (stride, E1, Em, cross) for the emission ``emitting`` = (flat, e):
     the C-order indices (N,) of the emitting voxels of ``pm``'s padded grid and their
     emission (N,3) W/(m^3 sr) (``emitting_voxels``), or None (nothing emitted, no camera,
     nowhere to scatter, too dense for paths); ``setting``: the Paths setting that scales the
     paths' cap (lightpaths.path_budget; None: ``n_paths``); ``signed``: the lattice's values
-    are not stopped at 0 where the nodal move takes them below (PathLattice.mean)."""
+    are not stopped at 0 where the nodal move takes them below (PathLattice.mean);
+    ``first_order`` False: E1 is not made from the first flights (None in its place), which
+    are traced all the same for Em."""
     if emitting is None or not len(emitting[0]) or camera is None:
         return None
     if not pm.scatters and not partners:
@@ -106,7 +109,7 @@ def scattered_glow(pm: PreparedMedium, emitting, camera, n_paths: int,
         every = _trace_all(sets, n, seed, threads, should_cancel, pm, lat, around,
                            partners=partners)
         later = [la.mean(np.maximum(e - f, 0.0), signed) for la, e, f in zip(lats, every, first)]
-    once = [la.mean(f, signed) for la, f in zip(lats, first)]
+    once = [la.mean(f, signed) if first_order else None for la, f in zip(lats, first)]
     return lat.stride, once[0], later[0], list(zip(once[1:], later[1:]))
 
 

@@ -41,9 +41,9 @@ SHARE_CHUNK = 1 << 11   # lattice points whose sky share is found at a time
 
 def deficit_paths(multiple_paths: int, floor: int, share: float) -> int:
     """The paths traced for the fictitious emission: ``share`` (Tuning.sky_deficit_paths)
-    of the Paths setting ``multiple_paths``, at least ``floor`` (the walk's Preview has no
-    paths of its own)."""
-    return max(int(floor), int(share * max(0, int(multiple_paths))))
+    of the Paths setting ``multiple_paths``, or of ``floor`` where that is more (the glow's
+    number: the walk's Preview has no paths of its own)."""
+    return max(1, int(share * max(int(floor), int(multiple_paths))))
 
 
 def sky_deficit(pm: PreparedMedium, colour, camera, n_paths: int, resolution: int,
@@ -59,24 +59,41 @@ def sky_deficit(pm: PreparedMedium, colour, camera, n_paths: int, resolution: in
     scales their cap), ``around`` the surfaces they reflect off; ``surfaces`` those that
     hide the sky (s: ``n_dirs`` directions a point of the world light's lattice)."""
     colour = np.asarray(colour, np.float64).reshape(3)
-    sigma_a = np.maximum(np.asarray(pm.sigma_a, np.float64).reshape(3), 0.0)
-    if camera is None or pm.endless or not np.any(colour * sigma_a > 0.0):
+    if camera is None or pm.endless or not np.any(colour > 0.0):
         return None
     rho = density_from(pm.grid, pm.threshold).reshape(-1)
     flat = np.flatnonzero(rho > 0.0)
+    e = absorption_at(pm, flat, rho[flat]) * colour[None, :]
+    keep = e.sum(axis=1) > 0.0
+    flat, e = flat[keep], e[keep]
     if not len(flat):
         return None
-    e = rho[flat, None] * (sigma_a * colour)[None, :]
     if surfaces is not None and not surfaces.empty:
         e *= seen_share(pm, flat, surfaces, n_dirs, seed, tuning.ambient_resolution)[:, None]
     got = scattered_glow(pm, (flat, e), camera, n_paths, resolution, True, seed=seed,
                          threads=threads, should_cancel=should_cancel, around=around,
                          partners=partners, deposits=tuning.path_deposits,
-                         nodal=tuning.path_nodal, setting=setting, signed=True)
+                         nodal=tuning.path_nodal, setting=setting, signed=True,
+                         first_order=False)
     if got is None:
         return None
     stride, _, later, cross = got
     return stride, later, [m for _, m in cross]
+
+
+def absorption_at(pm: PreparedMedium, flat: np.ndarray, rho: np.ndarray) -> np.ndarray:
+    """(N,3) sigma_a (1/m) at the voxels ``flat`` of ``pm`` of density ``rho`` (N,): its
+    extinction (per channel from the extinction grid where it has one) less its scattering
+    (times the scattering colour's factor where it varies), at least 0."""
+    st = np.asarray(pm.sigma_t, np.float64).reshape(1, 3)
+    ss = np.asarray(pm.sigma_s, np.float64).reshape(1, 3)
+    ext = pm.extinction_density
+    if ext is None and pm.scatter_grid is None:   # one albedo: sigma_a per unit density
+        return np.asarray(rho, np.float64)[:, None] * np.maximum(st - ss, 0.0)
+    t = st * (rho[:, None] if ext is None else ext.reshape(-1, 3)[flat].astype(np.float64))
+    factor = pm.scatter_at(flat)
+    sc = ss * rho[:, None] * (1.0 if factor is None else factor)
+    return np.maximum(t - sc, 0.0)
 
 
 def seen_share(pm: PreparedMedium, flat: np.ndarray, surfaces, n_dirs: int, seed: int,

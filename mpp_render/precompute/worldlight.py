@@ -90,8 +90,9 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
     are traced and taken off, precompute.skydeficit) the collided part of a furnace less the
     absorption's first flight, (tau_s / tau_t)(1 - exp(-tau_t)); without (the world fog's
     glow, or no camera) the model exp(-tau_a) (1 - exp(-tau_s)) (docs/method.md §9.8).
-    Points draw their jitter from streams seeded by (seed, block of ``WORLD_RNG_BLOCK`` points), so the result depends on neither the thread count nor the
-    chunk size (by default ``world_chunk(n_dirs)``, short enough to serve Esc quickly).
+    Points draw their jitter from streams seeded by (seed, block of ``WORLD_RNG_BLOCK``
+    points), so the result depends on neither the thread count nor the chunk size (by
+    default ``world_chunk(n_dirs)``, short enough to serve Esc quickly).
     ``fog_sigma_t``: None for the sky (the surfaces cut it off), or the RGB extinction (1/m)
     of the endless fog whose glow ``world.color`` is (precompute.fogglow.glow_on_medium): a
     surface at t metres along a direction hides only the fog behind it, the glow from there
