@@ -9,6 +9,9 @@ runs them (run.py):
 * lightdepth.py: optical depth to each light through all media and surfaces (the sweep);
 * source.py: the first-scattering source on a lattice and the forward peak's light;
 * worldlight.py: the world's light scattered towards the camera;
+* skydeficit.py: the sky's light that absorbing media lose once it has scattered (a
+  fictitious emission's traced flights, taken off worldlight's multiple scattering);
+* emissionlight.py, fogglow.py: the media's glow, scattered in them;
 * lightpyramid.py, boundary.py: the walk's levels, their escape through the surface and
   their drift.
 """
