@@ -2,6 +2,8 @@
 light less the fictitious emission sigma_a L_w's flights, against independent random walks."""
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -124,3 +126,25 @@ def test_the_lattice_leaves_a_signed_light_below_0_when_asked():
     plain, signed = lat.mean(acc), lat.mean(acc, signed=True)
     assert plain.min() >= 0.0 and signed.min() < 0.0
     assert np.all(plain == np.maximum(signed, 0.0))
+
+
+@pytest.mark.parametrize("albedo, scale", [(0.5, 2500.0), (1e-6, 1.0), (0.999999, 1.0)])
+def test_stiff_media_under_a_sky_give_finite_light(albedo, scale):
+    """Optical radius 4500 (too dense for paths: it keeps the collided model, whose multiple
+    part is 0.03 of the sky's radiance at most, at its surface, and not the furnace's
+    first-order 0.5, which only the traced flights would bring down),
+    nearly black and nearly white media: the sky's light stays finite, and the multiple part
+    never exceeds the sky's radiance by more than the noise of what is taken off."""
+    pm = sphere(albedo)
+    pm = dataclasses.replace(pm, sigma_s=pm.sigma_s * scale, sigma_a=pm.sigma_a * scale,
+                             sigma_t=pm.sigma_t * scale)
+    pre = precompute([pm], [], World(color=np.ones(3)), camera(), multiple=True,
+                     multiple_paths=100_000, seed=1)
+    lay = pre.layout
+    f = pre.fields[0]
+    for ch in (lay.ambient_channel, lay.ambient_multiple_channel):
+        v = f[..., ch:ch + 3]
+        assert np.all(np.isfinite(v))
+        assert float(v.max()) <= 1.05
+    if scale > 1.0:
+        assert float(f[..., lay.ambient_multiple_channel].max()) < 0.1

@@ -189,6 +189,16 @@ def tentative_rate(majorant: float, h: float, deposits: float) -> float:
     return max(float(majorant), float(deposits) / float(h))
 
 
+def too_dense(pm, resolution: int, deposits: float = Tuning.path_deposits) -> bool:
+    """Whether medium ``pm`` is too dense for paths at ``resolution`` (paths.PATHS_MAX_SPAN:
+    its tentative collisions across the grid; PathLattice.of is None then)."""
+    _, _, h = paths_lattice(pm, resolution)
+    density = pm.path_density()
+    rate = tentative_rate(float(density.max()) * float(np.max(pm.sigma_t)), h, deposits)
+    return not rate_span(rate, np.asarray(pm.i2w[:3, :3], np.float64),
+                         density.shape) <= PATHS_MAX_SPAN
+
+
 def partner_lattice(pm, camera, resolution: int, around: Optional[Surroundings] = None,
                     deposits: float = Tuning.path_deposits, nodal: bool = Tuning.path_nodal):
     """The PathLattice other media's paths deposit on in ``pm`` (traced_multiple's
@@ -279,12 +289,12 @@ class PathLattice:
         least (Tuning.path_deposits): the rate is max(majorant, deposits / h).  ``nodal``:
         ``mean`` moves each point's value from its tent's centroid to the point
         (Tuning.path_nodal, nodal.py)."""
+        if too_dense(pm, resolution, deposits):
+            return None
         stride, shape, h = paths_lattice(pm, resolution)
         i2w = np.asarray(pm.i2w[:3, :3], np.float64)
         density = pm.path_density()
         rate = tentative_rate(float(density.max()) * float(np.max(pm.sigma_t)), h, deposits)
-        if not rate_span(rate, i2w, density.shape) <= PATHS_MAX_SPAN:
-            return None
         _, lpts = lattice_points(pm, shape, stride)
         towards = np.ascontiguousarray(towards_camera(camera, lpts).reshape(tuple(shape) + (3,)))
         # the paths read the nearest voxel's density (paths.py): each voxel's density holds

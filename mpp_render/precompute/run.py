@@ -19,7 +19,8 @@ from .lightdepth import (SHADOW_TAU, light_optical_depth, near_sharp_surfaces, s
 from .flatten import flattened
 from .fogglow import glow_on_medium
 from .emissionlight import EMISSION_PATHS, add_glow, add_lattice, emission_light
-from .lightpaths import lit_by_glow, overlapping, partner_lattice, traced_multiple
+from .lightpaths import (lit_by_glow, overlapping, partner_lattice, too_dense,
+                         traced_multiple)
 from .pathstarts import Surroundings
 from .skydeficit import deficit_paths, sky_deficit
 from .lightpyramid import MultipleField, multiple_field
@@ -166,15 +167,17 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                   tuning=tuning)
                 kernels.upsample_into(f, beams[li], peak[0], peak[1], flat)
         if layout.ambient_channel is not None and world_lit:
+            # a medium too dense for paths keeps the collided model (none are traced in it)
+            own_deficit = deficit and not too_dense(pm, path_res[mi], tuning.path_deposits)
             if progress:
                 progress(0.0, f"World light on {pm.medium.name}")
             got = fill_world_light(f, (layout.ambient_channel, layout.ambient_multiple_channel),
                                    solid, pm, world, camera, flat, n_dirs, 2.0 * step,
                                    seed=seed + mi, should_cancel=should_cancel,
                                    surfaces=surfaces, threads=threads, tuning=tuning,
-                                   deficit=deficit)
+                                   deficit=own_deficit)
             n_ambient += got
-            if deficit:
+            if own_deficit:
                 if progress:
                     progress(0.0, f"Sky light absorbed in {pm.medium.name}")
                 near = partners(mi, lit_by_glow(media, mi))
