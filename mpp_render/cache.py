@@ -279,6 +279,7 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
     modify the returned arrays."""
     from . import precompute as pre_mod
     from .precompute.lattice import MULTIPLE_RESOLUTION
+    from .precompute.pathstarts import sky_paths_wanted
     from .precompute.layout import light_channels
     from .scene import Tuning, World
     from .media import glow_lights
@@ -300,9 +301,8 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
     seeded = int(seed) if multiple and multiple_paths > 0 else None
     # the sky's light off the surfaces starts paths too (pathstarts.sky_surface_starts): the
     # lights' part then holds the sky's colour
-    sky_paths = bool(multiple and multiple_paths > 0 and surface_bounce and surfaces is not None
-                     and not surfaces.empty and np.any(np.asarray(world.color) > 0)
-                     and not any(pm.endless for pm in media))
+    sky_paths = sky_paths_wanted(multiple, multiple_paths, surface_bounce, surfaces,
+                                 world.color, media)
     light_key = digest("lights", common, list(lights), has_world,
                        camera_key(camera) if multiple else None, seeded,
                        np.asarray(world.color, np.float64) if sky_paths else None)

@@ -332,6 +332,19 @@ def _falloff(d, r0: float) -> np.ndarray:
 SKY_DIRECTIONS = 16       # cosine-weighted directions per point for the sky's irradiance
 
 
+def sky_paths_wanted(multiple: bool, multiple_paths: int, surface_bounce: bool, surfaces,
+                     sky, media) -> bool:
+    """Whether the constant sky's light off the surfaces starts traced paths
+    (``sky_surface_starts``): multiple scattering by traced paths (``multiple_paths`` > 0),
+    surfaces that bounce the paths, a sky of RGB radiance ``sky`` above 0, and no world fog
+    among ``media`` (it hides the sky).  The precompute (run.py) and its cache's key of the
+    lights' part (cache.py) both ask it."""
+    return bool(multiple and int(multiple_paths) > 0 and surface_bounce
+                and surfaces is not None and not surfaces.empty
+                and np.any(np.asarray(sky, np.float64) > 0.0)
+                and not any(pm.endless for pm in media))
+
+
 def sky_surface_starts(pm, around: Surroundings, seed: int):
     """(points, power, normals, jitter m) of the constant sky's light that the surfaces round
     the bounded medium ``pm`` reflect, drawn as ``surface_starts`` draws the lights' (its

@@ -21,7 +21,7 @@ from .fogglow import glow_on_medium
 from .emissionlight import EMISSION_PATHS, add_glow, add_lattice, emission_light
 from .lightpaths import (lit_by_glow, overlapping, partner_lattice, too_dense,
                          traced_multiple)
-from .pathstarts import Surroundings
+from .pathstarts import Surroundings, sky_paths_wanted
 from .skydeficit import deficit_paths, sky_deficit
 from .lightpyramid import MultipleField, multiple_field
 from .source import peak_light
@@ -78,7 +78,9 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
     shadowed = surfaces is not None and not surfaces.empty
     around = Surroundings(solid, fog_st, surfaces, step, bool(surface_bounce),
                           tuning.disc_exact, tuning.disc_voxels,
-                          sky=sky_colour if np.any(sky_colour > 0) and fog is None else None)
+                          sky=sky_colour if sky_paths_wanted(multiple, multiple_paths,
+                                                             surface_bounce, surfaces,
+                                                             sky_colour, media) else None)
     # the traced paths' lattice of each medium, finer round a lamp inside it
     path_res = [lamp_resolution(pm, lights, multiple_resolution) for pm in media]
     # traced paths fly through every medium whose box overlaps theirs and deposit on it too
