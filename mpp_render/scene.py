@@ -359,16 +359,16 @@ class Tuning:
     are the sky's light an absorbing medium loses (precompute/skydeficit.py), as a share of
     the Paths setting (or of emissionlight.EMISSION_PATHS where that is more: the Preview's
     walk has no paths; its render of p_sphere_lowalbedo at 480x270 took 1.1 s more with all
-    250 000).  The sky's multiple scattering
-    alone over Cycles' (benchmarks/sky_split.py, 160x120) at all the 3 000 000 paths, 1/8
-    and 1/32: p_sphere_gneg 0.976 / 0.979 / 0.976, p_sphere_thick 0.977 / 0.973 / 0.970,
-    p_sphere_lowalbedo 0.964 / 0.936 at the first two (the thick sphere's render with the
-    sky alone 45 / 7.7 s at the first two; measured before the lattice's points were left
-    signed, after which 1/8 gives 0.972, 0.978 and 0.961: docs/method.md §9.8).  A share times the medium's absorbed fraction
-    (1 - albedo; 1/4 of the paths at albedo 0) saved cloud_vdb's 0.7 s at 1920x1080 but took
-    its full render 0.0161 -> 0.0215, p_sphere_g95 0.0827 -> 0.0916 and slab_forward
-    0.0403 -> 0.0458: the deficit of a thick white medium is not small deep inside, and
-    its few paths' noise showed."""
+    250 000).  The sky's multiple scattering alone over Cycles' (benchmarks/sky_split.py,
+    160x120) at all the 3 000 000 paths, 1/8 and 1/32: p_sphere_gneg 0.976 / 0.979 / 0.976,
+    p_sphere_thick 0.977 / 0.973 / 0.970, p_sphere_lowalbedo 0.964 / 0.936 at the first two
+    (the thick sphere's render with the sky alone 45 / 7.7 s at the first two; measured
+    before the lattice's points were left signed, after which 1/8 gives 0.972, 0.978 and
+    0.961: docs/method.md §9.8).  A share times the medium's absorbed fraction (1 - albedo;
+    1/4 of the paths at albedo 0) saved cloud_vdb's 0.7 s at 1920x1080 but took its full
+    render 0.0161 -> 0.0215, p_sphere_g95 0.0827 -> 0.0916 and slab_forward 0.0403 ->
+    0.0458: the deficit of a thick white medium is not small deep inside, and its few
+    paths' noise showed."""
 
     skip_min_voxels: int = 1 << 20
     spot_cull: bool = True

@@ -108,7 +108,8 @@ def scattered_glow(pm: PreparedMedium, emitting, camera, n_paths: int,
     if multiple:
         every = _trace_all(sets, n, seed, threads, should_cancel, pm, lat, around,
                            partners=partners)
-        later = [la.mean(np.maximum(e - f, 0.0), signed) for la, e, f in zip(lats, every, first)]
+        later = [la.mean(np.maximum(e - f, 0.0), signed)
+                 for la, e, f in zip(lats, every, first)]
     once = [la.mean(f, signed) if first_order else None for la, f in zip(lats, first)]
     return lat.stride, once[0], later[0], list(zip(once[1:], later[1:]))
 

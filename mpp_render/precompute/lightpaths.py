@@ -189,14 +189,23 @@ def tentative_rate(majorant: float, h: float, deposits: float) -> float:
     return max(float(majorant), float(deposits) / float(h))
 
 
+def _path_rate(pm, resolution: int, deposits: float):
+    """(stride, shape, h, density, rate, dense) of medium ``pm``'s paths at ``resolution``:
+    its lattice (paths_lattice), the density they fly through, their tentative collisions
+    per metre (tentative_rate) and whether that many across the grid pass
+    paths.PATHS_MAX_SPAN (too dense for paths)."""
+    stride, shape, h = paths_lattice(pm, resolution)
+    density = pm.path_density()
+    rate = tentative_rate(float(density.max()) * float(np.max(pm.sigma_t)), h, deposits)
+    dense = not rate_span(rate, np.asarray(pm.i2w[:3, :3], np.float64),
+                          density.shape) <= PATHS_MAX_SPAN
+    return stride, shape, h, density, rate, dense
+
+
 def too_dense(pm, resolution: int, deposits: float = Tuning.path_deposits) -> bool:
     """Whether medium ``pm`` is too dense for paths at ``resolution`` (paths.PATHS_MAX_SPAN:
     its tentative collisions across the grid; PathLattice.of is None then)."""
-    _, _, h = paths_lattice(pm, resolution)
-    density = pm.path_density()
-    rate = tentative_rate(float(density.max()) * float(np.max(pm.sigma_t)), h, deposits)
-    return not rate_span(rate, np.asarray(pm.i2w[:3, :3], np.float64),
-                         density.shape) <= PATHS_MAX_SPAN
+    return _path_rate(pm, resolution, deposits)[-1]
 
 
 def partner_lattice(pm, camera, resolution: int, around: Optional[Surroundings] = None,
@@ -289,12 +298,10 @@ class PathLattice:
         least (Tuning.path_deposits): the rate is max(majorant, deposits / h).  ``nodal``:
         ``mean`` moves each point's value from its tent's centroid to the point
         (Tuning.path_nodal, nodal.py)."""
-        if too_dense(pm, resolution, deposits):
+        stride, shape, h, density, rate, dense = _path_rate(pm, resolution, deposits)
+        if dense:
             return None
-        stride, shape, h = paths_lattice(pm, resolution)
         i2w = np.asarray(pm.i2w[:3, :3], np.float64)
-        density = pm.path_density()
-        rate = tentative_rate(float(density.max()) * float(np.max(pm.sigma_t)), h, deposits)
         _, lpts = lattice_points(pm, shape, stride)
         towards = np.ascontiguousarray(towards_camera(camera, lpts).reshape(tuple(shape) + (3,)))
         # the paths read the nearest voxel's density (paths.py): each voxel's density holds

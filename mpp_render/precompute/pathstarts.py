@@ -212,10 +212,10 @@ def surface_points(ss, centre, radius: float, m: int, rng, albedo_min: float = -
     parts is the sum of weight x f over the points).  Triangles whose largest diffuse albedo
     is not above ``albedo_min`` (surface_albedo) are left out; None where nothing remains.
 
-    ``scale`` None (or not above 0): the points spread uniformly, all of the same weight.  A triangle smaller
-    than the disc the sphere cuts from its plane is drawn over whole, else that disc is, and
-    the draws outside the triangle or the sphere are dropped: a ground far wider than the
-    sphere gets its points where the sphere is, not over all of it.
+    ``scale`` None (or not above 0): the points spread uniformly, all of the same weight.  A
+    triangle smaller than the disc the sphere cuts from its plane is drawn over whole, else
+    that disc is, and the draws outside the triangle or the sphere are dropped: a ground far
+    wider than the sphere gets its points where the sphere is, not over all of it.
 
     ``scale`` r0 (m): the points' density per area follows g(d) = (r0^2 / (r0^2 + d^2))^(3/2),
     d their distance from ``centre``: the light a diffuse surface sends into a medium of
@@ -350,8 +350,8 @@ def sky_surface_starts(pm, around: Surroundings, seed: int):
     the bounded medium ``pm`` reflect, drawn as ``surface_starts`` draws the lights' (its
     points, on the side of each surface that faces the medium's centre), or None without a
     sky or surfaces.  A point's irradiance from the sky is pi L_w times the mean, over
-    ``SKY_DIRECTIONS`` cosine-weighted directions stratified in cos^2 (gathers.directions), of each
-    direction's transmittance through the media where no surface hides the sky (the media's
+    ``SKY_DIRECTIONS`` cosine-weighted directions stratified in cos^2 (gathers.directions),
+    of each direction's transmittance through the media where no surface hides the sky (the media's
     own shadows on the ground); its power R E w (W) leaves in a cosine lobe, as light that
     has bounced."""
     ss = around.surfaces

@@ -34,7 +34,7 @@ from .. import kernels
 from ..media import PreparedMedium, density_from
 from ..scene import Tuning
 from .emissionlight import scattered_glow
-from .worldlight import sky_share, world_lattice
+from .worldlight import on_lattice, sky_share, world_lattice
 
 SHARE_CHUNK = 1 << 11   # lattice points whose sky share is found at a time
 
@@ -106,8 +106,6 @@ def seen_share(pm: PreparedMedium, flat: np.ndarray, surfaces, n_dirs: int, seed
     for a in range(0, len(cpts), SHARE_CHUNK):
         b = min(len(cpts), a + SHARE_CHUNK)
         share[a:b] = sky_share(surfaces, cpts[a:b], seed, a, b, n_dirs)
-    lattice = np.zeros((int(np.prod(shape)), 3), np.float32)
-    lattice[cflat] = share[:, None]
-    lattice = lattice.reshape(tuple(shape) + (3,))
+    lattice = on_lattice(shape, cflat, np.repeat(share[:, None], 3, axis=1))
     ijk = np.stack(np.unravel_index(flat, pm.grid.shape[:3]), axis=1).astype(np.float64)
     return np.clip(kernels.trilinear(lattice, ijk / stride)[:, 0].astype(np.float64), 0.0, 1.0)
