@@ -463,7 +463,7 @@ def trace_paths_media(inp, *, threads: int = 1, should_cancel=None, backend=None
             _c.trace_paths(outs[i][0], *args, a, min(a + PATH_CHUNK, int(cuts[i + 1])), n,
                            int(inp.seed) & 0xFFFFFFFF, int(inp.max_collisions), float(ROULETTE),
                            *extra, moms[i][0], others, float(inp.threshold), cells, light,
-                           colour, extinction)
+                           colour, extinction, int(inp.min_collisions))
 
     if workers == 1:
         for i in range(blocks):

@@ -169,6 +169,9 @@ class PathInputs:
     ``cdf``: (N,) the cumulative probabilities of the starts; ``rate``: mu, tentative
     collisions per metre; ``n_paths``; ``seed``; ``max_collisions``: real collisions (and
     bounces) after which a path ends (1: the first flights alone, the second order);
+    ``min_collisions``: real collisions and bounces a path has made before its deposits
+    count (0: all; 1: only the light that has scattered at least once, what a trace to the
+    end less one with ``max_collisions`` 1 would give, in one trace);
     ``jitter``, ``lobe``: how a path leaves its start (module docstring, "Starts");
     ``outside``: the density beyond the grid; ``reach_centre`` (3,) m, ``reach_radius`` m:
     where a path outside ends; ``triangles``: (T,3,3) each triangle's corner and two edges
@@ -230,6 +233,7 @@ class PathInputs:
     light: Optional[np.ndarray] = None
     scatter: Optional[np.ndarray] = None
     extinction: Optional[np.ndarray] = None
+    min_collisions: int = 0
 
     @property
     def channels(self) -> int:
@@ -623,15 +627,16 @@ def trace_paths_media_np(inp: PathInputs) -> list:
                 continue
             _collide(grids[j], outs[j], tws[j], gs[j], sts[j], sss[j], mus[j], sel, alive,
                      ins[:, j], rate, kk, ev, pos, d, w, w0, hits, keep, nc, lshapes[j],
-                     outside, centre, radius, inp.max_collisions)
+                     outside, centre, radius, inp.max_collisions, inp.min_collisions)
         alive = alive[keep & (ev < MAX_EVENTS)]
     return [o.reshape(sh + (nc,)) for o, sh in zip(outs, lshapes)]
 
 
 def _collide(m, out, tw, g, st, ss, mu, coll, alive, ins, rate, kk, ev, pos, d, w, w0, hits,
-             keep, nc, lshape, outside, centre, radius, max_collisions):
+             keep, nc, lshape, outside, centre, radius, max_collisions, min_collisions=0):
     """The tentative collisions ``coll`` (a mask over ``alive``) in medium ``m``: their
-    deposits on its lattice ``out``, then real or null collisions (csrc/paths.c)."""
+    deposits on its lattice ``out`` (of the paths with at least ``min_collisions`` real
+    collisions and bounces), then real or null collisions (csrc/paths.c)."""
     lsh = np.array(lshape)
     st_max, st_min = float(np.max(st)), float(np.min(st))
     ci = alive[coll]
@@ -649,7 +654,8 @@ def _collide(m, out, tw, g, st, ss, mu, coll, alive, ins, rate, kk, ev, pos, d, 
         r = density_at(m, idx)
         rho[inn] = r
         # deposit, weighted by the density: the 8 lattice points round the point,
-        # each with its own phase
+        # each with its own phase (none from a flight whose light is not asked for)
+        r = r * (hits[pi] >= min_collisions)
         lat = idx / m.stride
         base = np.floor(lat).astype(np.int64)
         fr = lat - base

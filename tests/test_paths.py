@@ -58,6 +58,27 @@ def test_twins_agree_on_a_chromatic_grid():
     assert np.abs(a - b).max() <= 1e-9 * np.abs(a).max()
 
 
+@needs_c
+@pytest.mark.parametrize("moments", [False, True])
+def test_deposits_after_the_first_collision(moments):
+    """min_collisions 1 counts only the deposits of light that has scattered at least once:
+    the twins agree, and it is the trace to the end less the same paths' first flights
+    (max_collisions 1), which it replaces with one trace; min_collisions 2 leaves out the
+    second flights as well, so less is deposited."""
+    inp, _ = cube_case(n=24, n_paths=3000, seed=4)
+    inp = dataclasses.replace(inp, moments=moments)
+    after = dataclasses.replace(inp, min_collisions=1)
+    every = kernels.trace_paths(inp, threads=2)
+    first = kernels.trace_paths(dataclasses.replace(inp, max_collisions=1), threads=2)
+    c = kernels.trace_paths(after, threads=2)
+    twin = trace_paths_np(after)
+    assert c[..., :3].sum() > 0.05 * every[..., :3].sum()
+    assert np.abs(c - twin).max() <= 1e-9 * np.abs(c).max()
+    assert np.abs(c - (every - first)).max() <= 1e-9 * np.abs(every).max()
+    later = kernels.trace_paths(dataclasses.replace(inp, min_collisions=2), threads=2)
+    assert later[..., :3].sum() < 0.99 * c[..., :3].sum()
+
+
 def half_empty_case(n_paths=4000):
     """A 20^3 grid whose voxels with i < 10 are empty, chromatic, first scatterings at lattice
     points on the boundary plane and beside it (their tents reach both halves)."""
@@ -216,7 +237,8 @@ def test_bad_input_raises():
     for change in (dict(rate=0.0), dict(rate=np.nan), dict(stride=0), dict(g=np.nan),
                    dict(rate=1e12), dict(towards=np.zeros((2, 2, 2, 2))),
                    dict(weights=np.ones((2, 3))), dict(cdf=np.ones(3)),
-                   dict(sigma_t=np.zeros(3)), dict(density=np.ones((4, 4), np.float32))):
+                   dict(sigma_t=np.zeros(3)), dict(density=np.ones((4, 4), np.float32)),
+                   dict(min_collisions=-1)):
         with pytest.raises(ValueError):
             kernels.trace_paths(PathInputs(**{**args, **change}))
 

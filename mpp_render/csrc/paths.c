@@ -11,7 +11,7 @@ const char trace_paths_doc[] =
     "trace_paths(out, density, w2i, i2w, sigma_s, sigma_t, g, stride, towards, starts, weights,\n"
     "            dirs, cdf, rate, path_lo, path_hi, n_paths, seed, max_collisions, roulette,\n"
     "            jitter, lobe, outside, reach, triangles, albedo, start_source, start_peak,\n"
-    "            moments, others, threshold, cells, light, colour, extinction)\n"
+    "            moments, others, threshold, cells, light, colour, extinction[, min_collisions])\n"
     "Twin of mpp_render.paths.trace_paths_np: adds to out (LX,LY,LZ,3) float64 the deposits\n"
     "of paths path_lo..path_hi-1 of n_paths towards the camera, and to moments (LX,LY,LZ,12)\n"
     "float64, unless it is empty, their moments of order 0 and 1 (paths.py, \"Moments\").\n"
@@ -28,7 +28,9 @@ const char trace_paths_doc[] =
     "each voxel's factor on sigma_s, applied at a real collision (the nearest voxel's).\n"
     "extinction: (0,0,0,3) float32, or the density's shape x 3: per voxel the density each\n"
     "channel's extinction reads (sigma_t[c] times channel c, the nearest voxel's; at most the\n"
-    "density, so the rate still bounds it), the collisions then by spectral tracking.";
+    "density, so the rate still bounds it), the collisions then by spectral tracking.\n"
+    "min_collisions (default 0): the real collisions and bounces a path has made before its\n"
+    "deposits count (1: only the light that has scattered at least once).";
 
 #define MAX_EVENTS 1000000L   /* tentative collisions per path, whatever the medium */
 #define MAX_RATE_SPAN 1e6    /* rate x the grid's diagonal (m): tentative points across it */
@@ -112,6 +114,7 @@ typedef struct {
     double i2w[9], roulette, jitter, outside;
     double reach[4];          /* centre (m) and radius (m) beyond which a path outside ends */
     long max_hits;
+    long min_hits;            /* real collisions and bounces before a path's deposits count */
     int lobe;                 /* 0: the first direction by the phase function, 1: cosine,
                                  2: uniform over the sphere */
     const double *tri, *alb;  /* (T,9) corner and two edges; (T,3) diffuse albedo */
@@ -571,8 +574,12 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
             for (int a = 0; a < 3; a++) r2 += (pos[a] - T->reach[a]) * (pos[a] - T->reach[a]);
             if (!(r2 <= T->reach[3] * T->reach[3])) return;   /* too far to come back */
             rho = T->outside;
-        } else {
+        } else if (hits >= T->min_hits) {
             rho = deposit(G, pos, w, d, key, ev);
+        } else {   /* a flight whose light is not asked for: its density alone */
+            double idx[3];
+            grid_index(G, pos, idx);
+            rho = density_at(G, idx);
         }
         /* real or null collision; chromatic media use spectral tracking (Kutz et al. 2017),
          * whose null probability stays > 0 while any channel has null density */
@@ -779,13 +786,13 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
     PyObject *po, *pd, *pw2i, *pi2w, *pss, *pst, *ptw, *pstarts, *pws, *pdirs, *pcdf, *preach,
         *ptri, *palb, *psrc, *ppeak, *pmom, *pothers, *pcells, *plight, *pcol, *pext;
     double g, rate, roulette, jitter, outside, thr0;
-    long stride, lo, hi, n_paths, max_hits, lobe;
+    long stride, lo, hi, n_paths, max_hits, lobe, min_hits = 0;
     unsigned long seed;
-    if (!PyArg_ParseTuple(args, "OOOOOOdlOOOOOdlllklddldOOOOOOOdOOOO", &po, &pd, &pw2i, &pi2w,
+    if (!PyArg_ParseTuple(args, "OOOOOOdlOOOOOdlllklddldOOOOOOOdOOOO|l", &po, &pd, &pw2i, &pi2w,
                           &pss, &pst, &g, &stride, &ptw, &pstarts, &pws, &pdirs, &pcdf, &rate,
                           &lo, &hi, &n_paths, &seed, &max_hits, &roulette, &jitter, &lobe,
                           &outside, &preach, &ptri, &palb, &psrc, &ppeak, &pmom, &pothers, &thr0,
-                          &pcells, &plight, &pcol, &pext))
+                          &pcells, &plight, &pcol, &pext, &min_hits))
         return NULL;
     if (!PyTuple_Check(pothers) || PyTuple_GET_SIZE(pothers) > PATH_MEDIA - 1) {
         PyErr_SetString(PyExc_ValueError, "trace_paths: others must be a tuple of at most 7 media");
@@ -851,7 +858,7 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
     }
     if (stride < 1 || !(rate > 0.0) || !isfinite(rate) || !isfinite(g) ||
         n_paths < 1 || lo < 0 || hi < lo || hi > n_paths || hi - lo > 0xFFFFFFFFL ||
-        max_hits < 1 || !(roulette >= 0.0) ||
+        max_hits < 1 || min_hits < 0 || !(roulette >= 0.0) ||
         sn[0] < 1 || sn[0] > 0xFFFFFFFFL) {
         PyErr_SetString(PyExc_ValueError, "trace_paths: bad stride, rate, g, path range or caps");
         goto done;
@@ -901,6 +908,7 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
     memcpy(T.i2w, bi.view.buf, sizeof T.i2w);
     T.roulette = roulette;
     T.max_hits = max_hits;
+    T.min_hits = min_hits;
     T.jitter = jitter;
     T.lobe = (int)lobe;
     T.outside = outside;

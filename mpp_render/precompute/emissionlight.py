@@ -13,9 +13,9 @@ point y
     Em(y) = <integral of L_1+(x, w) p(w . v(y); g) dw>_rho,t_y
 
 L_0 the emitted radiance that has not scattered yet (its first flights: the paths traced with
-``max_collisions`` 1) and L_1+ what has scattered at least once (every later flight: all the
-flights' deposits minus the first flights', the same paths drawing the same numbers, so the
-difference has no noise of the first flights).  The march reads E1 with the sky's light
+``max_collisions`` 1) and L_1+ what has scattered at least once (every later flight: the
+same paths, drawing the same numbers, traced to their end with only the deposits after their
+first collision counted, ``min_collisions`` 1, so L_1+ has no noise of the first flights).  The march reads E1 with the sky's light
 (scattered once towards the camera: Volume Single) and Em with the sky's multiple scattering
 (Volume Multiple): both are added to the field's world channels (precompute/layout.py),
 interpolated from the lattice to the voxels.  The paths reflect off the surfaces as the
@@ -102,15 +102,15 @@ def scattered_glow(pm: PreparedMedium, emitting, camera, n_paths: int,
     lats = [lat] + [plat for _, plat in partners]
     # at most PATHS_PER_POINT per lattice point of every medium the light scatters in
     n = max(1, path_budget(n_paths, sum(la.cells for la in lats), setting))
-    first = _trace_all(sets, n, seed, threads, should_cancel, pm, lat, around, max_collisions=1,
-                       partners=partners)
-    later = [None] * len(lats)
-    if multiple:
-        every = _trace_all(sets, n, seed, threads, should_cancel, pm, lat, around,
-                           partners=partners)
-        later = [la.mean(np.maximum(e - f, 0.0), signed)
-                 for la, e, f in zip(lats, every, first)]
-    once = [la.mean(f, signed) if first_order else None for la, f in zip(lats, first)]
+    once, later = [None] * len(lats), [None] * len(lats)
+    if first_order:
+        first = _trace_all(sets, n, seed, threads, should_cancel, pm, lat, around,
+                           max_collisions=1, partners=partners)
+        once = [la.mean(f, signed) for la, f in zip(lats, first)]
+    if multiple:   # the same paths (the same seed), their deposits after a first collision
+        after = _trace_all(sets, n, seed, threads, should_cancel, pm, lat, around,
+                           partners=partners, min_collisions=1)
+        later = [la.mean(a, signed) for la, a in zip(lats, after)]
     return lat.stride, once[0], later[0], list(zip(once[1:], later[1:]))
 
 

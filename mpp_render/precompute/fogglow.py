@@ -89,10 +89,8 @@ def fog_glow(pm, camera, n_paths: int, resolution: int, multiple: bool, seed: in
         sets = [(p, exitance * (1.0 - albedo) * total, normal, jitter, 1, None,
                  nearness(pm, p))]
         n = max(1, lat.paths(int(n_paths * DEFICIT_PATHS), n_paths))
-        first = _trace_all(sets, n, seed, threads, should_cancel, pm, lat, around,
-                           max_collisions=1)[0]
-        every = _trace_all(sets, n, seed, threads, should_cancel, pm, lat, around)[0]
-        later = lat.mean(np.maximum(every - first, 0.0))
+        later = lat.mean(_trace_all(sets, n, seed, threads, should_cancel, pm, lat, around,
+                                    min_collisions=1)[0])
     em = np.where(absorbs, np.maximum(total * (1.0 - h1) - later - e1, 0.0), 0.0)
     return lat.stride, e1, fill_hidden(em.astype(np.float32), seen), []
 

@@ -355,13 +355,15 @@ def _trace(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
 
 def _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
                max_collisions: int = MAX_COLLISIONS, moments: bool = False,
-               partners=(), light=None) -> list:
+               partners=(), light=None, min_collisions: int = 0) -> list:
     """``_trace``'s deposits on ``lat``, then on each of the ``partners``' lattices
     ((PreparedMedium, PathLattice), traced_multiple), which the paths fly through too.  Each
     set of ``sets``: (points, power W, directions, jitter, lobe[, (start source, peaks) or
     None[, bias]]), bias (N,) the relative odds of drawing each start (paths.from_power).
     ``light``: None, or the packed light record the first scatterings (the tracer reads it
-    for lobe 0 sets only) draw their incoming direction from (``start_light``)."""
+    for lobe 0 sets only) draw their incoming direction from (``start_light``).
+    ``min_collisions``: the real collisions and bounces a path makes before its deposits
+    count (1: the light that has scattered at least once; paths.PathInputs)."""
     density, w2i, i2w = lat.density, lat.w2i, lat.i2w
     surf = around.surfaces if around is not None else None
     centre, radius = reach(pm, (w2i, density.shape))
@@ -394,7 +396,8 @@ def _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
                          max_collisions=max_collisions, jitter=jitter, lobe=lobe,
                          start_source=source, start_peak=peak, moments=moments,
                          others=others, threshold=lat.threshold, light=light,
-                         scatter=scatter, extinction=extinction, **extra)
+                         scatter=scatter, extinction=extinction,
+                         min_collisions=min_collisions, **extra)
         got = kernels.trace_paths_media(inp, threads=worker_count(threads),
                                         should_cancel=should_cancel)
         acc = got if acc is None else [a + b for a, b in zip(acc, got)]
