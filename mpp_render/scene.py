@@ -368,7 +368,15 @@ class Tuning:
     1/4 of the paths at albedo 0) saved cloud_vdb's 0.7 s at 1920x1080 but took its full
     render 0.0161 -> 0.0215, p_sphere_g95 0.0827 -> 0.0916 and slab_forward 0.0403 ->
     0.0458: the deficit of a thick white medium is not small deep inside, and its few
-    paths' noise showed."""
+    paths' noise showed.
+    ``sky_deficit_mix``: the share of those paths drawn by the emission's power alone; the
+    rest also by how well the camera sees the light the path will carry
+    (skydeficit.camera_odds), so that no path weighs more than 1 / mix of its plain weight.
+    p_sphere_lowalbedo's seed-to-seed noise of the whole image (4 x 4 blocks) was 0.0083
+    with every path by its power, 0.0058 / 0.0058 / 0.0064 at 0.1 / 0.2 / 0.35 (with the
+    odds softened as exp(-tau_c / 4), the first form tried), 0.0055 with the walk's reach;
+    p_sphere_gneg 0.0054 -> 0.0058, cloud_vdb 0.0154 -> 0.0152, slab_isotropic 0.0108 ->
+    0.0108 (within the two seeds' scatter)."""
 
     skip_min_voxels: int = 1 << 20
     spot_cull: bool = True
@@ -406,6 +414,7 @@ class Tuning:
     surface_cache_smooth: int = 1
     surface_bounces: int = 2
     sky_deficit_paths: float = 0.125
+    sky_deficit_mix: float = 0.2
 
 
 # The default Noise Threshold (pilot.py's unit: the standard error over sqrt(I S), S the

@@ -79,15 +79,16 @@ def scattered_glow(pm: PreparedMedium, emitting, camera, n_paths: int,
                    should_cancel=None, around: Optional[Surroundings] = None, partners=(),
                    deposits: float = Tuning.path_deposits, nodal: bool = Tuning.path_nodal,
                    setting: Optional[int] = None, signed: bool = False,
-                   first_order: bool = True):
+                   first_order: bool = True, odds: Optional[np.ndarray] = None):
     """``emission_light``'s (stride, E1, Em, cross) for the emission ``emitting`` = (flat, e):
     the C-order indices (N,) of the emitting voxels of ``pm``'s padded grid and their
     emission (N,3) W/(m^3 sr) (``emitting_voxels``), or None (nothing emitted, no camera,
     nowhere to scatter, too dense for paths); ``setting``: the Paths setting that scales the
     paths' cap (lightpaths.path_budget; None: ``n_paths``); ``signed``: the lattice's values
     are not stopped at 0 where the nodal move takes them below (PathLattice.mean);
-    ``first_order`` False: E1 is not made from the first flights (None in its place), which
-    are traced all the same for Em."""
+    ``first_order`` False: E1 is not made from the first flights (None in its place).
+    ``odds``: None, or (N,) the relative odds of drawing a path from each emitting voxel
+    (paths.from_power's bias: the weights stay unbiased)."""
     if emitting is None or not len(emitting[0]) or camera is None:
         return None
     if not pm.scatters and not partners:
@@ -99,6 +100,8 @@ def scattered_glow(pm: PreparedMedium, emitting, camera, n_paths: int,
     if lat is None:
         return None
     sets = voxel_starts(pm, emitting[0], emitting[1], lat.stride)
+    if odds is not None:
+        sets = [item + (None, np.asarray(odds, np.float64)) for item in sets]
     lats = [lat] + [plat for _, plat in partners]
     # at most PATHS_PER_POINT per lattice point of every medium the light scatters in
     n = max(1, path_budget(n_paths, sum(la.cells for la in lats), setting))
