@@ -374,9 +374,9 @@ class Tuning:
     (skydeficit.camera_odds), so that no path weighs more than 1 / mix of its plain weight.
     p_sphere_lowalbedo's seed-to-seed noise of the whole image (4 x 4 blocks) was 0.0083
     with every path by its power, 0.0058 / 0.0058 / 0.0064 at 0.1 / 0.2 / 0.35 (with the
-    odds softened as exp(-tau_c / 4), the first form tried), 0.0055 with the walk's reach;
-    p_sphere_gneg 0.0054 -> 0.0058, cloud_vdb 0.0154 -> 0.0152, slab_isotropic 0.0108 ->
-    0.0108 (within the two seeds' scatter)."""
+    odds softened as exp(-tau_c / 4), the first form tried), 0.0061 as now; at 0.2 with a
+    reach of 3: p_sphere_gneg 0.0054 -> 0.0058, cloud_vdb 0.0154 -> 0.0152,
+    slab_isotropic 0.0108 -> 0.0108 (within two seeds' scatter; docs/method.md §9.8)."""
 
     skip_min_voxels: int = 1 << 20
     spot_cull: bool = True
