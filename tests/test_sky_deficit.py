@@ -10,7 +10,8 @@ import pytest
 from mpp_render.media import prepare
 from mpp_render.precompute import precompute
 from mpp_render.precompute.lightpaths import PathLattice
-from mpp_render.precompute.skydeficit import camera_odds, deficit_paths, sky_deficit, walk_reach
+from mpp_render.precompute.skydeficit import (camera_odds, deficit_paths, largest_albedo, sky_deficit,
+                                              walk_reach, weighted_paths)
 from mpp_render.scene import Camera, Medium, Tuning, World
 
 N = 40          # voxels a side
@@ -199,3 +200,25 @@ def test_the_odds_keep_the_estimate_and_lower_its_noise_where_the_camera_looks()
     assert mean[0.2] == pytest.approx(mean[1.0], rel=0.02)
     spread = {m: np.sqrt(np.mean((a - b) ** 2)) for m, (a, b) in got.items()}
     assert spread[0.2] < 0.95 * spread[1.0]   # 0.037 against 0.042 (seeds 1 and 2)
+
+
+def test_the_deficits_paths_weigh_what_the_lights_paths_weigh():
+    """As many paths as give the fictitious emission's scattered power (4 pi e V summed, times
+    the largest albedo) the lights' mean weight a path, within [1, most]."""
+    pm = sphere(0.5)
+    flat = np.flatnonzero(pm.grid.reshape(-1) > 0.0)
+    e = np.full((len(flat), 3), 0.01)
+    power = 4.0 * np.pi * VOXEL ** 3 * e.sum() * largest_albedo(pm)
+    assert largest_albedo(pm) == pytest.approx(0.5)
+    assert weighted_paths(pm, e, power / 1000.0, 10 ** 6) == 1000
+    assert weighted_paths(pm, e, power / 1000.0, 500) == 500
+    assert weighted_paths(pm, e, power * 10.0, 10 ** 6) == 1
+    # run.py hands the lights' weight over: the deficit then takes more paths than its share
+    # where it weighs more, never fewer
+    pm5, cam = thick_sphere(), camera()
+    few = sky_deficit(pm5, np.ones(3), cam, 2000, 20, seed=1)
+    many = sky_deficit(pm5, np.ones(3), cam, 2000, 20, seed=1, path_weight=1e-6, most=40_000)
+    same = sky_deficit(pm5, np.ones(3), cam, 2000, 20, seed=1, path_weight=1e3, most=40_000)
+    assert np.array_equal(few[1], same[1])
+    spread = [np.std(x[1][..., 0][x[1][..., 0] != 0]) for x in (few, many)]
+    assert spread[1] < 0.5 * spread[0]

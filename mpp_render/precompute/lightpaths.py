@@ -50,10 +50,11 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
                     far_resolution: int = MULTIPLE_RESOLUTION,
                     cell_tau: float = Tuning.cell_tau, cell_walk: int = Tuning.cell_walk,
                     sky: bool = False):
-    """(stride, h, M, far, moments) for ``light`` on medium ``pm`` (its field ``fld``, the light's optical
-    depth at ``channel``): M float32 (LX,LY,LZ,3) W/(m^2 sr) on the light pyramid's lattice
-    (lattice.walk_lattice at ``resolution``), from ``n_paths`` paths (paths.py; at most
-    ``PATHS_PER_POINT`` per lattice point the medium fills) seen from ``camera``; ``threads``
+    """(stride, h, M, far, moments, cross, started) for ``light`` on medium ``pm`` (its field
+    ``fld``, the light's optical depth at ``channel``): M float32 (LX,LY,LZ,3) W/(m^2 sr) on
+    the light pyramid's lattice (lattice.walk_lattice at ``resolution``), from ``n_paths``
+    paths (paths.py; at most ``PATHS_PER_POINT`` per lattice point the medium fills) seen
+    from ``camera``; ``threads``
     share them; raises cancel.Cancelled when ``should_cancel`` says so.  The paths start
     where the light's unscattered beam first scatters in the medium (source.source_and_density:
     a lattice point by its power, then a point of its tent by the voxels' own source,
@@ -71,7 +72,8 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     scatter in them by their own albedo and phase function and deposit on their lattices; a
     sixth item, per partner, is what they deposited there as M (float32 (LX,LY,LZ,3), with the
     moments where these are made (LX,LY,LZ,15)), to be added to that medium's M for this
-    light.  None where the medium is too dense for paths (paths.PATHS_MAX_SPAN): the caller
+    light; a seventh, (W, n): the power of the paths' starts (channels summed) and their
+    number.  None where the medium is too dense for paths (paths.PATHS_MAX_SPAN): the caller
     keeps the walk.  ``deposits``, ``nodal``: Tuning.path_deposits, Tuning.path_nodal
     (PathLattice.of).  ``far_resolution``: the far box's voxels along its longest side (the
     *Multiple Scattering Resolution* as set, not raised round a lamp).  ``cell_tau``,
@@ -111,13 +113,14 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
             if got is not None:
                 sets.append(got[:3] + (got[3], 1))
     if not sets:
-        return stride, h, np.zeros(tuple(shape) + (3,), np.float32), None, None, []
+        return stride, h, np.zeros(tuple(shape) + (3,), np.float32), None, None, [], (0.0, 0)
     lat = PathLattice.of(pm, camera, resolution,
                          None if around is None else around.enclosed(pm), deposits=deposits,
                          nodal=nodal)
     if lat is None:
         return None
     n_paths = lat.paths(n_paths)
+    started = (sum(float(np.asarray(item[1]).sum()) for item in sets), int(n_paths))
     gathered = moments and around is not None and around.surfaces is not None
     rec = start_light(light)
     accs = _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
@@ -129,9 +132,9 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
         far = _far_multiple(pm, sets, camera, n_paths, seed, threads, should_cancel, around,
                             light=rec, nodal=nodal, resolution=far_resolution)
     if not gathered:
-        return stride, h, m, far, None, cross
+        return stride, h, m, far, None, cross, started
     return (stride, h, np.ascontiguousarray(m[..., :3]), far,
-            np.ascontiguousarray(m[..., 3:]), cross)
+            np.ascontiguousarray(m[..., 3:]), cross, started)
 
 
 def start_light(light):

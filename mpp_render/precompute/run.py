@@ -168,6 +168,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                   multiple_resolution, should_cancel, fog=pm is fog,
                                   tuning=tuning)
                 kernels.upsample_into(f, beams[li], peak[0], peak[1], flat)
+        own_deficit = False
         if layout.ambient_channel is not None and world_lit:
             # a medium too dense for paths keeps the collided model (none are traced in it)
             own_deficit = deficit and not too_dense(pm, path_res[mi], tuning.path_deposits)
@@ -179,21 +180,6 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                    surfaces=surfaces, threads=threads, tuning=tuning,
                                    deficit=own_deficit)
             n_ambient += got
-            if own_deficit:
-                if progress:
-                    progress(0.0, f"Sky light absorbed in {pm.medium.name}")
-                near = partners(mi, lit_by_glow(media, mi))
-                n_lost = deficit_paths(multiple_paths, EMISSION_PATHS, tuning.sky_deficit_paths)
-                got = sky_deficit(pm, world.color, camera, n_lost, path_res[mi],
-                                  seed=seed + 7919 * mi + 3001, threads=threads,
-                                  should_cancel=should_cancel, around=around,
-                                  partners=[(media[j], lat) for j, lat in near],
-                                  surfaces=surfaces, n_dirs=n_dirs,
-                                  setting=max(int(multiple_paths), n_lost), tuning=tuning)
-                if got is not None:
-                    stride, own, cross = got
-                    add_lattice(f, layout.ambient_multiple_channel, -own, stride, flat)
-                    lost += [(j, lat.stride, d) for (j, lat), d in zip(near, cross)]
         if glow and layout.ambient_channel is not None and \
                 (pm.glows if pm.endless else pm.emits):
             if progress:
@@ -222,6 +208,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                                 should_cancel=should_cancel, tuning=tuning)
             add_glow(f, layout, stride, once, more, flat)
         ms = [None] * len(lights)
+        started = [0.0, 0]   # the lights' paths in this medium: their starts' power (W), number
         if multiple and np.any(pm.sigma_s > 0):
             # the sky's light off the surfaces rides with the first light that has paths
             sky_li = next((li for li in range(len(lights)) if chans[li] is not None), None)
@@ -253,6 +240,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                 if traced is not None:
                     ms[li] = MultipleField(traced[0], traced[1], [traced[2]], traced=True,
                                            far=traced[3], moments=traced[4])
+                    started = [started[0] + traced[6][0], started[1] + traced[6][1]]
                     check(should_cancel)
                     continue
                 # the walk starts where the beam of unscattered and forward-scattered light
@@ -265,6 +253,23 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                         should_cancel=should_cancel, g_last=float(pm.g),
                                         threads=threads, tuning=tuning)
                 check(should_cancel)
+        if own_deficit:
+            if progress:
+                progress(0.0, f"Sky light absorbed in {pm.medium.name}")
+            near = partners(mi, lit_by_glow(media, mi))
+            n_lost = deficit_paths(multiple_paths, EMISSION_PATHS, tuning.sky_deficit_paths)
+            got = sky_deficit(pm, world.color, camera, n_lost, path_res[mi],
+                              seed=seed + 7919 * mi + 3001, threads=threads,
+                              should_cancel=should_cancel, around=around,
+                              partners=[(media[j], lat) for j, lat in near],
+                              surfaces=surfaces, n_dirs=n_dirs,
+                              setting=max(int(multiple_paths), n_lost), tuning=tuning,
+                              path_weight=started[0] / started[1] if started[1] else None,
+                              most=max(int(multiple_paths), n_lost))
+            if got is not None:
+                stride, own, cross = got
+                add_lattice(f, layout.ambient_multiple_channel, -own, stride, flat)
+                lost += [(j, lat.stride, d) for (j, lat), d in zip(near, cross)]
         if camera is not None and any(m is not None and m.flat for m in ms) \
                 and not any(m is not None and m.traced for m in ms):
             # a mesh volume's pyramids summed towards the camera, once (precompute.flatten)
