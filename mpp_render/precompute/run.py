@@ -104,11 +104,13 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
 
     crossed = {}   # (medium, light) -> M (and moments) deposited there by other media's paths
     glowed = []    # (medium, stride, E1, Em): other media's glow scattered in that medium
-    lost = []      # (medium, stride, D): other media's absorption of the sky (skydeficit.py)
+    lost = []      # (medium, stride, D): the media's absorption of the sky (skydeficit.py)
     # the absorption's share of the sky's multiply scattered light is traced (skydeficit.py):
     # with multiple scattering, a camera, and no world fog (which hides the sky)
     deficit = bool(multiple and camera is not None and fog is None and world_lit
                    and layout.ambient_multiple_channel is not None)
+    absorbing = []       # the media whose absorption of the sky is traced (after the lights)
+    started = [0.0, 0]   # the lights' paths in all media: their starts' power (W), number
     fields = []
     n_pts = 0
     n_ambient = 0
@@ -208,7 +210,6 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                                 should_cancel=should_cancel, tuning=tuning)
             add_glow(f, layout, stride, once, more, flat)
         ms = [None] * len(lights)
-        started = [0.0, 0]   # the lights' paths in this medium: their starts' power (W), number
         if multiple and np.any(pm.sigma_s > 0):
             # the sky's light off the surfaces rides with the first light that has paths
             sky_li = next((li for li in range(len(lights)) if chans[li] is not None), None)
@@ -254,28 +255,32 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                         threads=threads, tuning=tuning)
                 check(should_cancel)
         if own_deficit:
-            if progress:
-                progress(0.0, f"Sky light absorbed in {pm.medium.name}")
-            near = partners(mi, lit_by_glow(media, mi))
-            n_lost = deficit_paths(multiple_paths, EMISSION_PATHS, tuning.sky_deficit_paths)
-            got = sky_deficit(pm, world.color, camera, n_lost, path_res[mi],
-                              seed=seed + 7919 * mi + 3001, threads=threads,
-                              should_cancel=should_cancel, around=around,
-                              partners=[(media[j], lat) for j, lat in near],
-                              surfaces=surfaces, n_dirs=n_dirs,
-                              setting=max(int(multiple_paths), n_lost), tuning=tuning,
-                              path_weight=started[0] / started[1] if started[1] else None,
-                              most=max(int(multiple_paths), n_lost))
-            if got is not None:
-                stride, own, cross = got
-                add_lattice(f, layout.ambient_multiple_channel, -own, stride, flat)
-                lost += [(j, lat.stride, d) for (j, lat), d in zip(near, cross)]
+            absorbing.append(mi)
         if camera is not None and any(m is not None and m.flat for m in ms) \
                 and not any(m is not None and m.traced for m in ms):
             # a mesh volume's pyramids summed towards the camera, once (precompute.flatten)
             ms = flattened(pm, ms, lights, camera, tuning)
         ms_all.append(ms)
         fields.append(f)
+    for mi in absorbing:
+        # after every medium's lights' paths: the deficit's paths take their mean weight
+        pm = media[mi]
+        if progress:
+            progress(0.0, f"Sky light absorbed in {pm.medium.name}")
+        near = partners(mi, lit_by_glow(media, mi))
+        n_lost = deficit_paths(multiple_paths, EMISSION_PATHS, tuning.sky_deficit_paths)
+        got = sky_deficit(pm, world.color, camera, n_lost, path_res[mi],
+                          seed=seed + 7919 * mi + 3001, threads=threads,
+                          should_cancel=should_cancel, around=around,
+                          partners=[(media[j], lat) for j, lat in near],
+                          surfaces=surfaces, n_dirs=n_dirs,
+                          setting=max(int(multiple_paths), n_lost), tuning=tuning,
+                          path_weight=started[0] / started[1] if started[1] else None,
+                          most=max(int(multiple_paths), n_lost))
+        if got is not None:
+            stride, own, cross = got
+            lost.append((mi, stride, own))
+            lost += [(j, lat.stride, d) for (j, lat), d in zip(near, cross)]
     for j, stride, once, more in glowed:
         if layout.ambient_channel is None:
             continue

@@ -169,8 +169,8 @@ def camera_odds(pm: PreparedMedium, flat: np.ndarray, e: np.ndarray, camera, res
     ``e`` (N,3)): mix + (1 - mix) v / <v> (module docstring), v from the optical depth to the
     camera's position at the points of a lattice of ``resolution`` points along the grid's
     longest side (the paths' own: a coarser one, the world light's 32, spread the seen layer
-    and kept less of the gain), interpolated trilinearly; None (every voxel by its power alone) where ``mix`` >= 1 or the
-    walk reaches everywhere the medium is."""
+    and kept less of the gain), interpolated trilinearly; None (every voxel by its power
+    alone) where ``mix`` >= 1 or the walk reaches everywhere the medium is."""
     reach = walk_reach(largest_albedo(pm), pm.g)
     if not (mix < 1.0) or not np.isfinite(reach):
         return None
