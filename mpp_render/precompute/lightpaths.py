@@ -80,14 +80,8 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     ``cell_walk``: Tuning's (source.thick_band_source).  ``sky``: the paths also start where
     the surfaces reflect the constant sky's light (``around.sky``, pathstarts.sky_surface_starts);
     the caller asks it of one light per medium, whose M then holds that light too."""
-    stride, shape, h = paths_lattice(pm, resolution)
-    voxels = np.zeros(pm.grid.shape[:3], np.float32)
-    base, _, pts = source_and_density(pm, fld, light, channel, stride, voxels=voxels,
-                                      disc=None if around is None else around.disc,
-                                      depth=None if around is None else around.optical_depth,
-                                      cell_tau=cell_tau, cell_walk=cell_walk)
-    vol = cell_volume(pm, stride)
-    power = base * vol
+    stride, shape, h, voxels, power, pts = _first_scatterings(pm, fld, light, channel, resolution,
+                                                              around, cell_tau, cell_walk)
     live = power.sum(axis=1) > 0.0
     fog = pm.endless
     sets = []   # (points, power W, directions, jitter, lobe, start source and peaks or None)
@@ -135,6 +129,42 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
         return stride, h, m, far, None, cross, started
     return (stride, h, np.ascontiguousarray(m[..., :3]), far,
             np.ascontiguousarray(m[..., 3:]), cross, started)
+
+
+def _first_scatterings(pm, fld, light, channel: int, resolution: int, around, cell_tau: float,
+                       cell_walk: int):
+    """(stride, shape, h, voxels, power, points) of ``light``'s first scatterings in ``pm``
+    on the paths' lattice at ``resolution``: the voxels' source (X,Y,Z) float32, each lattice
+    point's power (N,3) W and world point (source.source_and_density)."""
+    stride, shape, h = paths_lattice(pm, resolution)
+    voxels = np.zeros(pm.grid.shape[:3], np.float32)
+    base, _, pts = source_and_density(pm, fld, light, channel, stride, voxels=voxels,
+                                      disc=None if around is None else around.disc,
+                                      depth=None if around is None else around.optical_depth,
+                                      cell_tau=cell_tau, cell_walk=cell_walk)
+    return stride, shape, h, voxels, base * cell_volume(pm, stride), pts
+
+
+def first_scattered_power(pm, fld, light, channel: int, resolution: int,
+                          around: Optional[Surroundings] = None,
+                          cell_tau: float = Tuning.cell_tau,
+                          cell_walk: int = Tuning.cell_walk) -> float:
+    """W: the power of ``light``'s first scatterings in ``pm`` (channels summed), as
+    ``traced_multiple``'s paths start from them (``across_media``)."""
+    return float(_first_scatterings(pm, fld, light, channel, resolution, around, cell_tau,
+                                    cell_walk)[4].sum())
+
+
+def across_media(powers) -> list:
+    """Per medium of a group that overlap, the share of the Paths setting its paths for one
+    light take: the light's first-scattering power in it over the most in the group
+    (``powers``, W, one a medium), so that the light's paths weigh the same in each, the
+    brightest taking the whole setting (1 where none scatters the light).  The paths of each
+    fly through the others (partners) and deposit there too, so a medium the light reaches
+    little (p_overlap's cube inside its sphere: 1.5 W against 39.9 W) is lit mostly by the
+    others' paths."""
+    top = max([float(p) for p in powers] + [0.0])
+    return [float(p) / top if top > 0.0 else 1.0 for p in powers]
 
 
 def start_light(light):

@@ -19,8 +19,8 @@ from .lightdepth import (SHADOW_TAU, light_optical_depth, near_sharp_surfaces, s
 from .flatten import flattened
 from .fogglow import glow_on_medium
 from .emissionlight import EMISSION_PATHS, add_glow, add_lattice, emission_light
-from .lightpaths import (lit_by_glow, overlapping, partner_lattice, too_dense,
-                         traced_multiple)
+from .lightpaths import (across_media, first_scattered_power, lit_by_glow, overlapping,
+                         partner_lattice, too_dense, traced_multiple)
 from .pathstarts import Surroundings, sky_paths_wanted
 from .skydeficit import deficit_paths, sky_deficit
 from .lightpyramid import MultipleField, multiple_field
@@ -209,6 +209,16 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                                 surfaces=surfaces, threads=threads,
                                                 should_cancel=should_cancel, tuning=tuning)
             add_glow(f, layout, stride, once, more, flat)
+        if own_deficit:
+            absorbing.append(mi)
+        fields.append(f)
+    # the lights' paths once every medium's light is known: a light's paths weigh the same in
+    # media that overlap (lightpaths.across_media), which needs each one's first-scattering
+    # power first; a medium apart from the others takes the whole Paths setting
+    shares = path_shares(media, fields, lights, chans, path_res, around, tuning,
+                         partners_of) if traces and multiple else None
+    for mi, pm in enumerate(media):
+        f = fields[mi]
         ms = [None] * len(lights)
         if multiple and np.any(pm.sigma_s > 0):
             # the sky's light off the surfaces rides with the first light that has paths
@@ -223,7 +233,9 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                 if traces:
                     # light paths traced from the first scatterings (precompute.lightpaths)
                     near = partners(mi)
-                    traced = traced_multiple(pm, f, light, chans[li], camera, multiple_paths,
+                    n_li = multiple_paths if shares is None else \
+                        max(1, int(np.ceil(multiple_paths * shares[li][mi])))
+                    traced = traced_multiple(pm, f, light, chans[li], camera, n_li,
                                              path_res[mi], seed=seed + 7919 * mi + li,
                                              threads=threads, should_cancel=should_cancel,
                                              around=around, moments=tuning.gather_moments,
@@ -254,14 +266,11 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                         should_cancel=should_cancel, g_last=float(pm.g),
                                         threads=threads, tuning=tuning)
                 check(should_cancel)
-        if own_deficit:
-            absorbing.append(mi)
         if camera is not None and any(m is not None and m.flat for m in ms) \
                 and not any(m is not None and m.traced for m in ms):
             # a mesh volume's pyramids summed towards the camera, once (precompute.flatten)
             ms = flattened(pm, ms, lights, camera, tuning)
         ms_all.append(ms)
-        fields.append(f)
     for mi in absorbing:
         # after every medium's lights' paths: the deficit's paths take their mean weight
         pm = media[mi]
@@ -298,3 +307,29 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
     return Precomputed(fields, layout, ms_all, time.perf_counter() - t_start,
                        {"points": n_pts, "ambient_points": n_ambient,
                         "backend": kernels.backend(), "glowing": n_glow})
+
+
+def path_shares(media, fields, lights, chans, path_res, around, tuning: Tuning, partners_of):
+    """[light][medium] the share of the Paths setting each medium's paths for each light
+    take: its first-scattering power over the most among it and the media whose boxes
+    overlap its own (``partners_of``, whose lattices its paths deposit on, and theirs on its
+    own; lightpaths.across_media).  1 for a medium apart from the others, the world fog
+    (whose paths also start beyond its grid) and a light without paths; None where no two
+    scattering media overlap."""
+    live = [mi for mi, pm in enumerate(media)
+            if np.any(pm.sigma_s > 0) and not pm.endless and
+            any(np.any(media[j].sigma_s > 0) and not media[j].endless for j in partners_of[mi])]
+    if not live:
+        return None
+    shares = []
+    for li, light in enumerate(lights):
+        share = [1.0] * len(media)
+        if chans[li] is not None:
+            power = {mi: first_scattered_power(media[mi], fields[mi], light, chans[li],
+                                               path_res[mi], around, tuning.cell_tau,
+                                               tuning.cell_walk) for mi in live}
+            for mi in live:
+                group = [mi] + [j for j in partners_of[mi] if j in power]
+                share[mi] = across_media([power[j] for j in group])[0]
+        shares.append(share)
+    return shares
