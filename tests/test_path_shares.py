@@ -64,3 +64,28 @@ def test_media_apart_take_the_whole_setting(monkeypatch):
     right = box("right", 8, 0.25, (2, 0, 0), 3.0)
     got = traced_counts([left, right], monkeypatch)
     assert got == {"left": 20_000, "right": 20_000}
+
+
+def test_the_shares_count_the_light_the_surfaces_reflect_into_a_medium(monkeypatch):
+    """With a ground, a medium's paths also start where the ground reflects the light into
+    it: the shares weigh every start (lightpaths.start_power), so each light's paths take,
+    per overlapping medium, the setting times the power traced_multiple then starts with
+    over the most of the two (the repeat scene: a spot that barely reaches the box directly
+    lights it off the ground)."""
+    from test_repeat import scene
+    from mpp_render.render import render
+    got = {}
+    real = R.traced_multiple
+
+    def spy(pm, fld, light, channel, camera, n_paths, *a, **k):
+        out = real(pm, fld, light, channel, camera, n_paths, *a, **k)
+        got[(pm.medium.name, light.name)] = (n_paths, out[6][0])
+        return out
+
+    monkeypatch.setattr(R, "traced_multiple", spy)
+    render(scene(2, samples=1))
+    for light in ("sun", "pt", "spot", "area"):
+        (na, pa), (nb, pb) = got[("cloud", light)], got[("box", light)]
+        top = max(pa, pb)
+        assert na == int(np.ceil(20000 * pa / top)) and nb == int(np.ceil(20000 * pb / top))
+    assert got[("box", "spot")][0] > 10000   # 1 path when the ground's light was left out

@@ -80,32 +80,9 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     ``cell_walk``: Tuning's (source.thick_band_source).  ``sky``: the paths also start where
     the surfaces reflect the constant sky's light (``around.sky``, pathstarts.sky_surface_starts);
     the caller asks it of one light per medium, whose M then holds that light too."""
-    stride, shape, h, voxels, power, pts = _first_scatterings(pm, fld, light, channel, resolution,
-                                                              around, cell_tau, cell_walk)
-    live = power.sum(axis=1) > 0.0
+    stride, shape, h, sets = path_sets(pm, fld, light, channel, resolution, around, cell_tau,
+                                       cell_walk, sky, seed)
     fog = pm.endless
-    sets = []   # (points, power W, directions, jitter, lobe, start source and peaks or None)
-    if np.any(live):
-        peak = tent_peak(voxels, stride, shape).reshape(-1)
-        if light.kind in ("POINT", "SPOT"):
-            # round a lamp the voxels' source is a point sample of ~1/r^2 (their lattice power
-            # is the cells' mean, source.cell_mean_source): there the starts only keep to the
-            # medium (a peak of 0 accepts any draw with source)
-            peak[near_light_cells(pm, light, stride, shape)] = 0.0
-        sets.append((pts[live], power[live], light_direction(light, pts[live]), 1.0, 0,
-                     (voxels, peak[live])))
-    if around is not None:
-        if fog:
-            got = fog_starts(pm, light, around, seed + 1)
-            if got is not None:
-                sets.append(got + (0.0, 0))
-        if around.surfaces is not None:
-            got = surface_starts(pm, light, around, seed + 2)
-            if got is not None:
-                sets.append(got[:3] + (got[3], 1))
-            got = sky_surface_starts(pm, around, seed + 3) if sky else None
-            if got is not None:
-                sets.append(got[:3] + (got[3], 1))
     if not sets:
         return stride, h, np.zeros(tuple(shape) + (3,), np.float32), None, None, [], (0.0, 0)
     lat = PathLattice.of(pm, camera, resolution,
@@ -131,34 +108,62 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
             np.ascontiguousarray(m[..., 3:]), cross, started)
 
 
-def _first_scatterings(pm, fld, light, channel: int, resolution: int, around, cell_tau: float,
-                       cell_walk: int):
-    """(stride, shape, h, voxels, power, points) of ``light``'s first scatterings in ``pm``
-    on the paths' lattice at ``resolution``: the voxels' source (X,Y,Z) float32, each lattice
-    point's power (N,3) W and world point (source.source_and_density)."""
+def path_sets(pm, fld, light, channel: int, resolution: int, around, cell_tau: float,
+              cell_walk: int, sky: bool, seed: int):
+    """(stride, shape, h, sets): the paths' lattice at ``resolution`` and the starts of
+    ``light``'s paths in ``pm`` (``traced_multiple``'s): its first scatterings, and with
+    ``around`` where it first scatters in the world fog beyond the grid, where the surfaces
+    reflect it and (``sky``) the constant sky's light; each set (points, power (N,3) W,
+    directions, jitter, lobe[, start source and peaks])."""
     stride, shape, h = paths_lattice(pm, resolution)
     voxels = np.zeros(pm.grid.shape[:3], np.float32)
     base, _, pts = source_and_density(pm, fld, light, channel, stride, voxels=voxels,
                                       disc=None if around is None else around.disc,
                                       depth=None if around is None else around.optical_depth,
                                       cell_tau=cell_tau, cell_walk=cell_walk)
-    return stride, shape, h, voxels, base * cell_volume(pm, stride), pts
+    power = base * cell_volume(pm, stride)
+    live = power.sum(axis=1) > 0.0
+    fog = pm.endless
+    sets = []   # (points, power W, directions, jitter, lobe, start source and peaks or None)
+    if np.any(live):
+        peak = tent_peak(voxels, stride, shape).reshape(-1)
+        if light.kind in ("POINT", "SPOT"):
+            # round a lamp the voxels' source is a point sample of ~1/r^2 (their lattice power
+            # is the cells' mean, source.cell_mean_source): there the starts only keep to the
+            # medium (a peak of 0 accepts any draw with source)
+            peak[near_light_cells(pm, light, stride, shape)] = 0.0
+        sets.append((pts[live], power[live], light_direction(light, pts[live]), 1.0, 0,
+                     (voxels, peak[live])))
+    if around is not None:
+        if fog:
+            got = fog_starts(pm, light, around, seed + 1)
+            if got is not None:
+                sets.append(got + (0.0, 0))
+        if around.surfaces is not None:
+            got = surface_starts(pm, light, around, seed + 2)
+            if got is not None:
+                sets.append(got[:3] + (got[3], 1))
+            got = sky_surface_starts(pm, around, seed + 3) if sky else None
+            if got is not None:
+                sets.append(got[:3] + (got[3], 1))
+    return stride, shape, h, sets
 
 
-def first_scattered_power(pm, fld, light, channel: int, resolution: int,
-                          around: Optional[Surroundings] = None,
-                          cell_tau: float = Tuning.cell_tau,
-                          cell_walk: int = Tuning.cell_walk) -> float:
-    """W: the power of ``light``'s first scatterings in ``pm`` (channels summed), as
-    ``traced_multiple``'s paths start from them (``across_media``)."""
-    return float(_first_scatterings(pm, fld, light, channel, resolution, around, cell_tau,
-                                    cell_walk)[4].sum())
+def start_power(pm, fld, light, channel: int, resolution: int,
+                around: Optional[Surroundings] = None, cell_tau: float = Tuning.cell_tau,
+                cell_walk: int = Tuning.cell_walk, sky: bool = False, seed: int = 0) -> float:
+    """W: the power of ``light``'s paths' starts in ``pm`` (``path_sets``, every set, the
+    channels summed), what ``traced_multiple`` reports as its ``started`` power for the same
+    arguments (``across_media``)."""
+    return float(sum(float(np.asarray(item[1]).sum()) for item in
+                     path_sets(pm, fld, light, channel, resolution, around, cell_tau,
+                               cell_walk, sky, seed)[3]))
 
 
 def across_media(powers) -> list:
     """Per medium of a group that overlap, the share of the Paths setting its paths for one
-    light take: the light's first-scattering power in it over the most in the group
-    (``powers``, W, one a medium), so that the light's paths weigh the same in each, the
+    light take: the power of the light's paths' starts in it (``start_power``) over the most
+    in the group (``powers``, W, one a medium), so that the light's paths weigh the same in each, the
     brightest taking the whole setting (1 where none scatters the light).  The paths of each
     fly through the others (partners) and deposit there too, so a medium the light reaches
     little (p_overlap's cube inside its sphere: 1.5 W against 39.9 W) is lit mostly by the

@@ -19,8 +19,8 @@ from .lightdepth import (SHADOW_TAU, light_optical_depth, near_sharp_surfaces, s
 from .flatten import flattened
 from .fogglow import glow_on_medium
 from .emissionlight import EMISSION_PATHS, add_glow, add_lattice, emission_light
-from .lightpaths import (across_media, first_scattered_power, lit_by_glow, overlapping,
-                         partner_lattice, too_dense, traced_multiple)
+from .lightpaths import (across_media, lit_by_glow, overlapping, partner_lattice, start_power,
+                         too_dense, traced_multiple)
 from .pathstarts import Surroundings, sky_paths_wanted
 from .skydeficit import deficit_paths, sky_deficit
 from .lightpyramid import MultipleField, multiple_field
@@ -213,10 +213,10 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
             absorbing.append(mi)
         fields.append(f)
     # the lights' paths once every medium's light is known: a light's paths weigh the same in
-    # media that overlap (lightpaths.across_media), which needs each one's first-scattering
-    # power first; a medium apart from the others takes the whole Paths setting
+    # media that overlap (lightpaths.across_media), which needs the power of each one's
+    # starts first; a medium apart from the others takes the whole Paths setting
     shares = path_shares(media, fields, lights, chans, path_res, around, tuning,
-                         partners_of) if traces and multiple else None
+                         partners_of, seed) if traces and multiple else None
     for mi, pm in enumerate(media):
         f = fields[mi]
         ms = [None] * len(lights)
@@ -309,25 +309,30 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                         "backend": kernels.backend(), "glowing": n_glow})
 
 
-def path_shares(media, fields, lights, chans, path_res, around, tuning: Tuning, partners_of):
+def path_shares(media, fields, lights, chans, path_res, around, tuning: Tuning, partners_of,
+                seed: int):
     """[light][medium] the share of the Paths setting each medium's paths for each light
-    take: its first-scattering power over the most among it and the media whose boxes
-    overlap its own (``partners_of``, whose lattices its paths deposit on, and theirs on its
-    own; lightpaths.across_media).  1 for a medium apart from the others, the world fog
-    (whose paths also start beyond its grid) and a light without paths; None where no two
+    take: the power of its paths' starts (lightpaths.start_power: the first scatterings and
+    the light the surfaces reflect into it, as traced_multiple will start them with the same
+    ``seed``) over the most among it and the media whose boxes overlap its own
+    (``partners_of``, whose lattices its paths deposit on, and theirs on its own;
+    lightpaths.across_media).  1 for a medium apart from the others, the world fog (whose
+    paths also start beyond its grid) and a light without paths; None where no two
     scattering media overlap."""
     live = [mi for mi, pm in enumerate(media)
             if np.any(pm.sigma_s > 0) and not pm.endless and
             any(np.any(media[j].sigma_s > 0) and not media[j].endless for j in partners_of[mi])]
     if not live:
         return None
+    sky_li = next((li for li in range(len(lights)) if chans[li] is not None), None)
     shares = []
     for li, light in enumerate(lights):
         share = [1.0] * len(media)
         if chans[li] is not None:
-            power = {mi: first_scattered_power(media[mi], fields[mi], light, chans[li],
-                                               path_res[mi], around, tuning.cell_tau,
-                                               tuning.cell_walk) for mi in live}
+            power = {mi: start_power(media[mi], fields[mi], light, chans[li], path_res[mi],
+                                     around, tuning.cell_tau, tuning.cell_walk,
+                                     sky=li == sky_li, seed=seed + 7919 * mi + li)
+                     for mi in live}
             for mi in live:
                 group = [mi] + [j for j in partners_of[mi] if j in power]
                 share[mi] = across_media([power[j] for j in group])[0]
