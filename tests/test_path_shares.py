@@ -1,6 +1,6 @@
 """A light's paths weigh the same in media that overlap (precompute/run.py path_shares,
 lightpaths.across_media): a medium the light barely reaches inside another takes as few of
-the Paths as its first-scattering power asks; media apart take the whole setting."""
+the Paths as the power of its starts asks; media apart take the whole setting."""
 from __future__ import annotations
 
 import numpy as np
