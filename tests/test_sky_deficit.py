@@ -10,8 +10,8 @@ import pytest
 from mpp_render.media import prepare
 from mpp_render.precompute import precompute
 from mpp_render.precompute.lightpaths import PathLattice
-from mpp_render.precompute.skydeficit import (camera_odds, deficit_paths, largest_albedo, sky_deficit,
-                                              walk_reach, weighted_paths)
+from mpp_render.precompute.skydeficit import (camera_odds, deficit_paths, largest_albedo,
+                                              sky_deficit, walk_reach, weighted_paths)
 from mpp_render.scene import Camera, Medium, Tuning, World
 
 N = 40          # voxels a side
@@ -217,8 +217,9 @@ def test_the_deficits_paths_weigh_what_the_lights_paths_weigh():
     # where it weighs more, never fewer
     pm5, cam = thick_sphere(), camera()
     few = sky_deficit(pm5, np.ones(3), cam, 2000, 20, seed=1)
-    many = sky_deficit(pm5, np.ones(3), cam, 2000, 20, seed=1, path_weight=1e-6, most=40_000)
-    same = sky_deficit(pm5, np.ones(3), cam, 2000, 20, seed=1, path_weight=1e3, most=40_000)
+    many = sky_deficit(pm5, np.ones(3), cam, 2000, 20, seed=1, path_weight=1e-6,
+                       setting=40_000)
+    same = sky_deficit(pm5, np.ones(3), cam, 2000, 20, seed=1, path_weight=1e3, setting=40_000)
     assert np.array_equal(few[1], same[1])
     spread = [np.std(x[1][..., 0][x[1][..., 0] != 0]) for x in (few, many)]
     assert spread[1] < 0.5 * spread[0]

@@ -15,11 +15,12 @@ point y
 L_0 the emitted radiance that has not scattered yet (its first flights: the paths traced with
 ``max_collisions`` 1) and L_1+ what has scattered at least once (every later flight: the
 same paths, drawing the same numbers, traced to their end with only the deposits after their
-first collision counted, ``min_collisions`` 1, so L_1+ has no noise of the first flights).  The march reads E1 with the sky's light
-(scattered once towards the camera: Volume Single) and Em with the sky's multiple scattering
-(Volume Multiple): both are added to the field's world channels (precompute/layout.py),
-interpolated from the lattice to the voxels.  The paths reflect off the surfaces as the
-lights' do; the surfaces' own light from the glow is their gather march's (surfaces.py).
+first collision counted, ``min_collisions`` 1, so L_1+ has no noise of the first flights).
+The march reads E1 with the sky's light (scattered once towards the camera: Volume Single)
+and Em with the sky's multiple scattering (Volume Multiple): both are added to the field's
+world channels (precompute/layout.py), interpolated from the lattice to the voxels.  The
+paths reflect off the surfaces as the lights' do; the surfaces' own light from the glow is
+their gather march's (surfaces.py).
 
 The glow's paths fly through every other medium that scatters, overlapping the glowing one
 or apart from it across empty space (precompute.lightpaths.lit_by_glow, the nearest seven;
@@ -42,7 +43,7 @@ from .. import kernels
 from ..media import PreparedMedium
 from ..scene import Tuning
 from .fogglow import fog_glow
-from .lightpaths import PathLattice, _trace_all, path_budget
+from .lightpaths import PathLattice, _trace_all, cell_volume, path_budget
 from .pathstarts import Surroundings
 
 CHUNK = 1 << 20  # voxels interpolated at once when the lattice is added to the field
@@ -140,8 +141,7 @@ def voxel_starts(pm: PreparedMedium, flat: np.ndarray, e: np.ndarray, stride: in
     W/(m^3 sr), each of power 4 pi e V (V the voxel's volume) and offset by a tent of
     half-width one voxel (``jitter`` 1 / ``stride`` lattice steps), so that the starts
     follow the emission interpolated trilinearly, as the march reads it."""
-    vox = float(abs(np.linalg.det(np.asarray(pm.i2w[:3, :3], np.float64))))
-    power = 4.0 * np.pi * vox * np.asarray(e, np.float64)
+    power = 4.0 * np.pi * cell_volume(pm, 1) * np.asarray(e, np.float64)
     ijk = np.stack(np.unravel_index(flat, pm.grid.shape[:3]), axis=1).astype(np.float64)
     up = np.zeros((len(flat), 3))
     up[:, 2] = 1.0                                      # any axis: the lobe is uniform

@@ -163,11 +163,11 @@ def start_power(pm, fld, light, channel: int, resolution: int,
 def across_media(powers) -> list:
     """Per medium of a group that overlap, the share of the Paths setting its paths for one
     light take: the power of the light's paths' starts in it (``start_power``) over the most
-    in the group (``powers``, W, one a medium), so that the light's paths weigh the same in each, the
-    brightest taking the whole setting (1 where none scatters the light).  The paths of each
-    fly through the others (partners) and deposit there too, so a medium the light reaches
-    little (p_overlap's cube inside its sphere: 1.5 W against 39.9 W) is lit mostly by the
-    others' paths."""
+    in the group (``powers``, W, one a medium), so that the light's paths weigh the same in
+    each, the brightest taking the whole setting (1 where none scatters the light).  The
+    paths of each fly through the others (partners) and deposit there too, so a medium the
+    light reaches little (p_overlap's cube inside its sphere: 1.5 W against 39.9 W) is lit
+    mostly by the others' paths."""
     top = max([float(p) for p in powers] + [0.0])
     return [float(p) / top if top > 0.0 else 1.0 for p in powers]
 

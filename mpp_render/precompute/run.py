@@ -215,14 +215,14 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
     # the lights' paths once every medium's light is known: a light's paths weigh the same in
     # media that overlap (lightpaths.across_media), which needs the power of each one's
     # starts first; a medium apart from the others takes the whole Paths setting
+    # the sky's light off the surfaces rides with the first light that has paths
+    sky_li = next((li for li in range(len(lights)) if chans[li] is not None), None)
     shares = path_shares(media, fields, lights, chans, path_res, around, tuning,
-                         partners_of, seed) if traces and multiple else None
+                         partners_of, seed, sky_li) if traces and multiple else None
     for mi, pm in enumerate(media):
         f = fields[mi]
         ms = [None] * len(lights)
         if multiple and np.any(pm.sigma_s > 0):
-            # the sky's light off the surfaces rides with the first light that has paths
-            sky_li = next((li for li in range(len(lights)) if chans[li] is not None), None)
             for li, light in enumerate(lights):
                 if chans[li] is None:
                     continue
@@ -236,7 +236,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                     n_li = multiple_paths if shares is None else \
                         max(1, int(np.ceil(multiple_paths * shares[li][mi])))
                     traced = traced_multiple(pm, f, light, chans[li], camera, n_li,
-                                             path_res[mi], seed=seed + 7919 * mi + li,
+                                             path_res[mi], seed=path_seed(seed, mi, li),
                                              threads=threads, should_cancel=should_cancel,
                                              around=around, moments=tuning.gather_moments,
                                              partners=[(media[j], lat) for j, lat in near],
@@ -284,8 +284,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                           partners=[(media[j], lat) for j, lat in near],
                           surfaces=surfaces, n_dirs=n_dirs,
                           setting=max(int(multiple_paths), n_lost), tuning=tuning,
-                          path_weight=started[0] / started[1] if started[1] else None,
-                          most=max(int(multiple_paths), n_lost))
+                          path_weight=started[0] / started[1] if started[1] else None)
         if got is not None:
             stride, own, cross = got
             lost.append((mi, stride, own))
@@ -309,29 +308,34 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                         "backend": kernels.backend(), "glowing": n_glow})
 
 
+def path_seed(seed: int, mi: int, li: int) -> int:
+    """The seed of light ``li``'s paths in medium ``mi`` (their starts' draws and the
+    trace's)."""
+    return seed + 7919 * mi + li
+
+
 def path_shares(media, fields, lights, chans, path_res, around, tuning: Tuning, partners_of,
-                seed: int):
+                seed: int, sky_li):
     """[light][medium] the share of the Paths setting each medium's paths for each light
     take: the power of its paths' starts (lightpaths.start_power: the first scatterings and
     the light the surfaces reflect into it, as traced_multiple will start them with the same
-    ``seed``) over the most among it and the media whose boxes overlap its own
-    (``partners_of``, whose lattices its paths deposit on, and theirs on its own;
-    lightpaths.across_media).  1 for a medium apart from the others, the world fog (whose
-    paths also start beyond its grid) and a light without paths; None where no two
-    scattering media overlap."""
+    seeds, ``path_seed``, and sky light ``sky_li``) over the most among it and the media
+    whose boxes overlap its own (``partners_of``, whose lattices its paths deposit on, and
+    theirs on its own; lightpaths.across_media).  1 for a medium apart from the others, the
+    world fog (whose paths also start beyond its grid) and a light without paths; None
+    where no two scattering media overlap."""
     live = [mi for mi, pm in enumerate(media)
             if np.any(pm.sigma_s > 0) and not pm.endless and
             any(np.any(media[j].sigma_s > 0) and not media[j].endless for j in partners_of[mi])]
     if not live:
         return None
-    sky_li = next((li for li in range(len(lights)) if chans[li] is not None), None)
     shares = []
     for li, light in enumerate(lights):
         share = [1.0] * len(media)
         if chans[li] is not None:
             power = {mi: start_power(media[mi], fields[mi], light, chans[li], path_res[mi],
                                      around, tuning.cell_tau, tuning.cell_walk,
-                                     sky=li == sky_li, seed=seed + 7919 * mi + li)
+                                     sky=li == sky_li, seed=path_seed(seed, mi, li))
                      for mi in live}
             for mi in live:
                 group = [mi] + [j for j in partners_of[mi] if j in power]

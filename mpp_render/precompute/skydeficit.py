@@ -46,6 +46,7 @@ from ..media import PreparedMedium, density_from
 from ..scene import Light, Tuning
 from .emissionlight import scattered_glow
 from .lightdepth import light_optical_depth
+from .lightpaths import cell_volume
 from .worldlight import on_lattice, sky_share, world_lattice
 
 SHARE_CHUNK = 1 << 11   # lattice points whose sky share is found at a time
@@ -61,8 +62,7 @@ def deficit_paths(multiple_paths: int, floor: int, share: float) -> int:
 def sky_deficit(pm: PreparedMedium, colour, camera, n_paths: int, resolution: int,
                 seed: int = 0, threads: int = 0, should_cancel=None, around=None, partners=(),
                 surfaces=None, n_dirs: int = 64, setting: Optional[int] = None,
-                tuning: Tuning = Tuning(), path_weight: Optional[float] = None,
-                most: Optional[int] = None):
+                tuning: Tuning = Tuning(), path_weight: Optional[float] = None):
     """(stride, D, cross) or None: D_2+ (float32 (LX,LY,LZ,3), W/(m^2 sr), phase-weighted
     towards the camera, module docstring) on ``pm``'s light-path lattice from the
     fictitious emission sigma_a rho L_w s of ``pm`` (``colour`` L_w, RGB), and ``cross``
@@ -73,8 +73,9 @@ def sky_deficit(pm: PreparedMedium, colour, camera, n_paths: int, resolution: in
     hide the sky (s: ``n_dirs`` directions a point of the world light's lattice).
     ``path_weight``: None, or the mean weight (W a path) of the lights' paths in ``pm``: the
     paths are then as many as give the fictitious emission's scattered power the same weight
-    a path (``weighted_paths``), at most ``most``, where that is more than ``n_paths``
-    (fewer, cloud_vdb's 78 000 instead of 375 000, took its full render 0.0161 -> 0.0170)."""
+    a path (``weighted_paths``), at most ``setting`` (or ``n_paths`` without one), where that
+    is more than ``n_paths`` (fewer, cloud_vdb's 78 000 instead of 375 000, took its full
+    render 0.0161 -> 0.0170)."""
     colour = np.asarray(colour, np.float64).reshape(3)
     if camera is None or pm.endless or not np.any(colour > 0.0):
         return None
@@ -89,7 +90,7 @@ def sky_deficit(pm: PreparedMedium, colour, camera, n_paths: int, resolution: in
         e *= seen_share(pm, flat, surfaces, n_dirs, seed, tuning.ambient_resolution)[:, None]
     if path_weight is not None and path_weight > 0.0:
         n_paths = max(int(n_paths), weighted_paths(pm, e, path_weight,
-                                                   n_paths if most is None else most))
+                                                   n_paths if setting is None else setting))
     odds = camera_odds(pm, flat, e, camera, resolution, tuning.sky_deficit_mix,
                        threads=threads, should_cancel=should_cancel)
     got = scattered_glow(pm, (flat, e), camera, n_paths, resolution, True, seed=seed,
@@ -123,14 +124,23 @@ def seen_share(pm: PreparedMedium, flat: np.ndarray, surfaces, n_dirs: int, seed
     """(N,) the share of the sky the voxels ``flat`` of ``pm`` see past the ``surfaces``:
     worldlight.sky_share at the points of the world light's lattice, interpolated
     trilinearly."""
-    stride, shape, cflat, cpts = world_lattice(pm, resolution)
+    got = world_lattice(pm, resolution)
+    cpts = got[3]
     share = np.zeros(len(cpts))
     for a in range(0, len(cpts), SHARE_CHUNK):
         b = min(len(cpts), a + SHARE_CHUNK)
         share[a:b] = sky_share(surfaces, cpts[a:b], seed, a, b, n_dirs)
-    lattice = on_lattice(shape, cflat, np.repeat(share[:, None], 3, axis=1))
+    return at_voxels(pm, flat, got, share)
+
+
+def at_voxels(pm: PreparedMedium, flat: np.ndarray, lattice, values: np.ndarray) -> np.ndarray:
+    """(N,) ``values`` (one per point of ``lattice`` = worldlight.world_lattice's (stride,
+    shape, flat, points)) interpolated trilinearly at the voxels ``flat`` of ``pm``, within
+    [0, 1] (a share, a transmittance)."""
+    stride, shape, cflat, _ = lattice
+    grid = on_lattice(shape, cflat, np.repeat(np.asarray(values)[:, None], 3, axis=1))
     ijk = np.stack(np.unravel_index(flat, pm.grid.shape[:3]), axis=1).astype(np.float64)
-    return np.clip(kernels.trilinear(lattice, ijk / stride)[:, 0].astype(np.float64), 0.0, 1.0)
+    return np.clip(kernels.trilinear(grid, ijk / stride)[:, 0].astype(np.float64), 0.0, 1.0)
 
 
 def largest_albedo(pm: PreparedMedium) -> float:
@@ -149,8 +159,8 @@ def weighted_paths(pm: PreparedMedium, e: np.ndarray, path_weight: float, most: 
     lights' paths start in proportion to their power (paths.from_power); the deficit's, whose
     light is taken off the sky's in the same pass, follow the same rule, so that neither's
     noise outweighs the other's for its power."""
-    vox = float(abs(np.linalg.det(np.asarray(pm.i2w[:3, :3], np.float64))))
-    scattered = 4.0 * np.pi * vox * float(np.asarray(e, np.float64).sum()) * largest_albedo(pm)
+    scattered = 4.0 * np.pi * cell_volume(pm, 1) * float(np.asarray(e, np.float64).sum()) * \
+        largest_albedo(pm)
     return int(min(max(1, int(most)), max(1.0, np.ceil(scattered / float(path_weight)))))
 
 
@@ -174,15 +184,12 @@ def camera_odds(pm: PreparedMedium, flat: np.ndarray, e: np.ndarray, camera, res
     reach = walk_reach(largest_albedo(pm), pm.g)
     if not (mix < 1.0) or not np.isfinite(reach):
         return None
-    stride, shape, cflat, cpts = world_lattice(pm, resolution)
+    lattice = world_lattice(pm, resolution)
     eye = Light("POINT", "camera", np.ones(3),
                 position=np.asarray(camera.cam_to_world, np.float64)[:3, 3])
-    tau = light_optical_depth([pm], eye, cpts, 0.5 * float(pm.voxel_size), threads=threads,
-                              should_cancel=should_cancel).max(axis=1)
-    v = np.exp(-np.maximum(tau - reach, 0.0))
-    lattice = on_lattice(shape, cflat, np.repeat(v[:, None], 3, axis=1))
-    ijk = np.stack(np.unravel_index(flat, pm.grid.shape[:3]), axis=1).astype(np.float64)
-    v = np.clip(kernels.trilinear(lattice, ijk / stride)[:, 0].astype(np.float64), 0.0, 1.0)
+    tau = light_optical_depth([pm], eye, lattice[3], 0.5 * float(pm.voxel_size),
+                              threads=threads, should_cancel=should_cancel).max(axis=1)
+    v = at_voxels(pm, flat, lattice, np.exp(-np.maximum(tau - reach, 0.0)))
     power = np.asarray(e, np.float64).sum(axis=1)
     mean = float((v * power).sum() / max(float(power.sum()), 1e-300))
     if not mean > 0.0:
