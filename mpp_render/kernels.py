@@ -408,7 +408,8 @@ def trace_paths(inp, *, threads: int = 1, should_cancel=None, backend=None):
                              backend=backend)[0]
 
 
-def trace_paths_media(inp, *, threads: int = 1, should_cancel=None, backend=None) -> list:
+def trace_paths_media(inp, *, threads: int = 1, should_cancel=None, backend=None,
+                      halves: bool = False):
     """Light paths' deposits for ``inp`` (a paths.PathInputs; the numpy twin is
     paths.trace_paths_media_np): one float64 array (LX,LY,LZ,inp.channels) per medium on its
     own lattice, the paths' own medium first, then ``inp.others`` in their order.  The paths
@@ -416,21 +417,43 @@ def trace_paths_media(inp, *, threads: int = 1, should_cancel=None, backend=None
     ``threads`` workers share (the caller sizes them: parallel.worker_count): the result is
     the same bits for any thread count (frames match across farm machines).  Each block runs
     ``PATH_CHUNK`` paths a call, asking ``should_cancel`` between calls: raises
-    cancel.Cancelled when it says so."""
+    cancel.Cancelled when it says so.  ``halves``: returns (that list, (first, k)), first the
+    own medium's light deposits (LX,LY,LZ,3) of paths 0..k-1 alone, the blocks of the first
+    half (weighed, as every path, by 1 / n_paths), or (list, None) with under 2 blocks: two
+    independent estimates (first x n / k and the rest x n / (n - k)) whose difference
+    measures the deposits' noise (precompute/lobefit.py)."""
     from .paths import ROULETTE, trace_paths_media_np
+    n = int(inp.n_paths)
     if not _on_c(backend) or not hasattr(_c, "trace_paths"):
-        return trace_paths_media_np(inp)
+        full = trace_paths_media_np(inp)
+        if inp.moments and n > 0 and len(inp.cdf):
+            cuts = np.linspace(0, n, min(PATH_BLOCKS, n) + 1).astype(np.int64)
+            ends = moment_ends(inp, cuts)
+            if not np.array_equal(ends, cuts[1:]):   # a share of each block's paths
+                parts = [trace_paths_media_np(inp, paths=(int(a), int(e)))
+                         for a, e in zip(cuts[:-1], ends)]
+                scale = n / float(np.sum(ends - cuts[:-1]))
+                full = [np.concatenate([f[..., :3], sum(p[g][..., 3:] for p in parts) * scale],
+                                       axis=-1) for g, f in enumerate(full)]
+        if not halves:
+            return full
+        k = n // 2
+        if k < 1 or len(inp.cdf) == 0:
+            return full, None
+        return full, (trace_paths_media_np(inp, paths=(0, k))[0][..., :3], k)
     grids = [inp] + list(inp.others)
     shapes = [tuple(m.towards.shape[:3]) for m in grids]
-    n = int(inp.n_paths)
     if n <= 0 or len(inp.cdf) == 0:
-        return [np.zeros(sh + (inp.channels,)) for sh in shapes]
+        empty = [np.zeros(sh + (inp.channels,)) for sh in shapes]
+        return (empty, None) if halves else empty
     blocks = min(PATH_BLOCKS, n)
     workers = max(1, min(int(threads), blocks))
     cuts = np.linspace(0, n, blocks + 1).astype(np.int64)
     outs = [[np.zeros(sh + (3,)) for sh in shapes] for _ in range(blocks)]
     moms = [[np.zeros(sh + (12,) if inp.moments else (0, 0, 0, 12)) for sh in shapes]
             for _ in range(blocks)]
+    ends = moment_ends(inp, cuts)      # each block's paths up to ends[i] deposit the moments
+    bare = np.zeros((0, 0, 0, 12))
     args = (_f32(inp.density), _f64(inp.w2i).reshape(3, 4), _f64(inp.i2w).reshape(3, 3),
             _f64(inp.sigma_s).reshape(3), _f64(inp.sigma_t).reshape(3), float(inp.g),
             int(inp.stride),
@@ -456,14 +479,21 @@ def trace_paths_media(inp, *, threads: int = 1, should_cancel=None, backend=None
 
     def work(i):
         others = tuple((outs[i][1 + k], moms[i][1 + k]) + f for k, f in enumerate(fixed))
+        plain = tuple((outs[i][1 + k], bare) + f for k, f in enumerate(fixed))
+        end = int(ends[i])
         for a in range(int(cuts[i]), int(cuts[i + 1]), PATH_CHUNK):
             if cancelled or (should_cancel is not None and should_cancel()):
                 cancelled.append(True)
                 return
-            _c.trace_paths(outs[i][0], *args, a, min(a + PATH_CHUNK, int(cuts[i + 1])), n,
-                           int(inp.seed) & 0xFFFFFFFF, int(inp.max_collisions), float(ROULETTE),
-                           *extra, moms[i][0], others, float(inp.threshold), cells, light,
-                           colour, extinction, int(inp.min_collisions))
+            b = min(a + PATH_CHUNK, int(cuts[i + 1]))
+            # the paths before ``end`` with their moments, the rest without
+            for lo, hi, mom, oth in ((a, min(b, end), moms[i][0], others),
+                                     (max(a, end), b, bare, plain)):
+                if hi > lo:
+                    _c.trace_paths(outs[i][0], *args, lo, hi, n, int(inp.seed) & 0xFFFFFFFF,
+                                   int(inp.max_collisions), float(ROULETTE), *extra, mom, oth,
+                                   float(inp.threshold), cells, light, colour, extinction,
+                                   int(inp.min_collisions))
 
     if workers == 1:
         for i in range(blocks):
@@ -474,14 +504,18 @@ def trace_paths_media(inp, *, threads: int = 1, should_cancel=None, backend=None
             list(ex.map(work, range(blocks)))
     if cancelled:
         raise Cancelled
-    result = []
+    result, first = [], None
     for g in range(len(grids)):
         total, moments = outs[0][g], moms[0][g]
         for i in range(1, blocks):
+            if g == 0 and i == blocks // 2:   # the first half's sum, on the way
+                first = (total.copy(), int(cuts[i]))
             total += outs[i][g]
             moments += moms[i][g]
+        if inp.moments and not np.array_equal(ends, cuts[1:]):   # a share's, for all the paths
+            moments *= n / float(np.sum(ends - cuts[:-1]))
         result.append(np.concatenate([total, moments], axis=-1) if inp.moments else total)
-    return result
+    return (result, first) if halves else result
 
 
 # the most cells cell_classes maps (one byte each); a larger grid reads every cell's voxels
@@ -518,4 +552,18 @@ def cell_classes(density, threshold: float) -> np.ndarray:
 
 
 PATH_BLOCKS = 4   # trace_paths' blocks of paths (its sums' order, whatever the threads)
+
+
+def moment_ends(inp, cuts: np.ndarray) -> np.ndarray:
+    """int64 (blocks,): for the blocks of paths cuts[i]..cuts[i+1]-1, the path before which
+    each block's paths deposit the moments: the block's end, or with ``inp.moment_share``
+    below 1 that share of its paths (at least one), so that every block, and every thread,
+    carries its part of the moments' cost (their moments scaled to all the paths,
+    trace_paths_media)."""
+    cuts = np.asarray(cuts, np.int64)
+    share = float(getattr(inp, "moment_share", 1.0))
+    if not share < 1.0:
+        return cuts[1:].copy()
+    size = cuts[1:] - cuts[:-1]
+    return cuts[:-1] + np.clip(np.ceil(share * size).astype(np.int64), np.minimum(size, 1), size)
 PATH_CHUNK = 16384   # paths per call of the compiled tracer, between checks for Esc

@@ -200,7 +200,9 @@ class PathInputs:
     coloured medium.  ``extinction``: None, or float32 (X,Y,Z,3) per voxel the density each
     channel's extinction reads (media.PreparedMedium.extinction_density: sigma_t[c] times
     channel c, at most ``density``), read at the nearest voxel (``_extinction_density``);
-    the collisions are then by spectral tracking."""
+    the collisions are then by spectral tracking.  ``moment_share``: with ``moments``, the
+    share of the paths (the first ones of each of kernels.PATH_BLOCKS blocks) whose moments
+    are deposited, scaled to all of them (kernels.moment_ends); 1: every path's."""
 
     density: np.ndarray
     w2i: np.ndarray
@@ -234,6 +236,7 @@ class PathInputs:
     scatter: Optional[np.ndarray] = None
     extinction: Optional[np.ndarray] = None
     min_collisions: int = 0
+    moment_share: float = 1.0
 
     @property
     def channels(self) -> int:
@@ -504,9 +507,11 @@ def start_directions(inp: PathInputs, keys, k, pos) -> np.ndarray:
     return np.where(ok[:, None], unit, din)
 
 
-def trace_paths_media_np(inp: PathInputs) -> list:
+def trace_paths_media_np(inp: PathInputs, paths: Optional[tuple] = None) -> list:
     """The numpy twin of csrc/paths.c with ``inp.others``: one float64 (LX,LY,LZ,channels)
-    array of deposits per medium on its own lattice, the paths' own medium first."""
+    array of deposits per medium on its own lattice, the paths' own medium first.
+    ``paths``: None, or (lo, hi) to trace only paths lo..hi-1 of the ``n_paths`` (each still
+    weighed by 1 / n_paths; kernels.trace_paths_media's halves)."""
     grids = [_own_medium(inp)] + list(inp.others)
     if len(grids) > PATH_MEDIA:
         raise ValueError(f"trace_paths: at most {PATH_MEDIA - 1} other media")
@@ -520,6 +525,8 @@ def trace_paths_media_np(inp: PathInputs) -> list:
     gs = [clamp_g(m.g) for m in grids]
     g = gs[0]
     keys = path_keys(inp.seed, n)
+    if paths is not None:
+        keys = keys[max(0, int(paths[0])):max(0, int(paths[1]))]
     k = np.minimum(np.searchsorted(inp.cdf, uniform(keys, 0, _D_PICK), side="right"),
                    len(inp.cdf) - 1)
     pos = start_positions(inp, keys, k)
@@ -531,14 +538,14 @@ def trace_paths_media_np(inp: PathInputs) -> list:
                   0.0 if int(inp.lobe) == 2 else g, din)
     w = inp.weights[k] / n
     w0 = w.max(axis=1)
-    event = np.zeros(n, np.int64)
-    hits = np.zeros(n, np.int64)
-    skip = np.full(n, -1, np.int64)
+    event = np.zeros(len(keys), np.int64)
+    hits = np.zeros(len(keys), np.int64)
+    skip = np.full(len(keys), -1, np.int64)
     shapes = [np.array(m.density.shape) for m in grids]
     inside = np.stack([np.all((np.floor(_to_index(m, pos) + 0.5) >= 0)
                               & (np.floor(_to_index(m, pos) + 0.5) < sh), axis=1)
                        for m, sh in zip(grids, shapes)], axis=1)
-    alive = np.arange(n)
+    alive = np.arange(len(keys))
     sts = [np.asarray(m.sigma_t, np.float64) for m in grids]
     sss = [np.asarray(m.sigma_s, np.float64) for m in grids]
     mus = [float(m.rate) for m in grids]

@@ -300,6 +300,11 @@ class Tuning:
     the first four of the eight chose it, the other four checked it.  At 0 (the majorant
     alone) the few deposits under a tent made spikes in M (colored_sphere 0.09-0.31);
     docs/performance.md.
+    ``lobe_window``: in a medium whose phase function is not flat, the camera's M from the
+    traced paths is their moments' HG lobe fitted to their deposits over windows of
+    (2 lobe_window + 1)^3 lattice points, as far as the deposits' noise warrants
+    (precompute/lobefit.py); 0: the deposits alone.  Chosen from 1, 2 and 3 on the public
+    suite (docs/method.md §9.9).
     ``surface_cache``: the surfaces' gathered light is gathered once at points of a grid over
     the image this many points across its width, and each camera sample on a surface
     interpolates it (surfacecache.py); below 2: every sample gathers itself
@@ -404,6 +409,7 @@ class Tuning:
     smooth_step_voxels: float = 1.0
     smooth_step_tau: float = 0.5
     path_deposits: float = 0.5
+    lobe_window: int = 3
     path_nodal: bool = True
     cell_tau: float = 0.25
     cell_walk: int = 4

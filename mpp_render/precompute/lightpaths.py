@@ -16,8 +16,10 @@ from ..media import box_distance, density_from, trilinear
 from ..parallel import worker_count
 from ..paths import (MAX_COLLISIONS, MOMENT_CHANNELS, PATH_MEDIA, PATHS_MAX_SPAN,
                      SIGNED_CHANNELS, PathInputs, PathMedium, from_power, rate_span)
-from ..scene import MULTIPLE_PATHS, Tuning
+from ..scene import MULTIPLE_PATHS, Light, Tuning
 from .lattice import MULTIPLE_RESOLUTION, dilate, lattice_points, paths_lattice
+from .lightdepth import light_optical_depth
+from .lobefit import camera_weight, fitted
 from .nodal import nodal_values, tent_mass
 from .pathstarts import (Surroundings, fog_starts, reach, sky_surface_starts,
                          surface_albedo, surface_starts)
@@ -29,6 +31,11 @@ from .source import CELL_POINTS, light_direction, near_light_cells, source_and_d
 # past the default 3 000 000 paths
 PATHS_PER_POINT = 32
 FAR_PATHS = 0.25     # the far box's paths, a fraction of the grid's
+FAR_EYE = 1e4        # m: an orthographic camera's eye, this far back along its axis
+# the share of the paths whose moments the camera's lobe (lobefit.py) is drawn from where no
+# surface's gathers need them all: the moments' one random lattice point per deposit took
+# p_sphere_g95's trace from 9.5 to 16.2 s with every path's
+LOBE_MOMENTS = 0.25
 
 
 def path_budget(n_paths: int, cells: int, setting: Optional[int] = None) -> int:
@@ -49,7 +56,7 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
                     nodal: bool = Tuning.path_nodal,
                     far_resolution: int = MULTIPLE_RESOLUTION,
                     cell_tau: float = Tuning.cell_tau, cell_walk: int = Tuning.cell_walk,
-                    sky: bool = False):
+                    sky: bool = False, lobe_window: int = Tuning.lobe_window):
     """(stride, h, M, far, moments, cross, started) for ``light`` on medium ``pm`` (its field
     ``fld``, the light's optical depth at ``channel``): M float32 (LX,LY,LZ,3) W/(m^2 sr) on
     the light pyramid's lattice (lattice.walk_lattice at ``resolution``), from ``n_paths``
@@ -79,7 +86,10 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     *Multiple Scattering Resolution* as set, not raised round a lamp).  ``cell_tau``,
     ``cell_walk``: Tuning's (source.thick_band_source).  ``sky``: the paths also start where
     the surfaces reflect the constant sky's light (``around.sky``, pathstarts.sky_surface_starts);
-    the caller asks it of one light per medium, whose M then holds that light too."""
+    the caller asks it of one light per medium, whose M then holds that light too.
+    ``lobe_window``: with a ``camera`` and a medium of g != 0, M towards the camera is the
+    paths' lobe fitted to their deposits over windows of this many lattice points round each
+    (lobefit.py, Tuning.lobe_window; 0: the deposits alone)."""
     stride, shape, h, sets = path_sets(pm, fld, light, channel, resolution, around, cell_tau,
                                        cell_walk, sky, seed)
     fog = pm.endless
@@ -94,9 +104,22 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     started = (sum(float(np.asarray(item[1]).sum()) for item in sets), int(n_paths))
     gathered = moments and around is not None and around.surfaces is not None
     rec = start_light(light)
+    # the camera's M fitted to the paths' lobe (lobefit.py), where the phase function is not
+    # flat: an isotropic medium's deposits weigh every direction alike
+    fit = lobe_window > 0 and camera is not None and float(pm.g) != 0.0
     accs = _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
-                      moments=gathered, partners=partners, light=rec)
+                      moments=gathered or fit, partners=partners, light=rec, halves=fit,
+                      moment_share=1.0 if gathered else LOBE_MOMENTS)
+    if fit:
+        accs, (first, second) = accs
     m = lat.mean(accs[0])
+    if fit:
+        u = camera_weight(lat.tent_mass, _camera_depth(pm, lat, camera, threads, should_cancel))
+        # the nodal move is linear where not stopped at 0: one for the halves' difference
+        light3 = fitted(m[..., :3], m[..., 3:], lat.towards, u,
+                        np.asarray(lat.mean(first - second, signed=True), np.float64),
+                        lobe_window)
+        m = np.concatenate([light3, m[..., 3:]], axis=-1) if gathered else light3
     cross = [plat.mean(a) for (_, plat), a in zip(partners, accs[1:])]
     far = None
     if fog and camera is not None:
@@ -393,7 +416,8 @@ def _trace(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
 
 def _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
                max_collisions: int = MAX_COLLISIONS, moments: bool = False,
-               partners=(), light=None, min_collisions: int = 0) -> list:
+               partners=(), light=None, min_collisions: int = 0, halves: bool = False,
+               moment_share: float = 1.0):
     """``_trace``'s deposits on ``lat``, then on each of the ``partners``' lattices
     ((PreparedMedium, PathLattice), traced_multiple), which the paths fly through too.  Each
     set of ``sets``: (points, power W, directions, jitter, lobe[, (start source, peaks) or
@@ -401,7 +425,11 @@ def _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
     ``light``: None, or the packed light record the first scatterings (the tracer reads it
     for lobe 0 sets only) draw their incoming direction from (``start_light``).
     ``min_collisions``: the real collisions and bounces a path makes before its deposits
-    count (1: the light that has scattered at least once; paths.PathInputs)."""
+    count (1: the light that has scattered at least once; paths.PathInputs).  ``halves``:
+    returns (that list, (first, second)), each (LX,LY,LZ,3) the own lattice's light deposits
+    as estimated by one half of every set's paths alone (kernels.trace_paths_media's halves,
+    scaled to the whole: the two are independent estimates of the list's first).
+    ``moment_share``: the share of the paths whose moments are kept (paths.PathInputs)."""
     density, w2i, i2w = lat.density, lat.w2i, lat.i2w
     surf = around.surfaces if around is not None else None
     centre, radius = reach(pm, (w2i, density.shape))
@@ -420,7 +448,7 @@ def _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
     scatter = _own_grid(pm.scatter_grid, lat)
     extinction = _own_grid(pm.extinction_density, lat)
     totals = np.array([float(item[1].sum()) for item in sets])
-    acc = None
+    acc, split = None, None
     for k, item in enumerate(sets):
         starts, pw, dirs, jitter, lobe = item[:5]
         source, peak = item[5] if len(item) > 5 and item[5] is not None else (None, None)
@@ -435,11 +463,36 @@ def _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
                          start_source=source, start_peak=peak, moments=moments,
                          others=others, threshold=lat.threshold, light=light,
                          scatter=scatter, extinction=extinction,
-                         min_collisions=min_collisions, **extra)
+                         min_collisions=min_collisions, moment_share=moment_share, **extra)
         got = kernels.trace_paths_media(inp, threads=worker_count(threads),
-                                        should_cancel=should_cancel)
+                                        should_cancel=should_cancel, halves=halves)
+        if halves:
+            got, half = got
+            light3 = got[0][..., :3]
+            if half is None or not 0 < half[1] < n_k:   # too few paths to halve: no spread
+                pair = (light3, light3)
+            else:
+                pair = (half[0] * (n_k / half[1]), (light3 - half[0]) * (n_k / (n_k - half[1])))
+            split = pair if split is None else (split[0] + pair[0], split[1] + pair[1])
         acc = got if acc is None else [a + b for a, b in zip(acc, got)]
-    return acc
+    return (acc, split) if halves else acc
+
+
+def _camera_depth(pm, lat, camera, threads, should_cancel) -> Optional[np.ndarray]:
+    """(LX,LY,LZ) the optical depth (largest channel) from each point of ``lat`` to the
+    camera through the medium ``pm`` alone (an orthographic camera's from far along its
+    axis); None for the world's fog, which fills the way (its lattice points are weighed
+    by their medium alone)."""
+    if pm.endless:
+        return None
+    c2w = np.asarray(camera.cam_to_world, np.float64)
+    eye = c2w[:3, 3] + (FAR_EYE * c2w[:3, 2] if str(camera.projection).upper() == "ORTHO" else 0.0)
+    _, lpts = lattice_points(pm, lat.shape, lat.stride)
+    tau = light_optical_depth([pm], Light("POINT", "camera", np.ones(3), position=eye),
+                              np.asarray(lpts, np.float64).reshape(-1, 3),
+                              0.5 * float(pm.voxel_size), threads=threads,
+                              should_cancel=should_cancel)
+    return tau.max(axis=1).reshape(lat.shape)
 
 
 def _own_grid(grid, lat) -> Optional[np.ndarray]:

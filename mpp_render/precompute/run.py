@@ -245,7 +245,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                              far_resolution=multiple_resolution,
                                              cell_tau=tuning.cell_tau,
                                              cell_walk=tuning.cell_walk,
-                                             sky=li == sky_li)
+                                             sky=li == sky_li,
+                                             lobe_window=tuning.lobe_window)
                     if traced is not None:
                         for (j, _), m in zip(near, traced[5]):
                             key = (j, li)
