@@ -73,6 +73,11 @@ def test_a_lobe_in_linear_proportion_to_the_deposits_is_kept_exactly():
     position, the fitted light is the deposits (every window, the lattice's edges too)."""
     truth, mc, _, _, _, u = lobe_case(np.random.default_rng(5), 0.0)
     np.testing.assert_allclose(lobe_ratio(truth, mc, u, 3), truth, rtol=1e-5)
+    # a point the lobe holds none of (its moments from a share of the paths missed it)
+    # keeps its deposits
+    holed = mc.copy()
+    holed[5, 4, 3] = 0.0
+    assert np.array_equal(lobe_ratio(truth, holed, u, 3)[5, 4, 3], truth[5, 4, 3])
     # without noise in the deposits (the halves agree) the fit returns them, whatever the lobe
     wrong = mc * np.exp(np.sin(np.arange(mc.shape[0]))[:, None, None, None])
     tw = np.zeros(mc.shape[:3] + (3,))

@@ -85,7 +85,7 @@ def box_sum(x: np.ndarray, r: int) -> np.ndarray:
 def lobe_ratio(md: np.ndarray, mc: np.ndarray, u: np.ndarray, r: int) -> np.ndarray:
     """float64 (LX,LY,LZ,3): M_r = M_c a, a the local-linear fit of M_d / M_c over each
     window of radius ``r`` with weights ``u`` (LX,LY,LZ) (module docstring, step 1); M_d
-    where the window holds no weight or M_c is 0 throughout it."""
+    where the window holds no weight, M_c is 0 throughout it, or M_c is 0 at the point."""
     shape = md.shape[:3]
     X = np.stack(np.meshgrid(*[np.arange(n, dtype=np.float64) for n in shape], indexing="ij"),
                  -1)
@@ -112,7 +112,9 @@ def lobe_ratio(md: np.ndarray, mc: np.ndarray, u: np.ndarray, r: int) -> np.ndar
         rc = rhs[..., 1:] - mu * rhs[..., :1]
         slope = _solve3(C, rc)
         a0 = (rhs[..., 0] - (slope * A[..., 0, 1:]).sum(-1)) / a00
-        out[..., c] = np.where(ok, m * (a0 + (slope * X).sum(-1)), d)
+        # where the lobe holds none of the light (no moments there: they come from a share
+        # of the paths) the deposits stay
+        out[..., c] = np.where(ok & (m > 0.0), m * (a0 + (slope * X).sum(-1)), d)
     if grey:   # one fit serves the three equal channels
         out[..., 1] = out[..., 2] = out[..., 0]
     return out
