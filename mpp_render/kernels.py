@@ -508,7 +508,7 @@ def trace_paths_media(inp, *, threads: int = 1, should_cancel=None, backend=None
     for g in range(len(grids)):
         total, moments = outs[0][g], moms[0][g]
         for i in range(1, blocks):
-            if g == 0 and i == blocks // 2:   # the first half's sum, on the way
+            if halves and g == 0 and i == blocks // 2:   # the first half's sum, on the way
                 first = (total.copy(), int(cuts[i]))
             total += outs[i][g]
             moments += moms[i][g]
@@ -552,6 +552,7 @@ def cell_classes(density, threshold: float) -> np.ndarray:
 
 
 PATH_BLOCKS = 4   # trace_paths' blocks of paths (its sums' order, whatever the threads)
+PATH_CHUNK = 16384   # paths per call of the compiled tracer, between checks for Esc
 
 
 def moment_ends(inp, cuts: np.ndarray) -> np.ndarray:
@@ -561,9 +562,8 @@ def moment_ends(inp, cuts: np.ndarray) -> np.ndarray:
     carries its part of the moments' cost (their moments scaled to all the paths,
     trace_paths_media)."""
     cuts = np.asarray(cuts, np.int64)
-    share = float(getattr(inp, "moment_share", 1.0))
+    share = float(inp.moment_share)
     if not share < 1.0:
         return cuts[1:].copy()
     size = cuts[1:] - cuts[:-1]
     return cuts[:-1] + np.clip(np.ceil(share * size).astype(np.int64), np.minimum(size, 1), size)
-PATH_CHUNK = 16384   # paths per call of the compiled tracer, between checks for Esc

@@ -144,6 +144,17 @@ SELF_VOXELS = 1.5  # surfaces this close to a fog voxel (in voxels) do not shado
 SOFT_OFFSETS = (np.stack(np.meshgrid(*[[-0.25, 0.25]] * 3, indexing="ij"), -1).reshape(-1, 3))
 
 
+def eye_depth(pm: PreparedMedium, eye, points, threads: int = 0,
+              should_cancel=None) -> np.ndarray:
+    """(N,) the optical depth (largest channel) from world ``points`` (N,3, m) to the point
+    ``eye`` (3,, m: the camera's) through the medium ``pm`` alone, marched at half its voxel
+    (``light_optical_depth`` of a point light there)."""
+    light = Light("POINT", "camera", np.ones(3), position=np.asarray(eye, np.float64))
+    return light_optical_depth([pm], light, np.asarray(points, np.float64).reshape(-1, 3),
+                               0.5 * float(pm.voxel_size), threads=threads,
+                               should_cancel=should_cancel).max(axis=1)
+
+
 def soft_visibility(surfaces, light: Light, pm: PreparedMedium, flat, points, chunk=1 << 14,
                     threads=0, should_cancel=None):
     """Visibility of ``light`` (0..1, (N,)) from the needed points ``points`` (at flat indices

@@ -16,9 +16,9 @@ from ..media import box_distance, density_from, trilinear
 from ..parallel import worker_count
 from ..paths import (MAX_COLLISIONS, MOMENT_CHANNELS, PATH_MEDIA, PATHS_MAX_SPAN,
                      SIGNED_CHANNELS, PathInputs, PathMedium, from_power, rate_span)
-from ..scene import MULTIPLE_PATHS, Light, Tuning
+from ..scene import MULTIPLE_PATHS, Tuning
 from .lattice import MULTIPLE_RESOLUTION, dilate, lattice_points, paths_lattice
-from .lightdepth import light_optical_depth
+from .lightdepth import eye_depth
 from .lobefit import camera_weight, fitted
 from .nodal import nodal_values, tent_mass
 from .pathstarts import (Surroundings, fog_starts, reach, sky_surface_starts,
@@ -488,11 +488,7 @@ def _camera_depth(pm, lat, camera, threads, should_cancel) -> Optional[np.ndarra
     c2w = np.asarray(camera.cam_to_world, np.float64)
     eye = c2w[:3, 3] + (FAR_EYE * c2w[:3, 2] if str(camera.projection).upper() == "ORTHO" else 0.0)
     _, lpts = lattice_points(pm, lat.shape, lat.stride)
-    tau = light_optical_depth([pm], Light("POINT", "camera", np.ones(3), position=eye),
-                              np.asarray(lpts, np.float64).reshape(-1, 3),
-                              0.5 * float(pm.voxel_size), threads=threads,
-                              should_cancel=should_cancel)
-    return tau.max(axis=1).reshape(lat.shape)
+    return eye_depth(pm, eye, lpts, threads, should_cancel).reshape(lat.shape)
 
 
 def _own_grid(grid, lat) -> Optional[np.ndarray]:

@@ -90,17 +90,19 @@ def lobe_ratio(md: np.ndarray, mc: np.ndarray, u: np.ndarray, r: int) -> np.ndar
     X = np.stack(np.meshgrid(*[np.arange(n, dtype=np.float64) for n in shape], indexing="ij"),
                  -1)
     out = np.array(md, np.float64)
+    f = [np.ones(shape)] + [X[..., i] for i in range(3)]
     grey = _grey(md) and _grey(mc)
     for c in range(1 if grey else 3):
         m, d = mc[..., c], md[..., c]
-        wc = np.where(m > 0.0, u / np.where(m > 0.0, m, 1.0), 0.0)
-        f = [np.ones(shape)] + [X[..., i] for i in range(3)]
+        # the normal equations of sum u / m (d - m a)^2: sums of u d f_i and u m f_i f_j,
+        # over the points the lobe holds light at
+        w = np.where(m > 0.0, u, 0.0)
         A = np.zeros(shape + (4, 4))
         rhs = np.zeros(shape + (4,))
         for i in range(4):
-            rhs[..., i] = box_sum(wc * d * m * f[i], r)
+            rhs[..., i] = box_sum(w * d * f[i], r)
             for j in range(i, 4):
-                A[..., i, j] = A[..., j, i] = box_sum(wc * m * m * f[i] * f[j], r)
+                A[..., i, j] = A[..., j, i] = box_sum(w * m * f[i] * f[j], r)
         ok = A[..., 0, 0] > 0.0
         a00 = np.where(ok, A[..., 0, 0], 1.0)
         # the slope about the window's weighted centre (its Schur complement), with a ridge

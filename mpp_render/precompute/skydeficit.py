@@ -43,9 +43,9 @@ import numpy as np
 
 from .. import kernels
 from ..media import PreparedMedium, density_from
-from ..scene import Light, Tuning
+from ..scene import Tuning
 from .emissionlight import scattered_glow
-from .lightdepth import light_optical_depth
+from .lightdepth import eye_depth
 from .lightpaths import cell_volume
 from .worldlight import on_lattice, sky_share, world_lattice
 
@@ -185,10 +185,8 @@ def camera_odds(pm: PreparedMedium, flat: np.ndarray, e: np.ndarray, camera, res
     if not (mix < 1.0) or not np.isfinite(reach):
         return None
     lattice = world_lattice(pm, resolution)
-    eye = Light("POINT", "camera", np.ones(3),
-                position=np.asarray(camera.cam_to_world, np.float64)[:3, 3])
-    tau = light_optical_depth([pm], eye, lattice[3], 0.5 * float(pm.voxel_size),
-                              threads=threads, should_cancel=should_cancel).max(axis=1)
+    tau = eye_depth(pm, np.asarray(camera.cam_to_world, np.float64)[:3, 3], lattice[3],
+                    threads=threads, should_cancel=should_cancel)
     v = at_voxels(pm, flat, lattice, np.exp(-np.maximum(tau - reach, 0.0)))
     power = np.asarray(e, np.float64).sum(axis=1)
     mean = float((v * power).sum() / max(float(power.sum()), 1e-300))
