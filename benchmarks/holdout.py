@@ -78,6 +78,30 @@ VARIANTS = {
                           [("volume", dict(density=5.0, anisotropy=0.0))]),
     "v_cloud_lowalb": ("cloud_vdb", "albedo 0.85, g 0.3",
                        [("volume", dict(color=0.85, anisotropy=0.3))]),
+    # the third set (2026-12-06): lamps of other kinds and places, and media the first two
+    # left out (a back-scattering cloud, a forward and absorbing sphere)
+    "v_cloud_lamp": ("cloud_vdb", "a point light (300 W, radius 0.2 m) inside the cloud at 40 % "
+                     "of its height, beside the sun",
+                     [("add_light", dict(kind="POINT", energy=300.0, radius=0.2, height=0.4))]),
+    "v_plume_spot": ("p_point_in_plume", "its point light replaced by a spot (150 W, radius 0.1 m, "
+                     "60 deg, blend 0.2) at the same place, pointing up",
+                     [("hide_lights", dict(kind="POINT")),
+                      ("add_light", dict(kind="SPOT", energy=150.0, radius=0.1,
+                                         location=(0.0, 0.0, -0.6), rotation=(math.pi, 0.0, 0.0),
+                                         spot_size=math.radians(60), spot_blend=0.2))]),
+    "v_dragon_area": ("p_dragon", "a 1 m square area light (300 W) 1.5 m above the grid's top, "
+                      "facing down, beside the sun",
+                      [("add_light", dict(kind="AREA", energy=300.0, size=1.0, height=1.0,
+                                          above=1.5))]),
+    "v_cloud_gneg": ("cloud_vdb", "g -0.3, albedo 0.95",
+                     [("volume", dict(color=0.95, anisotropy=-0.3))]),
+    "v_sphere_g95_lowalb": ("p_sphere_g95", "albedo 0.6",
+                            [("volume", dict(color=0.6))]),
+    "v_slab_lamp_behind": ("p_backlit_slab", "its sun replaced by a point light (400 W, radius "
+                           "0.2 m) 1.5 m behind the slab",
+                           [("hide_lights", dict(kind="SUN")),
+                            ("add_light", dict(kind="POINT", energy=400.0, radius=0.2,
+                                               location=(0.0, 1.5, 0.3)))]),
 }
 
 
@@ -101,6 +125,15 @@ def _volume_objects(sc):
              any(n.bl_idname == "ShaderNodeVolumePrincipled" for n in o.active_material.node_tree.nodes))]
 
 
+def _volume_box(sc):
+    """(lo, hi): the world box of the scene's first Volume object, or else of its first
+    volume mesh (its bound box's corners, transformed)."""
+    import mathutils
+    vol = next((o for o in sc.objects if o.type == "VOLUME"), None) or _volume_objects(sc)[0]
+    cs = [vol.matrix_world @ mathutils.Vector(c) for c in vol.bound_box]
+    return ([min(c[i] for c in cs) for i in range(3)], [max(c[i] for c in cs) for i in range(3)])
+
+
 def apply(sc, step: str, kw: dict) -> None:
     """One recipe step on the open scene ``sc``."""
     import bpy
@@ -119,15 +152,33 @@ def apply(sc, step: str, kw: dict) -> None:
         if "location" in kw:
             ob.location = kw["location"]
     elif step == "lamp_in_volume":
-        import mathutils
-        vol = next(o for o in sc.objects if o.type == "VOLUME")
-        cs = [vol.matrix_world @ mathutils.Vector(c) for c in vol.bound_box]
-        lo = [min(c[i] for c in cs) for i in range(3)]
-        hi = [max(c[i] for c in cs) for i in range(3)]
+        lo, hi = _volume_box(sc)
         ob = next(o for o in sc.objects if o.type == "LIGHT" and o.data.type == "POINT")
         ob.data.energy, ob.data.shadow_soft_size = kw["energy"], kw["radius"]
         ob.location = (0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]),
                        lo[2] + kw["height"] * (hi[2] - lo[2]))
+    elif step == "hide_lights":   # every light of a kind
+        for o in sc.objects:
+            if o.type == "LIGHT" and o.data.type == kw["kind"]:
+                o.hide_render = True
+    elif step == "add_light":
+        data = bpy.data.lights.new("added_" + kw["kind"].lower(), kw["kind"])
+        data.energy = kw["energy"]
+        if kw["kind"] == "AREA":
+            data.size = kw["size"]
+        else:
+            data.shadow_soft_size = kw["radius"]
+        if kw["kind"] == "SPOT":
+            data.spot_size, data.spot_blend = kw["spot_size"], kw["spot_blend"]
+        ob = bpy.data.objects.new(data.name, data)
+        sc.collection.objects.link(ob)
+        if "location" in kw:
+            ob.location = kw["location"]
+        else:   # over the first volume's box: its middle, at `height` of it, `above` higher
+            lo, hi = _volume_box(sc)
+            ob.location = (0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]),
+                           lo[2] + kw["height"] * (hi[2] - lo[2]) + kw.get("above", 0.0))
+        ob.rotation_euler = kw.get("rotation", (0.0, 0.0, 0.0))
     elif step == "lift":
         for o in _volume_objects(sc):
             o.location.z += kw["dz"]
