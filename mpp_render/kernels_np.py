@@ -880,6 +880,8 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
                                 tables[mi][0, 0, :3] * hg(np.zeros(1), 0.0)[0])
                         if amb_ms >= 0:
                             ms_inc += v[live, amb_ms:amb_ms + 3]
+                        # never below 0 (march.c: the sky's less its absorption's noise)
+                        ms_inc = np.where(ms_inc > 0.0, ms_inc, 0.0)
                         src_ms[live] += ss[live] * ms_inc
             x_t = sig_t * hl[:, None]
             frac = np.where(x_t > 1e-7, -np.expm1(-x_t) / np.maximum(x_t, 1e-300), 1.0 - 0.5 * x_t)

@@ -174,6 +174,37 @@ def test_march_twins_agree_on_random_rays(lights, density):
         assert np.array_equal(x, y)
 
 
+@needs_c
+def test_the_multiply_scattered_light_a_sample_reads_is_never_below_zero():
+    """The sky's multiply scattered light is its collided model less its absorption's traced
+    estimate (skydeficit.py), whose noise can take a lattice point below 0 (a forward and
+    absorbing sphere, g 0.95, albedo 0.6: pixels of -0.05 in a Volume Multiple of mean
+    0.002).  Each sample reads the sum of the lights' and the sky's multiply scattered light
+    at least 0: with the world channel below 0 everywhere, how far below changes nothing (the
+    samples read none of it; the forward peak's light is added apart); with it below 0 in half
+    the grid, the twins give at least 0 and less than with the channel as it was."""
+    media, pre, inputs = random_march(np.random.default_rng(7), unjittered_lights(), 2.0, 400)
+    am = pre.layout.ambient_multiple_channel
+    base = kernels.march(inputs, backend="c").multiple
+    assert base.max() > 0.01
+
+    def lowered(depth, half=False):
+        fields = [f.copy() for f in inputs.fields]
+        for f in fields:
+            f[:f.shape[0] // 2 if half else f.shape[0], ..., am:am + 3] += np.float32(depth)
+        low = inputs.replace(fields=fields)
+        a, b = kernels.march(low, backend="numpy"), kernels.march(low, backend="c")
+        assert np.all(np.abs(a.multiple - b.multiple) <= 1e-4 * np.maximum(np.abs(a.multiple), 1e-6))
+        assert np.all(b.multiple >= 0.0) and np.all(a.multiple >= 0.0)
+        return b.multiple
+
+    deep = lowered(-1e3)
+    np.testing.assert_array_equal(deep, lowered(-1e6))
+    assert deep.sum() < 0.5 * base.sum()
+    half = lowered(-0.2, half=True)
+    assert deep.sum() < half.sum() < base.sum()
+
+
 @pytest.mark.parametrize("backend", ["c", "numpy"])
 def test_a_thin_mesh_volume_takes_longer_steps_inside_and_short_ones_at_its_surface(backend):
     """adapt_tau inside a mesh volume: a super-step wholly inside (the bricks' least bound 1)

@@ -1036,6 +1036,9 @@ static void medium_sources(const March *c, int m, const double x[3], const doubl
         }
         if (c->ms.amb >= 0)
             for (int a = 0; a < 3; a++) msi[a] += v[c->ms.amb + a];
+        /* light is never below 0: where the sky's, less its absorption's traced estimate
+         * (skydeficit.py), has more noise than light, none (NaN too) */
+        for (int a = 0; a < 3; a++) msi[a] = msi[a] > 0.0 ? msi[a] : 0.0;
         for (int a = 0; a < 3; a++) s->src_ms[a] += ss[a] * (msi[a] + beam_inc[a]);
     }
 }

@@ -43,7 +43,8 @@ from .. import kernels
 from ..media import PreparedMedium
 from ..scene import Tuning
 from .fogglow import fog_glow
-from .lightpaths import PathLattice, _trace_all, cell_volume, path_budget
+from .lightpaths import (LOBE_MOMENTS, PathLattice, _trace_all, cell_volume, fits_lobe,
+                         lobe_light, path_budget)
 from .pathstarts import Surroundings
 
 CHUNK = 1 << 20  # voxels interpolated at once when the lattice is added to the field
@@ -55,7 +56,8 @@ EMISSION_PATHS = 250_000
 def emission_light(pm: PreparedMedium, camera, n_paths: int, resolution: int,
                    multiple: bool, seed: int = 0, threads: int = 0, should_cancel=None,
                    around: Optional[Surroundings] = None, partners=(),
-                   deposits: float = Tuning.path_deposits, nodal: bool = Tuning.path_nodal):
+                   deposits: float = Tuning.path_deposits, nodal: bool = Tuning.path_nodal,
+                   lobe_window: int = Tuning.lobe_window):
     """(stride, E1, Em, cross) on the light pyramid's lattice of ``pm`` (module docstring),
     float32 (LX,LY,LZ,3) W/(m^2 sr); Em None without ``multiple``.  ``n_paths`` paths (at
     most lightpaths.PATHS_PER_POINT per lattice point the medium fills, more with more Paths:
@@ -63,7 +65,7 @@ def emission_light(pm: PreparedMedium, camera, n_paths: int, resolution: int,
     (PreparedMedium, PathLattice) the overlapping media they fly through too (lightpaths.traced_multiple), ``cross`` per partner its
     (E1, Em) on its lattice.  None where nothing is emitted or the medium is too dense for
     paths.  ``deposits``, ``nodal``: Tuning.path_deposits, Tuning.path_nodal
-    (lightpaths.PathLattice.of)."""
+    (lightpaths.PathLattice.of); ``lobe_window``: Tuning.lobe_window (``scattered_glow``)."""
     if pm.endless:   # the world fog glows everywhere: its own estimate (fogglow.py)
         return fog_glow(pm, camera, n_paths, resolution, multiple, seed=seed, threads=threads,
                         should_cancel=should_cancel, around=around, deposits=deposits,
@@ -72,7 +74,7 @@ def emission_light(pm: PreparedMedium, camera, n_paths: int, resolution: int,
     return scattered_glow(pm, None if e is None else emitting_voxels(e), camera, n_paths,
                           resolution, multiple, seed=seed, threads=threads,
                           should_cancel=should_cancel, around=around, partners=partners,
-                          deposits=deposits, nodal=nodal)
+                          deposits=deposits, nodal=nodal, lobe_window=lobe_window)
 
 
 def scattered_glow(pm: PreparedMedium, emitting, camera, n_paths: int,
@@ -80,7 +82,8 @@ def scattered_glow(pm: PreparedMedium, emitting, camera, n_paths: int,
                    should_cancel=None, around: Optional[Surroundings] = None, partners=(),
                    deposits: float = Tuning.path_deposits, nodal: bool = Tuning.path_nodal,
                    setting: Optional[int] = None, signed: bool = False,
-                   first_order: bool = True, odds: Optional[np.ndarray] = None):
+                   first_order: bool = True, odds: Optional[np.ndarray] = None,
+                   lobe_window: int = Tuning.lobe_window):
     """``emission_light``'s (stride, E1, Em, cross) for the emission ``emitting`` = (flat, e):
     the C-order indices (N,) of the emitting voxels of ``pm``'s padded grid and their
     emission (N,3) W/(m^3 sr) (``emitting_voxels``), or None (nothing emitted, no camera,
@@ -89,7 +92,9 @@ def scattered_glow(pm: PreparedMedium, emitting, camera, n_paths: int,
     are not stopped at 0 where the nodal move takes them below (PathLattice.mean);
     ``first_order`` False: E1 is not made from the first flights (None in its place).
     ``odds``: None, or (N,) the relative odds of drawing a path from each emitting voxel
-    (paths.from_power's bias: the weights stay unbiased)."""
+    (paths.from_power's bias: the weights stay unbiased).  ``lobe_window``: the own
+    lattice's M towards the camera is the paths' lobe fitted to their deposits over windows of
+    this many lattice points (lightpaths.lobe_light, Tuning.lobe_window; 0: the deposits)."""
     if emitting is None or not len(emitting[0]) or camera is None:
         return None
     if not pm.scatters and not partners:
@@ -106,15 +111,26 @@ def scattered_glow(pm: PreparedMedium, emitting, camera, n_paths: int,
     lats = [lat] + [plat for _, plat in partners]
     # at most PATHS_PER_POINT per lattice point of every medium the light scatters in
     n = max(1, path_budget(n_paths, sum(la.cells for la in lats), setting))
+    # the own lattice's M towards the camera fitted to the paths' lobe, as the lights'
+    # (lightpaths.lobe_light); the other media's lattices keep their deposits
+    fit = fits_lobe(pm, camera, lobe_window)
+
+    def traced(**kw):
+        accs = _trace_all(sets, n, seed, threads, should_cancel, pm, lat, around,
+                          partners=partners, moments=fit, halves=fit,
+                          moment_share=LOBE_MOMENTS, **kw)
+        if not fit:
+            return [la.mean(a, signed) for la, a in zip(lats, accs)]
+        accs, split = accs
+        own = lobe_light(pm, lat, camera, lat.mean(accs[0], signed), split, lobe_window,
+                         threads, should_cancel, signed)
+        return [own] + [la.mean(a[..., :3], signed) for la, a in zip(lats[1:], accs[1:])]
+
     once, later = [None] * len(lats), [None] * len(lats)
     if first_order:
-        first = _trace_all(sets, n, seed, threads, should_cancel, pm, lat, around,
-                           max_collisions=1, partners=partners)
-        once = [la.mean(f, signed) for la, f in zip(lats, first)]
+        once = traced(max_collisions=1)
     if multiple:   # the same paths (the same seed), their deposits after a first collision
-        after = _trace_all(sets, n, seed, threads, should_cancel, pm, lat, around,
-                           partners=partners, min_collisions=1)
-        later = [la.mean(a, signed) for la, a in zip(lats, after)]
+        later = traced(min_collisions=1)
     return lat.stride, once[0], later[0], list(zip(once[1:], later[1:]))
 
 

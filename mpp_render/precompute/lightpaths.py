@@ -104,21 +104,15 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     started = (sum(float(np.asarray(item[1]).sum()) for item in sets), int(n_paths))
     gathered = moments and around is not None and around.surfaces is not None
     rec = start_light(light)
-    # the camera's M fitted to the paths' lobe (lobefit.py), where the phase function is not
-    # flat: an isotropic medium's deposits weigh every direction alike
-    fit = lobe_window > 0 and camera is not None and float(pm.g) != 0.0
+    fit = fits_lobe(pm, camera, lobe_window)
     accs = _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
                       moments=gathered or fit, partners=partners, light=rec, halves=fit,
                       moment_share=1.0 if gathered else LOBE_MOMENTS)
     if fit:
-        accs, (first, second) = accs
+        accs, split = accs
     m = lat.mean(accs[0])
     if fit:
-        u = camera_weight(lat.tent_mass, _camera_depth(pm, lat, camera, threads, should_cancel))
-        # the nodal move is linear where not stopped at 0: one for the halves' difference
-        light3 = fitted(m[..., :3], m[..., 3:], lat.towards, u,
-                        np.asarray(lat.mean(first - second, signed=True), np.float64),
-                        lobe_window)
+        light3 = lobe_light(pm, lat, camera, m, split, lobe_window, threads, should_cancel)
         m = np.concatenate([light3, m[..., 3:]], axis=-1) if gathered else light3
     cross = [plat.mean(a) for (_, plat), a in zip(partners, accs[1:])]
     far = None
@@ -476,6 +470,29 @@ def _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
             split = pair if split is None else (split[0] + pair[0], split[1] + pair[1])
         acc = got if acc is None else [a + b for a, b in zip(acc, got)]
     return (acc, split) if halves else acc
+
+
+def fits_lobe(pm, camera, lobe_window: int) -> bool:
+    """Whether the camera's M of paths in ``pm`` is fitted to their lobe (lobefit.py,
+    ``lobe_light``): with a ``camera``, a ``lobe_window`` > 0 and a phase function that is not
+    flat (an isotropic medium's deposits weigh every direction alike)."""
+    return lobe_window > 0 and camera is not None and float(pm.g) != 0.0
+
+
+def lobe_light(pm, lat, camera, m: np.ndarray, split, lobe_window: int, threads: int = 0,
+               should_cancel=None, signed: bool = False) -> np.ndarray:
+    """float32 (LX,LY,LZ,3) W/(m^2 sr): the camera's M on the PathLattice ``lat`` of ``pm``,
+    the paths' lobe fitted to their deposits (lobefit.fitted) from ``m`` (``lat.mean`` of the
+    deposits with their moments, (LX,LY,LZ,15)) and ``split`` (first, second: the light
+    deposits of the paths' two halves, _trace_all's ``halves``), over windows of
+    ``lobe_window`` lattice points.  At least 0 unless ``signed`` (an estimate taken off
+    another, skydeficit.py: its noise is not to be stopped at 0 on its own)."""
+    u = camera_weight(lat.tent_mass, _camera_depth(pm, lat, camera, threads, should_cancel))
+    first, second = split
+    # the nodal move is linear where not stopped at 0: one for the halves' difference
+    light3 = fitted(m[..., :3], m[..., 3:], lat.towards, u,
+                    np.asarray(lat.mean(first - second, signed=True), np.float64), lobe_window)
+    return light3 if signed else np.maximum(light3, np.float32(0.0))
 
 
 def _camera_depth(pm, lat, camera, threads, should_cancel) -> Optional[np.ndarray]:

@@ -195,7 +195,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                  should_cancel=should_cancel, around=around,
                                  partners=[(media[j], lat) for j, lat in near],
                                  deposits=tuning.path_deposits,
-                                 nodal=tuning.path_nodal)
+                                 nodal=tuning.path_nodal, lobe_window=tuning.lobe_window)
             if got is not None:
                 stride, once, more, cross = got
                 glowed += [(j, lat.stride) + em for (j, lat), em in zip(near, cross)]

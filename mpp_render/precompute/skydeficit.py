@@ -97,7 +97,7 @@ def sky_deficit(pm: PreparedMedium, colour, camera, n_paths: int, resolution: in
                          threads=threads, should_cancel=should_cancel, around=around,
                          partners=partners, deposits=tuning.path_deposits,
                          nodal=tuning.path_nodal, setting=setting, signed=True,
-                         first_order=False, odds=odds)
+                         first_order=False, odds=odds, lobe_window=tuning.lobe_window)
     if got is None:
         return None
     stride, _, later, cross = got

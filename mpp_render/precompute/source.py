@@ -93,14 +93,31 @@ VOXEL_POINTS = 3   # per axis: a spot's irradiance is a voxel's mean over VOXEL_
 def voxel_irradiance(light: Light, pts, i2w, n: int = VOXEL_POINTS) -> np.ndarray:
     """The light's irradiance (W/m^2, (N,3)) at voxel centres ``pts`` (N,3, m): a spot's the
     mean over each voxel (``cell_mean_irradiance`` on the voxel's cell ``i2w``, ``n``^3
-    points), any other light's read at the centre.  A spot's cone a few voxels wide read at
-    the centres alone is over- or under-counted as the voxels fall (the single scattering
-    reads it exactly at every march sample, the paths' source did not): on fog_beam the
-    paths' second order went from 1.186 to 1.155 of Cycles' (split by volume_bounces), the
-    same at 6 points per axis as at 3."""
-    if light.kind != "SPOT":
-        return irradiance(light, pts)
-    return cell_mean_irradiance(light, pts, np.asarray(i2w, np.float64), n)
+    points), a point light's read at the centre with its falloff at least the mean of a
+    voxel's ball round it (``near_falloff``), any other light's read at the centre.  A spot's
+    cone a few voxels wide read at the centres alone is over- or under-counted as the voxels
+    fall (the single scattering reads it exactly at every march sample, the paths' source did
+    not): on fog_beam the paths' second order went from 1.186 to 1.155 of Cycles' (split by
+    volume_bounces), the same at 6 points per axis as at 3."""
+    if light.kind == "SPOT":
+        return cell_mean_irradiance(light, pts, np.asarray(i2w, np.float64), n)
+    e = irradiance(light, pts)
+    if light.kind == "POINT":
+        e = e * near_falloff(light, pts, i2w)[:, None]
+    return e
+
+
+def near_falloff(light: Light, pts, i2w) -> np.ndarray:
+    """(N,) the factor that takes a point light's falloff (``point_falloff``) read at ``pts``
+    (N,3, m) to its read at max(r^2, R^2 / 3): for a light without radius the exact mean of
+    1 / r^2 over the ball of one voxel's volume (radius R; voxel edges the columns of ``i2w``)
+    centred on the light, where the centre's read grows without bound; 1 beyond R, and for a
+    lamp whose disc is wider than R."""
+    vol = abs(np.linalg.det(np.asarray(i2w, np.float64)[:3, :3]))
+    r_min2 = (3.0 * vol / (4.0 * np.pi)) ** (2.0 / 3.0) / 3.0
+    rel = np.asarray(pts, np.float64).reshape(-1, 3) - np.asarray(light.position, np.float64)
+    r2 = np.einsum("ij,ij->i", rel, rel)
+    return point_falloff(np.maximum(r2, r_min2), light.radius) / point_falloff(r2, light.radius)
 
 
 def peak_light(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int, beam: int,
@@ -206,7 +223,10 @@ def cell_mean_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel:
     point light the source varies too fast for one read at the lattice point: a light
     inside a medium then lost 25-55 % of its first-scattered power to the pyramid."""
     ci = np.stack(np.unravel_index(cells, shape), axis=1)
-    offs = np.stack(np.meshgrid(*[np.arange(stride) - stride // 2] * 3, indexing="ij"), -1).reshape(-1, 3)
+    t = np.arange(-(stride - 1), stride)
+    offs = np.stack(np.meshgrid(t, t, t, indexing="ij"), -1).reshape(-1, 3)
+    # the tent's weights, as restricted_source shares every other voxel's power (1 in all)
+    weight = np.prod((stride - np.abs(offs)) / float(stride * stride), axis=1)
     ijk = (ci[:, None, :] * stride + offs[None]).reshape(-1, 3)
     ok = np.all((ijk >= 0) & (ijk < np.array(pm.grid.shape)), axis=1)
     flat = np.ravel_multi_index(tuple(np.where(ok[:, None], ijk, 0).T), pm.grid.shape)
@@ -214,15 +234,11 @@ def cell_mean_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel:
     v = fld.reshape(-1, fld.shape[-1])[flat]
     rho = np.where(ok, density_from(v[:, 0], pm.threshold), 0.0)
     _, e = incident(light, pts)
-    vol = abs(np.linalg.det(pm.i2w[:3, :3]))
-    r_min2 = (3.0 * vol / (4.0 * np.pi)) ** (2.0 / 3.0) / 3.0
-    r2 = np.einsum("ij,ij->i", pts - light.position, pts - light.position)
-    e = e * (point_falloff(np.maximum(r2, r_min2), light.radius)
-             / point_falloff(r2, light.radius))[:, None]
+    e = e * near_falloff(light, pts, pm.i2w[:3, :3])[:, None]
     tau = v[:, channel:channel + 3]
     q = first_scattering(pm, rho, e, tau, None if beam is None else v[:, beam:beam + 3],
                          _disc(disc, light, pts, tau, pm), pm.scatter_at(flat=flat))
-    return q.reshape(len(cells), len(offs), 3).mean(axis=1)
+    return np.einsum("nkc,k->nc", q.reshape(len(cells), len(offs), 3), weight)
 
 
 # A mesh volume whose optical depth across one voxel exceeds SURFACE_TAU: the voxels by its
