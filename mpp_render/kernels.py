@@ -173,6 +173,18 @@ def upsample_into(field, channel, lattice, stride, flat, *, backend=None):
                      None if flat is None else np.ascontiguousarray(flat, np.int64).reshape(-1))
 
 
+def nodal_fit(mean, offsets, mass, signed: int, ridge: float, *, backend=None):
+    """The tent means moved to the lattice points (kernels_np.nodal_fit): (X,Y,Z,C) float32."""
+    if not _on_c(backend):
+        return kernels_np.nodal_fit(mean, offsets, mass, signed, ridge)
+    m = _f32(mean)
+    if m.ndim != 4 or m.shape[-1] > 64:
+        return kernels_np.nodal_fit(mean, offsets, mass, signed, ridge)
+    buf = _c.nodal_fit(m, _f64(offsets).reshape(m.shape[:3] + (3,)),
+                       _f64(mass).reshape(m.shape[:3]), int(signed), float(ridge))
+    return np.frombuffer(buf, np.float32).reshape(m.shape)
+
+
 def trilinear(grid, idx, *, backend=None):
     """media.trilinear: (N,C) for a 4-D grid, (N,) for a 3-D one.  A grid that is not float32
     is read by the numpy twin (the kernel would round it to float32)."""

@@ -971,3 +971,55 @@ def intersect_triangles(o, d, tmax, triangles):
                 t_best[rays[better]] = tj[better]
                 out[rays[better]] = t0 + j[better]
     return t_best, out
+
+
+NODAL_CHUNK = 32768   # nodal_fit's lattice points fitted at a time (about 1 kB a point with moments)
+
+
+def nodal_fit(mean, offsets, mass, signed, ridge):
+    """(X,Y,Z,C) float32: the tent means ``mean`` (X,Y,Z,C) moved from their centroids to the
+    lattice points (precompute/nodal.py): at each point with ``mass`` (X,Y,Z) > 0 and an
+    offset (``offsets`` (X,Y,Z,3), centroid less point, lattice steps) the mean less the
+    offset times the gradient fitted by least squares to the differences to its 26 neighbours
+    that hold mass, each weighing m_z / (m_z + m_y), against their centroids' offsets from its
+    own, ``ridge`` (lattice steps^2) added to the normal matrix; the first C - ``signed``
+    channels stopped at 0.  The rest as they came."""
+    mean = np.asarray(mean, np.float32)
+    shape = mean.shape[:3]
+    d = np.asarray(offsets, np.float64)
+    sel = np.flatnonzero((np.abs(d).max(axis=-1) > 1e-6) & (np.asarray(mass) > 0.0))
+    out = np.array(mean, np.float32, order="C")
+    if not len(sel):
+        return out
+    C = mean.shape[-1]
+    # padded by one point on every side (no mass there), read at the selected points'
+    # neighbours by flat index; float32 as the means come
+    pm = np.pad(mean, ((1, 1),) * 3 + ((0, 0),)).reshape(-1, C)
+    pd = np.pad(d, ((1, 1),) * 3 + ((0, 0),)).reshape(-1, 3)
+    pw = np.pad(np.asarray(mass, np.float64), 1).reshape(-1)
+    ps = tuple(n + 2 for n in shape)
+    centre = int(np.ravel_multi_index((1, 1, 1), ps))
+    steps = [(st, int(np.ravel_multi_index(st + 1, ps)) - centre)
+             for st in np.argwhere(np.ones((3, 3, 3), bool)) - 1 if st.any()]
+    flat = out.reshape(-1, C)
+    for a in range(0, len(sel), NODAL_CHUNK):   # the fit's arrays a chunk of points at a time
+        part = sel[a:a + NODAL_CHUNK]
+        here = np.ravel_multi_index((np.stack(np.unravel_index(part, shape), axis=1) + 1).T, ps)
+        m0, d0, w0 = pm[here].astype(np.float64), pd[here], pw[here]
+        A = np.zeros((len(part), 3, 3))
+        b = np.zeros((len(part), 3, C))
+        for step, off in steps:
+            there = here + off
+            wz = pw[there]
+            wt = np.divide(wz, wz + w0, out=np.zeros_like(wz), where=wz > 0.0)
+            dc = step + pd[there] - d0
+            wdc = wt[:, None] * dc
+            A += wdc[:, :, None] * dc[:, None, :]
+            b += wdc[:, :, None] * (pm[there] - m0)[:, None, :]
+        A += ridge * np.eye(3)
+        grad = np.linalg.solve(A, b)                       # (n,3,C)
+        fixed = m0 - np.einsum("na,nac->nc", d0, grad)
+        if signed < C:
+            fixed[:, :C - signed] = np.maximum(fixed[:, :C - signed], 0.0)
+        flat[part] = fixed
+    return out

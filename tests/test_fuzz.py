@@ -175,6 +175,37 @@ def test_fuzz_walk_depth():
     assert ran > ROUNDS // 3
 
 
+def test_fuzz_nodal_fit():
+    """The compiled nodal fit (kernels.nodal_fit): random lattices down to one point an axis,
+    1-16 channels, spoiled means, offsets and masses (NaN, inf, huge), any signed count and
+    ridge: it reads only inside the lattice (ASan checks this in test_sanitizers.py) and
+    returns the lattice's shape, or raises ValueError; finite inputs give finite values."""
+    rng = np.random.default_rng(777)
+    ran = 0
+    for _ in range(ROUNDS):
+        shape = tuple(int(x) for x in rng.integers(1, 7, 3))
+        nc = int(rng.integers(1, 17))
+        mean = (rng.normal(size=shape + (nc,)) * 3).astype(np.float32)
+        d = rng.uniform(-0.6, 0.6, shape + (3,))
+        mass = rng.random(shape) * (rng.random(shape) > 0.3)
+        clean = rng.random() < 0.4
+        if not clean:
+            mean = spoil(mean, rng, 0.03).astype(np.float32)
+            d, mass = spoil(d, rng, 0.03), spoil(mass, rng, 0.03)
+        signed = int(rng.integers(-1, nc + 2))
+        ridge = float(rng.choice([0.01, 1e-12, 0.0, -1.0, 1e300]))
+        try:
+            out = np.frombuffer(kernels._c.nodal_fit(mean, d, mass, signed, ridge), np.float32)
+        except ValueError:
+            assert signed < 0 or signed > nc or not ridge > 0.0
+            continue
+        assert out.size == mean.size
+        if clean and ridge >= 0.01:
+            assert np.all(np.isfinite(out))
+        ran += 1
+    assert ran > ROUNDS // 3
+
+
 def test_wrong_types_and_shapes_raise():
     c = kernels._c
     with pytest.raises(ValueError):

@@ -169,16 +169,50 @@ def test_the_path_lattice_moves_its_means_only_when_asked():
 
 
 def test_the_fit_a_chunk_of_points_at_a_time_is_the_fit_of_all(monkeypatch):
-    """nodal_values fits NODAL_CHUNK points at a time (memory): 7 at a time gives what all
-    at once do, to float32's rounding."""
-    import mpp_render.precompute.nodal as nodal
+    """The numpy twin (kernels_np.nodal_fit) fits NODAL_CHUNK points at a time (memory): 7 at
+    a time gives what all at once do, to float32's rounding."""
+    from mpp_render import kernels_np
     stride, n = 2, 24
     shape = tuple((n - 1 + stride - 1) // stride + 1 for _ in range(3))
     rho = half_space(n)
     mass, d, mean, _ = exact_means(rho, stride, shape, 10.0, np.array([0.8, 0.3, -0.2]))
     rng = np.random.default_rng(5)
     noisy = mean[..., None] * rng.uniform(0.9, 1.1, mean.shape + (15,))
-    whole = nodal.nodal_values(noisy, d, mass, signed=9)
-    monkeypatch.setattr(nodal, "NODAL_CHUNK", 7)
-    np.testing.assert_allclose(nodal.nodal_values(noisy, d, mass, signed=9), whole,
+    whole = kernels_np.nodal_fit(noisy, d, mass, 9, 0.01)
+    monkeypatch.setattr(kernels_np, "NODAL_CHUNK", 7)
+    np.testing.assert_allclose(kernels_np.nodal_fit(noisy, d, mass, 9, 0.01), whole,
                                rtol=1e-6, atol=1e-6)
+
+
+@pytest.mark.skipif(not __import__("mpp_render.kernels", fromlist=["_c"])._c,
+                    reason="the compiled kernels are not built")
+def test_the_compiled_fit_is_its_numpy_twins():
+    """kernels.nodal_fit compiled and in numpy: the same values to float32's rounding on a
+    half-space's tents with noisy light and signed channels (some below 0), the light stopped
+    at 0, points without mass or offset as they came; bad shapes are refused."""
+    from mpp_render import kernels
+    stride, n = 2, 24
+    shape = tuple((n - 1 + stride - 1) // stride + 1 for _ in range(3))
+    mass, d, mean, _ = exact_means(half_space(n), stride, shape, 10.0, np.array([0.8, 0.3, -0.2]))
+    rng = np.random.default_rng(9)
+    noisy = (mean[..., None] * rng.uniform(0.5, 1.5, mean.shape + (15,))).astype(np.float32)
+    noisy[..., 6:] -= 4.0                                 # the signed channels reach below 0
+    for signed in (0, 9, 15):
+        a = kernels.nodal_fit(noisy, d, mass, signed, 0.01, backend="numpy")
+        b = kernels.nodal_fit(noisy, d, mass, signed, 0.01, backend="c")
+        assert b.dtype == np.float32 and b.shape == noisy.shape
+        np.testing.assert_allclose(b, a, rtol=2e-6, atol=2e-6 * float(np.abs(a).max()))
+        assert np.all(b[..., :15 - signed] >= 0.0)
+        if signed:
+            assert b[..., 15 - signed:].min() < 0.0
+    moved = (np.abs(d).max(axis=-1) > 1e-6) & (mass > 0.0)
+    assert moved.any() and not moved.all()
+    b = kernels.nodal_fit(noisy, d, mass, 9, 0.01, backend="c")
+    np.testing.assert_array_equal(b[~moved], noisy[~moved])
+    assert np.abs(b[moved] - noisy[moved]).max() > 1e-3
+    with pytest.raises(ValueError):
+        kernels.nodal_fit(noisy, d[:-1], mass, 0, 0.01, backend="c")
+    with pytest.raises(ValueError):
+        kernels.nodal_fit(noisy, d, mass, 16, 0.01, backend="c")
+    with pytest.raises(ValueError):
+        kernels.nodal_fit(noisy, d, mass, 0, 0.0, backend="c")

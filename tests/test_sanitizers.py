@@ -27,8 +27,9 @@ def test_kernels_under_asan_and_ubsan(tmp_path):
     (work / "tests").mkdir()
     for name in ("test_fuzz.py", "test_kernels.py", "test_sweep.py", "test_skip.py", "test_pyramid.py",
                  "test_paths.py", "test_paths_world.py", "test_paths_media.py",
-                 "test_sharp_surface.py", "test_moments.py",
-                 "rays.py"):  # the tests' ray helper (test_kernels imports it)
+                 "test_sharp_surface.py", "test_moments.py", "test_nodal.py",
+                 "rays.py",          # the tests' ray helper (test_kernels imports it)
+                 "test_enclosed.py"):  # its scenes (test_nodal imports them)
         shutil.copy(REPO / "tests" / name, work / "tests" / name)
     shutil.copy(REPO / "setup.py", work / "setup.py")
     env = dict(os.environ, MPP_SANITIZE="1")
@@ -47,7 +48,7 @@ def test_kernels_under_asan_and_ubsan(tmp_path):
                           "tests/test_skip.py", "tests/test_pyramid.py", "tests/test_paths.py",
                           "tests/test_paths_world.py", "tests/test_paths_media.py",
                           "tests/test_sharp_surface.py",
-                          "tests/test_moments.py",
+                          "tests/test_moments.py", "tests/test_nodal.py",
                           # the slowest case runs the numpy twins alone: no C to check
                           "--deselect", "tests/test_kernels.py::"
                           "test_an_indirect_lights_single_scattering_is_multiple[numpy]"],

@@ -28,12 +28,12 @@ from functools import lru_cache
 
 import numpy as np
 
+from .. import kernels
 from .source import tent_restrict
 
 # ridge (lattice steps^2) added to the least-squares normal matrix: an axis along which no
 # neighbour holds medium gets no gradient, not an ill-conditioned one
 RIDGE = 0.01
-NODAL_CHUNK = 32768   # lattice points fitted at a time (memory: about 1 kB a point with moments)
 
 
 @lru_cache(maxsize=16)
@@ -94,44 +94,5 @@ def nodal_values(mean: np.ndarray, offsets: np.ndarray, mass: np.ndarray,
     neighbour holding a sliver of the medium (and few deposits) counts little; ridge
     ``RIDGE``.  Points without mass keep their mean; the first C - ``signed`` channels
     (light, which is never negative) stop at 0, the last ``signed`` (the moments' first
-    order, paths.py) do not.  Float32 out."""
-    mean = np.asarray(mean, np.float32)
-    shape = mean.shape[:3]
-    d = np.asarray(offsets, np.float64)
-    sel = np.flatnonzero((np.abs(d).max(axis=-1) > 1e-6) & (mass > 0.0))
-    out = np.array(mean, np.float32, order="C")
-    if not len(sel):
-        return out
-    C = mean.shape[-1]
-    # padded by one point on every side (no mass there), read at the selected points'
-    # neighbours by flat index; float32 as the means come (a Reference lattice of 130^3
-    # points with the moments' 15 channels is 130 MB so)
-    pm = np.pad(mean, ((1, 1),) * 3 + ((0, 0),)).reshape(-1, C)
-    pd = np.pad(d, ((1, 1),) * 3 + ((0, 0),)).reshape(-1, 3)
-    pw = np.pad(np.asarray(mass, np.float64), 1).reshape(-1)
-    ps = tuple(n + 2 for n in shape)
-    centre = int(np.ravel_multi_index((1, 1, 1), ps))
-    steps = [(st, int(np.ravel_multi_index(st + 1, ps)) - centre)
-             for st in np.argwhere(np.ones((3, 3, 3), bool)) - 1 if st.any()]
-    flat = out.reshape(-1, C)
-    for a in range(0, len(sel), NODAL_CHUNK):   # the fit's arrays a chunk of points at a time
-        part = sel[a:a + NODAL_CHUNK]
-        here = np.ravel_multi_index((np.stack(np.unravel_index(part, shape), axis=1) + 1).T, ps)
-        m0, d0, w0 = pm[here].astype(np.float64), pd[here], pw[here]
-        A = np.zeros((len(part), 3, 3))
-        b = np.zeros((len(part), 3, C))
-        for step, off in steps:
-            there = here + off
-            wz = pw[there]
-            wt = np.divide(wz, wz + w0, out=np.zeros_like(wz), where=wz > 0.0)
-            dc = step + pd[there] - d0
-            wdc = wt[:, None] * dc
-            A += wdc[:, :, None] * dc[:, None, :]
-            b += wdc[:, :, None] * (pm[there] - m0)[:, None, :]
-        A += RIDGE * np.eye(3)
-        grad = np.linalg.solve(A, b)                       # (n,3,C)
-        fixed = m0 - np.einsum("na,nac->nc", d0, grad)
-        if signed < C:
-            fixed[:, :C - signed] = np.maximum(fixed[:, :C - signed], 0.0)
-        flat[part] = fixed
-    return out
+    order, paths.py) do not.  Float32 out (kernels.nodal_fit)."""
+    return kernels.nodal_fit(mean, offsets, mass, int(signed), RIDGE)
