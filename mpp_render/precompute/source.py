@@ -223,10 +223,11 @@ def cell_mean_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel:
     point light the source varies too fast for one read at the lattice point: a light
     inside a medium then lost 25-55 % of its first-scattered power to the pyramid."""
     ci = np.stack(np.unravel_index(cells, shape), axis=1)
-    t = np.arange(-(stride - 1), stride)
-    offs = np.stack(np.meshgrid(t, t, t, indexing="ij"), -1).reshape(-1, 3)
     # the tent's weights, as restricted_source shares every other voxel's power (1 in all)
-    weight = np.prod((stride - np.abs(offs)) / float(stride * stride), axis=1)
+    tw = tent_weights(stride)
+    t, w = np.array(list(tw)), np.array(list(tw.values()))
+    offs = np.stack(np.meshgrid(t, t, t, indexing="ij"), -1).reshape(-1, 3)
+    weight = np.einsum("i,j,k->ijk", w, w, w).reshape(-1)
     ijk = (ci[:, None, :] * stride + offs[None]).reshape(-1, 3)
     ok = np.all((ijk >= 0) & (ijk < np.array(pm.grid.shape)), axis=1)
     flat = np.ravel_multi_index(tuple(np.where(ok[:, None], ijk, 0).T), pm.grid.shape)
@@ -380,8 +381,7 @@ def tent_restrict(a: np.ndarray, axis: int, stride: int, n_out: int,
     t = -stride..stride), for a value that holds over the whole voxel (the paths' nearest-
     voxel density).  ``weights``: {t: w} given instead of either (nodal.py's moments)."""
     if weights is None:
-        weights = box_tent_weights(stride) if boxed else \
-            {t: (stride - abs(t)) / float(stride * stride) for t in range(-(stride - 1), stride)}
+        weights = box_tent_weights(stride) if boxed else tent_weights(stride)
     reach = max(weights)
     n = a.shape[axis]
     pad = [(0, 0)] * a.ndim
@@ -393,6 +393,13 @@ def tent_restrict(a: np.ndarray, axis: int, stride: int, n_out: int,
         sl[axis] = slice(t + reach, t + reach + stride * n_out, stride)
         out = out + w * p[tuple(sl)]
     return out
+
+
+def tent_weights(stride: int) -> dict:
+    """{t: (stride - |t|) / stride^2} for t = -(stride-1)..stride-1: the share of a voxel t
+    voxels from a lattice point that the point's tent takes (the shares of one voxel over
+    the points round it sum to 1/stride per axis, the weights of one point to 1)."""
+    return {t: (stride - abs(t)) / float(stride * stride) for t in range(-(stride - 1), stride)}
 
 
 def box_tent_weights(stride: int) -> dict:
