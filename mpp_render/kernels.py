@@ -173,12 +173,15 @@ def upsample_into(field, channel, lattice, stride, flat, *, backend=None):
                      None if flat is None else np.ascontiguousarray(flat, np.int64).reshape(-1))
 
 
+NODAL_CHANNELS = 64   # the most channels the compiled nodal fit takes (csrc/nodal.c)
+
+
 def nodal_fit(mean, offsets, mass, signed: int, ridge: float, *, backend=None):
     """The tent means moved to the lattice points (kernels_np.nodal_fit): (X,Y,Z,C) float32."""
     if not _on_c(backend):
         return kernels_np.nodal_fit(mean, offsets, mass, signed, ridge)
     m = _f32(mean)
-    if m.ndim != 4 or m.shape[-1] > 64:
+    if m.ndim != 4 or m.shape[-1] > NODAL_CHANNELS:
         return kernels_np.nodal_fit(mean, offsets, mass, signed, ridge)
     buf = _c.nodal_fit(m, _f64(offsets).reshape(m.shape[:3] + (3,)),
                        _f64(mass).reshape(m.shape[:3]), int(signed), float(ridge))
@@ -437,22 +440,10 @@ def trace_paths_media(inp, *, threads: int = 1, should_cancel=None, backend=None
     from .paths import ROULETTE, trace_paths_media_np
     n = int(inp.n_paths)
     if not _on_c(backend) or not hasattr(_c, "trace_paths"):
-        full = trace_paths_media_np(inp)
-        if inp.moments and n > 0 and len(inp.cdf):
-            cuts = np.linspace(0, n, min(PATH_BLOCKS, n) + 1).astype(np.int64)
-            ends = moment_ends(inp, cuts)
-            if not np.array_equal(ends, cuts[1:]):   # a share of each block's paths
-                parts = [trace_paths_media_np(inp, paths=(int(a), int(e)))
-                         for a, e in zip(cuts[:-1], ends)]
-                scale = n / float(np.sum(ends - cuts[:-1]))
-                full = [np.concatenate([f[..., :3], sum(p[g][..., 3:] for p in parts) * scale],
-                                       axis=-1) for g, f in enumerate(full)]
-        if not halves:
-            return full
-        k = n // 2
-        if k < 1 or len(inp.cdf) == 0:
-            return full, None
-        return full, (trace_paths_media_np(inp, paths=(0, k))[0][..., :3], k)
+        if n <= 0 or len(inp.cdf) == 0 or not (halves or inp.moments):
+            full = trace_paths_media_np(inp)
+            return (full, None) if halves else full
+        return _trace_blocks_np(inp, halves)
     grids = [inp] + list(inp.others)
     shapes = [tuple(m.towards.shape[:3]) for m in grids]
     if n <= 0 or len(inp.cdf) == 0:
@@ -565,6 +556,36 @@ def cell_classes(density, threshold: float) -> np.ndarray:
 
 PATH_BLOCKS = 4   # trace_paths' blocks of paths (its sums' order, whatever the threads)
 PATH_CHUNK = 16384   # paths per call of the compiled tracer, between checks for Esc
+
+
+def _trace_blocks_np(inp, halves: bool):
+    """trace_paths_media's numpy twin with the moments or the halves: the compiled tracer's
+    blocks of paths (``PATH_BLOCKS``), each path traced once, with its moments where it lies
+    before its block's ``moment_ends`` and without them after; the first half's light summed
+    on the way as the compiled one sums it."""
+    from .paths import trace_paths_media_np
+    n = int(inp.n_paths)
+    blocks = min(PATH_BLOCKS, n)
+    cuts = np.linspace(0, n, blocks + 1).astype(np.int64)
+    ends = moment_ends(inp, cuts) if inp.moments else cuts[1:]
+    plain = dataclasses.replace(inp, moments=False)
+    light, moms, first = None, None, None
+    for i in range(blocks):
+        if halves and i == blocks // 2 and i > 0:   # the first half's sum, on the way
+            first = (light[0].copy(), int(cuts[i]))
+        for lo, hi, what in ((cuts[i], ends[i], inp), (ends[i], cuts[i + 1], plain)):
+            if hi <= lo:
+                continue
+            got = trace_paths_media_np(what, paths=(int(lo), int(hi)))
+            part = [g[..., :3] for g in got]
+            light = part if light is None else [a + b for a, b in zip(light, part)]
+            if what.moments:
+                part = [g[..., 3:] for g in got]
+                moms = part if moms is None else [a + b for a, b in zip(moms, part)]
+    if inp.moments:   # a share's moments, for all the paths
+        scale = n / float(np.sum(ends - cuts[:-1]))
+        light = [np.concatenate([a, b * scale], axis=-1) for a, b in zip(light, moms)]
+    return (light, first) if halves else light
 
 
 def moment_ends(inp, cuts: np.ndarray) -> np.ndarray:

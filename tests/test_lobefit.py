@@ -139,6 +139,11 @@ def test_the_halves_and_the_moments_share_of_the_tracer():
     np.testing.assert_allclose(got[..., 3:], want, rtol=1e-9, atol=1e-9 * np.abs(want).max())
     np_got = kernels.trace_paths_media(quarter, backend="numpy")[0]
     np.testing.assert_allclose(np_got, got, rtol=1e-9, atol=1e-9 * np.abs(got).max())
+    # the numpy twin's blocks: the same halves, each path traced once
+    np_full, (np_first, np_k) = kernels.trace_paths_media(inp, backend="numpy", halves=True)
+    assert np_k == k
+    np.testing.assert_allclose(np_first, first, rtol=1e-9, atol=1e-9 * scale)
+    np.testing.assert_allclose(np_full[0], full[0], rtol=1e-9, atol=1e-9 * np.abs(full[0]).max())
 
 
 def traced_m(n_paths, seed, window, g=0.9):
