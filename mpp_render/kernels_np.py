@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from .lightrecord import (KIND_AREA, KIND_POINT, KIND_SPOT, KIND_SUN, L_AREA, L_AX, L_AY, L_BEAM,
-                          L_BLEND, L_CHANNEL, L_COND, L_COSHALF, L_DIR, L_INDIRECT, L_INV, L_KIND,
-                          L_NORMAL, L_NORMALIZE, L_POS, L_RADIUS, L_ROUND, L_STRENGTH, LIGHT_FIELDS)
+                          L_BLEND, L_CHANNEL, L_COND, L_COSHALF, L_DIR, L_DISC, L_INDIRECT, L_INV,
+                          L_KIND, L_NORMAL, L_NORMALIZE, L_POS, L_RADIUS, L_ROUND, L_STRENGTH, LIGHT_FIELDS)
 from .media import BRICK, density_from, trilinear
 from .walk import table_lookup
 from .lights import light_sample, path_stretch, polygon_solid_angle
@@ -837,6 +837,11 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
                         st = path_stretch(ds[off], dc[off], voxels[mi])
                         tau[off] = tau[off] * st[:, None]
                         reach = 0.0 if disc_reach is None else float(disc_reach[li])
+                        cd = int(rec[L_DISC])
+                        if cd >= 1:   # beyond the reach: the disc's mean (discdepth.py)
+                            far = np.flatnonzero(off)[~(dc[off] < reach)] \
+                                if reach > 0.0 else np.flatnonzero(off)
+                            tau[far] = np.maximum(tau[far] + v[far, cd:cd + 3], 0.0)
                         if reach > 0.0 and int(rec[L_KIND]) in (KIND_POINT, KIND_SPOT):
                             near = np.flatnonzero(dc[off] < reach)
                             if near.size:

@@ -28,13 +28,16 @@ Fields (offset: width; units):
                     (precompute.FieldLayout.beam_channels; read with multiple scattering only)
   L_INDIRECT 37: 1  1: scattered light (scene.Light.indirect): its single scattering is added
                     to the multiple output
-  38, 39            unused
+  L_DISC 38: 1      the channel of its disc's depth change beyond the march's reach (a point
+                    or spot light with a radius; precompute.FieldLayout.disc_channels,
+                    precompute/discdepth.py), or < 1: none
+  39                unused
 """
 
 LIGHT_FIELDS = 40
 L_KIND, L_STRENGTH, L_POS, L_DIR, L_INV, L_COSHALF, L_BLEND, L_RADIUS = 0, 1, 4, 7, 10, 19, 20, 21
 L_AX, L_AY, L_AREA, L_NORMAL, L_NORMALIZE, L_ROUND, L_CHANNEL = 22, 25, 28, 29, 32, 33, 34
-L_COND, L_BEAM, L_INDIRECT = 35, 36, 37
+L_COND, L_BEAM, L_INDIRECT, L_DISC = 35, 36, 37, 38
 
 KIND_POINT, KIND_SPOT, KIND_SUN, KIND_AREA = 0, 1, 2, 3
 

@@ -31,8 +31,8 @@ from __future__ import annotations
 import numpy as np
 
 from .lightrecord import (KIND_AREA, KIND_POINT, KIND_SPOT, KIND_SUN, L_AREA, L_AX, L_AY, L_BEAM,
-                          L_BLEND, L_CHANNEL, L_COND, L_COSHALF, L_DIR, L_INDIRECT, L_INV, L_KIND,
-                          L_NORMAL, L_NORMALIZE, L_POS, L_RADIUS, L_ROUND, L_STRENGTH, LIGHT_FIELDS)
+                          L_BLEND, L_CHANNEL, L_COND, L_COSHALF, L_DIR, L_DISC, L_INDIRECT, L_INV,
+                          L_KIND, L_NORMAL, L_NORMALIZE, L_POS, L_RADIUS, L_ROUND, L_STRENGTH, LIGHT_FIELDS)
 from .phase import orthonormal_basis
 from .rng import hash32
 from .scene import Light
@@ -285,7 +285,7 @@ DISC_NODES = 8   # Gauss-Legendre points of disc_transmittance over a lamp's dis
 
 
 def disc_transmittance(light: Light, x, tau, voxel: float, nodes: int = DISC_NODES,
-                       depth=None, reach: float = 0.0):
+                       depth=None, reach: float = 0.0, change=None):
     """The transmittance (N,3) a lamp's light reaches points ``x`` (N,3, m) with, from the
     optical depth ``tau`` (N,3) to its centre: for a POINT or SPOT light with a radius the
     mean over its soft-falloff disc (light_sample: every disc point carries the same
@@ -303,7 +303,9 @@ def disc_transmittance(light: Light, x, tau, voxel: float, nodes: int = DISC_NOD
     path's depth minus the stretched centre's, both through ``depth``), at an angle about
     the centre's direction turned by the golden angle from node to node and by a fixed
     pseudo-random offset per point: the stretched depth is exact only where the medium is
-    the same across the disc."""
+    the same across the disc.  ``change`` (N,3) or None: beyond that, the disc's depth
+    change (precompute/discdepth.py, the field's disc channels) added to every node's
+    stretched depth, as the march adds it."""
     tau = np.asarray(tau, np.float64)
     if light.kind == "AREA":
         return area_transmittance(light, x, tau, voxel)
@@ -320,6 +322,8 @@ def disc_transmittance(light: Light, x, tau, voxel: float, nodes: int = DISC_NOD
     cos_t = 1.0 - s2[None, :] * omc_max[:, None]
     stretch = path_stretch(dc[:, None] / cos_t, dc[:, None], voxel)          # (N,K)
     out = np.einsum("k,nkc->nc", w, np.exp(-tau[:, None, :] * stretch[..., None]))
+    if change is not None:
+        out *= np.exp(-np.maximum(np.asarray(change, np.float64), -tau))
     near = np.flatnonzero((dc < reach * radius) & (dc > 0.0)) if depth is not None else []
     if len(near):
         xs, dn = x[near], dc[near]
@@ -359,10 +363,11 @@ def area_geometry(light: Light):
 _KINDS = {"POINT": KIND_POINT, "SPOT": KIND_SPOT, "SUN": KIND_SUN, "AREA": KIND_AREA}
 
 
-def pack_light(light: Light, channel: int = -1, beam: int = -1) -> np.ndarray:
+def pack_light(light: Light, channel: int = -1, beam: int = -1, disc: int = -1) -> np.ndarray:
     """The light as one float64 record of ``LIGHT_FIELDS`` (layout: lightrecord), the form
     the kernels read; ``channel`` is its optical-depth channel in the media fields or -1,
-    ``beam`` that of its forward peak's light (precompute.FieldLayout.beam_channels) or -1."""
+    ``beam`` that of its forward peak's light (precompute.FieldLayout.beam_channels) or -1,
+    ``disc`` that of its disc's depth change (FieldLayout.disc_channels) or -1."""
     if light.kind not in _KINDS:
         raise ValueError(f"unsupported light type {light.kind!r}")
     r = np.zeros(LIGHT_FIELDS)
@@ -390,6 +395,7 @@ def pack_light(light: Light, channel: int = -1, beam: int = -1) -> np.ndarray:
         r[L_ROUND] = 1.0 if light.shape in ("DISK", "ELLIPSE") else 0.0
     r[L_CHANNEL] = channel
     r[L_BEAM] = beam
+    r[L_DISC] = disc
     r[L_INDIRECT] = 1.0 if light.indirect else 0.0
     return r
 

@@ -71,9 +71,11 @@ def pack_lights(lights: List[Light], layout: FieldLayout) -> np.ndarray:
     """(L, LIGHT_FIELDS) float64 records of the lights for the march kernel."""
     out = np.zeros((len(lights), LIGHT_FIELDS))
     beams = layout.beam_channels or [None] * len(lights)
+    discs = layout.disc_channels or [None] * len(lights)
     for i, light in enumerate(lights):
-        c, b = layout.light_channels[i], beams[i]
-        out[i] = pack_light(light, -1 if c is None else c, -1 if b is None else b)
+        c, b, k = layout.light_channels[i], beams[i], discs[i]
+        out[i] = pack_light(light, -1 if c is None else c, -1 if b is None else b,
+                            -1 if k is None else k)
     return out
 
 

@@ -106,12 +106,27 @@ def random_march(rng, lights, density: float, n: int):
                                             (unjittered_lights(), 0.1), (indirect_lights(), 2.0)],
                          ids=["all", "unjittered", "unjittered-thin", "indirect"])
 def test_march_twins_agree_on_random_rays(lights, density):
-    media, _, inputs = random_march(np.random.default_rng(5), lights, density, TWIN_RAYS)
+    media, pre, inputs = random_march(np.random.default_rng(5), lights, density, TWIN_RAYS)
     a = kernels.march(inputs, backend="numpy")
     b = kernels.march(inputs, backend="c")
     for x, y, name in zip(a, b, MarchResult._fields):
         assert np.all(np.isfinite(y)), name
         assert np.all(np.abs(x - y) <= 1e-4 * np.maximum(np.abs(x), 1e-6)), name
+    # the lamps with a radius carry their disc's depth change in this uneven smoke
+    # (precompute/discdepth.py): both twins read it, and it changes the light
+    discs = [k for k in (pre.layout.disc_channels or []) if k is not None]
+    assert len(discs) == sum(lt.kind in ("POINT", "SPOT") and lt.radius > 0 for lt in lights)
+    if discs:
+        assert max(np.abs(f[..., k:k + 3]).max() for f in pre.fields for k in discs) > 1e-3
+        bare = [f.copy() for f in pre.fields]
+        for f in bare:
+            for k in discs:
+                f[..., k:k + 3] = 0.0
+        z_np = kernels.march(inputs.replace(fields=bare), backend="numpy")
+        z_c = kernels.march(inputs.replace(fields=bare), backend="c")
+        assert np.all(np.abs(z_np.single - z_c.single)
+                      <= 1e-4 * np.maximum(np.abs(z_np.single), 1e-6))
+        assert np.abs(z_c.single - b.single).max() > 1e-4 * b.single.max()
     # skipping empty bricks changes nothing but the count of samples taken; longer steps in
     # thin media (adapt_tau) change the samples: the twins still agree, sample for sample
     bricks = [m.bricks for m in media]
@@ -439,7 +454,7 @@ def test_the_compiled_light_record_is_lightrecords():
     mpp_render.lightrecord's layout, field by field."""
     from mpp_render import lightrecord
     assert kernels._c.light_layout() == lightrecord.layout()
-    assert lightrecord.layout()["LIGHT_FIELDS"] == 40 and len(lightrecord.layout()) == 23
+    assert lightrecord.layout()["LIGHT_FIELDS"] == 40 and len(lightrecord.layout()) == 24
 
 
 def test_the_layout_and_the_model_import_no_kernel():

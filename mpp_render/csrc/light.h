@@ -27,6 +27,7 @@
 #define L_COND 35
 #define L_BEAM 36      /* the channel of the forward peak's light (W/m^2), < 1: none */
 #define L_INDIRECT 37  /* 1: scattered light (a surface's bounce): its single scattering is multiple */
+#define L_DISC 38      /* the channel of its disc's depth change beyond the reach, < 1: none */
 #define KIND_POINT 0
 #define KIND_SPOT 1
 #define KIND_SUN 2

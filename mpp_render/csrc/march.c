@@ -494,6 +494,7 @@ typedef struct {
     const double *LR;                      /* light records (nl, LIGHT_FIELDS) */
     Py_ssize_t nl;
     int chan[MAX_LIGHTS], beam[MAX_LIGHTS], indirect[MAX_LIGHTS], jitter[MAX_LIGHTS];
+    int disc[MAX_LIGHTS];   /* the channel of its disc's depth change beyond the reach, or -1 */
     int ambient;
     double step, depth_opacity, depth_miss, adapt_tau, thr_op;
     double roulette;                       /* Russian roulette below this transmittance; 0: off */
@@ -634,6 +635,13 @@ static int parse_lights(March *c, PyObject *plights) {
         for (int m = 0; m < c->ng; m++)
             if (c->beam[l] >= 0 && c->beam[l] + 3 > c->g[m].nc) {
                 PyErr_SetString(PyExc_ValueError, "lights: beam channel outside the fields");
+                return -1;
+            }
+        double df = LR[l * LIGHT_FIELDS + L_DISC];
+        c->disc[l] = (cf >= 0 && df >= 1.0 && df < 1e9) ? (int)df : -1;
+        for (int m = 0; m < c->ng; m++)
+            if (c->disc[l] >= 0 && c->disc[l] + 3 > c->g[m].nc) {
+                PyErr_SetString(PyExc_ValueError, "lights: disc channel outside the fields");
                 return -1;
             }
         if (!(kf == KIND_POINT || kf == KIND_SPOT || kf == KIND_SUN || kf == KIND_AREA)) {
@@ -999,6 +1007,9 @@ static void medium_sources(const March *c, int m, const double x[3], const doubl
                 disc_correction(c->g, c->xc, c->ng, x, la->wc[l], la->dc[l], wd, la->ds[l], st,
                                 c->disc_step, dt);
                 for (int a = 0; a < 3; a++) tau[a] = tau[a] + dt[a] > 0.0 ? tau[a] + dt[a] : 0.0;
+            } else if (c->disc[l] >= 0) {  /* beyond: the disc's mean (discdepth.py) */
+                const double *dd = v + c->disc[l];
+                for (int a = 0; a < 3; a++) tau[a] = tau[a] + dd[a] > 0.0 ? tau[a] + dd[a] : 0.0;
             }
         }
         int cb = c->use_ms ? c->beam[l] : -1;

@@ -3,9 +3,11 @@ the precompute fills it, the cache patches its parts, the march reads it.
 
 In order: channel 0 the density; per lit light 3 channels of RGB optical depth to it; with
 multiple scattering in a forward-scattering medium per lit light 3 channels of its forward
-peak's light; with a lit world or a medium's emission that lights a medium that scatters
-(media.glow_lights) 3 channels of world light, then with multiple scattering 3 of its multiply scattered part (the glow's light
-scattered once and more is added to them, precompute.emissionlight); then, for a medium with
+peak's light; per point or spot light with a radius (``folds_disc``) 3 channels of its
+disc's depth change beyond the march's reach (precompute/discdepth.py); with a lit world or
+a medium's emission that lights a medium that scatters (media.glow_lights) 3 channels of
+world light, then with multiple scattering 3 of its multiply scattered part (the glow's
+light scattered once and more is added to them, precompute.emissionlight); then, for a medium with
 an emission grid only, 3 channels of its emitted radiance; then, for a medium with a scatter
 colour grid only (PreparedMedium.scatter_grid), 3 channels of its factor on sigma_s; last,
 for a medium whose extinction's colour varies only (PreparedMedium.extinction_density), 3
@@ -36,7 +38,10 @@ class FieldLayout:
     (multiple scattering on, some medium with a forward peak): the offset of light i's
     forward peak's light (W/m^2, ``peak_light``: what has scattered into the peak and not
     out of it, spread sideways), first the optical depth through the delta-scaled media
-    (media.delta_scaled) from which it is made; right after the lights' channels."""
+    (media.delta_scaled) from which it is made; right after the lights' channels.
+    ``disc_channels[i]`` (a point or spot light with a radius, ``folds_disc``): the offset of
+    light i's disc's optical-depth change beyond the march's reach (discdepth.py), after the
+    beams' channels, before the world's."""
 
     light_channels: List[Optional[int]]
     ambient_channel: Optional[int]
@@ -46,6 +51,7 @@ class FieldLayout:
     beam_channels: Optional[List[Optional[int]]] = None
     scatter_channels: Optional[List[Optional[int]]] = None
     extinction_channels: Optional[List[Optional[int]]] = None
+    disc_channels: Optional[List[Optional[int]]] = None
 
     def own_grids(self, pm: PreparedMedium, m: int):
         """(first channel, grid) of each of medium ``pm``'s own grids (index ``m``) in its
@@ -86,14 +92,15 @@ def light_channels(lights) -> List[Optional[int]]:
 
 def field_layout(media: Sequence[PreparedMedium], lights, world_color, multiple: bool,
                  delta: Optional[Sequence[PreparedMedium]] = None,
-                 peak: bool = True, glow: bool = True) -> FieldLayout:
+                 peak: bool = True, glow: bool = True, disc: bool = True) -> FieldLayout:
     """The layout of the fields the precompute gives ``media`` lit by ``lights`` and a world
     of colour ``world_color``, with or without ``multiple`` scattering.  ``delta``: the
     media delta-scaled (media.delta_scaled), where the caller has them.  ``peak``: whether
     multiple scattering carries the forward peak's light apart (the walk's beam channels,
     precompute.source.peak_light); traced paths (paths.py) carry it themselves.  ``glow``:
     whether the media's glow counts as world light (the cache's part without the world
-    sets it False)."""
+    sets it False).  ``disc``: whether the lamps' discs are folded (Tuning.disc_fold_stride
+    > 0; ``folds_disc``)."""
     chans = light_channels(lights)
     c = 1 + 3 * sum(ch is not None for ch in chans)
     beams = [None] * len(lights)
@@ -103,6 +110,11 @@ def field_layout(media: Sequence[PreparedMedium], lights, world_color, multiple:
             if chans[i] is not None:
                 beams[i] = c
                 c += 3
+    discs = [None] * len(lights)
+    for i, light in enumerate(lights):
+        if disc and chans[i] is not None and folds_disc(light):
+            discs[i] = c
+            c += 3
     lit = np.any(np.asarray(world_color) > 0) or (glow and glow_lights(media))
     amb = c if lit else None
     amb_ms = None
@@ -117,4 +129,10 @@ def field_layout(media: Sequence[PreparedMedium], lights, world_color, multiple:
     emission, scatter, extinction = ([f[k] for f in firsts] for k in range(3))
     return FieldLayout(chans, amb, c, amb_ms, emission,
                        beams if any(b is not None for b in beams) else None, scatter,
-                       extinction)
+                       extinction, discs if any(k is not None for k in discs) else None)
+
+
+def folds_disc(light) -> bool:
+    """Whether ``light``'s disc is folded into its own channels (discdepth.py): a point or
+    spot light with a radius."""
+    return light.kind in ("POINT", "SPOT") and float(getattr(light, "radius", 0.0) or 0.0) > 0.0

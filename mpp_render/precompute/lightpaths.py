@@ -56,7 +56,8 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
                     nodal: bool = Tuning.path_nodal,
                     far_resolution: int = MULTIPLE_RESOLUTION,
                     cell_tau: float = Tuning.cell_tau, cell_walk: int = Tuning.cell_walk,
-                    sky: bool = False, lobe_window: int = Tuning.lobe_window):
+                    sky: bool = False, lobe_window: int = Tuning.lobe_window,
+                    disc_channel: Optional[int] = None):
     """(stride, h, M, far, moments, cross, started) for ``light`` on medium ``pm`` (its field
     ``fld``, the light's optical depth at ``channel``): M float32 (LX,LY,LZ,3) W/(m^2 sr) on
     the light pyramid's lattice (lattice.walk_lattice at ``resolution``), from ``n_paths``
@@ -89,9 +90,10 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     the caller asks it of one light per medium, whose M then holds that light too.
     ``lobe_window``: with a ``camera`` and a medium of g != 0, M towards the camera is the
     paths' lobe fitted to their deposits over windows of this many lattice points round each
-    (lobefit.py, Tuning.lobe_window; 0: the deposits alone)."""
+    (lobefit.py, Tuning.lobe_window; 0: the deposits alone).  ``disc_channel``: the light's
+    disc channels in ``fld`` (precompute/discdepth.py), or None."""
     stride, shape, h, sets = path_sets(pm, fld, light, channel, resolution, around, cell_tau,
-                                       cell_walk, sky, seed)
+                                       cell_walk, sky, seed, disc_channel)
     fog = pm.endless
     if not sets:
         return stride, h, np.zeros(tuple(shape) + (3,), np.float32), None, None, [], (0.0, 0)
@@ -126,18 +128,20 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
 
 
 def path_sets(pm, fld, light, channel: int, resolution: int, around, cell_tau: float,
-              cell_walk: int, sky: bool, seed: int):
+              cell_walk: int, sky: bool, seed: int, disc_channel: Optional[int] = None):
     """(stride, shape, h, sets): the paths' lattice at ``resolution`` and the starts of
     ``light``'s paths in ``pm`` (``traced_multiple``'s): its first scatterings, and with
     ``around`` where it first scatters in the world fog beyond the grid, where the surfaces
     reflect it and (``sky``) the constant sky's light; each set (points, power (N,3) W,
-    directions, jitter, lobe[, start source and peaks])."""
+    directions, jitter, lobe[, start source and peaks]).  ``disc_channel``: the light's disc
+    channels in ``fld`` (discdepth.py) or None."""
     stride, shape, h = paths_lattice(pm, resolution)
     voxels = np.zeros(pm.grid.shape[:3], np.float32)
     base, _, pts = source_and_density(pm, fld, light, channel, stride, voxels=voxels,
                                       disc=None if around is None else around.disc,
                                       depth=None if around is None else around.optical_depth,
-                                      cell_tau=cell_tau, cell_walk=cell_walk)
+                                      cell_tau=cell_tau, cell_walk=cell_walk,
+                                      disc_channel=disc_channel)
     power = base * cell_volume(pm, stride)
     live = power.sum(axis=1) > 0.0
     fog = pm.endless
@@ -168,13 +172,14 @@ def path_sets(pm, fld, light, channel: int, resolution: int, around, cell_tau: f
 
 def start_power(pm, fld, light, channel: int, resolution: int,
                 around: Optional[Surroundings] = None, cell_tau: float = Tuning.cell_tau,
-                cell_walk: int = Tuning.cell_walk, sky: bool = False, seed: int = 0) -> float:
+                cell_walk: int = Tuning.cell_walk, sky: bool = False, seed: int = 0,
+                disc_channel: Optional[int] = None) -> float:
     """W: the power of ``light``'s paths' starts in ``pm`` (``path_sets``, every set, the
     channels summed), what ``traced_multiple`` reports as its ``started`` power for the same
     arguments (``across_media``)."""
     return float(sum(float(np.asarray(item[1]).sum()) for item in
                      path_sets(pm, fld, light, channel, resolution, around, cell_tau,
-                               cell_walk, sky, seed)[3]))
+                               cell_walk, sky, seed, disc_channel)[3]))
 
 
 def across_media(powers) -> list:

@@ -88,18 +88,19 @@ class Surroundings:
             self._enclosed[id(pm)] = enclosed_voxels(pm, self.surfaces)
         return self._enclosed[id(pm)]
 
-    def disc(self, light: Light, x, tau) -> np.ndarray:
+    def disc(self, light: Light, x, tau, change=None) -> np.ndarray:
         """lights.disc_transmittance of ``light`` at points ``x`` (N,3, m) from the optical
         depth ``tau`` (N,3) to its centre, the disc points within media.disc_reaches of the
         lamp marched through the solid media (the world fog, homogeneous, needs no
-        correction)."""
+        correction); beyond, ``change`` (N,3, the field's disc channels) or None."""
         if id(light) not in self._disc_depth:   # asked once per chunk of voxels: decide once
             reach = disc_reaches(self.solid, [light], self.disc_exact, self.disc_voxels)[0]
             radius = float(getattr(light, "radius", 0.0) or 0.0)
-            self._disc_depth[id(light)] = (self._depth(), reach / radius) \
+            self._disc_depth[id(light)] = (self.solid_depth(), reach / radius) \
                 if reach and radius > 0.0 else (None, 0.0)
         depth, radii = self._disc_depth[id(light)]
-        return disc_transmittance(light, x, tau, self.step, depth=depth, reach=radii)
+        return disc_transmittance(light, x, tau, self.step, depth=depth, reach=radii,
+                                  change=change)
 
     def optical_depth(self, light: Light, x) -> np.ndarray:
         """(N,3) optical depth from points ``x`` (N,3, m) to ``light``'s centre as the
@@ -108,9 +109,9 @@ class Surroundings:
         return light_optical_depth(self.solid, light, x, self.step, surfaces=self.surfaces,
                                    fog_sigma_t=self.fog_sigma_t)
 
-    def _depth(self):
+    def solid_depth(self):
         """Callable (points, unit dirs, lengths m) -> (N,3) optical depth through the solid
-        media (kernels.optical_depth at ``step``); the media are uneven, so there are some."""
+        media (kernels.optical_depth at ``step``); there must be some."""
         arrays = kernel_arrays(self.solid)
 
         def od(p, d, t):

@@ -16,6 +16,7 @@ from .lattice import MULTIPLE_RESOLUTION, grid_points, lamp_resolution, needed_f
 from .layout import FieldLayout, field_layout
 from .lightdepth import (SHADOW_TAU, light_optical_depth, near_sharp_surfaces, soft_visibility,
                          split_fog, sweep_light)
+from .discdepth import fold_disc
 from .flatten import flattened
 from .fogglow import glow_on_medium
 from .emissionlight import EMISSION_PATHS, add_glow, add_lattice, emission_light
@@ -62,11 +63,15 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
     without the world gives the world's)."""
     t_start = time.perf_counter()
     delta = [delta_scaled(pm) for pm in media]
+    # a lamp's disc is folded into its own channels where a medium other than the world's
+    # fog (homogeneous: the stretch is exact in it) lies round it (discdepth.py)
     layout = field_layout(media, lights, world.color, multiple, delta, peak=multiple_paths <= 0,
-                          glow=glow)
+                          glow=glow, disc=tuning.disc_fold_stride > 0
+                          and any(not pm.endless for pm in media))
     world_lit = bool(np.any(np.asarray(world.color) > 0))
     sky_colour = np.asarray(world.color if sky is None else sky, np.float64)
     chans, beams = layout.light_channels, layout.beam_channels or [None] * len(lights)
+    discs = layout.disc_channels or [None] * len(lights)
     c = layout.channels
     ms_all = []
     step = step_factor * min(pm.voxel_size for pm in media) if media else 1.0
@@ -115,6 +120,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
     n_pts = 0
     n_ambient = 0
     n_glow = 0
+    n_disc = 0     # lattice points whose lamp's disc was marched (discdepth.py)
     for mi, pm in enumerate(media):
         cm = layout.medium_channels(mi)
         f = np.zeros(pm.grid.shape + (cm,), np.float32)
@@ -163,6 +169,13 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                               should_cancel=should_cancel)
                         tau = tau - np.log(np.maximum(vis, np.exp(-SHADOW_TAU)))[:, None]
                     view[flat, ch:ch + 3] = tau
+            if discs[li] is not None and pm is not fog and solid:
+                # the lamp's disc beyond the march's reach (discdepth.py)
+                if progress:
+                    progress(0.0, f"Light attenuation: {light.name}'s disc on {pm.medium.name}")
+                n_disc += fold_disc(pm, f, chans[li], discs[li], light, around.solid_depth(),
+                                    tuning.disc_fold_stride, tuning.disc_fold_nodes,
+                                    threads, should_cancel)
             if beams[li] is not None:
                 # the beam channels: from the beam's optical depth to the forward peak's own
                 # light, spread sideways (W/m^2)
@@ -218,7 +231,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
     # the sky's light off the surfaces rides with the first light that has paths
     sky_li = next((li for li in range(len(lights)) if chans[li] is not None), None)
     shares = path_shares(media, fields, lights, chans, path_res, around, tuning,
-                         partners_of, seed, sky_li) if traces and multiple else None
+                         partners_of, seed, sky_li, discs) if traces and multiple else None
     for mi, pm in enumerate(media):
         f = fields[mi]
         ms = [None] * len(lights)
@@ -246,7 +259,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                              cell_tau=tuning.cell_tau,
                                              cell_walk=tuning.cell_walk,
                                              sky=li == sky_li,
-                                             lobe_window=tuning.lobe_window)
+                                             lobe_window=tuning.lobe_window,
+                                             disc_channel=discs[li])
                     if traced is not None:
                         for (j, _), m in zip(near, traced[5]):
                             key = (j, li)
@@ -306,7 +320,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
             mf.moments = mf.moments + m[..., 3:]
     return Precomputed(fields, layout, ms_all, time.perf_counter() - t_start,
                        {"points": n_pts, "ambient_points": n_ambient,
-                        "backend": kernels.backend(), "glowing": n_glow})
+                        "backend": kernels.backend(), "glowing": n_glow,
+                        "disc_points": n_disc})
 
 
 def path_seed(seed: int, mi: int, li: int) -> int:
@@ -316,7 +331,7 @@ def path_seed(seed: int, mi: int, li: int) -> int:
 
 
 def path_shares(media, fields, lights, chans, path_res, around, tuning: Tuning, partners_of,
-                seed: int, sky_li):
+                seed: int, sky_li, discs=None):
     """[light][medium] the share of the Paths setting each medium's paths for each light
     take: the power of its paths' starts (lightpaths.start_power: the first scatterings and
     the light the surfaces reflect into it, as traced_multiple will start them with the same
@@ -324,7 +339,9 @@ def path_shares(media, fields, lights, chans, path_res, around, tuning: Tuning, 
     whose boxes overlap its own (``partners_of``, whose lattices its paths deposit on, and
     theirs on its own; lightpaths.across_media).  1 for a medium apart from the others, the
     world fog (whose paths also start beyond its grid) and a light without paths; None
-    where no two scattering media overlap."""
+    where no two scattering media overlap.  ``discs``: the lights' disc channels
+    (FieldLayout.disc_channels) or None."""
+    discs = discs or [None] * len(lights)
     live = [mi for mi, pm in enumerate(media)
             if np.any(pm.sigma_s > 0) and not pm.endless and
             any(np.any(media[j].sigma_s > 0) and not media[j].endless for j in partners_of[mi])]
@@ -336,7 +353,8 @@ def path_shares(media, fields, lights, chans, path_res, around, tuning: Tuning, 
         if chans[li] is not None:
             power = {mi: start_power(media[mi], fields[mi], light, chans[li], path_res[mi],
                                      around, tuning.cell_tau, tuning.cell_walk,
-                                     sky=li == sky_li, seed=path_seed(seed, mi, li))
+                                     sky=li == sky_li, seed=path_seed(seed, mi, li),
+                                     disc_channel=discs[li])
                      for mi in live}
             for mi in live:
                 group = [mi] + [j for j in partners_of[mi] if j in power]

@@ -213,7 +213,8 @@ def point_falloff(r2, radius: float) -> np.ndarray:
 
 def cell_mean_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: int,
                      stride: int, shape, cells: np.ndarray,
-                     beam: Optional[int] = None, disc=None) -> np.ndarray:
+                     beam: Optional[int] = None, disc=None,
+                     disc_channel: Optional[int] = None) -> np.ndarray:
     """The first-scattering source Q = sigma_s E exp(-tau) (W/m^3, (len(cells), 3)) averaged
     over the voxels of each lattice cell in ``cells`` (the voxels nearest to the cell's
     point), with a point light's falloff (``point_falloff``) read at max(r^2, R^2/3): for a
@@ -238,7 +239,8 @@ def cell_mean_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel:
     e = e * near_falloff(light, pts, pm.i2w[:3, :3])[:, None]
     tau = v[:, channel:channel + 3]
     q = first_scattering(pm, rho, e, tau, None if beam is None else v[:, beam:beam + 3],
-                         _disc(disc, light, pts, tau, pm), pm.scatter_at(flat=flat))
+                         _disc(disc, light, pts, tau, pm, _change(v, disc_channel)),
+                         pm.scatter_at(flat=flat))
     return np.einsum("nkc,k->nc", q.reshape(len(cells), len(offs), 3), weight)
 
 
@@ -363,12 +365,18 @@ def cell_depth_factor(tau: np.ndarray, flat: np.ndarray) -> np.ndarray:
     return out
 
 
-def _disc(disc, light: Light, pts, tau, pm: PreparedMedium) -> np.ndarray:
+def _change(rows: np.ndarray, disc_channel: Optional[int]) -> Optional[np.ndarray]:
+    """The disc channels (discdepth.py) of field ``rows`` (N,C), or None without them."""
+    return None if disc_channel is None else rows[:, disc_channel:disc_channel + 3]
+
+
+def _disc(disc, light: Light, pts, tau, pm: PreparedMedium, change=None) -> np.ndarray:
     """The lamp's disc transmittance at ``pts`` through ``disc`` (see source_and_density) or
-    lights.disc_transmittance at the voxel size."""
+    lights.disc_transmittance at the voxel size; ``change``: the field's disc channels
+    there (discdepth.py) or None."""
     if disc is not None:
-        return disc(light, pts, tau)
-    return disc_transmittance(light, pts, tau, pm.voxel_size)
+        return disc(light, pts, tau, change) if change is not None else disc(light, pts, tau)
+    return disc_transmittance(light, pts, tau, pm.voxel_size, change=change)
 
 
 def tent_restrict(a: np.ndarray, axis: int, stride: int, n_out: int,
@@ -419,7 +427,8 @@ def restricted_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel
                    stride: int, shape, chunk: int = 16,
                    should_cancel: Optional[Callable[[], bool]] = None,
                    beam: Optional[int] = None,
-                   voxels: Optional[np.ndarray] = None, disc=None, band=None) -> np.ndarray:
+                   voxels: Optional[np.ndarray] = None, disc=None, band=None,
+                   disc_channel: Optional[int] = None) -> np.ndarray:
     """The first-scattering source Q = sigma_s E exp(-tau) (W/m^3, (N,3) in the C order of
     the lattice ``shape`` ``stride`` voxels apart) from every voxel of the field ``fld``
     (optical depth at ``channel``), each voxel's power shared among the lattice points
@@ -431,7 +440,7 @@ def restricted_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel
     grid's shape): filled with each voxel's Q summed over its channels (the paths' starts,
     precompute.lightpaths).  ``band``: None, or surface_band_source's (flat voxel indices,
     Q (N,3)) that replace those voxels' source and (flat indices, factors (M,3)) that scale
-    theirs."""
+    theirs.  ``disc_channel``: the light's disc channels in ``fld`` (discdepth.py) or None."""
     nx = pm.grid.shape[0]
     plane = int(np.prod(pm.grid.shape[1:]))
     rows = np.zeros((nx, shape[1], shape[2], 3))
@@ -451,7 +460,8 @@ def restricted_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel
             tau = v[live, channel:channel + 3]
             q[live] = first_scattering(pm, rho[live], e, tau,
                                        None if beam is None else v[live, beam:beam + 3],
-                                       _disc(disc, light, pts, tau, pm),
+                                       _disc(disc, light, pts, tau, pm, _change(v[live],
+                                                                                disc_channel)),
                                        pm.scatter_at(flat=a * plane + np.flatnonzero(live)))
         if band is not None:
             here = (band[2] >= a * plane) & (band[2] < b * plane)
@@ -473,7 +483,8 @@ def source_and_density(pm: PreparedMedium, fld: np.ndarray, light: Light, channe
                    stride: int, beam: Optional[int] = None,
                    should_cancel: Optional[Callable[[], bool]] = None,
                    voxels: Optional[np.ndarray] = None, disc=None, depth=None,
-                   cell_tau: float = 0.0, cell_walk: int = Tuning.cell_walk):
+                   cell_tau: float = 0.0, cell_walk: int = Tuning.cell_walk,
+                   disc_channel: Optional[int] = None):
     """(source (N,3) W/m^3, density (N,), points (N,3) m) on the lattice ``stride`` voxels
     apart (C order of ``lattice_shape``): the first-scattering source of ``restricted_source``,
     averaged over the cells round a point or spot light (``cell_mean_source``), and the
@@ -485,7 +496,9 @@ def source_and_density(pm: PreparedMedium, fld: np.ndarray, light: Light, channe
     a dense mesh volume's surface voxels then take their source from points of their cells
     (surface_band_source; not for the walk's forward peak, ``beam``).  ``cell_tau`` > 0: a
     density grid's lit voxels by optically thick ones take theirs from points of their cells
-    (thick_band_source; Tuning.cell_tau, ``cell_walk`` Tuning.cell_walk)."""
+    (thick_band_source; Tuning.cell_tau, ``cell_walk`` Tuning.cell_walk).  ``disc_channel``:
+    the light's disc channels in ``fld`` (discdepth.py; the voxels' and the cells' round the
+    lamp, not the bands'), or None."""
     shape = lattice_shape(pm.grid.shape, stride)
     idx, pts = lattice_points(pm, shape, stride)
     rho = density_from(lattice_values(fld[..., 0], idx, stride), pm.threshold)
@@ -494,11 +507,13 @@ def source_and_density(pm: PreparedMedium, fld: np.ndarray, light: Light, channe
     if band is None and beam is None and cell_tau > 0.0:
         band = thick_band_source(pm, fld, light, channel, cell_tau, disc, cell_walk)
     base = restricted_source(pm, fld, light, channel, stride, shape, should_cancel=should_cancel,
-                          beam=beam, voxels=voxels, disc=disc, band=band)
+                          beam=beam, voxels=voxels, disc=disc, band=band,
+                          disc_channel=disc_channel)
     if light.kind in ("POINT", "SPOT"):
         near = near_light_cells(pm, light, stride, shape)
         if near.size:
-            base[near] = cell_mean_source(pm, fld, light, channel, stride, shape, near, beam, disc)
+            base[near] = cell_mean_source(pm, fld, light, channel, stride, shape, near, beam, disc,
+                                          disc_channel)
     return base, rho, pts
 
 
