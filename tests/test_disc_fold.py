@@ -129,3 +129,32 @@ def test_a_lamp_inside_a_homogeneous_medium_is_not_folded():
     split = split_medium()
     f2, n2 = folded(split)
     assert n2 > 20 ** 3 and np.abs(f2[..., dch:dch + 3]).max() > 0.01
+
+
+def test_the_paths_first_scatterings_take_the_same_disc():
+    """The traced paths start where the lamp's light first scatters (source.py): with the
+    light's disc channels each voxel's source is the stretched disc mean times e^-D, the
+    light the march sees there; without them the stretched mean alone."""
+    from mpp_render.precompute.lattice import lattice_shape
+    from mpp_render.precompute.source import restricted_source
+    pm = split_medium()
+    light = lamp()
+    layout = field_layout([pm], [light], np.zeros(3), False)
+    ch, dch = layout.light_channels[0], layout.disc_channels[0]
+    field = np.zeros(pm.grid.shape + (layout.channels,), np.float32)
+    field[..., 0] = pm.grid
+    pts = pm.to_world(np.stack(np.meshgrid(*[np.arange(n) for n in pm.grid.shape],
+                                           indexing="ij"), -1).reshape(-1, 3).astype(float))
+    field[..., ch:ch + 3] = light_optical_depth([pm], light, pts, 0.02).reshape(
+        pm.grid.shape + (3,))
+    arrays = kernel_arrays([pm])
+    fold_disc(pm, field, ch, dch, light,
+              lambda p, d, t: kernels.optical_depth(p, d, t, *arrays, 0.02, 0.5, clip=True),
+              2, 16)
+    shape = lattice_shape(pm.grid.shape, 1)
+    plain = restricted_source(pm, field, light, ch, 1, shape)
+    folded = restricted_source(pm, field, light, ch, 1, shape, disc_channel=dch)
+    d = field[..., dch].reshape(-1).astype(float)
+    lit = plain[:, 0] > 1e-6 * plain[:, 0].max()
+    assert np.abs(d[lit]).max() > 0.05
+    assert np.allclose(folded[lit, 0], plain[lit, 0] * np.exp(-d[lit]), rtol=1e-6)
