@@ -35,7 +35,7 @@ class MPPRenderSettings(bpy.types.PropertyGroup):
                 "0.09, worst 1.8; 4 s median at 160x120)"),
                ("FINAL", "Final", "16 samples at most (adaptive, Noise Threshold 0.02) and 3 "
                 "million traced light paths per light for multiple scattering: the defaults "
-                "(public scenes: error median 0.018, worst 0.18; 10 s median at 160x120)"),
+                "(public scenes: error median 0.018, worst 0.14; 10 s median at 160x120)"),
                ("REFERENCE", "Reference", "16 samples in every pixel (Noise Threshold 0), 12 "
                 "million paths per light on a lattice twice as fine: closest to Cycles, "
                 "3-11x Final's time, 12-22x on VDBs (public scenes: error median 0.016, 90th "
