@@ -146,12 +146,11 @@ def test_the_halves_and_the_moments_share_of_the_tracer():
     np.testing.assert_allclose(np_full[0], full[0], rtol=1e-9, atol=1e-9 * np.abs(full[0]).max())
 
 
-def traced_m(n_paths, seed, window, g=0.9):
-    """M towards the camera of a 16^3 cube under a sun (test_paths.small_cube_under_a_sun)
-    from ``n_paths`` paths at ``seed``, fitted over ``window`` (0: the deposits)."""
+def cube(g=0.9):
+    """(camera, sun, medium, field) of a 16^3 cube under a sun
+    (test_paths.small_cube_under_a_sun), the field the sun's depth at its voxels."""
     from mpp_render.media import prepare
     from mpp_render.precompute.lightdepth import light_optical_depth
-    from mpp_render.precompute.lightpaths import traced_multiple
     from mpp_render.scene import Medium
     cam, sun, i2w = small_cube_under_a_sun()
     pm = prepare(Medium("m", np.ones((16, 16, 16), np.float32), i2w, np.full(3, 3.8),
@@ -162,7 +161,17 @@ def traced_m(n_paths, seed, window, g=0.9):
     fld = np.zeros(shape + (4,), np.float32)
     fld[..., 0] = pm.grid[..., 0] if pm.grid.ndim == 4 else pm.grid
     fld[..., 1:] = tau.reshape(shape + (3,))
-    got = traced_multiple(pm, fld, sun, 1, cam, n_paths, 8, seed=seed, lobe_window=window)
+    return cam, sun, pm, fld
+
+
+def traced_m(n_paths, seed, window, g=0.9, around=None, scene=None):
+    """M towards the camera of ``cube(g)`` (or ``scene``, one) from ``n_paths`` paths at
+    ``seed``, fitted over ``window`` (0: the deposits), with the Surroundings ``around`` or
+    none."""
+    from mpp_render.precompute.lightpaths import traced_multiple
+    cam, sun, pm, fld = cube(g) if scene is None else scene
+    got = traced_multiple(pm, fld, sun, 1, cam, n_paths, 8, seed=seed, lobe_window=window,
+                          around=around)
     return np.asarray(got[2], np.float64)
 
 
@@ -186,3 +195,23 @@ def test_the_fit_converges_to_many_paths_with_paths_added(monkeypatch):
     print(f"deposits {dep:.4f}, fitted {fit1:.4f}, fitted x4 {fit4:.4f}")
     assert fit1 < dep and fit4 < fit1
     assert np.array_equal(traced_m(20_000, 1, 3, g=0.0), traced_m(20_000, 1, 0, g=0.0))
+
+
+@needs_c
+def test_the_lattices_depth_to_the_camera_is_made_once_and_changes_nothing(monkeypatch):
+    """The lights' lobe fits and the sky deficit's on one lattice share its optical depth to
+    the camera (pathstarts.Surroundings.camera_depth): made once for two traces of the same
+    medium, and the fitted light the same bits as without the Surroundings keeping it."""
+    from mpp_render.precompute import lightpaths
+    from mpp_render.precompute.pathstarts import Surroundings
+    made = []
+    real = lightpaths._camera_depth
+    monkeypatch.setattr(lightpaths, "_camera_depth", lambda *a: made.append(1) or real(*a))
+    scene = cube()
+    around = Surroundings([], None, None, 0.05)
+    a = traced_m(20_000, 1, 3, around=around, scene=scene)
+    b = traced_m(20_000, 2, 3, around=around, scene=scene)
+    assert len(made) == 1
+    assert np.array_equal(a, traced_m(20_000, 1, 3, scene=scene))
+    assert np.array_equal(b, traced_m(20_000, 2, 3, scene=scene))
+    assert len(made) == 3

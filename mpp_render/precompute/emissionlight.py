@@ -123,7 +123,7 @@ def scattered_glow(pm: PreparedMedium, emitting, camera, n_paths: int,
             return [la.mean(a, signed) for la, a in zip(lats, accs)]
         accs, split = accs
         own = lobe_light(pm, lat, camera, lat.mean(accs[0], signed), split, lobe_window,
-                         threads, should_cancel, signed)
+                         threads, should_cancel, signed, around=around)
         return [own] + [la.mean(a[..., :3], signed) for la, a in zip(lats[1:], accs[1:])]
 
     once, later = [None] * len(lats), [None] * len(lats)

@@ -114,7 +114,8 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
         accs, split = accs
     m = lat.mean(accs[0])
     if fit:
-        light3 = lobe_light(pm, lat, camera, m, split, lobe_window, threads, should_cancel)
+        light3 = lobe_light(pm, lat, camera, m, split, lobe_window, threads, should_cancel,
+                            around=around)
         m = np.concatenate([light3, m[..., 3:]], axis=-1) if gathered else light3
     cross = [plat.mean(a) for (_, plat), a in zip(partners, accs[1:])]
     far = None
@@ -485,14 +486,20 @@ def fits_lobe(pm, camera, lobe_window: int) -> bool:
 
 
 def lobe_light(pm, lat, camera, m: np.ndarray, split, lobe_window: int, threads: int = 0,
-               should_cancel=None, signed: bool = False) -> np.ndarray:
+               should_cancel=None, signed: bool = False,
+               around: Optional[Surroundings] = None) -> np.ndarray:
     """float32 (LX,LY,LZ,3) W/(m^2 sr): the camera's M on the PathLattice ``lat`` of ``pm``,
     the paths' lobe fitted to their deposits (lobefit.fitted) from ``m`` (``lat.mean`` of the
     deposits with their moments, (LX,LY,LZ,15)) and ``split`` (first, second: the light
     deposits of the paths' two halves, _trace_all's ``halves``), over windows of
     ``lobe_window`` lattice points.  At least 0 unless ``signed`` (an estimate taken off
-    another, skydeficit.py: its noise is not to be stopped at 0 on its own)."""
-    u = camera_weight(lat.tent_mass, _camera_depth(pm, lat, camera, threads, should_cancel))
+    another, skydeficit.py: its noise is not to be stopped at 0 on its own).  ``around``: the
+    precompute's Surroundings, which keeps the lattice's depth to the camera for the other
+    lights and the sky's deficit on the same lattice (Surroundings.camera_depth)."""
+    depth = (lambda: _camera_depth(pm, lat, camera, threads, should_cancel))
+    tau = depth() if around is None else around.camera_depth(
+        (id(pm), tuple(lat.shape), int(lat.stride), _eye(camera).tobytes()), depth)
+    u = camera_weight(lat.tent_mass, tau)
     first, second = split
     # the nodal move is linear where not stopped at 0: one for the halves' difference
     light3 = fitted(m[..., :3], m[..., 3:], lat.towards, u,
@@ -507,10 +514,15 @@ def _camera_depth(pm, lat, camera, threads, should_cancel) -> Optional[np.ndarra
     by their medium alone)."""
     if pm.endless:
         return None
-    c2w = np.asarray(camera.cam_to_world, np.float64)
-    eye = c2w[:3, 3] + (FAR_EYE * c2w[:3, 2] if str(camera.projection).upper() == "ORTHO" else 0.0)
     _, lpts = lattice_points(pm, lat.shape, lat.stride)
-    return eye_depth(pm, eye, lpts, threads, should_cancel).reshape(lat.shape)
+    return eye_depth(pm, _eye(camera), lpts, threads, should_cancel).reshape(lat.shape)
+
+
+def _eye(camera) -> np.ndarray:
+    """(3,) m: the camera's eye (an orthographic camera's ``FAR_EYE`` back along its axis)."""
+    c2w = np.asarray(camera.cam_to_world, np.float64)
+    return c2w[:3, 3] + (FAR_EYE * c2w[:3, 2] if str(camera.projection).upper() == "ORTHO"
+                         else 0.0)
 
 
 def _own_grid(grid, lat) -> Optional[np.ndarray]:

@@ -77,6 +77,7 @@ class Surroundings:
             self.surfaces = None
         self._enclosed = {}
         self._disc_depth = {}
+        self._camera_depth = {}
 
     def enclosed(self, pm) -> Optional[np.ndarray]:
         """bool (X,Y,Z) the voxels of prepared medium ``pm`` behind the surfaces
@@ -101,6 +102,15 @@ class Surroundings:
         depth, radii = self._disc_depth[id(light)]
         return disc_transmittance(light, x, tau, self.step, depth=depth, reach=radii,
                                   change=change)
+
+    def camera_depth(self, key, make):
+        """The optical depth to the camera of a path lattice's points (lightpaths.lobe_light)
+        under ``key`` (the medium, the lattice's shape and stride, the eye), made once by
+        ``make()``: the lights' lobe fits and the sky deficit's on the same lattice share it.
+        Callers must not modify it."""
+        if key not in self._camera_depth:
+            self._camera_depth[key] = make()
+        return self._camera_depth[key]
 
     def optical_depth(self, light: Light, x) -> np.ndarray:
         """(N,3) optical depth from points ``x`` (N,3, m) to ``light``'s centre as the
