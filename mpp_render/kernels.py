@@ -188,6 +188,16 @@ def nodal_fit(mean, offsets, mass, signed: int, ridge: float, *, backend=None):
     return np.frombuffer(buf, np.float32).reshape(m.shape)
 
 
+def lobe_ratio(md, mc, u, r: int, channels: int = 3, *, backend=None):
+    """The lobe's local-linear fit (kernels_np.lobe_ratio): (X,Y,Z,3) float64."""
+    if not _on_c(backend) or int(r) < 1:
+        return kernels_np.lobe_ratio(md, mc, u, r, channels)
+    d = _f64(md)
+    buf = _c.lobe_ratio(d, _f64(mc).reshape(d.shape), _f64(u).reshape(d.shape[:3]), int(r),
+                        int(channels))
+    return np.frombuffer(buf, np.float64).reshape(d.shape)
+
+
 def trilinear(grid, idx, *, backend=None):
     """media.trilinear: (N,C) for a 4-D grid, (N,) for a 3-D one.  A grid that is not float32
     is read by the numpy twin (the kernel would round it to float32)."""

@@ -206,6 +206,40 @@ def test_fuzz_nodal_fit():
     assert ran > ROUNDS // 3
 
 
+def test_fuzz_lobe_ratio():
+    """The compiled local-linear fit of the paths' lobe (kernels.lobe_ratio): random lattices
+    down to one point an axis, windows wider than the lattice, spoiled deposits, lobes and
+    weights (NaN, inf, huge), channels 1 or 3 or wrong: it reads only inside the lattice (ASan
+    checks this in test_sanitizers.py), returns the lattice's shape or raises ValueError,
+    and agrees with its numpy twin bit for bit wherever the twin is finite."""
+    from mpp_render import kernels_np
+    rng = np.random.default_rng(778)
+    ran = 0
+    for _ in range(ROUNDS):
+        shape = tuple(int(x) for x in rng.integers(1, 8, 3))
+        md = rng.random(shape + (3,)) * rng.choice([1.0, 1e-30, 1e30])
+        mc = rng.random(shape + (3,)) * (rng.random(shape + (3,)) > 0.2)
+        u = rng.random(shape) * (rng.random(shape) > 0.3)
+        clean = rng.random() < 0.5
+        if not clean:
+            md, mc, u = spoil(md, rng, 0.03), spoil(mc, rng, 0.03), spoil(u, rng, 0.03)
+        r = int(rng.integers(0, 9))
+        ch = int(rng.choice([1, 3, 3, 2]))
+        try:
+            out = np.frombuffer(kernels._c.lobe_ratio(md, mc, u, r, ch), np.float64)
+        except ValueError:
+            assert r < 1 or ch not in (1, 3)
+            continue
+        out = out.reshape(shape + (3,))
+        if clean:
+            with np.errstate(all="ignore"):
+                twin = kernels_np.lobe_ratio(md, mc, u, r, ch)
+            fin = np.isfinite(twin)
+            assert np.array_equal(out[fin], twin[fin])
+        ran += 1
+    assert ran > ROUNDS // 3
+
+
 def test_wrong_types_and_shapes_raise():
     c = kernels._c
     with pytest.raises(ValueError):

@@ -1,5 +1,6 @@
 /* mpp_render._kernels: the method table.  Each kernel lives in its own file (optical_depth.c,
- * sweep.c, march.c, upsample.c, trilinear.c, paths.c, intersect.c, intervals.c, nodal.c) over the shared headers common.h
+ * sweep.c, march.c, upsample.c, trilinear.c, paths.c, intersect.c, intervals.c, nodal.c,
+ * lobefit.c) over the shared headers common.h
  * (buffers, grids, trilinear reads, random numbers), bricks.h (empty space), light.h (the light
  * record) and triangles.h (rays against triangles).
  */
@@ -46,6 +47,7 @@ static PyMethodDef methods[] = {
     {"union_interval", union_interval, METH_VARARGS, union_interval_doc},
     {"walk_depth", walk_depth, METH_VARARGS, walk_depth_doc},
     {"nodal_fit", nodal_fit, METH_VARARGS, nodal_fit_doc},
+    {"lobe_ratio", lobe_ratio, METH_VARARGS, lobe_ratio_doc},
     {"light_layout", light_layout, METH_NOARGS, light_layout_doc},
     {NULL, NULL, 0, NULL},
 };

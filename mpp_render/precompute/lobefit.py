@@ -43,6 +43,8 @@ from typing import Optional
 
 import numpy as np
 
+from .. import kernels
+from ..kernels_np import box_sum
 from ..phase import G_LIMIT, hg
 
 __all__ = ["lobe", "box_sum", "lobe_ratio", "fitted", "camera_weight"]
@@ -69,76 +71,12 @@ def lobe(moments: np.ndarray, towards: np.ndarray) -> np.ndarray:
     return out
 
 
-def box_sum(x: np.ndarray, r: int) -> np.ndarray:
-    """The sums of ``x`` (LX,LY,LZ,...) over the (2 r + 1)^3 lattice points round each point
-    (zero beyond the lattice), by cumulative sums along each of the first three axes."""
-    out = np.asarray(x, np.float64)
-    for axis in range(3):
-        n = out.shape[axis]
-        pad = [(0, 0)] * out.ndim
-        pad[axis] = (r + 1, r)
-        c = np.cumsum(np.pad(out, pad), axis=axis)
-        out = c.take(range(2 * r + 1, 2 * r + 1 + n), axis=axis) - c.take(range(0, n), axis=axis)
-    return out
-
-
 def lobe_ratio(md: np.ndarray, mc: np.ndarray, u: np.ndarray, r: int) -> np.ndarray:
     """float64 (LX,LY,LZ,3): M_r = M_c a, a the local-linear fit of M_d / M_c over each
     window of radius ``r`` with weights ``u`` (LX,LY,LZ) (module docstring, step 1); M_d
-    where the window holds no weight, M_c is 0 throughout it, or M_c is 0 at the point."""
-    shape = md.shape[:3]
-    X = np.stack(np.meshgrid(*[np.arange(n, dtype=np.float64) for n in shape], indexing="ij"),
-                 -1)
-    out = np.array(md, np.float64)
-    f = [np.ones(shape)] + [X[..., i] for i in range(3)]
-    grey = _grey(md) and _grey(mc)
-    for c in range(1 if grey else 3):
-        m, d = mc[..., c], md[..., c]
-        # the normal equations of sum u / m (d - m a)^2: sums of u d f_i and u m f_i f_j,
-        # over the points the lobe holds light at
-        w = np.where(m > 0.0, u, 0.0)
-        A = np.zeros(shape + (4, 4))
-        rhs = np.zeros(shape + (4,))
-        for i in range(4):
-            rhs[..., i] = box_sum(w * d * f[i], r)
-            for j in range(i, 4):
-                A[..., i, j] = A[..., j, i] = box_sum(w * m * f[i] * f[j], r)
-        ok = A[..., 0, 0] > 0.0
-        a00 = np.where(ok, A[..., 0, 0], 1.0)
-        # the slope about the window's weighted centre (its Schur complement), with a ridge
-        # of 1e-9 of its scale where the window's points lie in a plane or on a line
-        mu = A[..., 0, 1:] / a00[..., None]
-        C = A[..., 1:, 1:] - a00[..., None, None] * mu[..., :, None] * mu[..., None, :]
-        ridge = 1e-9 * (np.trace(C, axis1=-2, axis2=-1) / 3.0 + a00)
-        C = C + np.eye(3) * ridge[..., None, None]
-        rc = rhs[..., 1:] - mu * rhs[..., :1]
-        slope = _solve3(C, rc)
-        a0 = (rhs[..., 0] - (slope * A[..., 0, 1:]).sum(-1)) / a00
-        # where the lobe holds none of the light (no moments there: they come from a share
-        # of the paths) the deposits stay
-        out[..., c] = np.where(ok & (m > 0.0), m * (a0 + (slope * X).sum(-1)), d)
-    if grey:   # one fit serves the three equal channels
-        out[..., 1] = out[..., 2] = out[..., 0]
-    return out
-
-
-def _solve3(C: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """x (...,3) with C x = b for symmetric (...,3,3) C, by Cramer's rule (0 where C is
-    singular)."""
-    c00, c01, c02 = C[..., 0, 0], C[..., 0, 1], C[..., 0, 2]
-    c11, c12, c22 = C[..., 1, 1], C[..., 1, 2], C[..., 2, 2]
-    a00 = c11 * c22 - c12 * c12
-    a01 = c02 * c12 - c01 * c22
-    a02 = c01 * c12 - c02 * c11
-    a11 = c00 * c22 - c02 * c02
-    a12 = c01 * c02 - c00 * c12
-    a22 = c00 * c11 - c01 * c01
-    det = c00 * a00 + c01 * a01 + c02 * a02
-    inv = np.where(det != 0.0, 1.0 / np.where(det != 0.0, det, 1.0), 0.0)
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([(a00 * b0 + a01 * b1 + a02 * b2) * inv,
-                     (a01 * b0 + a11 * b1 + a12 * b2) * inv,
-                     (a02 * b0 + a12 * b1 + a22 * b2) * inv], -1)
+    where the window holds no weight, M_c is 0 throughout it, or M_c is 0 at the point
+    (kernels.lobe_ratio: one fit for a grey medium's three equal channels)."""
+    return kernels.lobe_ratio(md, mc, u, r, 1 if _grey(md) and _grey(mc) else 3)
 
 
 def _grey(x: np.ndarray) -> bool:
