@@ -12,7 +12,8 @@ import numpy as np
 
 from .lightrecord import (KIND_AREA, KIND_POINT, KIND_SPOT, KIND_SUN, L_AREA, L_AX, L_AY, L_BEAM,
                           L_BLEND, L_CHANNEL, L_COND, L_COSHALF, L_DIR, L_DISC, L_INDIRECT, L_INV,
-                          L_KIND, L_NORMAL, L_NORMALIZE, L_POS, L_RADIUS, L_ROUND, L_STRENGTH, LIGHT_FIELDS)
+                          L_KIND, L_NORMAL, L_NORMALIZE, L_POS, L_RADIUS, L_ROUND, L_STRENGTH,
+                          LIGHT_FIELDS)
 from .media import BRICK, density_from, trilinear
 from .walk import table_lookup
 from .lights import light_sample, path_stretch, polygon_solid_angle

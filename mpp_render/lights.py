@@ -309,9 +309,9 @@ def disc_transmittance(light: Light, x, tau, voxel: float, nodes: int = DISC_NOD
     tau = np.asarray(tau, np.float64)
     if light.kind == "AREA":
         return area_transmittance(light, x, tau, voxel)
-    radius = float(getattr(light, "radius", 0.0) or 0.0)
-    if light.kind not in ("POINT", "SPOT") or radius <= 0.0:
+    if not has_disc(light):
         return np.exp(-tau)
+    radius = float(light.radius)
     x = np.asarray(x, np.float64).reshape(-1, 3)
     centre = np.asarray(light.position, np.float64)
     dc = np.linalg.norm(x - centre, axis=1)
@@ -631,6 +631,12 @@ def towards_light(light: Light, points):
     v = pos - points
     dist = np.linalg.norm(v, axis=1)
     return v / np.maximum(dist, 1e-30)[:, None], dist
+
+
+def has_disc(light: Light) -> bool:
+    """Whether ``light`` shines from a disc facing the lit point: a point or spot light with
+    a radius (light_sample, disc_transmittance; media.disc_reaches, precompute/discdepth.py)."""
+    return light.kind in ("POINT", "SPOT") and float(getattr(light, "radius", 0.0) or 0.0) > 0.0
 
 
 def is_dark(light: Light) -> bool:

@@ -13,6 +13,7 @@ from typing import List, Optional
 
 import numpy as np
 
+from .lights import has_disc
 from .phase import clamp_g, delta_fraction, delta_g
 from .scene import Medium
 
@@ -520,8 +521,7 @@ def disc_reaches(media, lights, disc_exact: float, disc_voxels: float = 0.0) -> 
     out = []
     finest = min((float(pm.voxel_size) for pm in media), default=0.0)
     for light in lights:
-        r = float(getattr(light, "radius", 0.0) or 0.0)
-        reach = max(disc_exact * r, disc_voxels * finest) \
-            if light.kind in ("POINT", "SPOT") and r > 0.0 else 0.0
+        reach = max(disc_exact * float(light.radius), disc_voxels * finest) \
+            if has_disc(light) else 0.0
         out.append(reach if reach > 0.0 and uneven_within(media, light.position, reach) else 0.0)
     return out

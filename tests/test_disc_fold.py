@@ -5,10 +5,11 @@ import numpy as np
 import pytest
 
 from mpp_render import kernels
-from mpp_render.lights import disc_transmittance, light_sample, pack_light, path_stretch
+from mpp_render.lights import (disc_transmittance, has_disc, light_sample, pack_light,
+                               path_stretch)
 from mpp_render.media import prepare
 from mpp_render.precompute.discdepth import fold_disc
-from mpp_render.precompute.layout import field_layout, folds_disc
+from mpp_render.precompute.layout import field_layout
 from mpp_render.precompute.lightdepth import kernel_arrays, light_optical_depth
 from mpp_render.scene import Light, Medium, Tuning
 
@@ -41,7 +42,7 @@ def test_the_folded_depth_gives_the_disc_points_own_transmittance(stride):
     light = lamp()
     layout = field_layout([pm], [light], np.zeros(3), False)
     ch, dch = layout.light_channels[0], layout.disc_channels[0]
-    assert folds_disc(light) and dch is not None
+    assert has_disc(light) and dch is not None
     field = np.zeros(pm.grid.shape + (layout.channels,), np.float32)
     field[..., 0] = pm.grid
     idx = np.stack(np.meshgrid(*[np.arange(n) for n in pm.grid.shape], indexing="ij"), -1)

@@ -3,8 +3,8 @@ the precompute fills it, the cache patches its parts, the march reads it.
 
 In order: channel 0 the density; per lit light 3 channels of RGB optical depth to it; with
 multiple scattering in a forward-scattering medium per lit light 3 channels of its forward
-peak's light; per point or spot light with a radius (``folds_disc``) 3 channels of its
-disc's depth change beyond the march's reach (precompute/discdepth.py); with a lit world or
+peak's light; per point or spot light with a radius (``lights.has_disc``) 3 channels of
+its disc's depth change beyond the march's reach (precompute/discdepth.py); with a lit world or
 a medium's emission that lights a medium that scatters (media.glow_lights) 3 channels of
 world light, then with multiple scattering 3 of its multiply scattered part (the glow's
 light scattered once and more is added to them, precompute.emissionlight); then, for a medium with
@@ -22,7 +22,7 @@ from typing import List, Optional, Sequence
 
 import numpy as np
 
-from ..lights import is_dark
+from ..lights import has_disc, is_dark
 from ..media import PreparedMedium, delta_scaled, glow_lights
 
 
@@ -39,9 +39,9 @@ class FieldLayout:
     forward peak's light (W/m^2, ``peak_light``: what has scattered into the peak and not
     out of it, spread sideways), first the optical depth through the delta-scaled media
     (media.delta_scaled) from which it is made; right after the lights' channels.
-    ``disc_channels[i]`` (a point or spot light with a radius, ``folds_disc``): the offset of
-    light i's disc's optical-depth change beyond the march's reach (discdepth.py), after the
-    beams' channels, before the world's."""
+    ``disc_channels[i]`` (a point or spot light with a radius, ``lights.has_disc``): the
+    offset of light i's disc's optical-depth change beyond the march's reach (discdepth.py),
+    after the beams' channels, before the world's."""
 
     light_channels: List[Optional[int]]
     ambient_channel: Optional[int]
@@ -100,7 +100,7 @@ def field_layout(media: Sequence[PreparedMedium], lights, world_color, multiple:
     precompute.source.peak_light); traced paths (paths.py) carry it themselves.  ``glow``:
     whether the media's glow counts as world light (the cache's part without the world
     sets it False).  ``disc``: whether the lamps' discs are folded (Tuning.disc_fold_stride
-    > 0; ``folds_disc``)."""
+    > 0; ``lights.has_disc``)."""
     chans = light_channels(lights)
     c = 1 + 3 * sum(ch is not None for ch in chans)
     beams = [None] * len(lights)
@@ -112,7 +112,7 @@ def field_layout(media: Sequence[PreparedMedium], lights, world_color, multiple:
                 c += 3
     discs = [None] * len(lights)
     for i, light in enumerate(lights):
-        if disc and chans[i] is not None and folds_disc(light):
+        if disc and chans[i] is not None and has_disc(light):
             discs[i] = c
             c += 3
     lit = np.any(np.asarray(world_color) > 0) or (glow and glow_lights(media))
@@ -130,9 +130,3 @@ def field_layout(media: Sequence[PreparedMedium], lights, world_color, multiple:
     return FieldLayout(chans, amb, c, amb_ms, emission,
                        beams if any(b is not None for b in beams) else None, scatter,
                        extinction, discs if any(k is not None for k in discs) else None)
-
-
-def folds_disc(light) -> bool:
-    """Whether ``light``'s disc is folded into its own channels (discdepth.py): a point or
-    spot light with a radius."""
-    return light.kind in ("POINT", "SPOT") and float(getattr(light, "radius", 0.0) or 0.0) > 0.0
