@@ -1,4 +1,4 @@
-"""A lamp's disc beyond the march's reach, folded into the optical depth the field stores.
+"""A lamp's disc beyond the march's reach: the depth change the field stores for it.
 
 A point or spot light with a radius r shines from a disc of radius r facing the lit point x
 (lights.light_sample).  The march draws one disc point per sample and reads the optical depth
@@ -20,15 +20,16 @@ disc point, that makes the stretched reads average to the disc's mean transmitta
 per channel, with the disc's nodes (s_j, w_j) of lights.disc_transmittance (Gauss-Legendre in
 the disc's squared radius, turned by the golden angle) and tau_j each node's path marched
 through the solid media (its own path's depth less the stretched centre's, added to the
-field's: what the march does within the reach).  D is made on a lattice
-of every ``stride``-th voxel (Tuning.disc_fold_stride) and interpolated to the voxels (it
-follows where the disc's paths cross the smoke, which changes slowly next to the voxels' own
-depth).  Within the reach the march ignores it and marches each disc point's path, as
-before.  The marches cost 2 ``nodes`` (Tuning.disc_fold_nodes) per lattice point the medium
-fills, whatever the image's size; a finer ``stride`` converges to the disc's exact mean at the
-voxels.  What it leaves: the phase function (and a spot's cone) weighs the disc's directions
-unequally, which the unweighted mean ignores; the disc subtends under 27 degrees beyond the
-reach (Tuning.disc_exact), and the march's exact zone takes the nearer points.
+field's: what the march does within the reach).  D is made on a lattice of every
+``stride``-th voxel (Tuning.disc_fold_stride; the world light's, lattice.coarse_lattice) and
+interpolated to the voxels (it follows where the disc's paths cross the smoke, which changes
+slowly next to the voxels' own depth).  Within the reach the march ignores it and marches
+each disc point's path, as before.  The marches cost 2 ``nodes`` (Tuning.disc_fold_nodes)
+per lattice point the medium fills, whatever the image's size; a finer ``stride`` converges
+to the disc's exact mean at the voxels.  What it leaves: the phase function (and a spot's
+cone) weighs the disc's directions unequally, which the unweighted mean ignores; the disc
+subtends under 27 degrees beyond the reach (Tuning.disc_exact), and the march's exact zone
+takes the nearer points.
 
 Units: world metres; optical depths dimensionless, RGB.
 """
@@ -36,8 +37,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import kernels
 from ..lights import disc_transmittance
 from ..parallel import run_chunks
+from .lattice import coarse_lattice
 
 __all__ = ["fold_disc"]
 
@@ -47,46 +50,19 @@ NEGLIGIBLE = 1e-3  # optical depth: a disc that changes none by this much (0.1 %
 CHUNK = 2048      # lattice points marched per call (threads share the chunks; Esc between)
 
 
-def _axis_weights(n: int, stride: int):
-    """The coarse indices along an axis of ``n`` voxels (every ``stride``-th and the last)
-    and, per voxel, its two coarse neighbours' positions in that list and the upper one's
-    linear weight."""
-    coarse = np.unique(np.r_[np.arange(0, n, stride), n - 1])
-    i = np.arange(n)
-    hi = np.clip(np.searchsorted(coarse, i, side="left"), 0, len(coarse) - 1)
-    lo = np.clip(hi - 1, 0, len(coarse) - 1)
-    exact = coarse[hi] == i
-    lo = np.where(exact, hi, lo)
-    span = np.maximum(coarse[hi] - coarse[lo], 1)
-    wt = np.where(exact, 0.0, (i - coarse[lo]) / span)
-    return coarse, lo, hi, wt
-
-
-def _shares(pm, field, channel, light, depth, stride, nodes, threads, should_cancel):
-    """(axes, D on the lattice of every ``stride``-th voxel (LX,LY,LZ,3), the lattice points
-    marched, the largest |D| among those inside the medium (inf where none is): one outside,
-    by a face, sees its disc's paths cross the face's voxels differently, which only the
-    voxels on the face read)."""
-    shape = pm.grid.shape[:3]
-    axes = [_axis_weights(n, stride) for n in shape]
-    cshape = tuple(len(a[0]) for a in axes)
-    ci = np.stack(np.meshgrid(*[a[0] for a in axes], indexing="ij"), -1).reshape(-1, 3)
-    # the lattice points whose stride-wide neighbourhood holds medium, from a summed-volume
-    # table of the occupancy
-    lo = np.maximum(ci - stride, 0)
-    hi = np.minimum(ci + stride + 1, np.array(shape))
-    sat = np.zeros(tuple(n + 1 for n in shape), np.int64)
-    sat[1:, 1:, 1:] = (pm.grid > 0.0).astype(np.int64).cumsum(0).cumsum(1).cumsum(2)
-    total = np.zeros(len(ci), np.int64)
-    for corner in range(8):
-        pick = [(hi if (corner >> a) & 1 else lo)[:, a] for a in range(3)]
-        total += (-1) ** (3 - bin(corner).count("1")) * sat[pick[0], pick[1], pick[2]]
+def _changes(pm, field, channel, light, depth, stride, nodes, threads, should_cancel):
+    """(D (LX,LY,LZ,3) float32 on lattice.coarse_lattice's points ``stride`` voxels apart, 0
+    where not made; the points marched; the largest |D| among those inside the medium, inf
+    where none is: one outside, by a face, sees its disc's paths cross the face's voxels
+    differently, which only the voxels on the face read)."""
+    shape, flat, pts = coarse_lattice(pm, stride)
+    # a last point beyond the grid's last voxel reads that voxel's depth (coarse_lattice)
+    ijk = np.minimum(np.stack(np.unravel_index(flat, shape), axis=1) * stride,
+                     np.array(pm.grid.shape[:3]) - 1)
     voxel = float(pm.voxel_size)
-    pts = pm.to_world(ci.astype(np.float64))
     dc = np.linalg.norm(pts - np.asarray(light.position, np.float64), axis=1)
-    tau = field[ci[:, 0], ci[:, 1], ci[:, 2], channel:channel + 3].astype(np.float64)
-    todo = np.flatnonzero((total > 0) & (dc > voxel) & (tau.max(axis=1) < TAU_CAP))
-    change = np.zeros((len(ci), 3))
+    tau = field[ijk[:, 0], ijk[:, 1], ijk[:, 2], channel:channel + 3].astype(np.float64)
+    todo = np.flatnonzero((dc > voxel) & (tau.max(axis=1) < TAU_CAP))
     d = np.zeros((len(todo), 3))
 
     def work(a, b):
@@ -98,36 +74,34 @@ def _shares(pm, field, channel, light, depth, stride, nodes, threads, should_can
                           - np.log(np.where(ok, exact, 1.0)), 0.0)
 
     run_chunks(len(todo), CHUNK, work, threads, should_cancel)
-    change[todo] = d
-    inside = pm.grid[tuple(ci[todo].T)] > 0.0   # the medium's own points decide
-    return axes, change.reshape(cshape + (3,)), len(todo), \
-        float(np.abs(d[inside]).max()) if inside.any() else np.inf
+    lattice = np.zeros(tuple(shape) + (3,), np.float32)
+    lattice.reshape(-1, 3)[flat[todo]] = d
+    inside = pm.grid[tuple(ijk[todo].T)] > 0.0   # the medium's own points decide
+    return lattice, len(todo), float(np.abs(d[inside]).max()) if inside.any() else np.inf
 
 
 def fold_disc(pm, field: np.ndarray, channel: int, disc_channel: int, light, depth,
               stride: int, nodes: int, threads: int = 0, should_cancel=None) -> int:
     """Write ``light``'s disc's depth change D (module docstring) into
-    ``field[..., disc_channel:disc_channel+3]``, from the depth to its centre in
-    ``field[..., channel:channel+3]`` at ``pm``'s voxels (0 within a voxel of the lamp and
-    where the light is gone).  ``depth``: callable (points, unit dirs, lengths) -> (N,3)
-    optical depth through the solid media.  A pilot lattice ``PILOT`` times coarser (at most
-    a ``PILOT``-th of the grid's shortest side) comes first: where the disc changes no depth inside the medium on it by ``NEGLIGIBLE`` (a lamp
-    inside a homogeneous medium, whose disc points' paths stay in it: the stretch is exact), D stays
-    0 and the lattice is not marched.  Returns the lattice points whose disc was marched;
-    raises cancel.Cancelled on Esc."""
+    ``field[..., disc_channel:disc_channel+3]`` (float32, C-contiguous), from the depth to its
+    centre in ``field[..., channel:channel+3]`` at ``pm``'s voxels (0 within a voxel of the
+    lamp and where the light is gone), made on lattice.coarse_lattice's points and read
+    trilinearly at the voxels (kernels.upsample_into).  ``depth``: callable (points, unit
+    dirs, lengths) -> (N,3) optical depth through the solid media.  A pilot lattice
+    ``PILOT`` times coarser (at most a ``PILOT``-th of the grid's shortest side) comes first:
+    where the disc changes no depth inside the medium on it by ``NEGLIGIBLE`` (a lamp inside
+    a homogeneous medium, whose disc points' paths stay in it: the stretch is exact), D
+    stays 0 and the lattice is not marched.  Returns the lattice points whose disc was
+    marched; raises cancel.Cancelled on Esc."""
     marched = 0
     pilot = min(PILOT * stride, max(stride, min(pm.grid.shape[:3]) // PILOT))
     if pilot > stride:
-        got = _shares(pm, field, channel, light, depth, pilot, nodes, threads, should_cancel)
-        marched = got[2]
-        if got[3] < NEGLIGIBLE:
+        _, marched, largest = _changes(pm, field, channel, light, depth, pilot, nodes, threads,
+                                       should_cancel)
+        if largest < NEGLIGIBLE:
             field[..., disc_channel:disc_channel + 3] = 0.0
             return marched
-    axes, c, n, _ = _shares(pm, field, channel, light, depth, stride, nodes, threads,
-                            should_cancel)
-    # interpolated to the voxels, separably
-    for a, (_, lo_a, hi_a, wt) in enumerate(axes):
-        w = np.expand_dims(wt, tuple(i for i in range(4) if i != a))
-        c = np.take(c, lo_a, axis=a) * (1.0 - w) + np.take(c, hi_a, axis=a) * w
-    field[..., disc_channel:disc_channel + 3] = c.astype(np.float32)
+    lattice, n, _ = _changes(pm, field, channel, light, depth, stride, nodes, threads,
+                             should_cancel)
+    kernels.upsample_into(field, disc_channel, lattice, stride, None)
     return marched + n
