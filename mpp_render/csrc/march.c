@@ -615,6 +615,19 @@ static int parse_media(March *c, PyObject *sss, PyObject *gsl, PyObject *vox, Py
     return 0;
 }
 
+/* A light record's optional 3-channel field (the forward peak's light, the disc's change) for
+ * a light lit at channel `cf` (>= 0): the channel `v`, -1 for none (below 1), or -2 with
+ * `msg` raised where it lies outside a medium's field. */
+static int optional_channel(const March *c, double cf, double v, const char *msg) {
+    int ch = (cf >= 0 && v >= 1.0 && v < 1e9) ? (int)v : -1;
+    for (int m = 0; m < c->ng; m++)
+        if (ch >= 0 && ch + 3 > c->g[m].nc) {
+            PyErr_SetString(PyExc_ValueError, msg);
+            return -2;
+        }
+    return ch;
+}
+
 /* The light records (their kinds and channels checked against the fields) and the ambient
  * channel. */
 static int parse_lights(March *c, PyObject *plights) {
@@ -630,20 +643,12 @@ static int parse_lights(March *c, PyObject *plights) {
     for (Py_ssize_t l = 0; l < nl; l++) {
         double cf = LR[l * LIGHT_FIELDS + L_CHANNEL], kf = LR[l * LIGHT_FIELDS + L_KIND];
         c->indirect[l] = LR[l * LIGHT_FIELDS + L_INDIRECT] > 0.5;
-        double bf = LR[l * LIGHT_FIELDS + L_BEAM];
-        c->beam[l] = (cf >= 0 && bf >= 1.0 && bf < 1e9) ? (int)bf : -1;
-        for (int m = 0; m < c->ng; m++)
-            if (c->beam[l] >= 0 && c->beam[l] + 3 > c->g[m].nc) {
-                PyErr_SetString(PyExc_ValueError, "lights: beam channel outside the fields");
-                return -1;
-            }
-        double df = LR[l * LIGHT_FIELDS + L_DISC];
-        c->disc[l] = (cf >= 0 && df >= 1.0 && df < 1e9) ? (int)df : -1;
-        for (int m = 0; m < c->ng; m++)
-            if (c->disc[l] >= 0 && c->disc[l] + 3 > c->g[m].nc) {
-                PyErr_SetString(PyExc_ValueError, "lights: disc channel outside the fields");
-                return -1;
-            }
+        c->beam[l] = optional_channel(c, cf, LR[l * LIGHT_FIELDS + L_BEAM],
+                                      "lights: beam channel outside the fields");
+        if (c->beam[l] < -1) return -1;
+        c->disc[l] = optional_channel(c, cf, LR[l * LIGHT_FIELDS + L_DISC],
+                                      "lights: disc channel outside the fields");
+        if (c->disc[l] < -1) return -1;
         if (!(kf == KIND_POINT || kf == KIND_SPOT || kf == KIND_SUN || kf == KIND_AREA)) {
             PyErr_SetString(PyExc_ValueError, "lights: unknown kind");
             return -1;
