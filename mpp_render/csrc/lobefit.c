@@ -15,8 +15,7 @@ const char lobe_ratio_doc[] =
 /* In place along one axis of a C-order (X,Y,Z) array: each value the sum of the 2r+1 around
  * it (0 beyond), as the difference of the running sums S(min(i+r, n-1)) - S(i-r-1), the
  * twin's cumulative sums over the zero-padded line. */
-static void box_axis(double *a, const Py_ssize_t n3[3], int axis, int r, double *line,
-                     double *pre) {
+static void box_axis(double *a, const Py_ssize_t n3[3], int axis, int r, double *pre) {
     Py_ssize_t n = n3[axis], stride = axis == 0 ? n3[1] * n3[2] : (axis == 1 ? n3[2] : 1);
     Py_ssize_t outer = n3[0] * n3[1] * n3[2] / n;
     for (Py_ssize_t o = 0; o < outer; o++) {
@@ -27,8 +26,7 @@ static void box_axis(double *a, const Py_ssize_t n3[3], int axis, int r, double 
         else base = o * n3[2];
         double s = 0.0;
         for (Py_ssize_t i = 0; i < n; i++) {
-            line[i] = a[base + i * stride];
-            s += line[i];
+            s += a[base + i * stride];
             pre[i] = s;
         }
         for (Py_ssize_t i = 0; i < n; i++) {
@@ -82,7 +80,7 @@ PyObject *lobe_ratio(PyObject *self, PyObject *args) {
     }
     result = PyByteArray_FromStringAndSize(NULL, pts * 3 * (Py_ssize_t)sizeof(double));
     if (!result) goto done;
-    work = (double *)malloc(((size_t)LOBE_SUMS * (size_t)pts + 2 * (size_t)longest + 2) *
+    work = (double *)malloc(((size_t)LOBE_SUMS * (size_t)pts + (size_t)longest + 1) *
                             sizeof(double));
     if (!work) {
         Py_CLEAR(result);
@@ -93,8 +91,7 @@ PyObject *lobe_ratio(PyObject *self, PyObject *args) {
         double *out = (double *)PyByteArray_AS_STRING(result);
         const double *MD = (const double *)bd.view.buf, *MC = (const double *)bc.view.buf,
                      *U = (const double *)bu.view.buf;
-        double *S = work, *line = work + (size_t)LOBE_SUMS * (size_t)pts,
-               *pre = line + longest + 1;
+        double *S = work, *pre = work + (size_t)LOBE_SUMS * (size_t)pts;
         Py_BEGIN_ALLOW_THREADS
         memcpy(out, MD, (size_t)pts * 3 * sizeof(double));
         for (int c = 0; c < channels; c++) {
@@ -114,7 +111,7 @@ PyObject *lobe_ratio(PyObject *self, PyObject *args) {
                     }
             for (int q = 0; q < LOBE_SUMS; q++)
                 for (int axis = 0; axis < 3; axis++)
-                    box_axis(S + q * pts, n3, axis, r, line, pre);
+                    box_axis(S + q * pts, n3, axis, r, pre);
             for (Py_ssize_t i = 0; i < n3[0]; i++)
                 for (Py_ssize_t j = 0; j < n3[1]; j++)
                     for (Py_ssize_t k = 0; k < n3[2]; k++) {
