@@ -22,9 +22,9 @@ from typing import List, NamedTuple, Optional
 
 import numpy as np
 
-from . import kernels_np
+from . import kernels_np, lights
 from .cancel import Cancelled
-from .lightrecord import LIGHT_FIELDS
+from .lightrecord import KIND_AREA, L_KIND, L_ROUND, LIGHT_FIELDS
 from .media import BRICK
 from .walk import DLOG_RHO, LOG_RHO0
 
@@ -186,6 +186,24 @@ def nodal_fit(mean, offsets, mass, signed: int, ridge: float, *, backend=None):
     buf = _c.nodal_fit(m, _f64(offsets).reshape(m.shape[:3] + (3,)),
                        _f64(mass).reshape(m.shape[:3]), int(signed), float(ridge))
     return np.frombuffer(buf, np.float32).reshape(m.shape)
+
+
+def light_sample(rec, x, u1, u2, normal=None, *, backend=None):
+    """lights.light_sample of packed light ``rec`` at points ``x`` (N,3, m) with jitter
+    ``u1``, ``u2`` (N,) in [0, 1): (propagation direction (N,3), irradiance (N,3), unit
+    direction to the centre (N,3), the centre's distance (N,), the sampled point's (N,)).
+    ``normal`` (N,3) warps a rectangle light's points towards a surface's cosine
+    (lights.cosine_warp), which only the numpy twin does: such calls run there."""
+    rec = _f64(rec).reshape(-1)
+    rect = int(rec[L_KIND]) == KIND_AREA and not rec[L_ROUND] > 0
+    if not _on_c(backend) or (normal is not None and rect):
+        return lights.light_sample(rec, x, u1, u2, normal=normal)
+    x = _f64(x).reshape(-1, 3)
+    n = len(x)
+    u1 = _f64(np.broadcast_to(u1, (n,)))
+    u2 = _f64(np.broadcast_to(u2, (n,)))
+    out = np.frombuffer(_c.light_samples(rec, x, u1, u2), np.float64).reshape(n, 11).copy()
+    return out[:, 0:3], out[:, 3:6], out[:, 6:9], out[:, 9], out[:, 10]
 
 
 def lobe_ratio(md, mc, u, r: int, channels: int = 3, *, backend=None):

@@ -213,7 +213,7 @@ def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, r
     the gathered light (surfacecache.SurfaceCache.lookup bound to the points' pixels): where
     ``ok`` its ``incident`` stands for the gathers (``gathered``), which only the others
     trace."""
-    from .lights import is_dark, light_sample, pack_light
+    from .lights import is_dark, pack_light
 
     n_pts = len(p)
     nrm = facing_normals(ss, tri, d)
@@ -230,7 +230,8 @@ def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, r
         # distance: the shadow ray and its optical depth run to that point, not as far as
         # the centre along the drawn direction (in smoke round a lamp, or fog under a large
         # area light, the centre's distance leaves out or adds medium)
-        wi, e, _, _, reach = light_sample(pack_light(light), po, u[:, 0], u[:, 1], normal=nrm)
+        wi, e, _, _, reach = kernels.light_sample(pack_light(light), po, u[:, 0], u[:, 1],
+                                                     normal=nrm)
         to_l = -wi
         cos = np.einsum("ij,ij->i", nrm, to_l)
         lit = np.flatnonzero(cos > 0)

@@ -317,7 +317,7 @@ def tail(fog: Medium, lights: List[Light], origins, dirs, s0, s1, nodes: int = T
     pos = st[st > 0]
     live = np.flatnonzero(length > 0)
     if (used or far is not None) and pos.size and np.any(ss > 0) and live.size:
-        from .lights import light_sample
+        from .kernels import light_sample
         sig = float(pos.min())
         recs = [pack_light(li) for li in used]
         with np.errstate(over="ignore"):

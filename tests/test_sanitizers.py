@@ -28,7 +28,7 @@ def test_kernels_under_asan_and_ubsan(tmp_path):
     for name in ("test_fuzz.py", "test_kernels.py", "test_sweep.py", "test_skip.py", "test_pyramid.py",
                  "test_paths.py", "test_paths_world.py", "test_paths_media.py",
                  "test_sharp_surface.py", "test_moments.py", "test_nodal.py",
-                 "test_lobefit.py",
+                 "test_lobefit.py", "test_light_samples.py",
                  "rays.py",          # the tests' ray helper (test_kernels imports it)
                  "test_enclosed.py"):  # its scenes (test_nodal imports them)
         shutil.copy(REPO / "tests" / name, work / "tests" / name)
@@ -50,7 +50,7 @@ def test_kernels_under_asan_and_ubsan(tmp_path):
                           "tests/test_paths_world.py", "tests/test_paths_media.py",
                           "tests/test_sharp_surface.py",
                           "tests/test_moments.py", "tests/test_nodal.py",
-                          "tests/test_lobefit.py",
+                          "tests/test_lobefit.py", "tests/test_light_samples.py",
                           # the slowest case runs the numpy twins alone: no C to check
                           "--deselect", "tests/test_kernels.py::"
                           "test_an_indirect_lights_single_scattering_is_multiple[numpy]"],

@@ -1,6 +1,6 @@
 /* mpp_render._kernels: the method table.  Each kernel lives in its own file (optical_depth.c,
  * sweep.c, march.c, upsample.c, trilinear.c, paths.c, intersect.c, intervals.c, nodal.c,
- * lobefit.c) over the shared headers common.h
+ * lobefit.c, lightsample.c) over the shared headers common.h
  * (buffers, grids, trilinear reads, random numbers), bricks.h (empty space), light.h (the light
  * record) and triangles.h (rays against triangles).
  */
@@ -48,6 +48,7 @@ static PyMethodDef methods[] = {
     {"walk_depth", walk_depth, METH_VARARGS, walk_depth_doc},
     {"nodal_fit", nodal_fit, METH_VARARGS, nodal_fit_doc},
     {"lobe_ratio", lobe_ratio, METH_VARARGS, lobe_ratio_doc},
+    {"light_samples", light_samples, METH_VARARGS, light_samples_doc},
     {"light_layout", light_layout, METH_NOARGS, light_layout_doc},
     {NULL, NULL, 0, NULL},
 };

@@ -1,0 +1,81 @@
+"""The compiled light sample (csrc/lightsample.c, kernels.light_sample) against its numpy twin
+(lights.light_sample): every kind of light, points near and inside a lamp's radius, a
+rectangle's cosine warp left to numpy, and bad input refused with a message."""
+import numpy as np
+import pytest
+
+from mpp_render import kernels, lights
+from mpp_render.lightrecord import L_KIND
+from mpp_render.lights import pack_light
+from test_kernels import all_lights, rect_light, unjittered_lights
+
+needs_c = pytest.mark.skipif(kernels._c is None, reason="compiled kernels not built")
+
+
+def points(n=4000, seed=3):
+    """Points round the test lights, a tenth of them within 0.15 m of the point light's
+    centre (inside its 0.2 m radius), with their jitter."""
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(-3.0, 4.0, (n, 3))
+    x[: n // 10] = np.array([1.5, -1.0, 0.5]) + rng.uniform(-0.15, 0.15, (n // 10, 3))
+    return x, rng.random(n), rng.random(n)
+
+
+def agree(a, b):
+    for p, q in zip(a, b):
+        p, q = np.asarray(p, np.float64), np.asarray(q, np.float64)
+        assert p.shape == q.shape
+        fin = np.isfinite(p)
+        assert np.array_equal(fin, np.isfinite(q))   # a sun's distances are inf in both
+        if fin.any():
+            np.testing.assert_allclose(q[fin], p[fin], rtol=1e-8,
+                                       atol=1e-12 * np.abs(p[fin]).max())
+
+
+@needs_c
+@pytest.mark.parametrize("light", all_lights() + [rect_light()] + unjittered_lights(),
+                         ids=lambda lt: f"{lt.kind}-{lt.name}-r{lt.radius or 0}")
+def test_twins_agree_for_every_kind(light):
+    x, u1, u2 = points()
+    rec = pack_light(light)
+    a = lights.light_sample(rec, x, u1, u2)
+    b = kernels.light_sample(rec, x, u1, u2, backend="c")
+    agree(a, b)
+    assert np.isfinite(b[1]).all() and (b[1] >= 0.0).all()
+    if np.any(light.strength > 0) and light.kind != "SUN":
+        assert b[1].max() > 0.0                       # the light reached some points
+    if (light.radius or 0.0) > 0.0:                   # the jitter moves a lamp's disc point
+        c = kernels.light_sample(rec, x, 1.0 - u1, u2, backend="c")
+        assert np.abs(c[0] - b[0]).max() > 1e-3
+
+
+@needs_c
+def test_a_surfaces_normal_warps_only_a_rectangle_and_only_numpy_does_it():
+    x, u1, u2 = points()
+    nrm = np.tile([0.0, 0.0, 1.0], (len(x), 1))
+    rect = pack_light(rect_light())
+    warped = kernels.light_sample(rect, x, u1, u2, normal=nrm)       # numpy's cosine warp
+    agree(lights.light_sample(rect, x, u1, u2, normal=nrm), warped)
+    assert np.abs(warped[0] - kernels.light_sample(rect, x, u1, u2)[0]).max() > 1e-3
+    for light in all_lights():                       # no other kind reads the normal
+        rec = pack_light(light)
+        agree(lights.light_sample(rec, x, u1, u2, normal=nrm),
+              kernels.light_sample(rec, x, u1, u2, normal=nrm, backend="c"))
+
+
+@needs_c
+def test_bad_input_is_refused():
+    x, u1, u2 = points(10)
+    rec = pack_light(all_lights()[1])
+    with pytest.raises(ValueError, match="rec"):
+        kernels._c.light_samples(rec[:-1].copy(), x, u1, u2)
+    bad = rec.copy()
+    bad[L_KIND] = 7.0
+    with pytest.raises(ValueError, match="unknown kind"):
+        kernels._c.light_samples(bad, x, u1, u2)
+    with pytest.raises(ValueError, match="u1"):
+        kernels._c.light_samples(rec, x, u1[:5].copy(), u2)
+    with pytest.raises(ValueError, match="x"):
+        kernels._c.light_samples(rec, x.astype(np.float32), u1, u2)
+    empty = kernels.light_sample(rec, np.zeros((0, 3)), np.zeros(0), np.zeros(0), backend="c")
+    assert [a.shape[0] for a in empty] == [0] * 5
