@@ -262,7 +262,8 @@ class FrameMarch:
         t_single, t_emit, t_trans, t_multi = worldfog.tail(self.fog, self.lights, o, d, s0,
                                                            t_end, nodes=nodes, far=self.far,
                                                            glow=self.fog_glow,
-                                                           trilinear=kernels.trilinear)
+                                                           trilinear=kernels.trilinear,
+                                                           light_sample=kernels.light_sample)
         return dict(r, single=r["single"] + r["T"] * t_single,
                     multiple=r["multiple"] + r["T"] * t_multi,
                     emission=r["emission"] + r["T"] * t_emit, T=r["T"] * t_trans)

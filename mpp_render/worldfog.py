@@ -277,7 +277,7 @@ def far_field(fields) -> Optional[FarField]:
 
 
 def tail(fog: Medium, lights: List[Light], origins, dirs, s0, s1, nodes: int = TAIL_NODES,
-         far: Optional[FarField] = None, glow=None, trilinear=None):
+         far: Optional[FarField] = None, glow=None, trilinear=None, light_sample=None):
     """What the homogeneous fog adds to rays o + s d over s in [s0, s1] (s1 may be inf;
     nothing where s1 <= s0), as seen from s0: ``(single (N,3), emission (N,3),
     transmittance (N,3), multiple (N,3))``, radiance in W/(m^2 sr).  Single scattering of the
@@ -289,7 +289,9 @@ def tail(fog: Medium, lights: List[Light], origins, dirs, s0, s1, nodes: int = T
     multiple), exactly as in the endless fog (the surfaces' shade on it is left out beyond
     the grid).  Emission in channels without extinction over an infinite stretch would be
     infinite; it is left out there (the caller warns).  ``trilinear``: how ``far`` is read
-    (FarField.read)."""
+    (FarField.read).  ``light_sample``: how the lights are sampled at the nodes
+    (lights.light_sample's arguments and values; None: lights.light_sample itself; the frame
+    passes the compiled kernels.light_sample)."""
     o = np.asarray(origins, np.float64)
     d = np.asarray(dirs, np.float64)
     s0 = np.asarray(s0, np.float64)
@@ -317,7 +319,8 @@ def tail(fog: Medium, lights: List[Light], origins, dirs, s0, s1, nodes: int = T
     pos = st[st > 0]
     live = np.flatnonzero(length > 0)
     if (used or far is not None) and pos.size and np.any(ss > 0) and live.size:
-        from .kernels import light_sample
+        if light_sample is None:
+            from .lights import light_sample
         sig = float(pos.min())
         recs = [pack_light(li) for li in used]
         with np.errstate(over="ignore"):

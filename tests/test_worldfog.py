@@ -146,6 +146,38 @@ def test_the_frame_reads_the_far_field_with_the_compiled_trilinear_to_the_same_v
     np.testing.assert_allclose(half, 0.5 * ref, rtol=1e-12)
 
 
+def test_the_frame_samples_the_tails_lights_with_the_compiled_twin():
+    """tiles passes kernels.light_sample to the tail: a point light with a radius and a spot
+    give lights.light_sample's single scattering within 1e-9, and a sampler that returns
+    something else shows in the tail."""
+    from mpp_render import kernels
+    from mpp_render.lights import light_sample
+    f = fog(sigma_s=(0.08, 0.08, 0.04), sigma_a=(0.02, 0.05, 0.02), g=0.5)
+    m = np.eye(4)
+    m[:3, 3] = [1.0, 6.0, 3.0]
+    spot = Light("SPOT", "s", np.array([500.0, 400.0, 300.0]), position=m[:3, 3].copy(),
+                 direction=np.array([0.0, 0.0, -1.0]), matrix=m, spot_size=0.9, spot_blend=0.3,
+                 radius=0.4)
+    lamp = point((-1.0, 8.0, 0.5), 800.0)
+    lamp.radius = 0.3
+    rng = np.random.default_rng(4)
+    n = 64
+    o = np.tile([0.0, -8.0, 0.0], (n, 1))
+    d = rng.normal(size=(n, 3)) * 0.2 + [0.0, 1.0, 0.0]
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    s0, s1 = np.full(n, 2.0), np.full(n, 25.0)
+    ref = worldfog.tail(f, [spot, lamp], o, d, s0, s1)[0]
+    got = worldfog.tail(f, [spot, lamp], o, d, s0, s1, light_sample=kernels.light_sample)[0]
+    assert ref.max() > 0.0
+    np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-12 * ref.max())
+
+    def dimmed(*a, **k):
+        wi, e, wc, dc, ds = light_sample(*a, **k)
+        return wi, 0.5 * e, wc, dc, ds
+    half = worldfog.tail(f, [spot, lamp], o, d, s0, s1, light_sample=dimmed)[0]
+    np.testing.assert_allclose(half, 0.5 * ref, rtol=1e-12)
+
+
 def test_a_lamp_in_fog_lights_the_fog_beyond_its_grid():
     """The traced paths of a lamp in the fog leave a far field (worldfog.FarField) on a
     frustum box to the fog's view depth: its M is positive beyond the fog's grid, falls with
