@@ -102,6 +102,15 @@ VARIANTS = {
                            [("hide_lights", dict(kind="SUN")),
                             ("add_light", dict(kind="POINT", energy=400.0, radius=0.2,
                                                location=(0.0, 1.5, 0.3)))]),
+    # the fourth set (2026-12-06, thirty-sixth session): the camera inside a mesh volume, as
+    # an artist's fog box round a whole shot puts it
+    "v_fogbox_camera": ("p_spot_in_fogbox", "the camera moved inside the fog box, 0.4 m from "
+                        "its front face, looking in",
+                        [("camera", dict(location=(0.0, -1.6, 0.0)))]),
+    "v_cube_camera": ("p_point_in_cube", "density 0.5; the camera moved inside the cube, 0.9 m "
+                      "from the lamp, looking at it",
+                      [("volume", dict(density=0.5)),
+                       ("camera", dict(location=(0.0, -0.8, 0.0), rotation=(1.35, 0.0, 0.0)))]),
 }
 
 
@@ -179,6 +188,10 @@ def apply(sc, step: str, kw: dict) -> None:
             ob.location = (0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]),
                            lo[2] + kw["height"] * (hi[2] - lo[2]) + kw.get("above", 0.0))
         ob.rotation_euler = kw.get("rotation", (0.0, 0.0, 0.0))
+    elif step == "camera":
+        sc.camera.location = kw["location"]
+        if "rotation" in kw:
+            sc.camera.rotation_euler = kw["rotation"]
     elif step == "lift":
         for o in _volume_objects(sc):
             o.location.z += kw["dz"]
