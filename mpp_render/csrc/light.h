@@ -32,6 +32,11 @@
 #define KIND_SPOT 1
 #define KIND_SUN 2
 #define KIND_AREA 3
+
+/* Whether a record's L_KIND is one of the kinds above (the kernels refuse any other). */
+static inline int light_kind_known(double kf) {
+    return kf == KIND_POINT || kf == KIND_SPOT || kf == KIND_SUN || kf == KIND_AREA;
+}
 #define SPOT_DISC_POINTS 8  /* kernels_np.SPOT_DISC_POINTS */
 #define SPOT_DISC_PHI 0.6180339887498949
 #define SPOT_GATE_MARGIN 1.05

@@ -24,8 +24,7 @@ PyObject *light_samples(PyObject *self, PyObject *args) {
     if (get_buf(pu, &bu, 'd', 1, su, "u1") < 0 || get_buf(pv, &bv, 'd', 1, sv, "u2") < 0)
         goto done;
     const double *L = (const double *)br.view.buf;
-    double kf = L[L_KIND];
-    if (!(kf == KIND_POINT || kf == KIND_SPOT || kf == KIND_SUN || kf == KIND_AREA)) {
+    if (!light_kind_known(L[L_KIND])) {
         PyErr_SetString(PyExc_ValueError, "light_samples: unknown kind");
         goto done;
     }

@@ -649,7 +649,7 @@ static int parse_lights(March *c, PyObject *plights) {
         c->disc[l] = optional_channel(c, cf, LR[l * LIGHT_FIELDS + L_DISC],
                                       "lights: disc channel outside the fields");
         if (c->disc[l] < -1) return -1;
-        if (!(kf == KIND_POINT || kf == KIND_SPOT || kf == KIND_SUN || kf == KIND_AREA)) {
+        if (!light_kind_known(kf)) {
             PyErr_SetString(PyExc_ValueError, "lights: unknown kind");
             return -1;
         }
