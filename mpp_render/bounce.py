@@ -30,6 +30,7 @@ from typing import List
 
 import numpy as np
 
+from . import kernels
 from .lights import incident, is_dark
 from .media import PreparedMedium
 from .scene import Light, Surface
@@ -93,7 +94,7 @@ def surface_irradiance(media: List[PreparedMedium], lights: List[Light], pts, no
     for light in lights:
         if is_dark(light):
             continue
-        d, el = incident(light, pts)
+        d, el = incident(light, pts, sample=kernels.light_sample)
         cos = np.clip(-(d @ normal), 0.0, None)
         lit = cos > 0.0
         if not np.any(lit) or not np.any(el[lit] > 0.0):

@@ -31,13 +31,15 @@ Fields (offset: width; units):
   L_DISC 38: 1      the channel of its disc's depth change beyond the march's reach (a point
                     or spot light with a radius; precompute.FieldLayout.disc_channels,
                     precompute/discdepth.py), or < 1: none
-  39                unused
+  L_ANGLES 39: 2    a spot's half angle and the inner angle where its blend begins (rad; the
+                    half angle where it has no blend), the two angles of its light_sample's
+                    one-point test, worked out once
 """
 
-LIGHT_FIELDS = 40
+LIGHT_FIELDS = 41
 L_KIND, L_STRENGTH, L_POS, L_DIR, L_INV, L_COSHALF, L_BLEND, L_RADIUS = 0, 1, 4, 7, 10, 19, 20, 21
 L_AX, L_AY, L_AREA, L_NORMAL, L_NORMALIZE, L_ROUND, L_CHANNEL = 22, 25, 28, 29, 32, 33, 34
-L_COND, L_BEAM, L_INDIRECT, L_DISC = 35, 36, 37, 38
+L_COND, L_BEAM, L_INDIRECT, L_DISC, L_ANGLES = 35, 36, 37, 38, 39
 
 KIND_POINT, KIND_SPOT, KIND_SUN, KIND_AREA = 0, 1, 2, 3
 

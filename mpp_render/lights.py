@@ -30,9 +30,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .lightrecord import (KIND_AREA, KIND_POINT, KIND_SPOT, KIND_SUN, L_AREA, L_AX, L_AY, L_BEAM,
-                          L_BLEND, L_CHANNEL, L_COND, L_COSHALF, L_DIR, L_DISC, L_INDIRECT, L_INV,
-                          L_KIND, L_NORMAL, L_NORMALIZE, L_POS, L_RADIUS, L_ROUND, L_STRENGTH, LIGHT_FIELDS)
+from .lightrecord import (KIND_AREA, KIND_POINT, KIND_SPOT, KIND_SUN, L_ANGLES, L_AREA, L_AX, L_AY,
+                          L_BEAM, L_BLEND, L_CHANNEL, L_COND, L_COSHALF, L_DIR, L_DISC, L_INDIRECT,
+                          L_INV, L_KIND, L_NORMAL, L_NORMALIZE, L_POS, L_RADIUS, L_ROUND, L_STRENGTH,
+                          LIGHT_FIELDS)
 from .phase import orthonormal_basis
 from .rng import hash32
 from .scene import Light
@@ -42,6 +43,26 @@ from .scene import Light
 SPOT_DISC_POINTS = 8    # points of a sphere spot's disc its cone is averaged over (C twin)
 SPOT_DISC_PHI = 0.6180339887498949  # the lattice's second coordinate steps by the golden ratio
 SPOT_GATE_MARGIN = 1.05  # widens the disc's angular radius in the one-point test
+# cos and sin of 2 pi frac(i SPOT_DISC_PHI): the turn of the disc lattice's i-th azimuth from
+# its first (the C twin's table; tests/test_light_samples.py holds both to this formula)
+LAMP_DISC_TURN = np.array([[1.0, 0.0],
+                           [-0.7373688780783199, -0.6754902942615236],
+                           [0.08742572471695967, 0.9961710408648278],
+                           [0.6084388609788622, -0.7936007512916963],
+                           [-0.9847134853154288, 0.17418195037931125],
+                           [0.8437552948123968, 0.5367280526263234],
+                           [-0.2596043049014893, -0.9657150743757781],
+                           [-0.4609070247133709, 0.8874484292452537]])
+
+
+def disc_turn(i: int):
+    """(cos, sin) of 2 pi frac(i SPOT_DISC_PHI): LAMP_DISC_TURN's row, or beyond its rows
+    the formula."""
+    if i < len(LAMP_DISC_TURN):
+        return LAMP_DISC_TURN[i]
+    f = i * SPOT_DISC_PHI
+    f -= np.floor(f)
+    return np.cos(2.0 * np.pi * f), np.sin(2.0 * np.pi * f)
 
 
 def _disc(a, b, round_shape):
@@ -62,6 +83,19 @@ def _spot_cos(rec, v):
     in the light's local frame (its inverse matrix: non-uniform scale included)."""
     loc = v @ rec[L_INV:L_INV + 9].reshape(3, 3).T
     return -loc[:, 2] / np.maximum(np.sqrt(np.einsum("ij,ij->i", loc, loc)), 1e-30)
+
+
+def straddles(rec, wc, dc):
+    """(N,) whether the cone of a spot with a radius differs over its disc as seen from points
+    at unit directions ``wc`` (N,3) and distances ``dc`` (N,) from its centre: their angle to
+    the axis within the disc's angular radius (times SPOT_GATE_MARGIN and L_COND) of the
+    cone's edge or blend, or the point inside the lamp (light_sample's one-point test, the C
+    twin's)."""
+    th = np.arccos(np.clip(_spot_cos(rec, -wc), -1.0, 1.0))
+    inside = rec[L_RADIUS] < dc
+    spread = SPOT_GATE_MARGIN * rec[L_COND] * np.arcsin(
+        np.where(inside, rec[L_RADIUS] / np.where(inside, dc, 1.0), 1.0))
+    return ~(inside & ((th - spread > rec[L_ANGLES]) | (th + spread < rec[L_ANGLES + 1])))
 
 
 def light_sample(rec, x, u1, u2, disc_points: int = SPOT_DISC_POINTS, normal=None):
@@ -85,51 +119,28 @@ def light_sample(rec, x, u1, u2, disc_points: int = SPOT_DISC_POINTS, normal=Non
     vc = centre - x
     dc = np.sqrt(np.einsum("ij,ij->i", vc, vc))
     wc = vc / np.maximum(dc, 1e-30)[:, None]
-    a, b = _disc(2.0 * u1 - 1.0, 2.0 * u2 - 1.0, kind != KIND_AREA or rec[L_ROUND] > 0)
     if kind in (KIND_POINT, KIND_SPOT):
         radius = rec[L_RADIUS]
         t1 = t2 = np.zeros((n, 3))
         if radius > 0.0:
             t1, t2 = orthonormal_basis(-wc)
-        # a spot with a radius averages its cone over disc_points points of the disc
-        n_pts = disc_points if (kind == KIND_SPOT and radius > 0.0) else 1
-        many = np.full(n, n_pts > 1)
-        if n_pts > 1:  # one point where the cone is the same over the whole disc
-            th = np.arccos(np.clip(_spot_cos(rec, -wc), -1.0, 1.0))
-            inside = radius < dc
-            spread = SPOT_GATE_MARGIN * rec[L_COND] * np.arcsin(np.where(inside, radius / np.where(inside, dc, 1.0), 1.0))
-            ch, bl = rec[L_COSHALF], rec[L_BLEND]
-            th_out = np.arccos(ch)
-            th_in = np.arccos(min(ch + (1.0 - ch) * bl, 1.0)) if bl > 0.0 else th_out
-            many = ~(inside & ((th - spread > th_out) | (th + spread < th_in)))
-        esum = np.zeros(n)
-        lsum = np.zeros(n)
-        dsum = np.zeros((n, 3))
-        d = None
         # 1 - cos(theta_max) of the cone the facing disc subtends, without cancellation
         hyp = np.sqrt(dc * dc + radius * radius)
         omc_max = radius * radius / (hyp * (hyp + dc)) if radius > 0.0 else np.zeros(n)
         e_disc = 2.0 * omc_max / (radius * radius) if radius > 0.0 else np.zeros(n)
-        for i in range(n_pts):
-            if i > 0:
-                if not many.any():
-                    break
-                ua = u1 + i / disc_points
-                ub = i * SPOT_DISC_PHI
-                ub = u2 + (ub - np.floor(ub))
-                ua = np.where(ua >= 1.0, ua - 1.0, ua)
-                ub = np.where(ub >= 1.0, ub - 1.0, ub)
-                a, b = _disc(2.0 * ua - 1.0, 2.0 * ub - 1.0, True)
-            a, b = np.broadcast_to(a, (n,)), np.broadcast_to(b, (n,))
+
+        def emitted(s2, ca, sa):
+            """(direction, irradiance per unit intensity, distance) of the disc point of
+            squared radius s2 on the unit disc whose azimuth's cosine and sine (times
+            sin theta over the point's radius for the concentric map's) are ca, sa."""
             if radius > 0.0:
                 # Cycles' soft-falloff lamp (C twin): a disc facing x of radiance I/(pi r^2);
-                # the disc point (a, b) maps to a direction uniform in the disc's solid angle
-                s2 = a * a + b * b
+                # the disc point maps to a direction uniform in the disc's solid angle,
+                # 1 - cos theta = s2 (1 - cos theta_max)
                 omc = s2 * omc_max
                 cos_t = 1.0 - omc
                 sin_t = np.sqrt(np.maximum(omc * (2.0 - omc), 0.0))
-                rs = np.where(s2 > 0.0, sin_t / np.sqrt(np.where(s2 > 0.0, s2, 1.0)), 0.0)
-                di = -(wc * cos_t[:, None] + (t1 * a[:, None] + t2 * b[:, None]) * rs[:, None])
+                di = -(wc * cos_t[:, None] + (t1 * ca[:, None] + t2 * sa[:, None]) * sin_t[:, None])
                 r2 = 1.0 / e_disc
                 dist = dc / np.maximum(cos_t, 1e-12)  # to the disc along di
             else:
@@ -137,8 +148,6 @@ def light_sample(rec, x, u1, u2, disc_points: int = SPOT_DISC_POINTS, normal=Non
                 dist = np.sqrt(np.einsum("ij,ij->i", v, v))
                 di = v / np.maximum(dist, 1e-30)[:, None]
                 r2 = np.maximum(dist * dist, 1e-4 ** 2)
-            if i == 0:
-                d = di
             att = 1.0
             if kind == KIND_SPOT:
                 cos_t = _spot_cos(rec, di)
@@ -148,24 +157,54 @@ def light_sample(rec, x, u1, u2, disc_points: int = SPOT_DISC_POINTS, normal=Non
                 else:
                     q = np.clip((cos_t - ch) / ((1.0 - ch) * bl), 0.0, 1.0)
                     att = q * q * (3.0 - 2.0 * q)
-            w = np.broadcast_to(att / r2, (n,))
-            if i == 0:
-                e1 = w.copy()
-                ds1 = np.broadcast_to(dist, (n,)).copy()
-            else:
-                w = np.where(many, w, 0.0)
-            esum = esum + w
-            lsum = lsum + w * dist
-            dsum = dsum + w[:, None] * di
-        ds = np.where(esum > 0.0, lsum / np.where(esum > 0.0, esum, 1.0), dc) if radius > 0.0 else dc
-        if n_pts > 1:  # the irradiance-weighted mean direction, as the phase function sees it
+            return di, np.broadcast_to(att / r2, (n,)), np.broadcast_to(dist, (n,))
+
+        # one disc point (C twin): (u1, u2) by the concentric map, (0.5, 0.5) the centre
+        a, b = _disc(2.0 * u1 - 1.0, 2.0 * u2 - 1.0, True)
+        s2 = a * a + b * b
+        rs = np.where(s2 > 0.0, 1.0 / np.sqrt(np.where(s2 > 0.0, s2, 1.0)), 0.0)
+        d, esum, ds = emitted(s2, a * rs, b * rs)
+        if radius > 0.0:
+            ds = np.where(esum > 0.0, ds, dc)
+        else:
+            ds = dc
+        # a spot with a radius averages its cone over disc_points points of the disc where
+        # it straddles the cone (C twin): the lattice (1/2 + i / disc_points, frac(i
+        # SPOT_DISC_PHI)) shifted by (u1, u2) modulo 1 in polar coordinates on the unit disc
+        # (the squared radius and the azimuth over 2 pi), the azimuths one cos and sin
+        # turned by LAMP_DISC_TURN
+        many = straddles(rec, wc, dc) if (kind == KIND_SPOT and radius > 0.0 and disc_points > 1) \
+            else np.zeros(n, bool)
+        if many.any():
+            m = np.flatnonzero(many)
+            c0, s0 = np.cos(2.0 * np.pi * u2), np.sin(2.0 * np.pi * u2)
+            ew = np.zeros(n)
+            lsum = np.zeros(n)
+            dsum = np.zeros((n, 3))
+            for i in range(disc_points):
+                s2 = np.broadcast_to(u1 + 0.5 + i / disc_points, (n,))
+                s2 = np.where(s2 >= 1.0, s2 - 1.0, s2)
+                s2 = np.where(s2 >= 1.0, s2 - 1.0, s2)
+                ct, st = disc_turn(i)
+                di, w, dist = emitted(s2, c0 * ct - s0 * st, s0 * ct + c0 * st)
+                if i == 0:
+                    d0 = di   # the direction where no point of the lattice lights x
+                ew = ew + w
+                lsum = lsum + w * dist
+                dsum = dsum + w[:, None] * di
+            # the irradiance-weighted mean direction and distance, as the phase function and
+            # the optical depth see them
             dn = np.sqrt(np.einsum("ij,ij->i", dsum, dsum))
-            d = np.where((many & (dn > 0.0))[:, None], dsum / np.where(dn > 0.0, dn, 1.0)[:, None], d)
-            ds = np.where(many, ds, np.where(e1 > 0.0, ds1, dc)) if radius > 0.0 else dc
-            esum = np.where(many, esum / n_pts, e1)
-        e = s[None, :] / (4.0 * np.pi) * esum[:, None]
-        return d, e, wc, dc, ds
+            d = d.copy()
+            d[m] = np.where((dn[m] > 0.0)[:, None], dsum[m] / np.where(dn[m] > 0.0, dn[m], 1.0)[:, None], d0[m])
+            ds = np.array(ds, np.float64, copy=True)
+            ds[m] = np.where(ew[m] > 0.0, lsum[m] / np.where(ew[m] > 0.0, ew[m], 1.0), dc[m])
+            esum = np.array(esum, np.float64, copy=True)
+            esum[m] = ew[m] / disc_points
+        e = s[None, :] / (4.0 * np.pi) * np.asarray(esum)[:, None]
+        return d, e, wc, dc, np.asarray(ds, np.float64)
     # AREA
+    a, b = _disc(2.0 * u1 - 1.0, 2.0 * u2 - 1.0, rec[L_ROUND] > 0)
     omega = np.full(n, -1.0)
     src = centre + rec[L_AX:L_AX + 3] * a[:, None] + rec[L_AY:L_AY + 3] * b[:, None]
     if not rec[L_ROUND] > 0:
@@ -363,6 +402,16 @@ def area_geometry(light: Light):
 _KINDS = {"POINT": KIND_POINT, "SPOT": KIND_SPOT, "SUN": KIND_SUN, "AREA": KIND_AREA}
 
 
+def spot_angles(coshalf: float, blend: float):
+    """(half angle, inner angle) in radians of a spot whose half angle has cosine ``coshalf``
+    and whose blend is ``blend``: the inner angle is where its smoothstep begins, cosine
+    coshalf + (1 - coshalf) blend (the half angle itself without a blend)."""
+    th_out = float(np.arccos(np.clip(coshalf, -1.0, 1.0)))
+    if not blend > 0.0:
+        return th_out, th_out
+    return th_out, float(np.arccos(min(coshalf + (1.0 - coshalf) * blend, 1.0)))
+
+
 def pack_light(light: Light, channel: int = -1, beam: int = -1, disc: int = -1) -> np.ndarray:
     """The light as one float64 record of ``LIGHT_FIELDS`` (layout: lightrecord), the form
     the kernels read; ``channel`` is its optical-depth channel in the media fields or -1,
@@ -385,6 +434,7 @@ def pack_light(light: Light, channel: int = -1, beam: int = -1, disc: int = -1) 
     r[L_COND] = sv[0] / sv[-1] if sv[-1] > 0.0 and np.isfinite(sv[0] / sv[-1]) else 1e30
     r[L_COSHALF] = np.cos(0.5 * light.spot_size)
     r[L_BLEND] = max(light.spot_blend, 0.0)
+    r[L_ANGLES:L_ANGLES + 2] = spot_angles(r[L_COSHALF], r[L_BLEND])
     r[L_RADIUS] = max(light.radius, 0.0)
     if light.kind == "AREA":
         _, ax, ay, area = area_geometry(light)
@@ -400,17 +450,63 @@ def pack_light(light: Light, channel: int = -1, beam: int = -1, disc: int = -1) 
     return r
 
 
-def incident(light: Light, points, u=None):
+def incident(light: Light, points, u=None, sample=None):
     """(direction (N,3), irradiance RGB (N,3)) of ``light`` at world ``points`` (N,3).
 
-    ``u`` (N,2) in [0,1): jitter for lights with an extent (sphere radius, area emitters)."""
+    ``u`` (N,2) in [0,1): jitter for lights with an extent (sphere radius, area emitters).
+    ``sample``: light_sample or its compiled twin (kernels.light_sample, which the layers
+    above pass in), what a spot with a radius is sampled with (``spot_incident``)."""
     points = np.asarray(points, np.float64).reshape(-1, 3)
     if u is None:
         if light.kind == "AREA":
             return area_incident(light, points)
-        u = point_jitter(points) if light.kind == "SPOT" and (light.radius or 0.0) > 0.0 \
-            else np.full((len(points), 2), 0.5)
+        if light.kind == "SPOT" and (light.radius or 0.0) > 0.0:
+            return spot_incident(light, points, sample or light_sample)
+        u = np.full((len(points), 2), 0.5)
     d, e = light_sample(pack_light(light), points, u[:, 0], u[:, 1])[:2]
+    return d, e
+
+
+SPOT_SHIFTS = 8        # spot_incident's shifts of the disc lattice per axis near the lamp
+SPOT_NEAR = 8.0        # where the disc straddles the cone within this many radii of the lamp
+SPOT_SHIFT_ROWS = 1 << 20   # the rows sampled at once
+
+
+def spot_incident(light: Light, points, sample=None):
+    """(direction (N,3), irradiance RGB (N,3)) of a spot with a radius at ``points``, sampled
+    by ``sample`` (light_sample or its compiled twin): the disc lattice shifted by each
+    point's own jitter (point_jitter), and where the disc straddles the cone's edge or blend
+    (``straddles``) within SPOT_NEAR radii of the lamp the mean over SPOT_SHIFTS x
+    SPOT_SHIFTS shifts stratified about that jitter (SPOT_SHIFTS^2 SPOT_DISC_POINTS disc
+    points), the direction their irradiance-weighted mean.  With one shift a point near the
+    lamp, where the disc spans a wide angle across the cone, was off by up to tens of per
+    cent, the same for every seed; farther out the disc is narrow and each lattice point of
+    the paths sums many voxels (docs/method.md §6, *A spot's disc*)."""
+    sample = sample or light_sample
+    rec = pack_light(light)
+    u = point_jitter(points)
+    d, e, wc, dc, _ = sample(rec, points, u[:, 0], u[:, 1])
+    vary = np.flatnonzero((dc < SPOT_NEAR * rec[L_RADIUS]) & straddles(rec, wc, dc))
+    if len(vary) == 0:
+        return d, e
+    # the lattice repeats its first coordinate every 1 / SPOT_DISC_POINTS: the shifts
+    # stratify that cell along it, and the whole unit along the second
+    k = SPOT_SHIFTS * SPOT_SHIFTS
+    i, j = np.divmod(np.arange(k), SPOT_SHIFTS)
+    grid = np.stack([i / SPOT_DISC_POINTS, j], axis=1) / SPOT_SHIFTS      # (k,2)
+    d, e = d.copy(), e.copy()
+    per = max(1, SPOT_SHIFT_ROWS // k)
+    for a in range(0, len(vary), per):
+        idx = vary[a:a + per]
+        u0 = u[idx] / SPOT_SHIFTS
+        u0[:, 0] /= SPOT_DISC_POINTS
+        w = (u0[:, None, :] + grid[None, :, :]).reshape(-1, 2)
+        di, ei = sample(rec, np.repeat(points[idx], k, axis=0), w[:, 0], w[:, 1])[:2]
+        ei = ei.reshape(len(idx), k, 3)
+        dsum = np.einsum("nkc,nk->nc", di.reshape(len(idx), k, 3), ei.sum(axis=2))
+        n = np.sqrt(np.einsum("ij,ij->i", dsum, dsum))
+        e[idx] = ei.mean(axis=1)
+        d[idx] = np.where((n > 0.0)[:, None], dsum / np.where(n > 0.0, n, 1.0)[:, None], d[idx])
     return d, e
 
 

@@ -277,3 +277,41 @@ def test_each_medium_kind_answers_for_itself():
     assert fog.grid.min() == 0.0                        # the march's grid has one
     assert set(np.unique(mesh.path_density())) <= {0.0, 1.0}
     assert vdb.path_density().max() == pytest.approx(0.5)
+
+
+def test_a_spots_irradiance_near_its_lamp_is_the_discs_mean(monkeypatch):
+    """lights.incident of a spot with a radius (p_spot_in_fogbox's: 0.05 m, 25 degrees, blend
+    0.2) at voxel centres round the lamp: within SPOT_NEAR radii, where its disc spans a wide
+    angle across the cone, the mean over the disc lattice's stratified shifts is point by
+    point within 8 % of the disc's integral (a 40 x 40 grid of shifts; the sum of absolute
+    differences over the sum; 19 % with one shift per point, the same for every seed) and
+    within 1.5 % summed over the points, and the same with the compiled sampler."""
+    from mpp_render import kernels, lights
+    from mpp_render.lights import SPOT_NEAR, incident, light_sample, pack_light
+    m = np.eye(4)
+    pos = np.array([-1.0, 0.5, 3.7])
+    L = Light("SPOT", "s", np.full(3, 3000.0), position=pos, direction=np.array([0, 0, -1.0]),
+              matrix=m, radius=0.05, spot_size=math.radians(25), spot_blend=0.2)
+    rec = pack_light(L)
+    g = np.arange(-6, 7) * 0.0625 + 0.03125
+    x = np.stack([a.ravel() for a in np.meshgrid(g, g, g, indexing="ij")], 1) + pos
+    r = np.linalg.norm(x - pos, axis=1)
+    x = x[(r > L.radius) & (r < SPOT_NEAR * L.radius)]
+    grid = 40
+    conv = np.zeros(len(x))
+    for i in range(grid):
+        for j in range(grid):
+            conv += light_sample(rec, x, np.full(len(x), (i + 0.5) / grid),
+                                 np.full(len(x), (j + 0.5) / grid))[1][:, 0]
+    conv /= grid * grid
+    assert conv.sum() > 0.0
+    e = incident(L, x)[1][:, 0]
+    assert e.sum() == pytest.approx(conv.sum(), rel=0.015)
+    assert np.abs(e - conv).sum() < 0.08 * conv.sum()
+    with monkeypatch.context() as mp:
+        mp.setattr(lights, "SPOT_NEAR", 0.0)   # one shift per point
+        one = incident(L, x)[1][:, 0]
+    assert np.abs(e - conv).sum() < 0.4 * np.abs(one - conv).sum()
+    if kernels._c is not None:
+        ec = incident(L, x, sample=kernels.light_sample)[1][:, 0]
+        np.testing.assert_allclose(ec, e, rtol=1e-8, atol=1e-9 * e.max())

@@ -454,7 +454,7 @@ def test_the_compiled_light_record_is_lightrecords():
     mpp_render.lightrecord's layout, field by field."""
     from mpp_render import lightrecord
     assert kernels._c.light_layout() == lightrecord.layout()
-    assert lightrecord.layout()["LIGHT_FIELDS"] == 40 and len(lightrecord.layout()) == 24
+    assert lightrecord.layout()["LIGHT_FIELDS"] == 41 and len(lightrecord.layout()) == 25
 
 
 def test_the_layout_and_the_model_import_no_kernel():

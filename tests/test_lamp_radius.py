@@ -232,8 +232,10 @@ def test_a_spots_irradiance_without_jitter_carries_the_marchs_flux():
     """lights.incident without a jitter (what the precompute's sources read) gives a spot
     with a radius the flux of the march's jittered samples through a plane across its beam
     near the lamp, within 1 %: a jitter per point (lights.point_jitter).  One fixed jitter
-    for every point counted the penumbra 10 % high there (fog_beam's spot), and the paths'
-    source with it; the same point gets the same jitter in any call."""
+    for every point is off there (fog_beam's spot; the paths' source with it): it counted the
+    penumbra 10 % high while the disc lattice was read by the concentric map, 8 % low since
+    it is read in polar coordinates (its squared radii i / 8 at the fixed jitter).  The same
+    point gets the same jitter in any call."""
     from mpp_render.lights import incident, light_sample, point_jitter
     m = np.eye(4)
     m[:3, :3] = np.array([[0, 0, -1.0], [0, 1, 0], [1, 0, 0]])   # local -Z along +x
@@ -252,5 +254,5 @@ def test_a_spots_irradiance_without_jitter_carries_the_marchs_flux():
     got = incident(spot, P)[1][:, 0].sum() * dA
     fixed = light_sample(pack_light(spot), P, np.full(n, 0.5), np.full(n, 0.5))[1][:, 0].sum() * dA
     assert got == pytest.approx(marched, rel=0.01), (got, marched)
-    assert fixed > 1.05 * marched
+    assert abs(fixed / marched - 1.0) > 0.05
     assert np.array_equal(point_jitter(P[::-1])[::-1], point_jitter(P))

@@ -79,3 +79,56 @@ def test_bad_input_is_refused():
         kernels._c.light_samples(rec, x.astype(np.float32), u1, u2)
     empty = kernels.light_sample(rec, np.zeros((0, 3)), np.zeros(0), np.zeros(0), backend="c")
     assert [a.shape[0] for a in empty] == [0] * 5
+
+
+def test_the_disc_lattice_turns_are_the_golden_ratio_steps():
+    """LAMP_DISC_TURN (and the C twin's copy of it, which test_twins_agree_for_every_kind
+    reads through a spot with a radius) is cos, sin of 2 pi frac(i SPOT_DISC_PHI)."""
+    i = np.arange(len(lights.LAMP_DISC_TURN))
+    f = i * lights.SPOT_DISC_PHI - np.floor(i * lights.SPOT_DISC_PHI)
+    np.testing.assert_allclose(lights.LAMP_DISC_TURN, np.stack([np.cos(2 * np.pi * f),
+                                                                np.sin(2 * np.pi * f)], 1),
+                               rtol=0, atol=1e-15)
+    assert len(lights.LAMP_DISC_TURN) == lights.SPOT_DISC_POINTS
+    assert np.allclose(lights.disc_turn(11), [np.cos(2 * np.pi * (11 * lights.SPOT_DISC_PHI % 1)),
+                                              np.sin(2 * np.pi * (11 * lights.SPOT_DISC_PHI % 1))])
+
+
+@needs_c
+def test_a_lamps_disc_points_are_uniform_in_its_solid_angle():
+    """Over a grid of jitters the directions a lamp with a radius sends fill the cone its disc
+    subtends evenly: 1 - cos of their angle to the centre uniform on [0, 1 - cos theta_max]
+    (mean and second moment), the azimuth round it uniform (its mean cosine and sine 0)."""
+    from test_kernels import all_lights
+    lamp = next(lt for lt in all_lights() if lt.kind == "POINT" and (lt.radius or 0) > 0)
+    rec = pack_light(lamp)
+    k = 128
+    u = (np.arange(k) + 0.5) / k
+    u1, u2 = (a.ravel() for a in np.meshgrid(u, u))
+    x = np.tile(lamp.position + np.array([0.0, 0.0, 0.7]), (len(u1), 1))
+    d, _, wc, dc, _ = kernels.light_sample(rec, x, u1, u2, backend="c")
+    r = lamp.radius
+    hyp = np.hypot(dc[0], r)
+    omc_max = r * r / (hyp * (hyp + dc[0]))
+    q = (1.0 + np.einsum("ij,ij->i", d, wc)) / omc_max      # d points away from the lamp
+    assert q.min() > -1e-6 and q.max() < 1.0 + 1e-6
+    assert q.mean() == pytest.approx(0.5, abs=1e-3) and (q * q).mean() == pytest.approx(1 / 3, abs=1e-3)
+    t1, t2 = lights.orthonormal_basis(-wc[:1])
+    side = d - np.einsum("ij,ij->i", d, -wc)[:, None] * -wc
+    ang = np.arctan2(side @ t2[0], side @ t1[0])
+    assert abs(np.cos(ang).mean()) < 1e-3 and abs(np.sin(ang).mean()) < 1e-3
+
+
+@needs_c
+def test_the_unjittered_sample_of_a_lamp_with_a_radius_is_its_centre():
+    """The callers' unjittered sample, (0.5, 0.5) (the march's test of how fast the light
+    varies along a ray, the world fog's tail, a mesh volume's flattened levels), draws the
+    centre of a lamp's disc in both twins: the propagation direction is the centre's."""
+    from test_kernels import all_lights
+    x, _, _ = points(500)
+    half = np.full(len(x), 0.5)
+    for lamp in (lt for lt in all_lights() if lt.kind == "POINT" and (lt.radius or 0) > 0):
+        rec = pack_light(lamp)
+        for d, _, wc, _, _ in (lights.light_sample(rec, x, half, half),
+                               kernels.light_sample(rec, x, half, half, backend="c")):
+            np.testing.assert_allclose(d, -wc, rtol=0, atol=1e-12)

@@ -8,7 +8,7 @@
 
 #include "common.h"
 
-#define LIGHT_FIELDS 40
+#define LIGHT_FIELDS 41
 #define L_KIND 0
 #define L_STRENGTH 1
 #define L_POS 4
@@ -28,6 +28,7 @@
 #define L_BEAM 36      /* the channel of the forward peak's light (W/m^2), < 1: none */
 #define L_INDIRECT 37  /* 1: scattered light (a surface's bounce): its single scattering is multiple */
 #define L_DISC 38      /* the channel of its disc's depth change beyond the reach, < 1: none */
+#define L_ANGLES 39    /* a spot's half angle and its blend's inner angle (rad) */
 #define KIND_POINT 0
 #define KIND_SPOT 1
 #define KIND_SUN 2
@@ -40,6 +41,20 @@ static inline int light_kind_known(double kf) {
 #define SPOT_DISC_POINTS 8  /* kernels_np.SPOT_DISC_POINTS */
 #define SPOT_DISC_PHI 0.6180339887498949
 #define SPOT_GATE_MARGIN 1.05
+
+/* cos and sin of 2 pi frac(i SPOT_DISC_PHI), i = 0..7: the turn of the disc lattice's i-th
+ * azimuth from its first (lights.LAMP_DISC_TURN, which tests/test_light_samples.py holds to
+ * the formula) */
+static const double LAMP_DISC_TURN[SPOT_DISC_POINTS][2] = {
+    {1.0, 0.0},
+    {-0.7373688780783199, -0.6754902942615236},
+    {0.08742572471695967, 0.9961710408648278},
+    {0.6084388609788622, -0.7936007512916963},
+    {-0.9847134853154288, 0.17418195037931125},
+    {0.8437552948123968, 0.5367280526263234},
+    {-0.2596043049014893, -0.9657150743757781},
+    {-0.4609070247133709, 0.8874484292452537},
+};
 
 static inline void disc_map(double u1, double u2, int round_shape, double *pa, double *pb) {
     double a = 2.0 * u1 - 1.0, b = 2.0 * u2 - 1.0;
@@ -145,8 +160,6 @@ static inline void light_sample(const double *L, const double x[3], double u1, d
     double inv_dc = 1.0 / (dcc > 1e-30 ? dcc : 1e-30);
     for (int a = 0; a < 3; a++) wc[a] = vc[a] * inv_dc;
     *dc = dcc;
-    double pa, pb;
-    disc_map(u1, u2, kind != KIND_AREA || L[L_ROUND] > 0, &pa, &pb);
     if (kind == KIND_POINT || kind == KIND_SPOT) {
         double radius = L[L_RADIUS], t1[3] = {0, 0, 0}, t2[3] = {0, 0, 0};
         if (radius > 0.0) {
@@ -164,10 +177,19 @@ static inline void light_sample(const double *L, const double x[3], double u1, d
             double cc = spot_cos(L, out);
             cc = cc < -1.0 ? -1.0 : (cc > 1.0 ? 1.0 : cc);
             double th = acos(cc), spread = SPOT_GATE_MARGIN * L[L_COND] * asin(radius / dcc);
-            double ch = L[L_COSHALF], bl = L[L_BLEND];
-            double th_out = acos(ch), cin = ch + (1.0 - ch) * bl;
-            double th_in = bl > 0.0 ? acos(cin < 1.0 ? cin : 1.0) : th_out;
-            if (th - spread > th_out || th + spread < th_in) n_pts = 1;
+            if (th - spread > L[L_ANGLES] || th + spread < L[L_ANGLES + 1]) n_pts = 1;
+        }
+        /* one disc point: (u1, u2) by the concentric map, (0.5, 0.5) the centre (the callers'
+         * unjittered sample).  Several (a spot's): the lattice (1/2 + i / SPOT_DISC_POINTS,
+         * frac(i SPOT_DISC_PHI)) shifted by (u1, u2) (Cranley-Patterson) modulo 1 in polar
+         * coordinates on the unit disc, the squared radius and the azimuth over 2 pi, each
+         * point uniform over the disc: the azimuths' cosines and sines are one sincos turned
+         * by LAMP_DISC_TURN, where the concentric map took a sincos per point */
+        double pa = 0.0, pb = 0.0, c0 = 1.0, s0 = 0.0;
+        if (radius > 0.0 && n_pts == 1) disc_map(u1, u2, 1, &pa, &pb);
+        if (n_pts > 1) {
+            c0 = cos(2.0 * M_PI * u2);
+            s0 = sin(2.0 * M_PI * u2);
         }
         double rmin = 1e-4, esum = 0.0, dsum[3] = {0, 0, 0}, lsum = 0.0;
         /* 1 - cos theta_max of the disc's cone, without cancellation for r << d */
@@ -175,23 +197,32 @@ static inline void light_sample(const double *L, const double x[3], double u1, d
         double omc_max = radius > 0.0 ? radius * radius / (hyp * (hyp + dcc)) : 0.0;
         double e_disc = radius > 0.0 ? 2.0 * omc_max / (radius * radius) : 0.0;
         for (int i = 0; i < n_pts; i++) {
-            if (i > 0) {
-                double ua = u1 + (double)i / (double)SPOT_DISC_POINTS, ub = (double)i * SPOT_DISC_PHI;
-                ub = u2 + (ub - floor(ub));
-                if (ua >= 1.0) ua -= 1.0;
-                if (ub >= 1.0) ub -= 1.0;
-                disc_map(ua, ub, 1, &pa, &pb);
-            }
             double di[3], den, dist;  /* the irradiance per unit intensity is att / den */
             if (radius > 0.0) {
                 /* Cycles' soft-falloff lamp: a disc of radius r facing x with radiance
                  * I / (pi r^2); the disc subtends the cone of half-angle atan(r / d) about wc,
                  * irradiance I / (pi r^2) * 2 pi (1 - cos theta_max), exact also inside r.
-                 * The disc point (pa, pb) maps to a direction uniform in that solid angle. */
-                double s = pa * pa + pb * pb, omc = s * omc_max;
+                 * The disc point (s, azimuth) maps to a direction uniform in that solid angle:
+                 * 1 - cos theta = s (1 - cos theta_max). */
+                /* s: the point's squared radius on the unit disc; (ca, sa): the point itself
+                 * (the concentric map's), or its azimuth's cosine and sine (the lattice's);
+                 * rs scales them to sin theta */
+                double s, ca, sa;
+                if (n_pts == 1) {
+                    s = pa * pa + pb * pb;
+                    ca = pa;
+                    sa = pb;
+                } else {
+                    s = u1 + 0.5 + (double)i / (double)SPOT_DISC_POINTS;
+                    if (s >= 1.0) s -= 1.0;
+                    if (s >= 1.0) s -= 1.0;
+                    ca = c0 * LAMP_DISC_TURN[i][0] - s0 * LAMP_DISC_TURN[i][1];
+                    sa = s0 * LAMP_DISC_TURN[i][0] + c0 * LAMP_DISC_TURN[i][1];
+                }
+                double omc = s * omc_max;
                 double cos_t = 1.0 - omc, sin_t = sqrt(omc * (2.0 - omc) > 0.0 ? omc * (2.0 - omc) : 0.0);
-                double rs = s > 0.0 ? sin_t / sqrt(s) : 0.0;
-                for (int a = 0; a < 3; a++) di[a] = -(wc[a] * cos_t + (t1[a] * pa + t2[a] * pb) * rs);
+                double rs = n_pts > 1 ? sin_t : (s > 0.0 ? sin_t / sqrt(s) : 0.0);
+                for (int a = 0; a < 3; a++) di[a] = -(wc[a] * cos_t + (t1[a] * ca + t2[a] * sa) * rs);
                 den = 1.0 / e_disc;
                 dist = dcc / (cos_t > 1e-12 ? cos_t : 1e-12);  /* to the disc along di */
             } else {
@@ -228,7 +259,8 @@ static inline void light_sample(const double *L, const double x[3], double u1, d
         return;
     }
     /* AREA */
-    double src[3], v[3], omega = -1.0;
+    double src[3], v[3], omega = -1.0, pa, pb;
+    disc_map(u1, u2, L[L_ROUND] > 0, &pa, &pb);
     if (!(L[L_ROUND] > 0))
         omega = rect_solid_angle_sample(L, x, dcc, u1, u2, src);
     if (omega < 0.0)  /* round, far, skewed or in its plane: a point uniform over the area */

@@ -19,7 +19,8 @@ PyObject *light_layout(PyObject *self, PyObject *noargs) {
         {"L_BLEND", L_BLEND}, {"L_RADIUS", L_RADIUS}, {"L_AX", L_AX}, {"L_AY", L_AY},
         {"L_AREA", L_AREA}, {"L_NORMAL", L_NORMAL}, {"L_NORMALIZE", L_NORMALIZE},
         {"L_ROUND", L_ROUND}, {"L_CHANNEL", L_CHANNEL}, {"L_COND", L_COND}, {"L_BEAM", L_BEAM},
-        {"L_INDIRECT", L_INDIRECT}, {"L_DISC", L_DISC}, {"KIND_POINT", KIND_POINT},
+        {"L_INDIRECT", L_INDIRECT}, {"L_DISC", L_DISC}, {"L_ANGLES", L_ANGLES},
+        {"KIND_POINT", KIND_POINT},
         {"KIND_SPOT", KIND_SPOT}, {"KIND_SUN", KIND_SUN}, {"KIND_AREA", KIND_AREA},
     };
     PyObject *d = PyDict_New();

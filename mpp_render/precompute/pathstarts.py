@@ -194,7 +194,7 @@ def fog_starts(pm, light: Light, around: Surroundings, seed: int):
     if not np.any(keep):
         return None
     x, r = x[keep], r[keep]
-    _, e = incident(light, x)
+    _, e = incident(light, x, sample=kernels.light_sample)
     tau = light_optical_depth(around.solid, light, x, around.step, surfaces=around.surfaces,
                               fog_sigma_t=st)
     q = np.asarray(pm.sigma_s, np.float64) * e * around.disc(light, x, tau)
@@ -418,7 +418,7 @@ def surface_starts(pm, light: Light, around: Surroundings, seed: int):
         return None
     p, pick, share = got
     albedo = surface_albedo(ss)
-    d, e = incident(light, p)
+    d, e = incident(light, p, sample=kernels.light_sample)
     n = ss.normal[pick]
     cos = -np.einsum("ij,ij->i", d, n)
     n = np.where((cos < 0.0)[:, None], -n, n)          # the lit side

@@ -10,7 +10,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from .. import pyramid
+from .. import kernels, pyramid
 from ..firstflight import fft_shape
 from ..lights import disc_transmittance, incident, irradiance, outside_spot, towards_light
 from ..media import PreparedMedium, delta_scaled, density_from
@@ -235,7 +235,7 @@ def cell_mean_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel:
     pts = pm.to_world(ijk.astype(np.float64))
     v = fld.reshape(-1, fld.shape[-1])[flat]
     rho = np.where(ok, density_from(v[:, 0], pm.threshold), 0.0)
-    _, e = incident(light, pts)
+    _, e = incident(light, pts, sample=kernels.light_sample)
     e = e * near_falloff(light, pts, pm.i2w[:3, :3])[:, None]
     tau = v[:, channel:channel + 3]
     q = first_scattering(pm, rho, e, tau, None if beam is None else v[:, beam:beam + 3],
@@ -308,7 +308,7 @@ def cell_points_source(pm: PreparedMedium, flat: np.ndarray, light: Light, densi
     q = np.zeros((len(idx), 3))
     if np.any(live):
         pts = pm.to_world(idx[live])
-        _, e = incident(light, pts)
+        _, e = incident(light, pts, sample=kernels.light_sample)
         tau = depth(idx[live], pts)
         q[live] = first_scattering(pm, rho[live], e, tau, None, _disc(disc, light, pts, tau, pm),
                                    pm.scatter_at(idx=idx[live]))
