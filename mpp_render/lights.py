@@ -131,8 +131,7 @@ def light_sample(rec, x, u1, u2, disc_points: int = SPOT_DISC_POINTS, normal=Non
 
         def emitted(s2, ca, sa):
             """(direction, irradiance per unit intensity, distance) of the disc point of
-            squared radius s2 on the unit disc whose azimuth's cosine and sine (times
-            sin theta over the point's radius for the concentric map's) are ca, sa."""
+            squared radius s2 on the unit disc whose azimuth's cosine and sine are ca, sa."""
             if radius > 0.0:
                 # Cycles' soft-falloff lamp (C twin): a disc facing x of radiance I/(pi r^2);
                 # the disc point maps to a direction uniform in the disc's solid angle,
@@ -461,7 +460,7 @@ def incident(light: Light, points, u=None, sample=None):
         if light.kind == "AREA":
             return area_incident(light, points)
         if light.kind == "SPOT" and (light.radius or 0.0) > 0.0:
-            return spot_incident(light, points, sample or light_sample)
+            return spot_incident(light, points, sample)
         u = np.full((len(points), 2), 0.5)
     d, e = light_sample(pack_light(light), points, u[:, 0], u[:, 1])[:2]
     return d, e
@@ -593,10 +592,11 @@ def point_jitter(points) -> np.ndarray:
     """(N,2) jitter in [0, 1) drawn per point from a hash of its coordinates' bits: the same
     for the same point whatever the call.  A spot with a radius averages its cone over
     SPOT_DISC_POINTS disc points, a lattice the jitter shifts; one fixed shift for every
-    point counts the penumbra high (fog_beam's flux into the box at 1.6 m from its 0.1 m
-    lamp: 2.555 W at u = (0.5, 0.5), 2.310 with a jitter per point, 2.316 without the radius,
-    and 2.573 / 2.400 / 2.586 on 2 x 2 / 3 x 3 / 4 x 4 midpoint grids of shifts), and the
-    paths' source with it (fog_beam's multiple scattering 8 % over Cycles')."""
+    point is off in the penumbra, and the paths' source with it.  While the lattice was read
+    by the concentric map it counted the penumbra high (fog_beam's flux into the box at 1.6 m
+    from its 0.1 m lamp: 2.555 W at u = (0.5, 0.5), 2.310 with a jitter per point, 2.316
+    without the radius; fog_beam's multiple scattering 8 % over Cycles'); read in polar
+    coordinates, it counts it 8 % low (tests/test_lamp_radius.py)."""
     bits = np.ascontiguousarray(np.asarray(points, np.float64).reshape(-1, 3)).view(np.uint32)
     h = np.full(len(bits), 0x9E3779B9, np.uint32)
     for c in range(bits.shape[1]):
