@@ -145,7 +145,10 @@ def write_report(rows, out, samples, merged_from=None, single_from=None):
              f"({os.cpu_count()} cores), at most {samples} spp (adaptive sampling at the "
              f"default Noise Threshold {NOISE_THRESHOLD:g}), at the suite's resolution. Metrics of "
              "`shared/reference/metrics.md`; seconds are the render call (this shared machine "
-             "ran other work beside it: read the seconds as rough).", ""] + merged
+             "ran other work beside it: read the seconds as rough).", "",
+             "How far each scene's two reference runs can be trusted, against more Cycles "
+             "seeds of the same scene: [cycles_seeds.md](cycles_seeds.md) "
+             "(`benchmarks/cycles_seeds.py`).", ""] + merged
     lines += summary_lines(rows) + [
              "## Single scattering (multiple off) against `ss_s*.exr`", "",
              "Samples per pixel at most as stated (`metrics.SINGLE_SCATTERING_SAMPLES`: where "
