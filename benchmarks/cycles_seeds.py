@@ -64,6 +64,12 @@ def prefix(single: bool) -> str:
     return "ss" if single else "ref"
 
 
+def spp_per_seed(name: str) -> int:
+    """The samples per run of the scene's references (its meta.json)."""
+    with open(os.path.join(SCENES, name, "meta.json")) as f:
+        return int(json.load(f)["spp_per_seed"])
+
+
 def extra_runs(name: str, seeds, single: bool, work: str) -> list:
     """Paths of the scene's runs at ``seeds`` in ``work``/name, rendering those not there
     (the suite's builder, at the samples per run of the scene's meta.json)."""
@@ -75,11 +81,9 @@ def extra_runs(name: str, seeds, single: bool, work: str) -> list:
     paths = [os.path.join(dst, f"{prefix(single)}_s{s}.exr") for s in seeds]
     missing = [s for s, p in zip(seeds, paths) if not os.path.exists(p)]
     if missing:
-        with open(os.path.join(src, "meta.json")) as f:
-            spp = int(json.load(f)["spp_per_seed"])
         suite = builder()
         spec = suite.all_scenes()[name]
-        suite.render(work, name, spec, seeds=missing, spp=spp, single=single)
+        suite.render(work, name, spec, seeds=missing, spp=spp_per_seed(name), single=single)
     return paths
 
 
@@ -175,14 +179,17 @@ def write_report(rows: list, out: str) -> None:
         f.write("\n".join(lines) + "\n")
 
 
-def merge(paths) -> list:
-    """Rows of the JSON files, later ones replacing earlier rows of the same scene and render."""
+def merge(paths, later=()) -> list:
+    """Rows of the JSON files and then ``later``'s, each replacing earlier rows of the same
+    scene and render."""
     merged = {}
     for path in paths:
         if os.path.exists(path):
             with open(path) as f:
                 for row in json.load(f):
                     merged[(row["scene"], row["render"])] = row
+    for row in later:
+        merged[(row["scene"], row["render"])] = row
     return list(merged.values())
 
 
@@ -208,7 +215,7 @@ def main(argv=None):
         batch.register()
         seeds = [int(s) for s in args.seeds.split(",")]
         if len(seeds) < 2:
-            ap.error("--seeds: at least two (the extra halves compare them)")
+            ap.error("--seeds: at least two (the extra runs' floor needs two; their halves four)")
         new = []
         with tempfile.TemporaryDirectory() as tmp:
             for name in metrics.scene_names(SCENES, args.scenes):
@@ -218,16 +225,13 @@ def main(argv=None):
                 pair = read(metrics.reference_paths(os.path.join(SCENES, name), args.single))
                 ours, secs = (None, None) if args.no_ours else render_ours(name, args.single, tmp)
                 row = {"scene": name, "render": "single" if args.single else "full",
-                       "seeds": seeds, "cycles_seconds": round(cycles_s, 1),
-                       **check(pair, extra, ours)}
-                with open(os.path.join(SCENES, name, "meta.json")) as f:
-                    row["spp"] = int(json.load(f)["spp_per_seed"])
+                       "seeds": seeds, "spp": spp_per_seed(name),
+                       "cycles_seconds": round(cycles_s, 1), **check(pair, extra, ours)}
                 if secs is not None:
                     row["ours_seconds"] = round(secs, 2)
                 new.append(row)
                 print(json.dumps(row), flush=True)
-        rows = merge([store]) + new
-        rows = list({(r["scene"], r["render"]): r for r in rows}.values())
+        rows = merge([store], new)
     with open(store, "w") as f:
         json.dump(sorted(rows, key=lambda r: (r["scene"], r["render"])), f, indent=1)
     write_report(rows, args.out)

@@ -26,6 +26,8 @@ def test_the_preview_png_holds_those_codes(tmp_path):
     path = str(tmp_path / "p.png")
     exr.write_preview_png(path, img)
     from mpp_render.exr import _oiio
-    px = _oiio().ImageInput.open(path).read_image(format="uint8")
+    inp = _oiio().ImageInput.open(path)
+    px = inp.read_image(format="uint8")
+    inp.close()
     np.testing.assert_array_equal(px[..., 0], exr.srgb_codes(img[..., 0]))
     assert px[1, 2, 1] == 0
