@@ -161,16 +161,17 @@ def light_sweep(out, channel: int, job: SweepJob, *, backend=None):
                    [float(t) for t in job.thresholds])
 
 
-def upsample_into(field, channel, lattice, stride, flat, *, backend=None):
+def upsample_into(field, channel, lattice, stride, flat, *, inside=None, backend=None):
     """A lattice's trilinear values written into ``field`` at voxels ``flat`` (None: every
-    voxel; kernels_np.upsample_into)."""
+    voxel), geometric where ``inside`` says (kernels_np.upsample_into)."""
     if not _on_c(backend):
-        return kernels_np.upsample_into(field, channel, lattice, stride, flat)
+        return kernels_np.upsample_into(field, channel, lattice, stride, flat, inside)
     if not (isinstance(field, np.ndarray) and field.dtype == np.float32 and field.flags.c_contiguous
             and field.flags.writeable and field.ndim == 4):
         raise ValueError("upsample_into: field must be a writable C-contiguous (X,Y,Z,C) float32 array")
     _c.upsample_into(field, int(channel), _f32(lattice), int(stride),
-                     None if flat is None else np.ascontiguousarray(flat, np.int64).reshape(-1))
+                     None if flat is None else np.ascontiguousarray(flat, np.int64).reshape(-1),
+                     None if inside is None else np.ascontiguousarray(inside, np.uint8))
 
 
 NODAL_CHANNELS = 64   # the most channels the compiled nodal fit takes (csrc/nodal.c)

@@ -242,16 +242,17 @@ def light_sweep(out, channel, a2w, axis, sign, i_first, i_last, coef, light_inde
         i += sign
 
 
-def upsample(lattice, stride, shape):
+def upsample(lattice, stride, shape, dtype=np.float32):
     """Trilinear upsampling of a lattice (cx,cy,cz,C) whose point j sits at fine index
     j * stride, onto the fine grid ``shape`` (X,Y,Z): separable linear interpolation, one
-    vectorised pass per axis (the same values as media.trilinear at those points); float32."""
-    out = np.asarray(lattice).astype(np.float32)
+    vectorised pass per axis (the same values as media.trilinear at those points); in
+    ``dtype`` (float32)."""
+    out = np.asarray(lattice).astype(dtype)
     for ax in range(3):
         i = np.arange(shape[ax])
         lo = np.minimum(i // stride, out.shape[ax] - 1)
         hi = np.minimum(lo + 1, out.shape[ax] - 1)
-        f = ((i - lo * stride) / float(stride)).astype(np.float32)
+        f = ((i - lo * stride) / float(stride)).astype(dtype)
         sh = [1] * out.ndim
         sh[ax] = -1
         out = (np.take(out, lo, axis=ax) * (1 - f).reshape(sh)
@@ -259,16 +260,30 @@ def upsample(lattice, stride, shape):
     return out
 
 
-def upsample_into(field, channel, lattice, stride, flat):
+GEO_FLOOR = 1e-30   # the logarithm's floor in upsample_into (a corner of weight 0 may hold 0)
+
+
+def upsample_into(field, channel, lattice, stride, flat, inside=None):
     """Write ``upsample(lattice, stride, field.shape[:3])`` into
     ``field[..., channel:channel + C]`` at the flat voxel indices ``flat`` only (None: every
-    voxel; C = the lattice's channels; ``field`` (X,Y,Z,F) float32, modified in place)."""
+    voxel; C = the lattice's channels; ``field`` (X,Y,Z,F) float32, modified in place).
+    ``inside``: None, or bool (cx,cy,cz) the lattice points inside the medium: at a voxel
+    whose lattice points of weight > 0 are all inside, each channel whose values there are
+    all > 0 is interpolated geometrically (its logarithm trilinearly, then exp: exact where
+    it falls exponentially, as light does into a medium)."""
     nc = lattice.shape[3]
-    fine = upsample(lattice, int(stride), field.shape[:3]).reshape(-1, nc)
+    shape = field.shape[:3]
+    fine = upsample(lattice, int(stride), shape).reshape(-1, nc)
+    if inside is not None:
+        lat = np.asarray(lattice, np.float64)
+        ins = upsample(np.asarray(inside, np.float64)[..., None], int(stride), shape, np.float64)
+        pos = upsample((lat > 0.0).astype(np.float64), int(stride), shape, np.float64)
+        logs = upsample(np.log(np.maximum(lat, GEO_FLOOR)), int(stride), shape, np.float64)
+        geo = (ins.reshape(-1, 1) >= 1.0 - 1e-9) & (pos.reshape(-1, nc) >= 1.0 - 1e-9)
+        fine = np.where(geo, np.exp(logs.reshape(-1, nc)), fine).astype(np.float32)
     if flat is None:
         flat = slice(None)
     field.reshape(-1, field.shape[3])[flat, channel:channel + nc] = fine[flat]
-
 
 
 DIM_JITTER = 1000       # random dimension of the step jitter; lights use 2*i, 2*i + 1

@@ -92,6 +92,50 @@ def test_upsample_into_twins_agree_and_write_only_the_given_voxels():
         kernels.upsample_into(b, 0, lat, 0, flat, backend="c")
 
 
+def test_upsample_into_is_geometric_inside_the_medium_and_the_twins_agree():
+    """With the lattice points inside the medium marked, a voxel whose points are all inside
+    and lit takes the logarithm's interpolation: an exponential fall across the cells comes
+    back exactly, where the linear chord reads it too bright; a cell with a point outside, or
+    a channel with a dark point, stays linear.  Both twins the same."""
+    import pytest
+    from mpp_render import kernels, kernels_np
+    shape, stride = (13, 9, 7), 4
+    cshape = tuple((s - 1 + stride - 1) // stride + 1 for s in shape)
+    xi = np.arange(cshape[0]) * stride
+    lat = np.zeros(cshape + (3,), np.float32)
+    lat[..., 0] = np.exp(-0.9 * xi)[:, None, None]       # falls by e^-3.6 a cell along x
+    lat[..., 1] = np.exp(-0.9 * xi)[:, None, None]
+    lat[0, ..., 1] = 0.0                                 # channel 1 dark at x = 0
+    lat[..., 2] = 2.0
+    inside = np.ones(cshape, np.uint8)
+    inside[-1, 0, 0] = 0                                 # one point outside the medium
+    backends = ["numpy"] + (["c"] if kernels._c is not None else [])
+    got = {}
+    for backend in backends:
+        f = np.zeros(shape + (3,), np.float32)
+        if backend == "c":
+            kernels.upsample_into(f, 0, lat, stride, None, inside=inside, backend="c")
+        else:
+            kernels_np.upsample_into(f, 0, lat, stride, None, inside)
+        got[backend] = f
+    f = got["numpy"]
+    x = np.arange(shape[0])
+    exact = np.exp(-0.9 * x).astype(np.float32)
+    # all inside: exact, and well below the linear chord between the points
+    np.testing.assert_allclose(f[:8, 4, 3, 0], exact[:8], rtol=1e-5)
+    linear = kernels_np.upsample(lat, stride, shape)
+    assert np.all(linear[1:4, 4, 3, 0] > 1.5 * exact[1:4])
+    # the cell with a point outside the medium, and the dark channel's first cell: linear
+    np.testing.assert_allclose(f[9:12, 0, 0, 0], linear[9:12, 0, 0, 0], rtol=1e-6)
+    np.testing.assert_allclose(f[1:4, 4, 3, 1], linear[1:4, 4, 3, 1], rtol=1e-6)
+    np.testing.assert_allclose(f[..., 2], 2.0, rtol=1e-6)          # a constant stays so
+    if "c" in got:
+        np.testing.assert_allclose(got["c"], f, rtol=2e-6, atol=1e-30)
+        with pytest.raises(ValueError):
+            kernels.upsample_into(np.zeros(shape + (3,), np.float32), 0, lat, stride, None,
+                                  inside=np.ones((2, 2, 2), np.uint8), backend="c")
+
+
 def test_lattice_values_read_what_trilinear_reads():
     """precompute.lattice_values (the density at the pyramid's lattice points) equals
     media.trilinear at those whole-voxel points, zero on the last plane and beyond."""

@@ -1,17 +1,24 @@
 /* Lattice upsampling (twin of kernels_np.upsample_into). */
 #include "kernels.h"
 
+#define GEO_FLOOR 1e-30   /* the logarithm's floor (twin: kernels_np.GEO_FLOOR); a corner of
+                             weight 0 may hold 0 */
+
 const char upsample_into_doc[] =
-    "upsample_into(field, channel, lattice, stride, flat) -> None\n"
+    "upsample_into(field, channel, lattice, stride, flat[, inside]) -> None\n"
     "Twin of kernels_np.upsample_into: trilinear values of the lattice (point j at fine index\n"
     "j * stride) written into field[..., channel:channel + C] at the flat voxel indices (None:\n"
-    "every voxel).";
+    "every voxel).  inside: None, or uint8 (cx,cy,cz) the lattice points inside the medium:\n"
+    "where every point a voxel's value weighs is inside and above 0 in a channel, that\n"
+    "channel's logarithm is interpolated (geometric: exact for an exponential fall).";
 
 PyObject *upsample_into(PyObject *self, PyObject *args) {
-    PyObject *pf, *pl, *pflat;
+    PyObject *pf, *pl, *pflat, *pin = Py_None;
     int channel, stride;
-    if (!PyArg_ParseTuple(args, "OiOiO", &pf, &channel, &pl, &stride, &pflat)) return NULL;
-    Buf bf = {0}, bl = {0}, bx = {0};
+    if (!PyArg_ParseTuple(args, "OiOiO|O", &pf, &channel, &pl, &stride, &pflat, &pin))
+        return NULL;
+    Buf bf = {0}, bl = {0}, bx = {0}, bi = {0};
+    double *LG = NULL;   /* with inside: each lattice value's logarithm, taken once */
     int ok = 0;
     Py_ssize_t sf[4] = {-1, -1, -1, -1}, sl[4] = {-1, -1, -1, -1}, sx[1] = {-1};
     if (get_buf_ex(pf, &bf, 'f', 4, sf, "field", PyBUF_WRITABLE) < 0) goto done;
@@ -38,6 +45,12 @@ PyObject *upsample_into(PyObject *self, PyObject *args) {
         PyErr_SetString(PyExc_ValueError, "upsample_into: bad stride, channel or lattice");
         goto done;
     }
+    const unsigned char *IN = NULL;
+    if (pin != Py_None) {
+        Py_ssize_t si[3] = {sl[0], sl[1], sl[2]};
+        if (get_buf(pin, &bi, 'B', 3, si, "inside") < 0) goto done;
+        IN = (const unsigned char *)bi.view.buf;
+    }
     const int64_t *FL = every ? NULL : (const int64_t *)bx.view.buf;
     Py_ssize_t nvox = sf[0] * sf[1] * sf[2];
     if (every) sx[0] = nvox;
@@ -48,6 +61,15 @@ PyObject *upsample_into(PyObject *self, PyObject *args) {
         }
     float *F = (float *)bf.view.buf;
     const float *LT = (const float *)bl.view.buf;
+    Py_ssize_t nlat = sl[0] * sl[1] * sl[2] * nc;
+    if (IN) {
+        LG = (double *)malloc((size_t)nlat * sizeof(double));
+        if (!LG) { PyErr_NoMemory(); goto done; }
+        for (Py_ssize_t q = 0; q < nlat; q++) {
+            double x = (double)LT[q];
+            LG[q] = log(x > GEO_FLOOR ? x : GEO_FLOOR);
+        }
+    }
     Py_BEGIN_ALLOW_THREADS
     for (Py_ssize_t q = 0; q < sx[0]; q++) {
         Py_ssize_t f = FL ? (Py_ssize_t)FL[q] : q, ijk[3] = {f / (sf[1] * sf[2]), (f / sf[2]) % sf[1], f % sf[2]};
@@ -59,23 +81,39 @@ PyObject *upsample_into(PyObject *self, PyObject *args) {
             hi[a] = lo[a] + 1 > sl[a] - 1 ? sl[a] - 1 : lo[a] + 1;
             t[a] = (double)(ijk[a] - lo[a] * stride) / (double)stride;
         }
+        /* with inside: whether every lattice point of weight > 0 is inside the medium */
+        int geo = IN != NULL;
+        for (int n = 0; geo && n < 8; n++) {
+            int cx = n >> 2, cy = (n >> 1) & 1, cz = n & 1;
+            double w = (cx ? t[0] : 1.0 - t[0]) * (cy ? t[1] : 1.0 - t[1]) * (cz ? t[2] : 1.0 - t[2]);
+            Py_ssize_t i = cx ? hi[0] : lo[0], j = cy ? hi[1] : lo[1], k = cz ? hi[2] : lo[2];
+            if (w > 0.0 && !IN[(i * sl[1] + j) * sl[2] + k]) geo = 0;
+        }
         for (Py_ssize_t c = 0; c < nc; c++) {
-            double v = 0.0;
+            double v = 0.0, lv = 0.0;
+            int pos = geo;
             for (int cx = 0; cx < 2; cx++)
                 for (int cy = 0; cy < 2; cy++)
                     for (int cz = 0; cz < 2; cz++) {
                         double w = (cx ? t[0] : 1.0 - t[0]) * (cy ? t[1] : 1.0 - t[1]) *
                                    (cz ? t[2] : 1.0 - t[2]);
                         Py_ssize_t i = cx ? hi[0] : lo[0], j = cy ? hi[1] : lo[1], k = cz ? hi[2] : lo[2];
-                        v += w * (double)LT[((i * sl[1] + j) * sl[2] + k) * nc + c];
+                        Py_ssize_t at = ((i * sl[1] + j) * sl[2] + k) * nc + c;
+                        double x = (double)LT[at];
+                        v += w * x;
+                        if (geo) {
+                            if (w > 0.0 && !(x > 0.0)) pos = 0;
+                            lv += w * LG[at];
+                        }
                     }
-            F[f * sf[3] + channel + c] = (float)v;
+            F[f * sf[3] + channel + c] = (float)(pos ? exp(lv) : v);
         }
     }
     Py_END_ALLOW_THREADS
     ok = 1;
 done:
-    buf_release(&bf); buf_release(&bl); buf_release(&bx);
+    free(LG);
+    buf_release(&bf); buf_release(&bl); buf_release(&bx); buf_release(&bi);
     if (!ok) return NULL;
     Py_RETURN_NONE;
 }

@@ -5,19 +5,26 @@ drawn from the phase lobe (so the estimate is the mean transmittance).  w_cam(x)
 to the camera, which is exact for camera rays through x.  It is mostly smooth: computed on a
 coarse lattice (``Tuning.ambient_resolution`` points along the grid's longest side) and interpolated
 to the voxels whose trilinear support touches non-zero density (lattice.needed_flat; the rest
-stay 0).  Where it is not (the sky's lit layer of a medium optically thick across a lattice
-cell, where A falls by a large factor between the cell's corners), the voxels of that cell
-get their own value (``refine_flat``, ``Tuning.ambient_refine``).
+stay 0): geometrically (its logarithm trilinearly) in the cells whose lattice points all lie
+inside the medium, where A falls exponentially and a linear chord reads it too bright,
+linearly across the medium's surface (``inside_lattice``).  Its multiply scattered part A_ms
+rises into the medium as A falls: in a medium of one albedo alpha, alone, A_ms + alpha A is
+alpha L_world wherever the sky is seen (``furnace_albedo``), so that sum is interpolated
+linearly and A_ms taken from it and the interpolated A; elsewhere A_ms linearly (a
+geometric chord would read its rise too dark).  Where a cell still misses (the
+sky's lit layer of a medium optically thick across a lattice cell, where A falls by a large
+factor between the cell's corners), the voxels of that cell get their own value
+(``refine_flat``, ``Tuning.ambient_refine``).
 """
 from __future__ import annotations
 
-from typing import List
+from typing import List, Optional
 
 import numpy as np
 
 from .. import kernels
 from ..camera import towards_camera
-from ..media import PreparedMedium
+from ..media import PreparedMedium, density_from
 from ..parallel import run_chunks
 from ..phase import sample_hg
 from ..scene import Camera, Tuning, World
@@ -159,8 +166,9 @@ def fill_world_light(f: np.ndarray, channels, media: List[PreparedMedium], pm: P
                      should_cancel=None, surfaces=None, threads=0, tuning: Tuning = Tuning(),
                      deficit: bool = False):
     """Write the world light (``world_light`` through ``media``, on ``coarse_lattice``,
-    interpolated trilinearly to the needed voxels ``flat``) into ``pm``'s field ``f`` at
-    ``channels`` = (A's first channel, A_ms's or None); the voxels of the lattice cells
+    interpolated to the needed voxels ``flat``: geometrically in the cells inside the
+    medium, A_ms from A where ``furnace_albedo`` holds, see the module's docstring) into
+    ``pm``'s field ``f`` at ``channels`` = (A's first channel, A_ms's or None); the voxels of the lattice cells
     that ``refine_flat`` picks (``tuning.ambient_refine``) get A computed at their own
     centres instead; ``deficit``: world_light's.  Returns the number of points computed
     (lattice and voxels)."""
@@ -173,8 +181,19 @@ def fill_world_light(f: np.ndarray, channels, media: List[PreparedMedium], pm: P
                            multiple=amb_ms is not None, tuning=tuning, deficit=deficit)
     a = light(cpts, seed)
     lattices = [on_lattice(cshape, cflat, vals) for vals in (a if amb_ms is not None else (a,))]
-    for ch, lat in zip((amb, amb_ms), lattices):
-        kernels.upsample_into(f, ch, lat, stride, flat)
+    # A falls into the medium: geometric in the cells wholly inside it.  Its collided part
+    # rises as A falls, alpha (L_w - A) where the sky is seen (the furnace): where that holds
+    # A_ms + alpha A is even, read linearly, and A_ms follows A's interpolation; else linear
+    alpha = furnace_albedo(media, pm) if amb_ms is not None and deficit else None
+    if alpha is not None:
+        lattices[1] = lattices[1] + alpha * lattices[0]
+    geometric = (inside_lattice(pm, stride, cshape), None)
+    for ch, lat, inside in zip((amb, amb_ms), lattices, geometric):
+        kernels.upsample_into(f, ch, lat, stride, flat, inside=inside)
+    if alpha is not None:
+        view = f.reshape(-1, f.shape[-1])
+        at = slice(None) if flat is None else np.asarray(flat, np.int64)
+        view[at, amb_ms:amb_ms + 3] -= (alpha[None, :] * view[at, amb:amb + 3]).astype(f.dtype)
     have = np.zeros(int(np.prod(cshape)), bool)
     have[cflat] = True
     fine = refine_flat(lattices[0], have.reshape(cshape), stride, pm.grid.shape, flat,
@@ -237,6 +256,28 @@ def refine_flat(values: np.ndarray, have: np.ndarray, stride: int, shape, flat, 
         on_point = (ijk[0] % stride == 0) & (ijk[1] % stride == 0) & (ijk[2] % stride == 0)
         pick[a:a + REFINE_CHUNK] = coarse[cell[0], cell[1], cell[2]] & ~on_point
     return flat[pick]
+
+
+def furnace_albedo(media, pm: PreparedMedium) -> Optional[np.ndarray]:
+    """(3,) alpha = sigma_s / sigma_t of ``pm``, where each of the sky's directions at a
+    point of its lattice brings alpha (1 - e^-tau) L_w collided for e^-tau L_w direct (the
+    furnace with the absorption's first flight taken off, world_light's ``deficit``): the
+    medium alone in ``media`` and of one albedo (no scattering or extinction colour grid);
+    else None.  Where the sky is seen from a point, A_ms + alpha A is alpha L_w there."""
+    if len(media) != 1 or pm.scatter_grid is not None or pm.extinction_density is not None:
+        return None
+    st = np.asarray(pm.sigma_t, np.float64)
+    return np.divide(np.asarray(pm.sigma_s, np.float64), st, out=np.zeros(3), where=st > 0.0)
+
+
+def inside_lattice(pm: PreparedMedium, stride: int, shape) -> np.ndarray:
+    """uint8 (shape) 1 at the lattice points (every ``stride`` voxels of ``pm``'s padded grid,
+    a point beyond the grid at its last voxel) where the medium has density (a mesh volume's:
+    at or above its threshold), else 0: the cells between points that are all inside take
+    the world light geometrically (``fill_world_light``)."""
+    at = [np.minimum(np.arange(n) * stride, s - 1) for n, s in zip(shape, pm.grid.shape)]
+    g = np.asarray(pm.grid[np.ix_(*at)])
+    return np.ascontiguousarray(density_from(g, pm.threshold) > 0.0, np.uint8)
 
 
 def world_lattice(pm: PreparedMedium, resolution: int = Tuning.ambient_resolution):
