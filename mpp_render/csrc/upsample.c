@@ -81,31 +81,29 @@ PyObject *upsample_into(PyObject *self, PyObject *args) {
             hi[a] = lo[a] + 1 > sl[a] - 1 ? sl[a] - 1 : lo[a] + 1;
             t[a] = (double)(ijk[a] - lo[a] * stride) / (double)stride;
         }
-        /* with inside: whether every lattice point of weight > 0 is inside the medium */
+        /* the 8 corners' weights and lattice points, n = 4 cx + 2 cy + cz; with inside,
+         * whether every point of weight > 0 lies inside the medium */
+        double w[8];
+        Py_ssize_t pt[8];
         int geo = IN != NULL;
-        for (int n = 0; geo && n < 8; n++) {
+        for (int n = 0; n < 8; n++) {
             int cx = n >> 2, cy = (n >> 1) & 1, cz = n & 1;
-            double w = (cx ? t[0] : 1.0 - t[0]) * (cy ? t[1] : 1.0 - t[1]) * (cz ? t[2] : 1.0 - t[2]);
-            Py_ssize_t i = cx ? hi[0] : lo[0], j = cy ? hi[1] : lo[1], k = cz ? hi[2] : lo[2];
-            if (w > 0.0 && !IN[(i * sl[1] + j) * sl[2] + k]) geo = 0;
+            w[n] = (cx ? t[0] : 1.0 - t[0]) * (cy ? t[1] : 1.0 - t[1]) * (cz ? t[2] : 1.0 - t[2]);
+            pt[n] = ((cx ? hi[0] : lo[0]) * sl[1] + (cy ? hi[1] : lo[1])) * sl[2] + (cz ? hi[2] : lo[2]);
+            if (geo && w[n] > 0.0 && !IN[pt[n]]) geo = 0;
         }
         for (Py_ssize_t c = 0; c < nc; c++) {
             double v = 0.0, lv = 0.0;
             int pos = geo;
-            for (int cx = 0; cx < 2; cx++)
-                for (int cy = 0; cy < 2; cy++)
-                    for (int cz = 0; cz < 2; cz++) {
-                        double w = (cx ? t[0] : 1.0 - t[0]) * (cy ? t[1] : 1.0 - t[1]) *
-                                   (cz ? t[2] : 1.0 - t[2]);
-                        Py_ssize_t i = cx ? hi[0] : lo[0], j = cy ? hi[1] : lo[1], k = cz ? hi[2] : lo[2];
-                        Py_ssize_t at = ((i * sl[1] + j) * sl[2] + k) * nc + c;
-                        double x = (double)LT[at];
-                        v += w * x;
-                        if (geo) {
-                            if (w > 0.0 && !(x > 0.0)) pos = 0;
-                            lv += w * LG[at];
-                        }
-                    }
+            for (int n = 0; n < 8; n++) {
+                Py_ssize_t at = pt[n] * nc + c;
+                double x = (double)LT[at];
+                v += w[n] * x;
+                if (geo) {
+                    if (w[n] > 0.0 && !(x > 0.0)) pos = 0;
+                    lv += w[n] * LG[at];
+                }
+            }
             F[f * sf[3] + channel + c] = (float)(pos ? exp(lv) : v);
         }
     }

@@ -29,7 +29,7 @@ from ..parallel import run_chunks
 from ..phase import sample_hg
 from ..scene import Camera, Tuning, World
 from ..surfaces import intersect, occluded
-from .lattice import coarse_lattice, grid_points
+from .lattice import coarse_lattice, grid_points, lattice_index, lattice_values
 from .lightdepth import density_lengths, depth_rows
 
 
@@ -168,8 +168,8 @@ def fill_world_light(f: np.ndarray, channels, media: List[PreparedMedium], pm: P
     """Write the world light (``world_light`` through ``media``, on ``coarse_lattice``,
     interpolated to the needed voxels ``flat``: geometrically in the cells inside the
     medium, A_ms from A where ``furnace_albedo`` holds, see the module's docstring) into
-    ``pm``'s field ``f`` at ``channels`` = (A's first channel, A_ms's or None); the voxels of the lattice cells
-    that ``refine_flat`` picks (``tuning.ambient_refine``) get A computed at their own
+    ``pm``'s field ``f`` at ``channels`` = (A's first channel, A_ms's or None); the voxels
+    of the lattice cells that ``refine_flat`` picks (``tuning.ambient_refine``) get A computed at their own
     centres instead; ``deficit``: world_light's.  Returns the number of points computed
     (lattice and voxels)."""
     amb, amb_ms = channels
@@ -271,13 +271,14 @@ def furnace_albedo(media, pm: PreparedMedium) -> Optional[np.ndarray]:
 
 
 def inside_lattice(pm: PreparedMedium, stride: int, shape) -> np.ndarray:
-    """uint8 (shape) 1 at the lattice points (every ``stride`` voxels of ``pm``'s padded grid,
-    a point beyond the grid at its last voxel) where the medium has density (a mesh volume's:
-    at or above its threshold), else 0: the cells between points that are all inside take
-    the world light geometrically (``fill_world_light``)."""
-    at = [np.minimum(np.arange(n) * stride, s - 1) for n, s in zip(shape, pm.grid.shape)]
-    g = np.asarray(pm.grid[np.ix_(*at)])
-    return np.ascontiguousarray(density_from(g, pm.threshold) > 0.0, np.uint8)
+    """uint8 (shape) 1 at the lattice points (every ``stride`` voxels of ``pm``'s padded grid)
+    where the medium has density (a mesh volume's: at or above its threshold), else 0 (and
+    on the grid's last plane and beyond, its padding: lattice.lattice_values): the cells
+    between points that are all inside take the world light geometrically
+    (``fill_world_light``)."""
+    rho = lattice_values(pm.grid, lattice_index(shape), stride)
+    return np.ascontiguousarray((density_from(rho, pm.threshold) > 0.0).reshape(shape),
+                                np.uint8)
 
 
 def world_lattice(pm: PreparedMedium, resolution: int = Tuning.ambient_resolution):
