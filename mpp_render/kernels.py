@@ -23,8 +23,8 @@ from typing import List, NamedTuple, Optional
 import numpy as np
 
 from . import kernels_np, lights
-from .cancel import Cancelled
 from .lightrecord import KIND_AREA, L_KIND, L_ROUND, LIGHT_FIELDS
+from .parallel import run_chunks
 from .media import BRICK
 from .walk import DLOG_RHO, LOG_RHO0
 
@@ -460,9 +460,10 @@ def trace_paths_media(inp, *, threads: int = 1, should_cancel=None, backend=None
     are cut into ``PATH_BLOCKS`` blocks, each with its own sums added in a fixed order, which
     ``threads`` workers share (the caller sizes them: parallel.worker_count): the result is
     the same bits for any thread count (frames match across farm machines).  Each block runs
-    ``PATH_CHUNK`` paths a call, asking ``should_cancel`` between calls: raises
-    cancel.Cancelled when it says so.  ``halves``: returns (that list, (first, k)), first the
-    own medium's light deposits (LX,LY,LZ,3) of paths 0..k-1 alone, the blocks of the first
+    ``PATH_CHUNK`` paths a call on parallel.run_chunks' pool, while this thread asks
+    ``should_cancel`` every parallel.POLL_S s: when it says so, a stop flag the compiled
+    loops read every few paths ends them, and cancel.Cancelled is raised.  ``halves``:
+    returns (that list, (first, k)), first the own medium's light deposits (LX,LY,LZ,3) of paths 0..k-1 alone, the blocks of the first
     half (weighed, as every path, by 1 / n_paths), or (list, None) with under 2 blocks: two
     independent estimates (first x n / k and the rest x n / (n - k)) whose difference
     measures the deposits' noise (precompute/lobefit.py)."""
@@ -507,15 +508,14 @@ def trace_paths_media(inp, *, threads: int = 1, should_cancel=None, backend=None
     cells = cell_classes(inp.density, inp.threshold)
     light = _f64(inp.light).reshape(-1) if inp.light is not None else np.zeros(0)
 
-    cancelled = []
+    stop = np.zeros(1, np.uint8)   # set by run_chunks on Esc: the compiled loops stop
 
-    def work(i):
+    def work(i, _):
         others = tuple((outs[i][1 + k], moms[i][1 + k]) + f for k, f in enumerate(fixed))
         plain = tuple((outs[i][1 + k], bare) + f for k, f in enumerate(fixed))
         end = int(ends[i])
         for a in range(int(cuts[i]), int(cuts[i + 1]), PATH_CHUNK):
-            if cancelled or (should_cancel is not None and should_cancel()):
-                cancelled.append(True)
+            if stop[0]:
                 return
             b = min(a + PATH_CHUNK, int(cuts[i + 1]))
             # the paths before ``end`` with their moments, the rest without
@@ -525,17 +525,9 @@ def trace_paths_media(inp, *, threads: int = 1, should_cancel=None, backend=None
                     _c.trace_paths(outs[i][0], *args, lo, hi, n, int(inp.seed) & 0xFFFFFFFF,
                                    int(inp.max_collisions), float(ROULETTE), *extra, mom, oth,
                                    float(inp.threshold), cells, light, colour, extinction,
-                                   int(inp.min_collisions))
+                                   int(inp.min_collisions), stop)
 
-    if workers == 1:
-        for i in range(blocks):
-            work(i)
-    else:
-        from concurrent.futures import ThreadPoolExecutor
-        with ThreadPoolExecutor(workers) as ex:
-            list(ex.map(work, range(blocks)))
-    if cancelled:
-        raise Cancelled
+    run_chunks(blocks, 1, work, threads=workers, should_cancel=should_cancel, stop=stop)
     result, first = [], None
     for g in range(len(grids)):
         total, moments = outs[0][g], moms[0][g]
@@ -584,7 +576,7 @@ def cell_classes(density, threshold: float) -> np.ndarray:
 
 
 PATH_BLOCKS = 4   # trace_paths' blocks of paths (its sums' order, whatever the threads)
-PATH_CHUNK = 16384   # paths per call of the compiled tracer, between checks for Esc
+PATH_CHUNK = 16384   # paths per call of the compiled tracer (each call sorts its paths by start)
 
 
 def _trace_blocks_np(inp, halves: bool):

@@ -3,6 +3,7 @@ estimate keeps energy where the answer is known in closed form, its second order
 independent quadrature of the double-scattering integral, it converges as paths are added,
 it does not depend on the thread count, and bad input raises instead of crashing."""
 import dataclasses
+import time
 
 import numpy as np
 import pytest
@@ -276,6 +277,56 @@ def test_esc_stops_the_paths_between_chunks():
         kernels.trace_paths(inp, threads=2, should_cancel=esc)
     assert len(calls) == 3                  # stopped at the first yes
     assert kernels.trace_paths(inp, threads=2, should_cancel=lambda: False).shape[-1] == 3
+
+
+class _StopFirst:
+    """kernels._c with its trace_paths called with the stop flag already set."""
+
+    def __init__(self, c):
+        self.c, self.calls = c, 0
+
+    def __getattr__(self, name):
+        return getattr(self.c, name)
+
+    def trace_paths(self, *args):
+        self.calls += 1
+        self.args = args
+        stop = args[-1]
+        stop[0] = 1
+        return self.c.trace_paths(*args)
+
+
+@needs_c
+def test_the_compiled_tracer_reads_the_stop_flag(monkeypatch):
+    inp, _ = cube_case(n_paths=5000)
+    assert kernels.trace_paths(inp).any()
+    proxy = _StopFirst(kernels._c)
+    monkeypatch.setattr(kernels, "_c", proxy)
+    out = kernels.trace_paths(inp)          # the flag set before any path: none traced
+    assert proxy.calls == 1 and not out.any()
+    for bad in (np.zeros(0, np.uint8), np.zeros(1, np.float32), np.zeros((1, 1), np.uint8)):
+        with pytest.raises(ValueError, match="stop"):
+            proxy.c.trace_paths(*proxy.args[:-1], bad)
+
+
+@needs_c
+@pytest.mark.parametrize("blocks, threads", [(1, 1), (4, 2)])
+def test_esc_stops_a_long_call_of_the_tracer(monkeypatch, blocks, threads):
+    """One compiled call per block (no chunks to stop between): Esc at the first poll still
+    ends the running calls within a few paths, far sooner than the trace would take (without
+    the stop flag, the running blocks would finish: the whole trace, or half of it)."""
+    monkeypatch.setattr(kernels, "PATH_CHUNK", 1 << 30)
+    monkeypatch.setattr(kernels, "PATH_BLOCKS", blocks)
+    inp, _ = cube_case(n_paths=150000, sigma_t=6.0)
+    t0 = time.perf_counter()
+    kernels.trace_paths(inp, threads=threads)
+    whole = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    with pytest.raises(Cancelled):
+        kernels.trace_paths(inp, threads=threads, should_cancel=lambda: True)
+    stopped = time.perf_counter() - t0
+    assert whole > 0.1, whole               # a trace long enough to measure the stop in
+    assert stopped < 0.2 * whole, (stopped, whole)
 
 
 def small_cube_under_a_sun():

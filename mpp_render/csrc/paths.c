@@ -30,7 +30,11 @@ const char trace_paths_doc[] =
     "channel's extinction reads (sigma_t[c] times channel c, the nearest voxel's; at most the\n"
     "density, so the rate still bounds it), the collisions then by spectral tracking.\n"
     "min_collisions (default 0): the real collisions and bounces a path has made before its\n"
-    "deposits count (1: only the light that has scattered at least once).";
+    "deposits count (1: only the light that has scattered at least once).\n"
+    "stop (default None): a writable uint8 array of at least one byte, read between paths\n"
+    "while the loop runs without the GIL: once its first byte is nonzero (another thread\n"
+    "sets it: Esc) the loop stops within STOP_EVERY paths and out holds a partial sum, which\n"
+    "the caller discards.";
 
 #define MAX_EVENTS 1000000L   /* tentative collisions per path, whatever the medium */
 #define MAX_RATE_SPAN 1e6    /* rate x the grid's diagonal (m): tentative points across it */
@@ -52,6 +56,7 @@ const char trace_paths_doc[] =
 #define D_LIGHT 700    /* the emitter point a first scattering's light comes from (event 0) */
 #define START_TRIES 64 /* offsets drawn for a first scattering until one is accepted */
 #define PATH_MEDIA 8    /* media one trace flies through: its own and 7 others */
+#define STOP_EVERY 16  /* paths traced between reads of the stop flag */
 #define BOX_TIE 1e-9   /* m (relative beyond 1 m): box faces this close are crossed together */
 
 /* The unit direction at cosine c and azimuth 2 pi u2 about the unit vector axis. */
@@ -784,15 +789,16 @@ static int other_grid(PyObject *item, Buf b[OTHER_BUFS], PathGrid *G) {
 
 PyObject *trace_paths(PyObject *self, PyObject *args) {
     PyObject *po, *pd, *pw2i, *pi2w, *pss, *pst, *ptw, *pstarts, *pws, *pdirs, *pcdf, *preach,
-        *ptri, *palb, *psrc, *ppeak, *pmom, *pothers, *pcells, *plight, *pcol, *pext;
+        *ptri, *palb, *psrc, *ppeak, *pmom, *pothers, *pcells, *plight, *pcol, *pext,
+        *pstop = Py_None;
     double g, rate, roulette, jitter, outside, thr0;
     long stride, lo, hi, n_paths, max_hits, lobe, min_hits = 0;
     unsigned long seed;
-    if (!PyArg_ParseTuple(args, "OOOOOOdlOOOOOdlllklddldOOOOOOOdOOOO|l", &po, &pd, &pw2i, &pi2w,
+    if (!PyArg_ParseTuple(args, "OOOOOOdlOOOOOdlllklddldOOOOOOOdOOOO|lO", &po, &pd, &pw2i, &pi2w,
                           &pss, &pst, &g, &stride, &ptw, &pstarts, &pws, &pdirs, &pcdf, &rate,
                           &lo, &hi, &n_paths, &seed, &max_hits, &roulette, &jitter, &lobe,
                           &outside, &preach, &ptri, &palb, &psrc, &ppeak, &pmom, &pothers, &thr0,
-                          &pcells, &plight, &pcol, &pext, &min_hits))
+                          &pcells, &plight, &pcol, &pext, &min_hits, &pstop))
         return NULL;
     if (!PyTuple_Check(pothers) || PyTuple_GET_SIZE(pothers) > PATH_MEDIA - 1) {
         PyErr_SetString(PyExc_ValueError, "trace_paths: others must be a tuple of at most 7 media");
@@ -800,7 +806,8 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
     }
     Buf bo = {0}, bd = {0}, bw = {0}, bi = {0}, bss = {0}, bst = {0}, btw = {0}, bs = {0},
         bws = {0}, bdir = {0}, bc = {0}, br = {0}, bt = {0}, ba = {0}, bq = {0}, bp = {0}, bm = {0},
-        bcl = {0}, bli = {0}, bcol = {0}, bext = {0};
+        bcl = {0}, bli = {0}, bcol = {0}, bext = {0}, bstop = {0};
+    const volatile unsigned char *stop = NULL;
     /* per other medium: out, moments, density, w2i, sigma_s, sigma_t, towards, cells, colour,
      * extinction */
     Buf ob[PATH_MEDIA - 1][OTHER_BUFS];
@@ -813,6 +820,15 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
     Py_ssize_t so[4] = {-1, -1, -1, 3}, sd[3] = {-1, -1, -1}, sw[2] = {3, 4}, si[2] = {3, 3},
                s3[1] = {3}, stw[4] = {-1, -1, -1, 3}, sn[2] = {-1, 3}, sc[1] = {-1};
     if (get_buf_ex(po, &bo, 'd', 4, so, "out", PyBUF_WRITABLE) < 0) goto done;
+    if (pstop != Py_None) {
+        Py_ssize_t sst[1] = {-1};
+        if (get_buf_ex(pstop, &bstop, 'B', 1, sst, "stop", PyBUF_WRITABLE) < 0) goto done;
+        if (sst[0] < 1) {
+            PyErr_SetString(PyExc_ValueError, "trace_paths: stop must hold at least one byte");
+            goto done;
+        }
+        stop = (const volatile unsigned char *)bstop.view.buf;
+    }
     if (get_buf(pd, &bd, 'f', 3, sd, "density") < 0) goto done;
     if (get_buf(pw2i, &bw, 'd', 2, sw, "w2i") < 0) goto done;
     if (get_buf(pi2w, &bi, 'd', 2, si, "i2w") < 0) goto done;
@@ -957,6 +973,7 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
     }
     if (hi > lo) qsort(order, (size_t)(hi - lo), sizeof(uint64_t), cmp_u64);
     for (long q = 0; q < hi - lo; q++) {
+        if (stop && q % STOP_EVERY == 0 && *stop) break;   /* Esc: the sums are discarded */
         long i = lo + (long)(order[q] & 0xFFFFFFFFu);
         Py_ssize_t a = (Py_ssize_t)(order[q] >> 32);
         uint32_t key = hash32((uint32_t)i ^ base);
@@ -970,7 +987,7 @@ done:
     buf_release(&bst); buf_release(&btw); buf_release(&bs); buf_release(&bws);
     buf_release(&bdir); buf_release(&bc); buf_release(&br); buf_release(&bt); buf_release(&ba);
     buf_release(&bq); buf_release(&bp); buf_release(&bm); buf_release(&bcl);
-    buf_release(&bli); buf_release(&bcol); buf_release(&bext);
+    buf_release(&bli); buf_release(&bcol); buf_release(&bext); buf_release(&bstop);
     for (Py_ssize_t k = 0; k < n_others; k++)
         for (int q = 0; q < OTHER_BUFS; q++) buf_release(&ob[k][q]);
     free(boxes);
