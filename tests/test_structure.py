@@ -12,13 +12,13 @@ LAYERS = [
     {"cli", "__main__", "package", "blender", "viewport"},              # entry points, glue
     {"render", "tiles", "pixelsamples", "pilot", "cache", "bounce", "budget", "metrics",
      "exr"},                                                            # the frame; I/O
-    {"precompute", "march", "firstflight", "pyramid", "parallel", "blasthreads",
+    {"precompute", "march", "firstflight", "pyramid", "blasthreads",
      "surfaces", "surfacecache"},                                                     # the two stages
     {"kernels", "kernels_np", "_kernels", "paths"},                     # C kernels, numpy twins
     {"lights", "gathers", "principled", "worldfog", "media", "phase", "mpp", "walk",
      "lightrecord",
      "camera", "blackbody", "passes", "textures", "rng"},                                # physics, media, model
-    {"scene", "cancel"},                                                # the description; Esc
+    {"scene", "cancel", "parallel"},                                    # the description; Esc
 ]
 
 
