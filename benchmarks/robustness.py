@@ -32,6 +32,7 @@ sys.path.insert(0, REPO)
 sys.path.insert(0, os.path.join(REPO, "tests"))
 
 from mpp_render import kernels  # noqa: E402
+from mpp_render.parallel import POLL_S  # noqa: E402
 from mpp_render.render import render  # noqa: E402
 from mpp_render.scene import Tuning  # noqa: E402
 
@@ -268,7 +269,8 @@ def main(argv=None):
           "scenes of `tests/test_cancel.py` (a noisy cloud, a sun, a point light, a grey sky, "
           "multiple scattering, 2 threads). The precompute polls Esc between chunks of a few "
           "hundredths of a second and after each light pyramid; while the light paths are "
-          "traced it polls every 0.05 s, and the tracer reads a stop flag every 16 paths. The march polls it between "
+          f"traced it polls every {POLL_S} s, and the tracer reads a stop flag every 16 paths. "
+          "The march polls it between "
           f"tiles of at most {TILE_RAYS} rays (fewer pixels at more samples per pixel) and waits "
           "for the tiles being marched, so there the latency is about one tile's time, which "
           "grows with the grid but not with the samples per pixel.", "",

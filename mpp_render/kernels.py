@@ -24,8 +24,8 @@ import numpy as np
 
 from . import kernels_np, lights
 from .lightrecord import KIND_AREA, L_KIND, L_ROUND, LIGHT_FIELDS
-from .parallel import run_chunks
 from .media import BRICK
+from .parallel import run_chunks
 from .walk import DLOG_RHO, LOG_RHO0
 
 try:  # pragma: no cover - depends on the build
@@ -463,10 +463,11 @@ def trace_paths_media(inp, *, threads: int = 1, should_cancel=None, backend=None
     ``PATH_CHUNK`` paths a call on parallel.run_chunks' pool, while this thread asks
     ``should_cancel`` every parallel.POLL_S s: when it says so, a stop flag the compiled
     loops read every few paths ends them, and cancel.Cancelled is raised.  ``halves``:
-    returns (that list, (first, k)), first the own medium's light deposits (LX,LY,LZ,3) of paths 0..k-1 alone, the blocks of the first
-    half (weighed, as every path, by 1 / n_paths), or (list, None) with under 2 blocks: two
-    independent estimates (first x n / k and the rest x n / (n - k)) whose difference
-    measures the deposits' noise (precompute/lobefit.py)."""
+    returns (that list, (first, k)), first the own medium's light deposits (LX,LY,LZ,3) of
+    paths 0..k-1 alone, the blocks of the first half (weighed, as every path, by
+    1 / n_paths), or (list, None) with under 2 blocks: two independent estimates
+    (first x n / k and the rest x n / (n - k)) whose difference measures the deposits' noise
+    (precompute/lobefit.py)."""
     from .paths import ROULETTE, trace_paths_media_np
     n = int(inp.n_paths)
     if not _on_c(backend) or not hasattr(_c, "trace_paths"):
