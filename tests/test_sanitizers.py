@@ -37,7 +37,11 @@ def test_kernels_under_asan_and_ubsan(tmp_path):
     build = subprocess.run([sys.executable, "setup.py", "-q", "build_ext", "--inplace"], cwd=work,
                            env=env, capture_output=True, text=True)
     assert build.returncode == 0, build.stderr[-3000:]
-    env.update(LD_PRELOAD=_libasan(), ASAN_OPTIONS="detect_leaks=0:abort_on_error=1",
+    # malloc_context_size: 4 frames of each allocation's and free's stack instead of 30 (a
+    # report still names the bad access's whole stack); numpy's allocations under ASan make up
+    # much of the run, and the shorter stacks take a sixth off the march twins' case (27 -> 23 s)
+    env.update(LD_PRELOAD=_libasan(),
+               ASAN_OPTIONS="detect_leaks=0:abort_on_error=1:malloc_context_size=4",
                UBSAN_OPTIONS="halt_on_error=1:print_stacktrace=1", MPP_FUZZ_ROUNDS="200",
                MPP_TWIN_RAYS="500",
                PYTHONPATH=str(work))

@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # One entry point for set-up, tests and demo renders.  Creates .venv/ (pinned requirements,
 # bpy 5.0.1 from PyPI) when it is missing, builds the C kernels, then runs the sub-command:
-#   tools/dev.sh test [pytest args]   run the test suite
+#   tools/dev.sh test [pytest args]   run the test suite, its files shared between
+#                                     MPP_TEST_WORKERS (default 2) pytest-xdist workers;
+#                                     MPP_TEST_WORKERS=0 runs them in this one process
 #   tools/dev.sh demo [args]          render the bundled demo scene (out/demo.exr, .png)
 #   tools/dev.sh py ARGS              run the venv's python
 set -euo pipefail
@@ -32,7 +34,8 @@ if [ -n "$stale" ]; then
 fi
 cmd="${1:-test}"; shift || true
 case "$cmd" in
-    test) exec .venv/bin/python -m pytest -q "$@" ;;
+    test) exec .venv/bin/python -m pytest -q -n "${MPP_TEST_WORKERS:-2}" --dist loadfile \
+              --no-loadscope-reorder "$@" ;;
     demo) exec .venv/bin/python -m mpp_render demo "$@" ;;
     py)   exec .venv/bin/python "$@" ;;
     *) echo "usage: tools/dev.sh test|demo|py ..." >&2; exit 2 ;;
