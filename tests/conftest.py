@@ -32,8 +32,10 @@ def warm(monkeypatch):
 # take longest go first, so that neither worker is left with one of them after the other has
 # run out of work.  Seconds a file in such a run on a 2-core machine (--durations=0,
 # 2026-12-07): test_wide_suite 295, test_sanitizers 238, test_accuracy 147, test_kernels 138;
-# the next, test_shader_graph_bpy, 94.  With them last the run took 777 s, first 788 s
-# against 1022 s in one process, but that run's order had left the sanitizers alone at the end.
+# the next, test_shader_graph_bpy, 94.  One process took 1022 s there.  xdist's own order
+# (the files with the most tests first) took 777 s with the sanitizers running alone at the
+# end; this order took 788 s with both workers ending together.  That is the same time here,
+# but the run's end no longer waits on whichever long file happens to come last.
 LONGEST_FIRST = ("tests/test_sanitizers.py",
                  "tests/blender/test_wide_suite.py",
                  "tests/blender/test_accuracy.py",
