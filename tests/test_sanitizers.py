@@ -19,18 +19,22 @@ def _libasan():
     return path if os.path.isabs(path) and os.path.exists(path) else None
 
 
+# the test files run on the sanitized build, and the files they import from tests/ (copied,
+# not run): test_kernels.py's ray helper, and test_enclosed.py's scenes (test_nodal's)
+RUN = ("test_fuzz.py", "test_kernels.py", "test_sweep.py", "test_skip.py", "test_pyramid.py",
+       "test_paths.py", "test_paths_world.py", "test_paths_media.py", "test_sharp_surface.py",
+       "test_moments.py", "test_nodal.py", "test_lobefit.py", "test_light_samples.py")
+HELPERS = ("rays.py", "test_enclosed.py")
+SEPARATE = "test_kernels.py"  # the march's twins: about as long as the rest together
+
+
 @pytest.mark.skipif(_libasan() is None, reason="no gcc with AddressSanitizer on this machine")
 def test_kernels_under_asan_and_ubsan(tmp_path):
     work = tmp_path / "asan"
     shutil.copytree(REPO / "mpp_render", work / "mpp_render",
                     ignore=shutil.ignore_patterns("*.so", "__pycache__", "blender"))
     (work / "tests").mkdir()
-    for name in ("test_fuzz.py", "test_kernels.py", "test_sweep.py", "test_skip.py", "test_pyramid.py",
-                 "test_paths.py", "test_paths_world.py", "test_paths_media.py",
-                 "test_sharp_surface.py", "test_moments.py", "test_nodal.py",
-                 "test_lobefit.py", "test_light_samples.py",
-                 "rays.py",          # the tests' ray helper (test_kernels imports it)
-                 "test_enclosed.py"):  # its scenes (test_nodal imports them)
+    for name in RUN + HELPERS:
         shutil.copy(REPO / "tests" / name, work / "tests" / name)
     shutil.copy(REPO / "setup.py", work / "setup.py")
     env = dict(os.environ, MPP_SANITIZE="1")
@@ -50,12 +54,7 @@ def test_kernels_under_asan_and_ubsan(tmp_path):
     assert where.stdout.strip().startswith(str(work)), where.stdout + where.stderr[-2000:]
     # two pytest runs side by side, the march's twins in one and the rest in the other (about
     # the same time each): the machine's second core works while the first does
-    groups = [["tests/test_kernels.py"],
-              ["tests/test_fuzz.py", "tests/test_sweep.py", "tests/test_skip.py",
-               "tests/test_pyramid.py", "tests/test_paths.py", "tests/test_paths_world.py",
-               "tests/test_paths_media.py", "tests/test_sharp_surface.py",
-               "tests/test_moments.py", "tests/test_nodal.py", "tests/test_lobefit.py",
-               "tests/test_light_samples.py"]]
+    groups = [[f"tests/{SEPARATE}"], [f"tests/{name}" for name in RUN if name != SEPARATE]]
     # the cases that run the numpy twins alone: no C to check
     numpy_only = ["tests/test_kernels.py::"
                   "test_an_indirect_lights_single_scattering_is_multiple[numpy]",
