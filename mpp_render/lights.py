@@ -454,7 +454,8 @@ def incident(light: Light, points, u=None, sample=None):
 
     ``u`` (N,2) in [0,1): jitter for lights with an extent (sphere radius, area emitters).
     ``sample``: light_sample or its compiled twin (kernels.light_sample, which the layers
-    above pass in), what a spot with a radius is sampled with (``spot_incident``)."""
+    above pass in), what a point light or spot is sampled with (a spot with a radius through
+    ``spot_incident``); None: light_sample."""
     points = np.asarray(points, np.float64).reshape(-1, 3)
     if u is None:
         if light.kind == "AREA":
@@ -462,7 +463,7 @@ def incident(light: Light, points, u=None, sample=None):
         if light.kind == "SPOT" and (light.radius or 0.0) > 0.0:
             return spot_incident(light, points, sample)
         u = np.full((len(points), 2), 0.5)
-    d, e = light_sample(pack_light(light), points, u[:, 0], u[:, 1])[:2]
+    d, e = (sample or light_sample)(pack_light(light), points, u[:, 0], u[:, 1])[:2]
     return d, e
 
 
@@ -606,13 +607,14 @@ def point_jitter(points) -> np.ndarray:
     return np.stack([u1, u2], axis=1).astype(np.float64) / 4294967296.0
 
 
-def irradiance(light: Light, points) -> np.ndarray:
-    """The irradiance RGB (N,3, W/m^2) of ``incident(light, points)`` without its direction
-    (an area light's emitter integral then skips Lambert's vector, half its cost)."""
+def irradiance(light: Light, points, sample=None) -> np.ndarray:
+    """The irradiance RGB (N,3, W/m^2) of ``incident(light, points, sample=sample)`` without
+    its direction (an area light's emitter integral then skips Lambert's vector, half its
+    cost)."""
     points = np.asarray(points, np.float64).reshape(-1, 3)
     if light.kind == "AREA":
         return area_incident(light, points, direction=False)[1]
-    return incident(light, points)[1]
+    return incident(light, points, sample=sample)[1]
 
 
 POLYGON_SIDES = 24  # sides of the polygon that stands for a disc or ellipse emitter

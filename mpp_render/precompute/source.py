@@ -66,9 +66,10 @@ def cell_mean_irradiance(light: Light, pts, cell: np.ndarray, n: int = 2,
     lattice falls; a sun's irradiance is the same everywhere and read once, and an area
     light's is already its emitter's integral (lights.area_incident), read once.  Cells
     wholly outside a spot's cone (``lights.outside_spot``) are 0 without a read (``cull``;
-    the same result, faster: Tuning.spot_cull)."""
+    the same result, faster: Tuning.spot_cull).  Every point is read through the compiled
+    light sample (kernels.light_sample; its numpy twin to 1e-8)."""
     if light.kind in ("SUN", "AREA"):
-        return irradiance(light, pts)
+        return irradiance(light, pts, kernels.light_sample)
     pts = np.asarray(pts, np.float64).reshape(-1, 3)
     cell = np.asarray(cell, np.float64)
     corner = 0.5 * float(np.linalg.norm(np.abs(cell).sum(axis=1)))   # m, a bound
@@ -83,7 +84,7 @@ def cell_mean_irradiance(light: Light, pts, cell: np.ndarray, n: int = 2,
     offs = np.stack(np.meshgrid(t, t, t, indexing="ij"), -1).reshape(-1, 3) @ cell.T
     acc = np.zeros((len(pts), 3))
     for o in offs:
-        acc += irradiance(light, pts + o)
+        acc += irradiance(light, pts + o, kernels.light_sample)
     return acc / len(offs)
 
 
@@ -101,7 +102,7 @@ def voxel_irradiance(light: Light, pts, i2w, n: int = VOXEL_POINTS) -> np.ndarra
     volume_bounces), the same at 6 points per axis as at 3."""
     if light.kind == "SPOT":
         return cell_mean_irradiance(light, pts, np.asarray(i2w, np.float64), n)
-    e = irradiance(light, pts)
+    e = irradiance(light, pts, kernels.light_sample)
     if light.kind == "POINT":
         e = e * near_falloff(light, pts, i2w)[:, None]
     return e
