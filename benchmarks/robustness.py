@@ -37,6 +37,7 @@ from mpp_render.render import render  # noqa: E402
 from mpp_render.scene import Tuning  # noqa: E402
 
 TILE_RAYS = Tuning().tile_rays
+STOP_EVERY = getattr(kernels._c, "STOP_EVERY", None)   # the tracer's paths between stop reads
 from mpp_render.scene import Settings, World  # noqa: E402
 
 import test_cancel  # noqa: E402  (scene builders of the Esc tests)
@@ -269,7 +270,8 @@ def main(argv=None):
           "scenes of `tests/test_cancel.py` (a noisy cloud, a sun, a point light, a grey sky, "
           "multiple scattering, 2 threads). The precompute polls Esc between chunks of a few "
           "hundredths of a second and after each light pyramid; while the light paths are "
-          f"traced it polls every {POLL_S} s, and the tracer reads a stop flag every 16 paths. "
+          f"traced it polls every {POLL_S} s, and the tracer reads a stop flag every "
+          f"{STOP_EVERY} paths. "
           "The march polls it between "
           f"tiles of at most {TILE_RAYS} rays (fewer pixels at more samples per pixel) and waits "
           "for the tiles being marched, so there the latency is about one tile's time, which "

@@ -304,6 +304,9 @@ def test_the_compiled_tracer_reads_the_stop_flag(monkeypatch):
     monkeypatch.setattr(kernels, "_c", proxy)
     out = kernels.trace_paths(inp)          # the flag set before any path: none traced
     assert proxy.calls == 1 and not out.any()
+    # how many paths it traces between reads of the flag, as the module states it (the
+    # robustness report quotes it)
+    assert isinstance(proxy.c.STOP_EVERY, int) and 1 <= proxy.c.STOP_EVERY <= 256
     for bad in (np.zeros(0, np.uint8), np.zeros(1, np.float32), np.zeros((1, 1), np.uint8)):
         with pytest.raises(ValueError, match="stop"):
             proxy.c.trace_paths(*proxy.args[:-1], bad)

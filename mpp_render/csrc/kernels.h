@@ -4,6 +4,8 @@
 
 #include "common.h"
 
+#define STOP_EVERY 16  /* paths traced between reads of the stop flag (trace_paths) */
+
 extern const char optical_depth_doc[], light_sweep_doc[], upsample_into_doc[], march_doc[],
     trilinear_doc[], light_layout_doc[], trace_paths_doc[], intersect_doc[],
     union_interval_doc[], walk_depth_doc[], nodal_fit_doc[], lobe_ratio_doc[],

@@ -58,10 +58,12 @@ static struct PyModuleDef moduledef = {PyModuleDef_HEAD_INIT, "_kernels",
                                        "Compiled twins of mpp_render.kernels_np.", -1, methods,
                                        NULL, NULL, NULL, NULL};
 
-/* SIMD: 1 where the trilinear sums run in SSE2 (common.h's corner_sums), 0 for the scalar code */
+/* SIMD: 1 where the trilinear sums run in SSE2 (common.h's corner_sums), 0 for the scalar code;
+ * STOP_EVERY: the paths trace_paths traces between reads of its stop flag (Esc) */
 PyMODINIT_FUNC PyInit__kernels(void) {
     PyObject *m = PyModule_Create(&moduledef);
-    if (m && PyModule_AddIntConstant(m, "SIMD", MPP_SIMD) < 0) {
+    if (m && (PyModule_AddIntConstant(m, "SIMD", MPP_SIMD) < 0 ||
+              PyModule_AddIntConstant(m, "STOP_EVERY", STOP_EVERY) < 0)) {
         Py_DECREF(m);
         return NULL;
     }

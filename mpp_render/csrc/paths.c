@@ -56,7 +56,6 @@ const char trace_paths_doc[] =
 #define D_LIGHT 700    /* the emitter point a first scattering's light comes from (event 0) */
 #define START_TRIES 64 /* offsets drawn for a first scattering until one is accepted */
 #define PATH_MEDIA 8    /* media one trace flies through: its own and 7 others */
-#define STOP_EVERY 16  /* paths traced between reads of the stop flag */
 #define BOX_TIE 1e-9   /* m (relative beyond 1 m): box faces this close are crossed together */
 
 /* The unit direction at cosine c and azimuth 2 pi u2 about the unit vector axis. */
