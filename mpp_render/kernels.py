@@ -207,6 +207,20 @@ def light_sample(rec, x, u1, u2, normal=None, *, backend=None):
     return out[:, 0:3], out[:, 3:6], out[:, 6:9], out[:, 9], out[:, 10]
 
 
+def emitter_transmittance(x, tau, dc, nodes, weights, normal, voxel: float, *, backend=None):
+    """lights.emitter_transmittance (its numpy twin): (N,3) float64, the transmittance an
+    emitter's quadrature ``nodes`` (K,3) with ``weights`` (K,) reach points ``x`` (N,3)
+    with, from their depth ``tau`` (N,3) to its centre ``dc`` (N,) metres away."""
+    if not _on_c(backend):
+        return lights.emitter_transmittance(x, tau, dc, nodes, weights, normal, voxel)
+    x = _f64(x).reshape(-1, 3)
+    n = len(x)
+    buf = _c.emitter_transmittance(x, _f64(tau).reshape(n, 3), _f64(dc).reshape(n),
+                                   _f64(nodes).reshape(-1, 3), _f64(weights).reshape(-1),
+                                   _f64(normal).reshape(3), float(voxel))
+    return np.frombuffer(buf, np.float64).reshape(n, 3).copy()
+
+
 def lobe_ratio(md, mc, u, r: int, channels: int = 3, *, backend=None):
     """The lobe's local-linear fit (kernels_np.lobe_ratio): (X,Y,Z,3) float64."""
     if not _on_c(backend) or int(r) < 1:

@@ -323,7 +323,7 @@ DISC_NODES = 8   # Gauss-Legendre points of disc_transmittance over a lamp's dis
 
 
 def disc_transmittance(light: Light, x, tau, voxel: float, nodes: int = DISC_NODES,
-                       depth=None, reach: float = 0.0, change=None):
+                       depth=None, reach: float = 0.0, change=None, transmit=None):
     """The transmittance (N,3) a lamp's light reaches points ``x`` (N,3, m) with, from the
     optical depth ``tau`` (N,3) to its centre: for a POINT or SPOT light with a radius the
     mean over its soft-falloff disc (light_sample: every disc point carries the same
@@ -343,10 +343,10 @@ def disc_transmittance(light: Light, x, tau, voxel: float, nodes: int = DISC_NOD
     pseudo-random offset per point: the stretched depth is exact only where the medium is
     the same across the disc.  ``change`` (N,3) or None: beyond that, the disc's depth
     change (precompute/discdepth.py, the field's disc channels) added to every node's
-    stretched depth, as the march adds it."""
+    stretched depth, as the march adds it.  ``transmit``: area_transmittance's."""
     tau = np.asarray(tau, np.float64)
     if light.kind == "AREA":
-        return area_transmittance(light, x, tau, voxel)
+        return area_transmittance(light, x, tau, voxel, transmit=transmit)
     if not has_disc(light):
         return np.exp(-tau)
     radius = float(light.radius)
@@ -541,7 +541,45 @@ def _emitter_nodes(light: Light, nodes: int):
     return c + a_[:, None] * ax + b_[:, None] * ay, wa
 
 
-def area_transmittance(light: Light, x, tau, voxel: float, nodes: int = AREA_NODES):
+def emitter_transmittance(x, tau, dc, nodes, weights, normal, voxel: float) -> np.ndarray:
+    """(N,3) the transmittance an emitter's light reaches points ``x`` (N,3, m) with, from
+    their optical depth ``tau`` (N,3) to its centre at distances ``dc`` (N,, m): the mean over
+    its quadrature ``nodes`` (K,3, m) with ``weights`` (K,), each weighed by the solid angle
+    it subtends from its emitting side (unit ``normal`` (3,)), w_k max(v . n, 0) / d^3 with
+    v = x - node and d = |v|, of exp(-tau path_stretch(d, dc, voxel)); exp(-tau) where no
+    node faces the point.  The numpy twin of the compiled kernel (csrc/emitter.c,
+    kernels.emitter_transmittance)."""
+    x = np.asarray(x, np.float64).reshape(-1, 3)
+    tau = np.asarray(tau, np.float64).reshape(len(x), 3)
+    dc = np.asarray(dc, np.float64).reshape(len(x))
+    pts = np.asarray(nodes, np.float64).reshape(-1, 3)
+    wa = np.asarray(weights, np.float64).reshape(len(pts))
+    normal = np.asarray(normal, np.float64).reshape(3)
+    out = np.exp(-tau)
+    grey = tau[:, 0] == tau[:, 1]
+    grey &= tau[:, 1] == tau[:, 2]
+    for a0 in range(0, len(x), 4096):
+        idx = np.arange(a0, min(a0 + 4096, len(x)))
+        v = x[idx, None, :] - pts[None, :, :]                       # emitter -> point
+        d = np.maximum(np.sqrt(np.einsum("nkc,nkc->nk", v, v)), 1e-9)
+        w = wa[None, :] * np.maximum(v @ normal, 0.0) / (d * d * d)
+        st = path_stretch(d, dc[idx, None], voxel)                   # (n,K)
+        num = np.empty((len(idx), 3))
+        g = grey[idx]
+        if g.any():   # a grey depth takes its transmittance once for the three channels
+            num[g] = np.einsum("nk,nk->n", w[g], np.exp(-tau[idx[g], 0, None] * st[g]))[:, None]
+        if not g.all():
+            c = ~g
+            num[c] = np.einsum("nk,nkc->nc", w[c],
+                               np.exp(-tau[idx[c], None, :] * st[c][..., None]))
+        den = w.sum(axis=1)
+        ok = den > 0.0
+        out[idx[ok]] = num[ok] / den[ok, None]
+    return out
+
+
+def area_transmittance(light: Light, x, tau, voxel: float, nodes: int = AREA_NODES,
+                       transmit=None):
     """The transmittance (N,3) an AREA light's light reaches points ``x`` (N,3, m) with,
     from the optical depth ``tau`` (N,3) to its centre: the mean over its emitter, weighed by
     the solid angle each part subtends (cos theta_l dA / d^2, the front side only), of
@@ -553,7 +591,9 @@ def area_transmittance(light: Light, x, tau, voxel: float, nodes: int = AREA_NOD
     parts differ in depth by about sigma a wherever the point is.
     The centre's depth alone read the light that reaches a point beside a large emitter
     from its near parts as if it came the longer way from its centre (p_area_in_box's
-    multiple scattering 0.967 of Cycles')."""
+    multiple scattering 0.967 of Cycles').  ``transmit``: ``emitter_transmittance`` (None)
+    or its compiled twin (kernels.emitter_transmittance, which the layers above pass in)."""
+    transmit = transmit or emitter_transmittance
     x = np.asarray(x, np.float64).reshape(-1, 3)
     tau = np.asarray(tau, np.float64).reshape(len(x), -1)
     c, ax, ay, _ = area_geometry(light)
@@ -564,28 +604,12 @@ def area_transmittance(light: Light, x, tau, voxel: float, nodes: int = AREA_NOD
         normal = -normal
     dc = np.linalg.norm(x - c, axis=1)
     out = np.exp(-tau)
-    # a grey depth (the channels equal) takes its transmittance once for the three
-    grey = tau.shape[1] == 3 and bool(np.all(tau[:, 0] == tau[:, 1]) and
-                                       np.all(tau[:, 1] == tau[:, 2]))
     for n, lo, hi in ((AREA_NEAR_NODES, 0.0, AREA_NEAR), (int(nodes), AREA_NEAR, AREA_MID),
                       (AREA_FAR_NODES, AREA_MID, np.inf)):
         sel = np.flatnonzero((dc >= lo * half) & (dc < hi * half))
-        if not len(sel):
-            continue
-        pts, wa = _emitter_nodes(light, n)
-        for a0 in range(0, len(sel), 4096):
-            idx = sel[a0:a0 + 4096]
-            v = x[idx, None, :] - pts[None, :, :]                       # emitter -> point
-            d = np.maximum(np.sqrt(np.einsum("nkc,nkc->nk", v, v)), 1e-9)
-            w = wa[None, :] * np.maximum(v @ normal, 0.0) / (d * d * d)
-            st = path_stretch(d, dc[idx, None], voxel)                   # (n,K)
-            if grey:
-                num = np.einsum("nk,nk->n", w, np.exp(-tau[idx, 0, None] * st))[:, None]
-            else:
-                num = np.einsum("nk,nkc->nc", w, np.exp(-tau[idx, None, :] * st[..., None]))
-            den = w.sum(axis=1)
-            ok = den > 0.0
-            out[idx[ok]] = num[ok] / den[ok, None]
+        if len(sel):
+            pts, wa = _emitter_nodes(light, n)
+            out[sel] = transmit(x[sel], tau[sel], dc[sel], pts, wa, normal, voxel)
     return out
 
 

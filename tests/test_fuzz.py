@@ -240,6 +240,38 @@ def test_fuzz_lobe_ratio():
     assert ran > ROUNDS // 3
 
 
+def test_fuzz_emitter_transmittance():
+    """The compiled transmittance over an emitter's nodes (kernels.emitter_transmittance):
+    random point and node counts down to none, spoiled points, depths, distances, weights and
+    normals (NaN, inf, huge), voxels of every sign: it returns (N,3) or raises ValueError for
+    the voxel, and agrees with its numpy twin wherever the input is clean."""
+    from mpp_render import lights
+    rng = np.random.default_rng(779)
+    ran = 0
+    for _ in range(ROUNDS):
+        n, k = int(rng.integers(0, 30)), int(rng.integers(0, 20))
+        x, tau = rng.uniform(-2, 2, (n, 3)), rng.uniform(0, 8, (n, 3))
+        dc, pts = rng.uniform(0, 3, n), rng.uniform(-1, 1, (k, 3))
+        wa, nrm = rng.uniform(0, 1, k), rng.normal(size=3)
+        voxel = float(rng.choice([0.05, 1e-300, 0.0, -1.0, np.nan, np.inf]))
+        clean = rng.random() < 0.5
+        if not clean:
+            x, tau, dc = spoil(x, rng), spoil(tau, rng), spoil(dc, rng)
+            pts, wa, nrm = spoil(pts, rng), spoil(wa, rng), spoil(nrm, rng, 0.2)
+        try:
+            out = np.frombuffer(kernels._c.emitter_transmittance(x, tau, dc, pts, wa, nrm, voxel),
+                                np.float64)
+        except ValueError:
+            assert not (voxel > 0.0 and np.isfinite(voxel))
+            continue
+        out = out.reshape(n, 3)
+        if clean:
+            twin = lights.emitter_transmittance(x, tau, dc, pts, wa, nrm, voxel)
+            np.testing.assert_allclose(out, twin, rtol=1e-12, atol=1e-300)
+        ran += 1
+    assert ran > ROUNDS // 4
+
+
 def test_wrong_types_and_shapes_raise():
     c = kernels._c
     with pytest.raises(ValueError):

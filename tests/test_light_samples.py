@@ -1,6 +1,7 @@
 """The compiled light sample (csrc/lightsample.c, kernels.light_sample) against its numpy twin
 (lights.light_sample): every kind of light, points near and inside a lamp's radius, a
-rectangle's cosine warp left to numpy, and bad input refused with a message."""
+rectangle's cosine warp left to numpy, and bad input refused with a message; the same for an
+area light's transmittance over its emitter (csrc/emitter.c, lights.emitter_transmittance)."""
 import numpy as np
 import pytest
 
@@ -79,6 +80,66 @@ def test_bad_input_is_refused():
         kernels._c.light_samples(rec, x.astype(np.float32), u1, u2)
     empty = kernels.light_sample(rec, np.zeros((0, 3)), np.zeros(0), np.zeros(0), backend="c")
     assert [a.shape[0] for a in empty] == [0] * 5
+
+
+def emitter_case(n=3000, seed=11, shape="RECTANGLE"):
+    """An area light's 16 x 16 nodes (lights._emitter_nodes) and points on both sides of its
+    plane, some a hair from a node, with depths grey and chromatic, some 0."""
+    light = rect_light()
+    light.shape = shape
+    pts, wa = lights._emitter_nodes(light, 16)
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(-1.0, 2.0, (n, 3))
+    x[:20] = pts[:20] + 1e-12                     # on a node: d held at 1e-9
+    tau = rng.uniform(0.0, 6.0, (n, 3))
+    tau[::3] = tau[::3, :1]                       # a third grey
+    tau[::7] = 0.0
+    c, ax, ay, _ = lights.area_geometry(light)
+    normal = np.cross(ax, ay)
+    normal /= np.linalg.norm(normal)
+    if np.dot(normal, pack_light(light)[lights.L_NORMAL:lights.L_NORMAL + 3]) < 0.0:
+        normal = -normal
+    dc = np.linalg.norm(x - c, axis=1)
+    dc[5:10] = 0.0                                # within half a voxel of the centre
+    return x, tau, dc, pts, wa, normal
+
+
+@needs_c
+@pytest.mark.parametrize("shape", ["RECTANGLE", "DISK"])
+def test_the_emitter_transmittance_twins_agree(shape):
+    """csrc/emitter.c against lights.emitter_transmittance: the same per point to rounding,
+    points behind the emitter at exp(-tau), every value in (0, 1]."""
+    x, tau, dc, pts, wa, normal = emitter_case(shape=shape)
+    want = lights.emitter_transmittance(x, tau, dc, pts, wa, normal, 0.05)
+    got = kernels.emitter_transmittance(x, tau, dc, pts, wa, normal, 0.05, backend="c")
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-300)
+    behind = (x - pts.mean(axis=0)) @ normal < -0.01
+    assert behind.sum() > 100
+    np.testing.assert_allclose(got[behind], np.exp(-tau[behind]), rtol=1e-15)  # libm's exp
+    assert np.all((got > 0.0) & (got <= 1.0))
+    front = ~behind & (tau[:, 0] > 0.5)
+    assert np.abs(got[front] - np.exp(-tau[front])).max() > 1e-3   # the emitter's spread
+
+
+@needs_c
+def test_emitter_transmittance_refuses_bad_input():
+    x, tau, dc, pts, wa, normal = emitter_case(50)
+    c = kernels._c.emitter_transmittance
+    with pytest.raises(ValueError, match="voxel"):
+        c(x, tau, dc, pts, wa, normal, 0.0)
+    with pytest.raises(ValueError, match="voxel"):
+        c(x, tau, dc, pts, wa, normal, float("nan"))
+    with pytest.raises(ValueError, match="tau"):
+        c(x, tau[:10].copy(), dc, pts, wa, normal, 0.05)
+    with pytest.raises(ValueError, match="weights"):
+        c(x, tau, dc, pts, wa[:-1].copy(), normal, 0.05)
+    with pytest.raises(ValueError, match="normal"):
+        c(x, tau, dc, pts, wa, normal[:2].copy(), 0.05)
+    with pytest.raises(ValueError, match="x"):
+        c(x.astype(np.float32), tau, dc, pts, wa, normal, 0.05)
+    none = kernels.emitter_transmittance(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), pts,
+                                         wa, normal, 0.05, backend="c")
+    assert none.shape == (0, 3)
 
 
 def test_the_disc_lattice_turns_are_the_golden_ratio_steps():

@@ -9,7 +9,7 @@
 extern const char optical_depth_doc[], light_sweep_doc[], upsample_into_doc[], march_doc[],
     trilinear_doc[], light_layout_doc[], trace_paths_doc[], intersect_doc[],
     union_interval_doc[], walk_depth_doc[], nodal_fit_doc[], lobe_ratio_doc[],
-    light_samples_doc[];
+    light_samples_doc[], emitter_transmittance_doc[];
 PyObject *optical_depth(PyObject *self, PyObject *args);
 PyObject *light_sweep(PyObject *self, PyObject *args);
 PyObject *upsample_into(PyObject *self, PyObject *args);
@@ -23,5 +23,6 @@ PyObject *walk_depth(PyObject *self, PyObject *args);
 PyObject *nodal_fit(PyObject *self, PyObject *args);
 PyObject *lobe_ratio(PyObject *self, PyObject *args);
 PyObject *light_samples(PyObject *self, PyObject *args);
+PyObject *emitter_transmittance(PyObject *self, PyObject *args);
 
 #endif

@@ -50,6 +50,7 @@ static PyMethodDef methods[] = {
     {"nodal_fit", nodal_fit, METH_VARARGS, nodal_fit_doc},
     {"lobe_ratio", lobe_ratio, METH_VARARGS, lobe_ratio_doc},
     {"light_samples", light_samples, METH_VARARGS, light_samples_doc},
+    {"emitter_transmittance", emitter_transmittance, METH_VARARGS, emitter_transmittance_doc},
     {"light_layout", light_layout, METH_NOARGS, light_layout_doc},
     {NULL, NULL, 0, NULL},
 };

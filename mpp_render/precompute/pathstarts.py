@@ -101,7 +101,7 @@ class Surroundings:
                 if reach and radius > 0.0 else (None, 0.0)
         depth, radii = self._disc_depth[id(light)]
         return disc_transmittance(light, x, tau, self.step, depth=depth, reach=radii,
-                                  change=change)
+                                  change=change, transmit=kernels.emitter_transmittance)
 
     def camera_depth(self, key, make):
         """The optical depth to the camera of a path lattice's points (lightpaths.lobe_light)

@@ -377,7 +377,8 @@ def _disc(disc, light: Light, pts, tau, pm: PreparedMedium, change=None) -> np.n
     there (discdepth.py) or None."""
     if disc is not None:
         return disc(light, pts, tau, change) if change is not None else disc(light, pts, tau)
-    return disc_transmittance(light, pts, tau, pm.voxel_size, change=change)
+    return disc_transmittance(light, pts, tau, pm.voxel_size, change=change,
+                              transmit=kernels.emitter_transmittance)
 
 
 def tent_restrict(a: np.ndarray, axis: int, stride: int, n_out: int,
