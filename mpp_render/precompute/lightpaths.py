@@ -93,7 +93,7 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     (lobefit.py, Tuning.lobe_window; 0: the deposits alone).  ``disc_channel``: the light's
     disc channels in ``fld`` (precompute/discdepth.py), or None."""
     stride, shape, h, sets = path_sets(pm, fld, light, channel, resolution, around, cell_tau,
-                                       cell_walk, sky, seed, disc_channel)
+                                       cell_walk, sky, seed, disc_channel, threads)
     fog = pm.endless
     if not sets:
         return stride, h, np.zeros(tuple(shape) + (3,), np.float32), None, None, [], (0.0, 0)
@@ -129,20 +129,22 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
 
 
 def path_sets(pm, fld, light, channel: int, resolution: int, around, cell_tau: float,
-              cell_walk: int, sky: bool, seed: int, disc_channel: Optional[int] = None):
+              cell_walk: int, sky: bool, seed: int, disc_channel: Optional[int] = None,
+              threads: int = 1):
     """(stride, shape, h, sets): the paths' lattice at ``resolution`` and the starts of
     ``light``'s paths in ``pm`` (``traced_multiple``'s): its first scatterings, and with
     ``around`` where it first scatters in the world fog beyond the grid, where the surfaces
     reflect it and (``sky``) the constant sky's light; each set (points, power (N,3) W,
     directions, jitter, lobe[, start source and peaks]).  ``disc_channel``: the light's disc
-    channels in ``fld`` (discdepth.py) or None."""
+    channels in ``fld`` (discdepth.py) or None; ``threads``: the source's
+    (source.restricted_source)."""
     stride, shape, h = paths_lattice(pm, resolution)
     voxels = np.zeros(pm.grid.shape[:3], np.float32)
     base, _, pts = source_and_density(pm, fld, light, channel, stride, voxels=voxels,
                                       disc=None if around is None else around.disc,
                                       depth=None if around is None else around.optical_depth,
                                       cell_tau=cell_tau, cell_walk=cell_walk,
-                                      disc_channel=disc_channel)
+                                      disc_channel=disc_channel, threads=threads)
     power = base * cell_volume(pm, stride)
     live = power.sum(axis=1) > 0.0
     fog = pm.endless

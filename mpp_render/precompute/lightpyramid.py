@@ -76,11 +76,13 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
     sees it: precompute hands the delta-scaled medium (media.delta_scaled) and the optical
     depth of its beam, and ``g_last`` the medium's own g, that of the last scattering
     towards the camera.
-    ``threads``: for the exact first flights' convolutions (firstflight.py).  ``tuning``:
+    ``threads``: for the first-scattering source (source.restricted_source) and the exact
+    first flights' convolutions (firstflight.py).  ``tuning``:
     whether the levels are flattened (``flattens``) and the exact first flights made, and
     on what lattice (scene.Tuning)."""
     stride, shape, h = walk_lattice(pm, resolution)
-    got = source_and_density(pm, fld, light, channel, stride, beam, should_cancel)
+    got = source_and_density(pm, fld, light, channel, stride, beam, should_cancel,
+                             threads=threads)
     base, rho, pts = got
     inside = rho[rho > 0]
     mean_rho = float(np.mean(inside)) if inside.size else 0.0
@@ -110,7 +112,8 @@ def multiple_field(pm: PreparedMedium, fld: np.ndarray, light: Light, channel: i
                 g if g_last is None else float(g_last), sigma_t) is None:
             fine = stride   # the walk serves: no finer source for flights never made
         got = (base, rho, pts) if fine == stride else \
-            source_and_density(pm, fld, light, channel, fine, beam, should_cancel)
+            source_and_density(pm, fld, light, channel, fine, beam, should_cancel,
+                               threads=threads)
         fshape = lattice_shape(pm.grid.shape, fine)
         first = first_flight(got[0].reshape(tuple(fshape) + (3,)), (got[1] > 0).reshape(fshape),
                              fine * pm.i2w[:3, :3], light_direction(light, got[2]),

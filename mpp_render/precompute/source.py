@@ -14,7 +14,7 @@ from .. import kernels, pyramid
 from ..firstflight import fft_shape
 from ..lights import disc_transmittance, incident, irradiance, outside_spot, towards_light
 from ..media import PreparedMedium, delta_scaled, density_from
-from ..parallel import check
+from ..parallel import check, run_chunks
 from ..phase import delta_fraction, peak_msa
 from ..scene import Light, Tuning
 from ..worldfog import optical_depth as fog_optical_depth
@@ -430,15 +430,18 @@ def restricted_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel
                    should_cancel: Optional[Callable[[], bool]] = None,
                    beam: Optional[int] = None,
                    voxels: Optional[np.ndarray] = None, disc=None, band=None,
-                   disc_channel: Optional[int] = None) -> np.ndarray:
+                   disc_channel: Optional[int] = None, threads: int = 1) -> np.ndarray:
     """The first-scattering source Q = sigma_s E exp(-tau) (W/m^3, (N,3) in the C order of
     the lattice ``shape`` ``stride`` voxels apart) from every voxel of the field ``fld``
     (optical depth at ``channel``), each voxel's power shared among the lattice points
     around it (``tent_restrict`` along each axis): the lattice holds the voxels' power, where
     reading Q at the lattice points alone missed (or doubled) the thin layer a light lights
     inside a dense medium's face as the lattice fell against it (docs/ms_resolution.md).
-    Stride 1 reads the voxels themselves.  Made ``chunk`` voxel planes at a time; raises
-    cancel.Cancelled when ``should_cancel`` says so between them.  ``voxels`` (float32, the
+    Stride 1 reads the voxels themselves.  Made ``chunk`` voxel planes at a time, on
+    ``threads`` workers (parallel.run_chunks: the light's compiled sample and emitter
+    transmittance release the GIL; each chunk writes its own planes, so the result does not
+    depend on the count); raises cancel.Cancelled when ``should_cancel`` says so between
+    them.  ``voxels`` (float32, the
     grid's shape): filled with each voxel's Q summed over its channels (the paths' starts,
     precompute.lightpaths).  ``band``: None, or surface_band_source's (flat voxel indices,
     Q (N,3)) that replace those voxels' source and (flat indices, factors (M,3)) that scale
@@ -447,9 +450,8 @@ def restricted_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel
     plane = int(np.prod(pm.grid.shape[1:]))
     rows = np.zeros((nx, shape[1], shape[2], 3))
     flat_fld = fld.reshape(nx, -1, fld.shape[-1])
-    for a in range(0, nx, chunk):
-        check(should_cancel)
-        b = min(a + chunk, nx)
+
+    def planes(a, b):
         ijk = np.stack(np.meshgrid(np.arange(a, b), np.arange(pm.grid.shape[1]),
                                    np.arange(pm.grid.shape[2]), indexing="ij"), -1).reshape(-1, 3)
         v = flat_fld[a:b].reshape(-1, fld.shape[-1])
@@ -476,6 +478,7 @@ def restricted_source(pm: PreparedMedium, fld: np.ndarray, light: Light, channel
         if stride > 1:
             q = tent_restrict(tent_restrict(q, 1, stride, shape[1]), 2, stride, shape[2])
         rows[a:b] = q
+    run_chunks(nx, chunk, planes, threads, should_cancel)
     if stride > 1:
         rows = tent_restrict(rows, 0, stride, shape[0])
     return rows.reshape(-1, 3)
@@ -486,7 +489,7 @@ def source_and_density(pm: PreparedMedium, fld: np.ndarray, light: Light, channe
                    should_cancel: Optional[Callable[[], bool]] = None,
                    voxels: Optional[np.ndarray] = None, disc=None, depth=None,
                    cell_tau: float = 0.0, cell_walk: int = Tuning.cell_walk,
-                   disc_channel: Optional[int] = None):
+                   disc_channel: Optional[int] = None, threads: int = 1):
     """(source (N,3) W/m^3, density (N,), points (N,3) m) on the lattice ``stride`` voxels
     apart (C order of ``lattice_shape``): the first-scattering source of ``restricted_source``,
     averaged over the cells round a point or spot light (``cell_mean_source``), and the
@@ -500,7 +503,7 @@ def source_and_density(pm: PreparedMedium, fld: np.ndarray, light: Light, channe
     density grid's lit voxels by optically thick ones take theirs from points of their cells
     (thick_band_source; Tuning.cell_tau, ``cell_walk`` Tuning.cell_walk).  ``disc_channel``:
     the light's disc channels in ``fld`` (discdepth.py; the voxels' and the cells' round the
-    lamp, not the bands'), or None."""
+    lamp, not the bands'), or None.  ``threads``: restricted_source's."""
     shape = lattice_shape(pm.grid.shape, stride)
     idx, pts = lattice_points(pm, shape, stride)
     rho = density_from(lattice_values(fld[..., 0], idx, stride), pm.threshold)
@@ -510,7 +513,7 @@ def source_and_density(pm: PreparedMedium, fld: np.ndarray, light: Light, channe
         band = thick_band_source(pm, fld, light, channel, cell_tau, disc, cell_walk)
     base = restricted_source(pm, fld, light, channel, stride, shape, should_cancel=should_cancel,
                           beam=beam, voxels=voxels, disc=disc, band=band,
-                          disc_channel=disc_channel)
+                          disc_channel=disc_channel, threads=threads)
     if light.kind in ("POINT", "SPOT"):
         near = near_light_cells(pm, light, stride, shape)
         if near.size:
