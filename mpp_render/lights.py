@@ -578,6 +578,17 @@ def emitter_transmittance(x, tau, dc, nodes, weights, normal, voxel: float) -> n
     return out
 
 
+def emitter_normal(light: Light) -> np.ndarray:
+    """(3,) the unit normal of an AREA light's emitter plane (its half axes' cross product),
+    on its emitting side (the packed record's L_NORMAL)."""
+    _, ax, ay, _ = area_geometry(light)
+    normal = np.cross(ax, ay)
+    normal /= max(float(np.linalg.norm(normal)), 1e-300)
+    if np.dot(normal, pack_light(light)[L_NORMAL:L_NORMAL + 3]) < 0.0:
+        normal = -normal
+    return normal
+
+
 def area_transmittance(light: Light, x, tau, voxel: float, nodes: int = AREA_NODES,
                        transmit=None):
     """The transmittance (N,3) an AREA light's light reaches points ``x`` (N,3, m) with,
@@ -598,10 +609,7 @@ def area_transmittance(light: Light, x, tau, voxel: float, nodes: int = AREA_NOD
     tau = np.asarray(tau, np.float64).reshape(len(x), -1)
     c, ax, ay, _ = area_geometry(light)
     half = float(np.sqrt(np.dot(ax, ax) + np.dot(ay, ay)))
-    normal = np.cross(ax, ay)
-    normal /= max(float(np.linalg.norm(normal)), 1e-300)
-    if np.dot(normal, pack_light(light)[L_NORMAL:L_NORMAL + 3]) < 0.0:
-        normal = -normal
+    normal = emitter_normal(light)
     dc = np.linalg.norm(x - c, axis=1)
     out = np.exp(-tau)
     for n, lo, hi in ((AREA_NEAR_NODES, 0.0, AREA_NEAR), (int(nodes), AREA_NEAR, AREA_MID),

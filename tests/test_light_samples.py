@@ -94,12 +94,8 @@ def emitter_case(n=3000, seed=11, shape="RECTANGLE"):
     tau = rng.uniform(0.0, 6.0, (n, 3))
     tau[::3] = tau[::3, :1]                       # a third grey
     tau[::7] = 0.0
-    c, ax, ay, _ = lights.area_geometry(light)
-    normal = np.cross(ax, ay)
-    normal /= np.linalg.norm(normal)
-    if np.dot(normal, pack_light(light)[lights.L_NORMAL:lights.L_NORMAL + 3]) < 0.0:
-        normal = -normal
-    dc = np.linalg.norm(x - c, axis=1)
+    normal = lights.emitter_normal(light)
+    dc = np.linalg.norm(x - lights.area_geometry(light)[0], axis=1)
     dc[5:10] = 0.0                                # within half a voxel of the centre
     return x, tau, dc, pts, wa, normal
 

@@ -1,13 +1,13 @@
 /* The transmittance an area light's emitter reaches points with, averaged over quadrature
  * nodes of the emitter by the solid angle each subtends (twin of
- * kernels_np.emitter_transmittance; lights.area_transmittance picks the nodes).  numpy took
+ * lights.emitter_transmittance; lights.area_transmittance picks the nodes).  numpy took
  * (N, K) arrays through a dozen passes; a ground that the walk model lights as an emitter
  * puts 256 nodes on every voxel of the medium above it. */
 #include "kernels.h"
 
 const char emitter_transmittance_doc[] =
     "emitter_transmittance(x, tau, dc, nodes, weights, normal, voxel) -> bytes\n"
-    "Twin of kernels_np.emitter_transmittance: x (N,3) float64 points (m), tau (N,3) their\n"
+    "Twin of lights.emitter_transmittance: x (N,3) float64 points (m), tau (N,3) their\n"
     "optical depth to the emitter's centre, dc (N,) their distance from it (m); nodes (K,3)\n"
     "float64 points of the emitter (m) with quadrature weights (K,), normal (3,) its unit\n"
     "emitting normal; voxel (m) > 0.  Per point the mean over the nodes, weighed by\n"
