@@ -96,18 +96,19 @@ def _f32(a):
 
 
 def optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, offset=0.5,
-                  bricks=None, clip=False, *, backend=None):
+                  bricks=None, clip=False, stop=None, stop_depth=np.inf, *, backend=None):
     """RGB optical depth (N,3) along rays (kernels_np.optical_depth)."""
     if not _on_c(backend):
         return kernels_np.optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds,
-                                        step, offset, bricks, clip)
+                                        step, offset, bricks, clip, stop, stop_depth)
     n = len(points)
     buf = _c.optical_depth(_f64(points).reshape(n, 3), _f64(dirs).reshape(n, 3),
                            _f64(t_max).reshape(n), [_f32(g) for g in grids],
                            [_f64(w) for w in w2is], [_f64(s).reshape(3) for s in sigma_ts],
                            [float(t) for t in thresholds], float(step), float(offset),
                            None if bricks is None else [_f32(b) for b in bricks], BRICK,
-                           bool(clip))
+                           bool(clip), None if stop is None else _f64(stop).reshape(3, 3),
+                           float(stop_depth))
     return np.frombuffer(buf, np.float64).reshape(n, 3)
 
 

@@ -79,7 +79,7 @@ def media_exit(grids, w2is, points, dirs, t_max):
 
 
 def optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, offset=0.5,
-                  bricks=None, clip=False):
+                  bricks=None, clip=False, stop=None, stop_depth=np.inf):
     """RGB optical depth (N,3) along rays p + s*dir, s in [0, t_max], through every medium.
 
     ``points`` (N,3), ``dirs`` (N,3) unit, ``t_max`` (N,) metres; ``grids`` padded float32
@@ -96,7 +96,20 @@ def optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, 
 
     ``bricks`` (the media's ``media.brick_bounds`` grids, or None) lets the compiled twin add
     the steps that lie wholly in empty or constant bricks in one go (its ``Walk``): the same
-    sum up to rounding, so this twin ignores them."""
+    sum up to rounding, so this twin ignores them.
+
+    ``stop`` (3,3) and ``stop_depth`` (> 0; inf: never): a ray ends after the first step at
+    whose end every channel of tau @ stop is at least ``stop_depth`` (the caller's optical
+    depth where tau holds other units, lightdepth.density_lengths).  Up to there the depth is
+    exact; a ray that ends has at least ``stop_depth`` (the compiled twin adds a run of empty
+    or constant bricks whole before it tests, so it may end further on)."""
+    if not (stop_depth > 0.0):
+        raise ValueError("stop_depth must be > 0 (inf: never)")
+    use_stop = stop is not None and np.isfinite(stop_depth)
+    if use_stop:
+        stop = np.asarray(stop, np.float64).reshape(3, 3)
+        if not (np.all(np.isfinite(stop)) and np.all(stop >= 0.0)):
+            raise ValueError("stop must be finite and >= 0")
     points = np.asarray(points, np.float64)
     dirs = np.asarray(dirs, np.float64)
     if clip:
@@ -105,8 +118,9 @@ def optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, 
     n = np.ceil(t_max / step).astype(np.int64)
     h = np.where(n > 0, t_max / np.maximum(n, 1), 0.0)
     tau = np.zeros((len(points), 3))
+    done = np.zeros(len(points), bool)
     for j in range(int(n.max()) if len(n) else 0):
-        live = n > j
+        live = (n > j) & ~done
         if not live.any():
             break
         p, dl, hl = points[live], dirs[live], h[live]
@@ -122,6 +136,8 @@ def optical_depth(points, dirs, t_max, grids, w2is, sigma_ts, thresholds, step, 
                 rho = value((j + offset) * hl)
             acc += rho[:, None] * st[None, :]
         tau[live] += acc * hl[:, None]
+        if use_stop:
+            done[live] = np.all(tau[live] @ stop >= stop_depth, axis=1)
     return tau
 
 

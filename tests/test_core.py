@@ -88,6 +88,81 @@ def test_c_optical_depth_matches_numpy_twin():
     assert np.all(np.abs(a - b) <= 1e-4 * np.maximum(np.abs(a), 1e-3))
 
 
+def _thick_rays(seed=4, scale=1.0):
+    """A chromatic smoke box (extinction 10-50 per m per unit density, ``scale`` times), rays
+    through it."""
+    rng = np.random.default_rng(seed)
+    med = box_medium(n=12, sigma_s=(40.0, 20.0, 8.0), sigma_a=(10.0, 5.0, 2.0))
+    med.density = (scale * (0.2 + rng.random((12, 12, 12)) * 2)).astype(np.float32)
+    m = prepare(med)
+    pts = rng.uniform(-1.2, 1.2, (400, 3))
+    d = rng.normal(size=(400, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    t = rng.uniform(0, 4, 400)
+    return m, pts, d, t, ([m.grid], [m.w2i], [m.sigma_t], [m.threshold], 0.05)
+
+
+@pytest.mark.parametrize("backend", ["numpy", "c"])
+def test_optical_depth_stops_where_every_channel_is_opaque(backend):
+    """kernels.optical_depth's stop: a ray whose depth (times the stop matrix) stays below the
+    stop depth in some channel is marched to its end as without it; one that reaches it in
+    every channel ends with at least the stop depth, at most its whole depth."""
+    if backend == "c" and kernels.backend() != "c":
+        pytest.skip("compiled kernels not built")
+    m, pts, d, t, args = _thick_rays()
+    full = kernels.optical_depth(pts, d, t, *args, backend=backend)
+    # the callers' channels: the depth's own, scaled, and one that mixes them
+    for stop in (np.eye(3), np.diag([1.0, 0.5, 2.0]), np.array([[1, 0, 0], [0, 0, 0], [0, 1, 1.0]])):
+        depth = 8.0
+        got = kernels.optical_depth(pts, d, t, *args, stop=stop, stop_depth=depth, backend=backend)
+        opaque = np.all(full @ stop >= depth, axis=1)
+        assert 50 < opaque.sum() < len(pts) - 50, opaque.sum()   # both kinds of rays
+        assert np.array_equal(got[~opaque], full[~opaque])
+        assert np.all(got[opaque] @ stop >= depth)
+        assert np.all(got[opaque] <= full[opaque] * (1 + 1e-12))
+        # they ended early: within one step of the stop, far short of their whole depth
+        step_most = 0.05 * float(np.max(m.sigma_t)) * float(m.grid.max()) * np.abs(stop).sum(0).max()
+        assert np.all((got[opaque] @ stop).min(axis=1) < depth + step_most)
+        assert np.mean(got[opaque].sum(1)) < 0.7 * np.mean(full[opaque].sum(1))
+
+
+@pytest.mark.skipif(kernels.backend() != "c", reason="compiled kernels not built")
+def test_optical_depth_stop_twins_agree_and_refuse_bad_input():
+    m, pts, d, t, args = _thick_rays(5)
+    stop = np.diag([1.0, 0.5, 2.0])
+    a = kernels_np.optical_depth(pts, d, t, *args, stop=stop, stop_depth=8.0)
+    b = kernels.optical_depth(pts, d, t, *args, stop=stop, stop_depth=8.0, backend="c")
+    below = ~np.all(a @ stop >= 8.0, axis=1)
+    assert below.sum() > 50
+    assert np.all(np.abs(a[below] - b[below]) <= 1e-4 * np.maximum(np.abs(a[below]), 1e-3))
+    assert np.all(b[~below] @ stop >= 8.0 * (1 - 1e-9))
+    for backend in ("numpy", "c"):
+        for bad in (dict(stop=stop, stop_depth=0.0), dict(stop=stop, stop_depth=-1.0),
+                    dict(stop=stop, stop_depth=float("nan")),
+                    dict(stop=-stop, stop_depth=8.0), dict(stop=stop * np.nan, stop_depth=8.0)):
+            with pytest.raises(ValueError):
+                kernels.optical_depth(pts, d, t, *args, backend=backend, **bad)
+    with pytest.raises(ValueError):
+        kernels._c.optical_depth(pts, d, t, *args, 0.5, None, 4, False, np.eye(2), 8.0)
+
+
+def test_density_lengths_end_at_the_opaque_depth_and_keep_the_world_light():
+    """lightdepth.density_lengths told the extinction ends its rays at OPAQUE_DEPTH; the world
+    light through a medium of that depth and more is the same to 1e-15."""
+    from mpp_render.precompute.lightdepth import OPAQUE_DEPTH, density_lengths
+    m, pts, d, t, _ = _thick_rays(6, scale=4.0)
+    full = density_lengths([m], pts, d, t, 0.05)
+    cut = density_lengths([m], pts, d, t, 0.05, sig_t=np.asarray(m.sigma_t)[None, :])
+    tau_full, tau_cut = full @ m.sigma_t[None, :], cut @ m.sigma_t[None, :]
+    opaque = tau_full.min(axis=1) >= OPAQUE_DEPTH
+    assert opaque.sum() > 20
+    assert np.array_equal(cut[~opaque], full[~opaque])
+    assert np.all(tau_cut[opaque].min(axis=1) >= OPAQUE_DEPTH)
+    assert np.all(cut[opaque] <= full[opaque]) and np.mean(cut[opaque] < full[opaque]) > 0.5
+    # what the world light makes of them: the transmittance and the collided part's ratio
+    assert np.max(np.abs(np.exp(-tau_cut) - np.exp(-tau_full))) < 1e-15
+
+
 def test_trilinear_is_exact_for_linear_fields_and_zero_outside():
     x, y, z = np.meshgrid(np.arange(5.0), np.arange(6.0), np.arange(7.0), indexing="ij")
     grid = (2 * x - y + 0.5 * z + 1).astype(np.float32)

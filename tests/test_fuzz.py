@@ -88,7 +88,11 @@ def test_fuzz_march_and_optical_depth():
         brick = int(rng.choice([1, 2, 4]))
         bricks = [spoil(brick_bounds(g, t, brick), rng, 0.05).astype(np.float32)
                   for g, t in zip(grids, thr)]
-        for extra in ((), (bricks, brick), (bricks, brick, True), (None, 4, True)):
+        # the stop where the rays turn opaque: a random (some spoiled) matrix and depth
+        stop = spoil(np.abs(rng.normal(size=(3, 3))) * rng.choice([0.0, 1.0, 1e6]), rng, 0.1)
+        depth = float(rng.choice([1e-9, 0.5, 37.0, np.inf, 0.0, -1.0, np.nan]))
+        for extra in ((), (bricks, brick), (bricks, brick, True), (None, 4, True),
+                      (bricks, brick, True, stop, depth), (None, 4, False, stop, depth)):
             try:
                 kernels._c.optical_depth(args[0], args[1], args[3], grids, w2is, st, thr, args[15],
                                          0.5, *extra)

@@ -33,6 +33,10 @@ def _exit_distance(media, points, dirs, limit):
 
 
 SHADOW_TAU = 50.0  # optical depth standing for "blocked by an opaque surface" (T ~ 2e-22)
+# optical depth past which a ray's transmittance, e^-37 = 8.5e-17 < 2^-53, adds less than half
+# an ulp to a sum of order 1 (a mean over directions of transmittances at most 1): where
+# density_lengths is told the extinction, its rays end there
+OPAQUE_DEPTH = 37.0
 
 
 def extinction_media(media):
@@ -62,12 +66,16 @@ def media_bricks(media, tuning: Tuning = Tuning()):
 
 
 def density_lengths(media: List[PreparedMedium], points, dirs, t_max, step,
-                    tuning: Tuning = Tuning()):
+                    tuning: Tuning = Tuning(), sig_t=None):
     """(N, M) metres of density along rays p + s dir, s in [0, t_max] cut where they leave
     the media's boxes, per medium: the integral of density_from(grid) (kernels.optical_depth
     with each medium's coefficient a unit vector, three media per call).  Any RGB optical
     depth through the media is then a product with their coefficients (M, 3), so one march
-    gives both the extinction and the scattering optical depth."""
+    gives both the extinction and the scattering optical depth.  ``sig_t``: None, or the
+    media's extinction per unit density (M, 3, 1/m): a ray then ends where that optical
+    depth reaches ``OPAQUE_DEPTH`` in every channel (each call's three media tested on their
+    own depth, which is at most the whole), so its lengths are exact up to there and hold
+    the ray's first OPAQUE_DEPTH or more."""
     od = kernels.optical_depth
     n, M = len(points), len(media)
     out = np.zeros((n, M))
@@ -76,9 +84,13 @@ def density_lengths(media: List[PreparedMedium], points, dirs, t_max, step,
     for g0 in range(0, M, 3):
         grp = media[g0:g0 + 3]
         units = [np.eye(3)[k] for k in range(len(grp))]
+        stop = None
+        if sig_t is not None:
+            stop = np.zeros((3, 3))
+            stop[:len(grp)] = np.asarray(sig_t, np.float64).reshape(M, 3)[g0:g0 + len(grp)]
         v = od(points, dirs, t_max, [m.grid for m in grp], [m.w2i for m in grp], units,
                [m.threshold for m in grp], float(step), 0.5, bricks=media_bricks(grp, tuning),
-               clip=M <= 3)
+               clip=M <= 3, stop=stop, stop_depth=OPAQUE_DEPTH if stop is not None else np.inf)
         out[:, g0:g0 + len(grp)] = v[:, :len(grp)]
     return out
 

@@ -1,8 +1,10 @@
 """The world light: the RGB radiance the constant world background brings to each voxel
 after the phase function towards the camera and the attenuation through all media,
 A(x) = L_world * integral p(w_in . w_cam(x)) T(x, -w_in) dw_in, estimated with directions
-drawn from the phase lobe (so the estimate is the mean transmittance).  w_cam(x) points from x
-to the camera, which is exact for camera rays through x.  It is mostly smooth: computed on a
+drawn from the phase lobe (so the estimate is the mean transmittance; each direction's optical
+depth marched until it is lightdepth.OPAQUE_DEPTH in every channel, past which its
+transmittance is below half an ulp of 1).  w_cam(x) points from x to the camera, which is
+exact for camera rays through x.  It is mostly smooth: computed on a
 coarse lattice (``Tuning.ambient_resolution`` points along the grid's longest side) and interpolated
 to the voxels whose trilinear support touches non-zero density (lattice.needed_flat; the rest
 stay 0): geometrically (its logarithm trilinearly) in the cells whose lattice points all lie
@@ -136,7 +138,7 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
                 # a surface hides the sky beyond it; the medium before it still scatters
                 # the sky's light it gets from elsewhere along the direction (below)
                 hidden = tri >= 0
-        lengths = density_lengths(tracks, pp, d, t_max, step, tuning) \
+        lengths = density_lengths(tracks, pp, d, t_max, step, tuning, sig_t) \
             if tracks else np.zeros((len(pp), 0))
         tau = lengths @ sig_t
         direct = np.exp(-tau) if hidden is None else \
