@@ -90,7 +90,7 @@ def density_lengths(media: List[PreparedMedium], points, dirs, t_max, step,
             stop[:len(grp)] = np.asarray(sig_t, np.float64).reshape(M, 3)[g0:g0 + len(grp)]
         v = od(points, dirs, t_max, [m.grid for m in grp], [m.w2i for m in grp], units,
                [m.threshold for m in grp], float(step), 0.5, bricks=media_bricks(grp, tuning),
-               clip=M <= 3, stop=stop, stop_depth=OPAQUE_DEPTH if stop is not None else np.inf)
+               clip=M <= 3, stop=stop, stop_depth=OPAQUE_DEPTH)
         out[:, g0:g0 + len(grp)] = v[:, :len(grp)]
     return out
 
