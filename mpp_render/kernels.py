@@ -523,6 +523,8 @@ def trace_paths_media(inp, *, threads: int = 1, should_cancel=None, backend=None
     colour, extinction = _colour(inp.scatter), _colour(inp.extinction)
     cells = cell_classes(inp.density, inp.threshold)
     light = _f64(inp.light).reshape(-1) if inp.light is not None else np.zeros(0)
+    # the camera's roulette odds, after the stop flag where there are some
+    odds = (_f32(inp.odds),) if inp.odds is not None else ()
 
     stop = np.zeros(1, np.uint8)   # set by run_chunks on Esc: the compiled loops stop
 
@@ -541,7 +543,7 @@ def trace_paths_media(inp, *, threads: int = 1, should_cancel=None, backend=None
                     _c.trace_paths(outs[i][0], *args, lo, hi, n, int(inp.seed) & 0xFFFFFFFF,
                                    int(inp.max_collisions), float(ROULETTE), *extra, mom, oth,
                                    float(inp.threshold), cells, light, colour, extinction,
-                                   int(inp.min_collisions), stop)
+                                   int(inp.min_collisions), stop, *odds)
 
     run_chunks(blocks, 1, work, threads=workers, should_cancel=should_cancel, stop=stop)
     result, first = [], None

@@ -38,6 +38,17 @@ weight it survives a Russian roulette; after ``MAX_EVENTS`` tentative collisions
 A rate that would put more than ``MAX_RATE_SPAN`` tentative points along the grid's diagonal
 is refused (``rate_span``), and beyond ``PATHS_MAX_SPAN`` the precompute keeps the walk.
 
+**The camera's roulette** (``odds``).  Deep in a thick absorbing medium a path's light never
+reaches the camera, yet its flights cost as much as any.  With ``odds`` (one value in (0, 1]
+per lattice point; precompute/camerareach.py makes them from the camera's optical depth), at
+each real collision inside the paths' own grid the nearest lattice point's odds q are read;
+where q is below the lowest odds the path has survived (``held``, 1 at its start), it goes on
+with probability q / held, its weight (and its start weight, so that the weight's own roulette
+sees the same path) times held / q, and held becomes q.  A path that has reached odds q has
+survived with probability q and weighs 1 / q of its plain weight: unbiased, and played once
+a path however often it comes back (played at every collision, the weights compounded to
+q^-k and spotted the image).  One random number, ``_D_CAMERA``, at the collision's event.
+
 **Beyond the grid.**  The grid's box in index space is [-0.5, n - 0.5] per axis (the
 nearest-voxel domain).  A flight that crosses its face stops there and starts again
 (exponential flights forget their past).  Outside, the medium has the density ``outside``
@@ -125,6 +136,7 @@ _D_ACCEPT = 512   # a start's acceptance draw, one dimension per try
 _D_CORNER = 600   # the lattice corner a deposit's moments go to
 _D_MEDIUM = 17    # which medium a tentative collision is in, with several (csrc/paths.c)
 _D_LIGHT = 700    # the emitter point a first scattering's light comes from (csrc/paths.c)
+_D_CAMERA = 800   # the camera's roulette at a real collision (csrc/paths.c)
 PATH_MEDIA = 8    # media one trace flies through at most: its own and 7 others
 BOX_TIE = 1e-9    # m (relative beyond 1 m): box faces this close are crossed together
 START_TRIES = 64  # offsets drawn for a first scattering until one is accepted
@@ -202,7 +214,9 @@ class PathInputs:
     channel c, at most ``density``), read at the nearest voxel (``_extinction_density``);
     the collisions are then by spectral tracking.  ``moment_share``: with ``moments``, the
     share of the paths (the first ones of each of kernels.PATH_BLOCKS blocks) whose moments
-    are deposited, scaled to all of them (kernels.moment_ends); 1: every path's."""
+    are deposited, scaled to all of them (kernels.moment_ends); 1: every path's.
+    ``odds``: None, or float32 (LX,LY,LZ) on the lattice, each point's odds in (0, 1] for the
+    camera's roulette (module docstring, "The camera's roulette")."""
 
     density: np.ndarray
     w2i: np.ndarray
@@ -237,6 +251,7 @@ class PathInputs:
     extinction: Optional[np.ndarray] = None
     min_collisions: int = 0
     moment_share: float = 1.0
+    odds: Optional[np.ndarray] = None
 
     @property
     def channels(self) -> int:
@@ -379,6 +394,23 @@ def _survive(keys, ev, w, w0, hits, max_hits):
     live = uniform(keys, ev, _D_RR) < q
     w = w / np.maximum(q, 1e-300)[:, None]
     return live & (hits < max_hits) & (w.max(axis=1) > 0.0), w
+
+
+def _camera_roulette(m, odds, lsh, pos, keys, ev, w, w0, held, ids):
+    """The camera's roulette (csrc/paths.c camera_roulette) at the real collisions ``pos``
+    inside ``m`` of the paths ``ids``: (alive, w); ``w0`` and ``held`` (per path) are
+    updated in place for the survivors."""
+    lat = np.floor(_to_index(m, pos) / m.stride + 0.5)
+    lat = np.where(lat >= 0.0, lat, 0.0)
+    v = np.minimum(lat, lsh - 1).astype(np.int64)
+    q = odds[(v[:, 0] * lsh[1] + v[:, 1]) * lsh[2] + v[:, 2]]
+    h = held[ids]
+    play = q < h
+    live = ~play | (uniform(keys, ev, _D_CAMERA) * h < q)
+    f = np.where(play & live, h / np.where(play, q, 1.0), 1.0)
+    w0[ids] = w0[ids] * f
+    held[ids] = np.where(play & live, q, h)
+    return live, w * f[:, None]
 
 
 def start_positions(inp: PathInputs, keys: np.ndarray, k: np.ndarray) -> np.ndarray:
@@ -538,6 +570,9 @@ def trace_paths_media_np(inp: PathInputs, paths: Optional[tuple] = None) -> list
                   0.0 if int(inp.lobe) == 2 else g, din)
     w = inp.weights[k] / n
     w0 = w.max(axis=1)
+    held = np.ones(len(keys))   # the lowest camera odds each path has survived
+    odds = None if inp.odds is None or not np.size(inp.odds) else \
+        np.asarray(inp.odds, np.float32).astype(np.float64).reshape(-1)
     event = np.zeros(len(keys), np.int64)
     hits = np.zeros(len(keys), np.int64)
     skip = np.full(len(keys), -1, np.int64)
@@ -634,16 +669,20 @@ def trace_paths_media_np(inp: PathInputs, paths: Optional[tuple] = None) -> list
                 continue
             _collide(grids[j], outs[j], tws[j], gs[j], sts[j], sss[j], mus[j], sel, alive,
                      ins[:, j], rate, kk, ev, pos, d, w, w0, hits, keep, nc, lshapes[j],
-                     outside, centre, radius, inp.max_collisions, inp.min_collisions)
+                     outside, centre, radius, inp.max_collisions, inp.min_collisions,
+                     odds=odds if j == 0 else None, held=held)
         alive = alive[keep & (ev < MAX_EVENTS)]
     return [o.reshape(sh + (nc,)) for o, sh in zip(outs, lshapes)]
 
 
 def _collide(m, out, tw, g, st, ss, mu, coll, alive, ins, rate, kk, ev, pos, d, w, w0, hits,
-             keep, nc, lshape, outside, centre, radius, max_collisions, min_collisions=0):
+             keep, nc, lshape, outside, centre, radius, max_collisions, min_collisions=0,
+             odds=None, held=None):
     """The tentative collisions ``coll`` (a mask over ``alive``) in medium ``m``: their
     deposits on its lattice ``out`` (of the paths with at least ``min_collisions`` real
-    collisions and bounces), then real or null collisions (csrc/paths.c)."""
+    collisions and bounces), then real or null collisions (csrc/paths.c); with ``odds``
+    (the lattice's flattened, PathInputs.odds) the camera's roulette after a real collision
+    inside the grid, ``held`` (per path) the lowest odds each has survived."""
     lsh = np.array(lshape)
     st_max, st_min = float(np.max(st)), float(np.min(st))
     ci = alive[coll]
@@ -729,6 +768,12 @@ def _collide(m, out, tw, g, st, ss, mu, coll, alive, ins, rate, kk, ev, pos, d, 
         hits[hi] += 1
         live_h, wc[hit] = _survive(kc[hit], ec[hit], wc[hit], w0[hi], hits[hi], max_collisions)
         live_c[hit] &= live_h
+        if odds is not None:
+            cam = hit & inn & live_c
+            if np.any(cam):
+                live_k, wc[cam] = _camera_roulette(m, odds, lsh, pos[ci[cam]], kc[cam], ec[cam],
+                                                   wc[cam], w0, held, ci[cam])
+                live_c[cam] &= live_k
     live_c[~hit] &= wc[~hit].max(axis=1) > 0.0
     w[ci] = wc
     keep[coll] = live_c

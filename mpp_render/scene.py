@@ -391,7 +391,17 @@ class Tuning:
     with every path by its power, 0.0058 / 0.0058 / 0.0064 at 0.1 / 0.2 / 0.35 (with the
     odds softened as exp(-tau_c / 4), the first form tried), 0.0061 as now; at 0.2 with a
     reach of 3: p_sphere_gneg 0.0054 -> 0.0058, cloud_vdb 0.0154 -> 0.0152,
-    slab_isotropic 0.0108 -> 0.0108 (within two seeds' scatter; docs/method.md §9.8)."""
+    slab_isotropic 0.0108 -> 0.0108 (within two seeds' scatter; docs/method.md §9.8).
+    ``camera_roulette``: the floor of the odds by which the lights' paths play the camera's
+    roulette where the camera cannot see their light (precompute/camerareach.py, paths.py
+    "The camera's roulette"): past the walk's reach a path goes on with odds falling by e
+    every diffusion length, down to this, and weighs as much more, at most
+    1 / camera_roulette of its plain weight; 1 switches it off.  Unbiased at any value: it
+    trades the paths' work for their noise.  0.1 as a test build measured it on
+    p_sphere_thick (one roulette a path at an optical depth of 20 from the camera:
+    precompute 51 / 56 -> 32 / 36 s, full render 0.0246 / 0.0261 -> 0.0246 / 0.0257 at
+    seeds 0 / 1; at 0.25 37 / 40 s, 0.0243 / 0.0265); as now 60 / 65 -> 53 / 52 s, 0.0246 /
+    0.0261 -> 0.0247 / 0.0261 (docs/performance.md, 2026-12-07)."""
 
     skip_min_voxels: int = 1 << 20
     spot_cull: bool = True
@@ -433,6 +443,7 @@ class Tuning:
     surface_bounces: int = 2
     sky_deficit_paths: float = 0.125
     sky_deficit_mix: float = 0.2
+    camera_roulette: float = 0.1
 
 
 # The default Noise Threshold (pilot.py's unit: the standard error over sqrt(I S), S the

@@ -23,7 +23,8 @@ def _libasan():
 # not run): test_kernels.py's ray helper, and test_enclosed.py's scenes (test_nodal's)
 RUN = ("test_fuzz.py", "test_kernels.py", "test_sweep.py", "test_skip.py", "test_pyramid.py",
        "test_paths.py", "test_paths_world.py", "test_paths_media.py", "test_sharp_surface.py",
-       "test_moments.py", "test_nodal.py", "test_lobefit.py", "test_light_samples.py")
+       "test_moments.py", "test_nodal.py", "test_lobefit.py", "test_light_samples.py",
+       "test_camera_roulette.py")
 HELPERS = ("rays.py", "test_enclosed.py")
 SEPARATE = "test_kernels.py"  # the march's twins: about as long as the rest together
 

@@ -10,8 +10,9 @@ import pytest
 from mpp_render.media import prepare
 from mpp_render.precompute import precompute
 from mpp_render.precompute.lightpaths import PathLattice
-from mpp_render.precompute.skydeficit import (camera_odds, deficit_paths, largest_albedo,
-                                              sky_deficit, walk_reach, weighted_paths)
+from mpp_render.precompute.camerareach import largest_albedo, walk_reach
+from mpp_render.precompute.skydeficit import (camera_odds, deficit_paths, sky_deficit,
+                                              weighted_paths)
 from mpp_render.scene import Camera, Medium, Tuning, World
 
 N = 40          # voxels a side

@@ -34,7 +34,10 @@ const char trace_paths_doc[] =
     "stop (default None): a writable uint8 array of at least one byte, read between paths\n"
     "while the loop runs without the GIL: once its first byte is nonzero (another thread\n"
     "sets it: Esc) the loop stops within STOP_EVERY paths and out holds a partial sum, which\n"
-    "the caller discards.";
+    "the caller discards.\n"
+    "odds (default None): None, an empty float32 array, or (LX,LY,LZ) float32 in (0, 1] on\n"
+    "the lattice: the camera's roulette at real collisions in the grid (paths.py, \"The\n"
+    "camera's roulette\"), the nearest lattice point's odds.";
 
 #define MAX_EVENTS 1000000L   /* tentative collisions per path, whatever the medium */
 #define MAX_RATE_SPAN 1e6    /* rate x the grid's diagonal (m): tentative points across it */
@@ -54,6 +57,7 @@ const char trace_paths_doc[] =
 #define D_CORNER 600   /* the lattice corner a deposit's moments go to */
 #define D_MEDIUM 17    /* which medium a tentative collision is in, with several (event >= 1) */
 #define D_LIGHT 700    /* the emitter point a first scattering's light comes from (event 0) */
+#define D_CAMERA 800   /* the camera's roulette at a real collision (camera_roulette) */
 #define START_TRIES 64 /* offsets drawn for a first scattering until one is accepted */
 #define PATH_MEDIA 8    /* media one trace flies through: its own and 7 others */
 #define BOX_TIE 1e-9   /* m (relative beyond 1 m): box faces this close are crossed together */
@@ -127,6 +131,8 @@ typedef struct {
     const double *light;      /* NULL, or the light record (LIGHT_FIELDS) whose first
                                  scatterings the lobe-0 starts are: the light's direction is
                                  drawn at the start from the emitter (light_sample) */
+    const float *odds;        /* NULL, or (LX,LY,LZ) of m[0]'s lattice: each point's odds in
+                                 (0, 1] of a path surviving there (camera_roulette) */
 } Tracer;
 
 /* Where the ray o + t d (t >= 0) enters (want_exit 0) or leaves (1) the grid's box in index
@@ -241,6 +247,34 @@ static inline int survive(const Tracer *T, uint32_t key, long ev, double w[3], d
     int live = uniform01(key, ev, D_RR) < q;
     for (int c = 0; c < 3; c++) w[c] /= max_d(q, 1e-300);
     return live && hits < T->max_hits && max_d(w[0], max_d(w[1], w[2])) > 0.0;
+}
+
+/* The camera's roulette at a real collision at world point p inside m[0] (paths.py, "The
+ * camera's roulette"): the odds q of the lattice point nearest p; where q is below the
+ * lowest odds *held the path has met, it survives with probability q / held and its weight
+ * (and w0, so that the weight's own roulette sees the same path) grows by held / q.  A path
+ * that reaches odds q has survived with probability q and weighs 1 / q: once per path, not
+ * compounded.  0 when the path ends. */
+static inline int camera_roulette(const Tracer *T, const double p[3], uint32_t key, long ev,
+                                  double w[3], double *w0, double *held) {
+    const PathGrid *G = &T->m[0];
+    double idx[3];
+    Py_ssize_t v[3];
+    grid_index(G, p, idx);
+    for (int a = 0; a < 3; a++) {
+        double l = floor_fast(idx[a] / (double)G->stride + 0.5);
+        if (!(l >= 0.0)) l = 0.0;   /* NaN too */
+        if (l > (double)(G->ls[a] - 1)) l = (double)(G->ls[a] - 1);
+        v[a] = (Py_ssize_t)l;
+    }
+    double q = (double)T->odds[(v[0] * G->ls[1] + v[1]) * G->ls[2] + v[2]];
+    if (!(q < *held)) return 1;
+    if (!(uniform01(key, ev, D_CAMERA) * *held < q)) return 0;
+    double f = *held / q;
+    for (int c = 0; c < 3; c++) w[c] *= f;
+    *w0 *= f;
+    *held = q;
+    return 1;
 }
 
 /* Whether world point p lies in grid G's box by more than INNER_MARGIN voxels on every
@@ -479,6 +513,7 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
         if (w[c] > w0) w0 = w[c];
     }
     long hits = 0;
+    double held = 1.0;   /* the lowest camera odds the path has survived (camera_roulette) */
     Py_ssize_t skip = -1;
     int inside[PATH_MEDIA];
     for (int j = 0; j < T->nm; j++) inside[j] = in_box(&T->m[j], pos);
@@ -628,6 +663,8 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
             for (int a = 0; a < 3; a++) d[a] = nd[a];
             hits++;
             if (!survive(T, key, ev, w, w0, hits)) return;
+            if (T->odds && j == 0 && inside[0] && !camera_roulette(T, pos, key, ev, w, &w0, &held))
+                return;
         } else if (!(max_d(w[0], max_d(w[1], w[2])) > 0.0)) {
             return;
         }
@@ -789,15 +826,15 @@ static int other_grid(PyObject *item, Buf b[OTHER_BUFS], PathGrid *G) {
 PyObject *trace_paths(PyObject *self, PyObject *args) {
     PyObject *po, *pd, *pw2i, *pi2w, *pss, *pst, *ptw, *pstarts, *pws, *pdirs, *pcdf, *preach,
         *ptri, *palb, *psrc, *ppeak, *pmom, *pothers, *pcells, *plight, *pcol, *pext,
-        *pstop = Py_None;
+        *pstop = Py_None, *podds = Py_None;
     double g, rate, roulette, jitter, outside, thr0;
     long stride, lo, hi, n_paths, max_hits, lobe, min_hits = 0;
     unsigned long seed;
-    if (!PyArg_ParseTuple(args, "OOOOOOdlOOOOOdlllklddldOOOOOOOdOOOO|lO", &po, &pd, &pw2i, &pi2w,
+    if (!PyArg_ParseTuple(args, "OOOOOOdlOOOOOdlllklddldOOOOOOOdOOOO|lOO", &po, &pd, &pw2i, &pi2w,
                           &pss, &pst, &g, &stride, &ptw, &pstarts, &pws, &pdirs, &pcdf, &rate,
                           &lo, &hi, &n_paths, &seed, &max_hits, &roulette, &jitter, &lobe,
                           &outside, &preach, &ptri, &palb, &psrc, &ppeak, &pmom, &pothers, &thr0,
-                          &pcells, &plight, &pcol, &pext, &min_hits, &pstop))
+                          &pcells, &plight, &pcol, &pext, &min_hits, &pstop, &podds))
         return NULL;
     if (!PyTuple_Check(pothers) || PyTuple_GET_SIZE(pothers) > PATH_MEDIA - 1) {
         PyErr_SetString(PyExc_ValueError, "trace_paths: others must be a tuple of at most 7 media");
@@ -805,7 +842,7 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
     }
     Buf bo = {0}, bd = {0}, bw = {0}, bi = {0}, bss = {0}, bst = {0}, btw = {0}, bs = {0},
         bws = {0}, bdir = {0}, bc = {0}, br = {0}, bt = {0}, ba = {0}, bq = {0}, bp = {0}, bm = {0},
-        bcl = {0}, bli = {0}, bcol = {0}, bext = {0}, bstop = {0};
+        bcl = {0}, bli = {0}, bcol = {0}, bext = {0}, bstop = {0}, bodds = {0};
     const volatile unsigned char *stop = NULL;
     /* per other medium: out, moments, density, w2i, sigma_s, sigma_t, towards, cells, colour,
      * extinction */
@@ -918,6 +955,26 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
         }
         T.light = sl[0] ? (const double *)bli.view.buf : NULL;
     }
+    T.odds = NULL;
+    if (podds != Py_None) {   /* the camera's odds: empty, or one in (0, 1] a lattice point */
+        Py_ssize_t sodd[3] = {-1, -1, -1};
+        if (get_buf(podds, &bodds, 'f', 3, sodd, "odds") < 0) goto done;
+        Py_ssize_t n_odds = sodd[0] * sodd[1] * sodd[2];
+        if (n_odds > 0) {
+            if (sodd[0] != so[0] || sodd[1] != so[1] || sodd[2] != so[2]) {
+                PyErr_SetString(PyExc_ValueError,
+                                "trace_paths: odds must have the lattice's shape");
+                goto done;
+            }
+            const float *q = (const float *)bodds.view.buf;
+            for (Py_ssize_t k = 0; k < n_odds; k++)
+                if (!(q[k] > 0.0f && q[k] <= 1.0f)) {
+                    PyErr_SetString(PyExc_ValueError, "trace_paths: odds must lie in (0, 1]");
+                    goto done;
+                }
+            T.odds = q;
+        }
+    }
     T.src = has_src ? (const float *)bq.view.buf : NULL;
     T.peak = has_src ? (const double *)bp.view.buf : NULL;
     memcpy(T.i2w, bi.view.buf, sizeof T.i2w);
@@ -987,6 +1044,7 @@ done:
     buf_release(&bdir); buf_release(&bc); buf_release(&br); buf_release(&bt); buf_release(&ba);
     buf_release(&bq); buf_release(&bp); buf_release(&bm); buf_release(&bcl);
     buf_release(&bli); buf_release(&bcol); buf_release(&bext); buf_release(&bstop);
+    buf_release(&bodds);
     for (Py_ssize_t k = 0; k < n_others; k++)
         for (int q = 0; q < OTHER_BUFS; q++) buf_release(&ob[k][q]);
     free(boxes);

@@ -17,6 +17,7 @@ from ..parallel import worker_count
 from ..paths import (MAX_COLLISIONS, MOMENT_CHANNELS, PATH_MEDIA, PATHS_MAX_SPAN,
                      SIGNED_CHANNELS, PathInputs, PathMedium, from_power, rate_span)
 from ..scene import MULTIPLE_PATHS, Tuning
+from .camerareach import needs_roulette, roulette_odds
 from .lattice import MULTIPLE_RESOLUTION, dilate, lattice_points, paths_lattice
 from .lightdepth import eye_depth
 from .lobefit import camera_weight, fitted
@@ -57,7 +58,8 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
                     far_resolution: int = MULTIPLE_RESOLUTION,
                     cell_tau: float = Tuning.cell_tau, cell_walk: int = Tuning.cell_walk,
                     sky: bool = False, lobe_window: int = Tuning.lobe_window,
-                    disc_channel: Optional[int] = None):
+                    disc_channel: Optional[int] = None,
+                    roulette_floor: float = Tuning.camera_roulette):
     """(stride, h, M, far, moments, cross, started) for ``light`` on medium ``pm`` (its field
     ``fld``, the light's optical depth at ``channel``): M float32 (LX,LY,LZ,3) W/(m^2 sr) on
     the light pyramid's lattice (lattice.walk_lattice at ``resolution``), from ``n_paths``
@@ -91,7 +93,9 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     ``lobe_window``: with a ``camera`` and a medium of g != 0, M towards the camera is the
     paths' lobe fitted to their deposits over windows of this many lattice points round each
     (lobefit.py, Tuning.lobe_window; 0: the deposits alone).  ``disc_channel``: the light's
-    disc channels in ``fld`` (precompute/discdepth.py), or None."""
+    disc channels in ``fld`` (precompute/discdepth.py), or None.  ``roulette_floor``:
+    Tuning.camera_roulette, the floor of the camera's roulette odds (camerareach.py), played
+    where the paths' light is for the camera alone (no surface gathers their moments)."""
     stride, shape, h, sets = path_sets(pm, fld, light, channel, resolution, around, cell_tau,
                                        cell_walk, sky, seed, disc_channel, threads)
     fog = pm.endless
@@ -107,9 +111,13 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     gathered = moments and around is not None and around.surfaces is not None
     rec = start_light(light)
     fit = fits_lobe(pm, camera, lobe_window)
+    odds = None
+    if camera is not None and not gathered and needs_roulette(pm, roulette_floor):
+        odds = roulette_odds(pm, lattice_depth(pm, lat, camera, threads, should_cancel, around),
+                             roulette_floor)
     accs = _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
                       moments=gathered or fit, partners=partners, light=rec, halves=fit,
-                      moment_share=1.0 if gathered else LOBE_MOMENTS)
+                      moment_share=1.0 if gathered else LOBE_MOMENTS, odds=odds)
     if fit:
         accs, split = accs
     m = lat.mean(accs[0])
@@ -419,7 +427,7 @@ def _trace(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
 def _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
                max_collisions: int = MAX_COLLISIONS, moments: bool = False,
                partners=(), light=None, min_collisions: int = 0, halves: bool = False,
-               moment_share: float = 1.0):
+               moment_share: float = 1.0, odds: Optional[np.ndarray] = None):
     """``_trace``'s deposits on ``lat``, then on each of the ``partners``' lattices
     ((PreparedMedium, PathLattice), traced_multiple), which the paths fly through too.  Each
     set of ``sets``: (points, power W, directions, jitter, lobe[, (start source, peaks) or
@@ -431,7 +439,9 @@ def _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
     returns (that list, (first, second)), each (LX,LY,LZ,3) the own lattice's light deposits
     as estimated by one half of every set's paths alone (kernels.trace_paths_media's halves,
     scaled to the whole: the two are independent estimates of the list's first).
-    ``moment_share``: the share of the paths whose moments are kept (paths.PathInputs)."""
+    ``moment_share``: the share of the paths whose moments are kept (paths.PathInputs).
+    ``odds``: None, or float32 (LX,LY,LZ) the camera's roulette odds on ``lat``
+    (camerareach.roulette_odds, paths.PathInputs.odds)."""
     density, w2i, i2w = lat.density, lat.w2i, lat.i2w
     surf = around.surfaces if around is not None else None
     centre, radius = reach(pm, (w2i, density.shape))
@@ -465,7 +475,8 @@ def _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
                          start_source=source, start_peak=peak, moments=moments,
                          others=others, threshold=lat.threshold, light=light,
                          scatter=scatter, extinction=extinction,
-                         min_collisions=min_collisions, moment_share=moment_share, **extra)
+                         min_collisions=min_collisions, moment_share=moment_share, odds=odds,
+                         **extra)
         got = kernels.trace_paths_media(inp, threads=worker_count(threads),
                                         should_cancel=should_cancel, halves=halves)
         if halves:
@@ -498,15 +509,25 @@ def lobe_light(pm, lat, camera, m: np.ndarray, split, lobe_window: int, threads:
     another, skydeficit.py: its noise is not to be stopped at 0 on its own).  ``around``: the
     precompute's Surroundings, which keeps the lattice's depth to the camera for the other
     lights and the sky's deficit on the same lattice (Surroundings.camera_depth)."""
-    depth = (lambda: _camera_depth(pm, lat, camera, threads, should_cancel))
-    tau = depth() if around is None else around.camera_depth(
-        (id(pm), tuple(lat.shape), int(lat.stride), _eye(camera).tobytes()), depth)
-    u = camera_weight(lat.tent_mass, tau)
+    u = camera_weight(lat.tent_mass, lattice_depth(pm, lat, camera, threads, should_cancel,
+                                                   around))
     first, second = split
     # the nodal move is linear where not stopped at 0: one for the halves' difference
     light3 = fitted(m[..., :3], m[..., 3:], lat.towards, u,
                     np.asarray(lat.mean(first - second, signed=True), np.float64), lobe_window)
     return light3 if signed else np.maximum(light3, np.float32(0.0))
+
+
+def lattice_depth(pm, lat, camera, threads: int = 0, should_cancel=None,
+                  around: Optional[Surroundings] = None) -> Optional[np.ndarray]:
+    """``_camera_depth`` of the PathLattice ``lat``, kept by ``around`` (the precompute's
+    Surroundings, Surroundings.camera_depth) for every light's lobe fit and roulette and the
+    sky deficit's on the same lattice; made afresh without one.  Callers must not modify it."""
+    depth = (lambda: _camera_depth(pm, lat, camera, threads, should_cancel))
+    if around is None:
+        return depth()
+    return around.camera_depth(
+        (id(pm), tuple(lat.shape), int(lat.stride), _eye(camera).tobytes()), depth)
 
 
 def _camera_depth(pm, lat, camera, threads, should_cancel) -> Optional[np.ndarray]:

@@ -104,9 +104,10 @@ class Surroundings:
                                   change=change, transmit=kernels.emitter_transmittance)
 
     def camera_depth(self, key, make):
-        """The optical depth to the camera of a path lattice's points (lightpaths.lobe_light)
+        """The optical depth to the camera of a path lattice's points (lightpaths.lattice_depth)
         under ``key`` (the medium, the lattice's shape and stride, the eye), made once by
-        ``make()``: the lights' lobe fits and the sky deficit's on the same lattice share it.
+        ``make()``: the lights' lobe fits and roulettes and the sky deficit's on the same
+        lattice share it.
         Callers must not modify it."""
         if key not in self._camera_depth:
             self._camera_depth[key] = make()

@@ -260,7 +260,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                              cell_walk=tuning.cell_walk,
                                              sky=li == sky_li,
                                              lobe_window=tuning.lobe_window,
-                                             disc_channel=discs[li])
+                                             disc_channel=discs[li],
+                                             roulette_floor=tuning.camera_roulette)
                     if traced is not None:
                         for (j, _), m in zip(near, traced[5]):
                             key = (j, li)

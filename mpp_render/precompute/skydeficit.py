@@ -31,9 +31,10 @@ odds of starting a path are mix + (1 - mix) v / <v> (``Tuning.sky_deficit_mix``;
 power-weighted mean), v = exp(-max(tau_c - r, 0)) with tau_c the optical depth from the
 voxel to the camera and r = sqrt(2 / ((1 - a)(1 - g))) the root-mean-square optical distance
 of a random walk of 1 / (1 - a) flights of mean square length 2 / (1 - g) (albedo a, the
-largest channel's; anisotropy g).  The weights divide by the odds: the estimate is the same,
-its noise lower where the camera looks (p_sphere_lowalbedo, albedo 0.5: Volume Multiple's
-seed-to-seed noise 0.0079 -> about 0.0054 of the image's mean; method.md §9.8).
+largest channel's; anisotropy g; camerareach.walk_reach).  The weights divide by the odds:
+the estimate is the same, its noise lower where the camera looks (p_sphere_lowalbedo, albedo
+0.5: Volume Multiple's seed-to-seed noise 0.0079 -> about 0.0054 of the image's mean;
+method.md §9.8).
 """
 from __future__ import annotations
 
@@ -44,6 +45,7 @@ import numpy as np
 from .. import kernels
 from ..media import PreparedMedium, density_from
 from ..scene import Tuning
+from .camerareach import largest_albedo, walk_reach
 from .emissionlight import scattered_glow
 from .lightdepth import eye_depth
 from .lightpaths import cell_volume
@@ -143,14 +145,6 @@ def at_voxels(pm: PreparedMedium, flat: np.ndarray, lattice, values: np.ndarray)
     return np.clip(kernels.trilinear(grid, ijk / stride)[:, 0].astype(np.float64), 0.0, 1.0)
 
 
-def largest_albedo(pm: PreparedMedium) -> float:
-    """The albedo sigma_s / sigma_t of ``pm``'s channel that scatters most (0 without
-    extinction)."""
-    st = np.asarray(pm.sigma_t, np.float64)
-    ss = np.asarray(pm.sigma_s, np.float64)
-    return float(np.max(np.where(st > 0.0, ss / np.where(st > 0.0, st, 1.0), 0.0)))
-
-
 def weighted_paths(pm: PreparedMedium, e: np.ndarray, path_weight: float, most: int) -> int:
     """The paths for the fictitious emission ``e`` (N,3) W/(m^3 sr) at ``pm``'s voxels so that
     each carries, once it has scattered, the lights' mean weight ``path_weight`` (W a path):
@@ -162,15 +156,6 @@ def weighted_paths(pm: PreparedMedium, e: np.ndarray, path_weight: float, most: 
     scattered = 4.0 * np.pi * cell_volume(pm, 1) * float(np.asarray(e, np.float64).sum()) * \
         largest_albedo(pm)
     return int(min(max(1, int(most)), max(1.0, np.ceil(scattered / float(path_weight)))))
-
-
-def walk_reach(albedo: float, g: float) -> float:
-    """The root-mean-square optical distance a path walks before it is absorbed in a medium of
-    ``albedo`` and anisotropy ``g``: sqrt(2 / ((1 - albedo)(1 - g))), 1 / (1 - albedo)
-    flights of mean square optical length 2 / (1 - g) (transport mean free paths); infinite
-    where nothing absorbs or g is 1."""
-    lost = (1.0 - float(albedo)) * (1.0 - float(g))
-    return float(np.sqrt(2.0 / lost)) if lost > 0.0 else np.inf
 
 
 def camera_odds(pm: PreparedMedium, flat: np.ndarray, e: np.ndarray, camera, resolution: int,
