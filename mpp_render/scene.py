@@ -400,7 +400,7 @@ class Tuning:
     trades the paths' work for their noise.  0.1 as a test build measured it on
     p_sphere_thick (one roulette a path at an optical depth of 20 from the camera:
     precompute 51 / 56 -> 32 / 36 s, full render 0.0246 / 0.0261 -> 0.0246 / 0.0257 at
-    seeds 0 / 1; at 0.25 37 / 40 s, 0.0243 / 0.0265); as now 60 / 65 -> 53 / 52 s, 0.0246 /
+    seeds 0 / 1; at 0.25 37 / 40 s, 0.0243 / 0.0265); as now 70 / 62 -> 53 / 57 s, 0.0246 /
     0.0261 -> 0.0247 / 0.0261 (docs/performance.md, 2026-12-07)."""
 
     skip_min_voxels: int = 1 << 20
