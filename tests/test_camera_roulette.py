@@ -140,7 +140,7 @@ def test_the_odds_follow_the_walks_reach():
     reach = camerareach.walk_reach(0.99, 0.6)
     assert reach == pytest.approx(np.sqrt(2.0 / (0.01 * 0.4)))
     tau = np.linspace(0.0, 60.0, 61).reshape(61, 1, 1)
-    odds = camerareach.roulette_odds(pm, tau, 0.1)
+    odds = camerareach.roulette_odds(pm, lambda: tau, 0.1)
     length = camerareach.diffusion_length(0.99, 0.6)
     assert length == pytest.approx(1.0 / np.sqrt(3.0 * 0.01 * (1.0 - 0.99 * 0.6)))
     assert camerareach.diffusion_length(1.0, 0.6) == np.inf
@@ -155,15 +155,15 @@ def test_the_odds_follow_the_walks_reach():
     assert np.all(odds[tau[:, 0, 0] <= reach + 1.0] == 1.0)
     # nothing to play: no absorption (an infinite reach), an optically small medium, a floor
     # of 1 (switched off), no depth, or depths all within the reach
-    assert camerareach.roulette_odds(thick_cube(albedo=1.0), tau, 0.1) is None
-    assert camerareach.roulette_odds(thick_cube(sigma_t=5.0), tau, 0.1) is None
-    assert camerareach.roulette_odds(pm, tau, 1.0) is None
-    assert camerareach.roulette_odds(pm, None, 0.1) is None
-    assert camerareach.roulette_odds(pm, np.full((4, 4, 4), reach), 0.1) is None
+    assert camerareach.roulette_odds(thick_cube(albedo=1.0), lambda: tau, 0.1) is None
+    assert camerareach.roulette_odds(thick_cube(sigma_t=5.0), lambda: tau, 0.1) is None
+    assert camerareach.roulette_odds(pm, lambda: tau, 1.0) is None
+    assert camerareach.roulette_odds(pm, lambda: None, 0.1) is None
+    assert camerareach.roulette_odds(pm, lambda: np.full((4, 4, 4), reach), 0.1) is None
     # a NaN depth plays nothing there, nor next to it
     deep = np.full((5, 5, 5), 50.0)
     deep[0, 0, 0] = np.nan
-    odds = camerareach.roulette_odds(pm, deep, 0.1)
+    odds = camerareach.roulette_odds(pm, lambda: deep, 0.1)
     near = slice(0, k + 1)
     assert np.all(odds[near, near, near] == 1.0) and np.all(odds[k + 1:] == np.float32(0.1))
 

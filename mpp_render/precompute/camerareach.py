@@ -23,10 +23,11 @@ Two estimates use that:
 """
 from __future__ import annotations
 
-from typing import Optional
+from typing import Callable, Optional
 
 import numpy as np
 
+from ..paths import rate_span
 
 # lattice steps round a point whose largest odds it takes: the tracer reads the nearest point's
 # odds (up to half a step from the path) and a deposit lands on the 8 points round the path
@@ -64,12 +65,11 @@ def diffusion_length(albedo: float, g: float) -> float:
 def optical_size(pm) -> float:
     """An upper bound of the optical depth any straight line inside ``pm``'s grid crosses:
     its largest extinction (1/m, the densest voxel's as its paths read it) times its box's
-    diagonal (m)."""
+    diagonal (m): paths.rate_span at that rate."""
     dens = pm.path_density()
     top = float(np.max(dens)) if dens.size else 0.0
-    i2w = np.asarray(pm.i2w, np.float64)[:3, :3]
-    diag = float(np.linalg.norm(i2w @ np.asarray(dens.shape[:3], np.float64)))
-    return top * float(np.max(pm.sigma_t)) * diag
+    return rate_span(top * float(np.max(pm.sigma_t)), np.asarray(pm.i2w, np.float64)[:3, :3],
+                     dens.shape[:3])
 
 
 def needs_roulette(pm, floor: float) -> bool:
@@ -82,9 +82,11 @@ def needs_roulette(pm, floor: float) -> bool:
     return bool(np.isfinite(reach) and optical_size(pm) > reach)
 
 
-def roulette_odds(pm, tau: Optional[np.ndarray], floor: float) -> Optional[np.ndarray]:
+def roulette_odds(pm, depth: Callable[[], Optional[np.ndarray]],
+                  floor: float) -> Optional[np.ndarray]:
     """float32 (LX,LY,LZ) the camera's roulette odds on a path lattice of ``pm`` whose points'
-    optical depth to the camera is ``tau``: max(floor, exp(-max(tau - r, 0) / l)) (module
+    optical depth to the camera ``depth()`` gives (called only where ``needs_roulette``:
+    the depth is a march per lattice point): max(floor, exp(-max(tau - r, 0) / l)) (module
     docstring; r = walk_reach, l = diffusion_length), each point then given the largest odds
     within ``ODDS_STEPS`` lattice steps (``neighbours_largest``), or None where every odds is
     1 (nothing to play) or there is no depth.  The tracer reads the nearest point's odds, up
@@ -94,7 +96,10 @@ def roulette_odds(pm, tau: Optional[np.ndarray], floor: float) -> Optional[np.nd
     0.0189 / 0.0189 / 0.0185; with it, the largest odds within one step 0.0203 / 0.0220 /
     0.0192 / 0.0193 / 0.0191, within two 0.0202 / 0.0219 / 0.0189 / 0.0189 / 0.0186
     (docs/performance.md, 2026-12-07)."""
-    if tau is None or not needs_roulette(pm, floor):
+    if not needs_roulette(pm, floor):
+        return None
+    tau = depth()
+    if tau is None:
         return None
     albedo, g = largest_albedo(pm), float(pm.g)
     reach, length = walk_reach(albedo, g), diffusion_length(albedo, g)
@@ -108,17 +113,17 @@ def roulette_odds(pm, tau: Optional[np.ndarray], floor: float) -> Optional[np.nd
 
 def neighbours_largest(a: np.ndarray, steps: int = 1) -> np.ndarray:
     """Each point of the 3-D array ``a`` replaced by the largest value within ``steps`` points
-    of it along every axis (a cube of (2 steps + 1)^3; the faces' values repeated beyond
-    them)."""
-    a = np.asarray(a)
-    if a.ndim != 3 or not a.size:
-        return a
-    out = a.copy()
-    sh = a.shape
-    for _ in range(max(0, int(steps))):
-        pad = np.pad(out, 1, mode="edge")
-        for i in range(3):
-            for j in range(3):
-                for k in range(3):
-                    np.maximum(out, pad[i:i + sh[0], j:j + sh[1], k:k + sh[2]], out=out)
+    of it along every axis (a cube of (2 steps + 1)^3, taken axis by axis; the faces' values
+    repeated beyond them)."""
+    out = np.asarray(a)
+    if out.ndim != 3 or not out.size:
+        return out
+    for ax in range(3):
+        n = out.shape[ax]
+
+        def part(lo):
+            return tuple(slice(lo, lo + n) if k == ax else slice(None) for k in range(3))
+        for _ in range(max(0, int(steps))):
+            pad = np.pad(out, [(1, 1) if k == ax else (0, 0) for k in range(3)], mode="edge")
+            out = np.maximum(np.maximum(pad[part(0)], pad[part(1)]), pad[part(2)])
     return out

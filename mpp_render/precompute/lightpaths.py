@@ -17,7 +17,7 @@ from ..parallel import worker_count
 from ..paths import (MAX_COLLISIONS, MOMENT_CHANNELS, PATH_MEDIA, PATHS_MAX_SPAN,
                      SIGNED_CHANNELS, PathInputs, PathMedium, from_power, rate_span)
 from ..scene import MULTIPLE_PATHS, Tuning
-from .camerareach import needs_roulette, roulette_odds
+from .camerareach import roulette_odds
 from .lattice import MULTIPLE_RESOLUTION, dilate, lattice_points, paths_lattice
 from .lightdepth import eye_depth
 from .lobefit import camera_weight, fitted
@@ -112,9 +112,9 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     rec = start_light(light)
     fit = fits_lobe(pm, camera, lobe_window)
     odds = None
-    if camera is not None and not gathered and needs_roulette(pm, roulette_floor):
-        odds = roulette_odds(pm, lattice_depth(pm, lat, camera, threads, should_cancel, around),
-                             roulette_floor)
+    if camera is not None and not gathered:
+        odds = roulette_odds(pm, lambda: lattice_depth(pm, lat, camera, threads, should_cancel,
+                                                       around), roulette_floor)
     accs = _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
                       moments=gathered or fit, partners=partners, light=rec, halves=fit,
                       moment_share=1.0 if gathered else LOBE_MOMENTS, odds=odds)
