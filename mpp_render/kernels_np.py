@@ -1077,6 +1077,12 @@ def box_sum(x: np.ndarray, r: int) -> np.ndarray:
     return out
 
 
+# standard deviations of a window's weighted spread beyond which the point it is fitted for
+# lies too far from its weight for the local line (lobe_ratio; csrc/lobefit.c): the three-sigma
+# rule; a full window's corner point at the lattice's edge lies 2.3 away
+LOBE_REACH = 3.0
+
+
 def lobe_ratio(md: np.ndarray, mc: np.ndarray, u: np.ndarray, r: int,
                channels: int = 3) -> np.ndarray:
     """float64 (LX,LY,LZ,3): M_r = M_c a, a the local-linear fit of M_d / M_c over each
@@ -1111,9 +1117,16 @@ def lobe_ratio(md: np.ndarray, mc: np.ndarray, u: np.ndarray, r: int,
         rc = rhs[..., 1:] - mu * rhs[..., :1]
         slope = _lobe_solve3(C, rc)
         a0 = (rhs[..., 0] - (slope * A[..., 0, 1:]).sum(-1)) / a00
+        # the point's distance from the window's weighted centre in units of the window's
+        # spread (Mahalanobis, squared): beyond LOBE_REACH the line is an extrapolation (the
+        # window's weight in a plane or on a line the point lies off: a lit face seen edge
+        # on), and the window's weighted mean ratio serves instead
+        delta = X - mu
+        far = a00 * (delta * _lobe_solve3(C, delta)).sum(-1) > LOBE_REACH * LOBE_REACH
+        a = np.where(far, rhs[..., 0] / a00, a0 + (slope * X).sum(-1))
         # where the lobe holds none of the light (no moments there: they come from a share
         # of the paths) the deposits stay
-        out[..., c] = np.where(ok & (m > 0.0), m * (a0 + (slope * X).sum(-1)), d)
+        out[..., c] = np.where(ok & (m > 0.0), m * a, d)
     if grey:   # one fit serves the three equal channels
         out[..., 1] = out[..., 2] = out[..., 0]
     return out

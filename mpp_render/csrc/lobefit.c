@@ -4,6 +4,9 @@
 #include "kernels.h"
 
 #define LOBE_SUMS 14   /* u d (1, x) and u m (1, x) (1, x)^T's upper triangle */
+/* standard deviations of the window's weighted spread beyond which its line is an
+ * extrapolation (kernels_np.LOBE_REACH) */
+#define LOBE_REACH 3.0
 
 const char lobe_ratio_doc[] =
     "lobe_ratio(md, mc, u, r, channels) -> bytearray\n"
@@ -137,8 +140,14 @@ PyObject *lobe_ratio(PyObject *self, PyObject *args) {
                                         rhs[2] - mu[2] * rhs0}, s[3];
                         cramer3(C[0][0], C[0][1], C[0][2], C[1][1], C[1][2], C[2][2], rc, s);
                         double a0 = (rhs0 - (s[0] * A0[0] + s[1] * A0[1] + s[2] * A0[2])) / A00;
-                        out[3 * p + c] = m * (a0 + (s[0] * (double)i + s[1] * (double)j +
-                                                    s[2] * (double)k));
+                        /* beyond LOBE_REACH of the window's spread the window's mean ratio */
+                        double delta[3] = {(double)i - mu[0], (double)j - mu[1],
+                                           (double)k - mu[2]}, xd[3];
+                        cramer3(C[0][0], C[0][1], C[0][2], C[1][1], C[1][2], C[2][2], delta, xd);
+                        double far = A00 * (delta[0] * xd[0] + delta[1] * xd[1] + delta[2] * xd[2]);
+                        double a = far > LOBE_REACH * LOBE_REACH ? rhs0 / A00 :
+                                   a0 + (s[0] * (double)i + s[1] * (double)j + s[2] * (double)k);
+                        out[3 * p + c] = m * a;
                     }
         }
         if (channels == 1)   /* one fit serves the three equal channels */

@@ -24,6 +24,10 @@ of the light scattered twice, the broad ones of later orders) that no single HG 
    a lit face: a box-filtered ratio there left p_backlit_vdb's image 3 % dark where the
    sharp lobe gives way to the broad ones).  u(y') is the lattice point's medium (its tent
    mass) times its transmittance to the camera, so the fit keeps what the camera sees.
+   Where y lies beyond ``kernels_np.LOBE_REACH`` standard deviations of the window's
+   weighted spread from its weighted centre (the weight in a plane y is off: a thick lit
+   face seen edge on), the line is an extrapolation and a is the window's weighted mean
+   ratio instead.
 2. **As far as the noise warrants.**  The paths come in two halves (kernels.trace_paths_media,
    ``halves``), each an estimate M_A, M_B of M_d; the window's mean of u (M_A - M_B)^2 / 4 over
    that of u is
