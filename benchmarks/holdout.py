@@ -111,6 +111,14 @@ VARIANTS = {
                       "from the lamp, looking at it",
                       [("volume", dict(density=0.5)),
                        ("camera", dict(location=(0.0, -0.8, 0.0), rotation=(1.35, 0.0, 0.0)))]),
+    # the fifth set (2026-12-07, forty-fifth session): thick smoke that absorbs a tenth of
+    # what it meets, where the paths' lattice is the voxels' own
+    "v_sphere_thick_dark": ("p_sphere_thick", "albedo 0.9",
+                            [("volume", dict(color=0.9))]),
+    "v_haze_thick_dark": ("p_haze_sun_ground", "density 40, albedo 0.9, g 0.6 (thick dark "
+                          "smoke), lifted 5 cm off the ground",
+                          [("volume", dict(density=40.0, color=0.9, anisotropy=0.6)),
+                           ("lift", dict(dz=0.05))]),
 }
 
 
