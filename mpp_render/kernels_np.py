@@ -1087,7 +1087,8 @@ def lobe_ratio(md: np.ndarray, mc: np.ndarray, u: np.ndarray, r: int,
                channels: int = 3) -> np.ndarray:
     """float64 (LX,LY,LZ,3): M_r = M_c a, a the local-linear fit of M_d / M_c over each
     window of radius ``r`` with weights ``u`` (LX,LY,LZ) (precompute/lobefit.py's docstring,
-    step 1); M_d where the window holds no weight, M_c is 0 throughout it, or M_c is 0 at
+    step 1), a the window's weighted mean ratio where the point lies beyond ``LOBE_REACH``
+    standard deviations of the window's weighted spread; M_d where the window holds no weight, M_c is 0 throughout it, or M_c is 0 at
     the point.  ``channels`` 1: a grey medium's, channel 0 fitted and copied to 1 and 2."""
     shape = md.shape[:3]
     X = np.stack(np.meshgrid(*[np.arange(n, dtype=np.float64) for n in shape], indexing="ij"),

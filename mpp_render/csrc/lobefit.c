@@ -13,7 +13,8 @@ const char lobe_ratio_doc[] =
     "Twin of kernels_np.lobe_ratio: md, mc (X,Y,Z,3) float64 the deposits and the lobe, u\n"
     "(X,Y,Z) float64 the weights, r >= 1 the window's radius (lattice points), channels 1 (a\n"
     "grey medium: channel 0 fitted, copied to 1 and 2) or 3.  (X,Y,Z,3) float64 as a\n"
-    "bytearray: M_r = M_c a, a the local-linear fit of M_d / M_c over each window.";
+    "bytearray: M_r = M_c a, a the local-linear fit of M_d / M_c over each window (the\n"
+    "window's weighted mean ratio beyond LOBE_REACH standard deviations of its spread).";
 
 /* In place along one axis of a C-order (X,Y,Z) array: each value the sum of the 2r+1 around
  * it (0 beyond), as the difference of the running sums S(min(i+r, n-1)) - S(i-r-1), the

@@ -15,9 +15,9 @@ Two estimates use that:
   does, by e every diffusion length l = 1 / sqrt(3 (1 - a)(1 - a g)) (``diffusion_length``),
   and the odds of going on follow it (survival in proportion to the expected contribution,
   as in adjoint-driven Russian roulette, Vorba and Krivanek 2016):
-  q(x) = max(floor, exp(-max(tau_c - r, 0) / l)), the largest of a lattice step round x.  At
-  a real collision where q is below the lowest odds the path has met, it survives with the
-  ratio and its weight grows by its inverse.  The estimate stays unbiased whatever the odds
+  q(x) = max(floor, exp(-max(tau_c - r, 0) / l)), the largest within ``ODDS_STEPS``
+  lattice steps round x.  At a real collision where q is below the lowest odds the path has
+  met, it survives with the ratio and its weight grows by its inverse.  The estimate stays unbiased whatever the odds
   (a roulette moves noise, not the mean); they only say where the paths' work is spent.
   ``floor`` (Tuning.camera_roulette) bounds a path's weight to 1 / floor its plain weight.
 """
