@@ -119,6 +119,31 @@ VARIANTS = {
                           "smoke), lifted 5 cm off the ground",
                           [("volume", dict(density=40.0, color=0.9, anisotropy=0.6)),
                            ("lift", dict(dz=0.05))]),
+    # the sixth set (2026-12-07, forty-sixth session): the kinds no variant had tried yet:
+    # emission lighting denser smoke, a shader-texture density made dense or backlit, world
+    # fog that scatters forward round an area light, a spot and an area light in dense
+    # white media
+    "v_glow_dense": ("p_glowing_smoke", "density 12, albedo 0.95, g 0.6",
+                     [("volume", dict(density=12.0, color=0.95, anisotropy=0.6))]),
+    "v_glow_sun": ("p_glowing_smoke", "a sun (2 W/m^2) from the left and above beside its glow",
+                   [("add_light", dict(kind="SUN", energy=2.0, radius=0.0, location=(0, 0, 5),
+                                       rotation=(math.radians(50), 0.0, math.radians(-60))))]),
+    "v_noise_dense": ("p_noise_cloud", "the noise's density 25 (from 10), albedo 0.9, g 0.3",
+                      [("noise_density", dict(density=25.0)),
+                       ("volume", dict(color=0.9, anisotropy=0.3))]),
+    "v_noise_backlit": ("p_noise_cloud", "the sun behind the cloud, towards the camera; g 0.8",
+                        [("sun", dict(rotation=(math.radians(-65), 0.0, math.radians(25)))),
+                         ("volume", dict(anisotropy=0.8))]),
+    "v_fog_area_fwd": ("p_fog_area", "world fog density 0.15, g 0.7",
+                       [("world_fog", dict(density=0.15, anisotropy=0.7))]),
+    "v_spot_dense_box": ("p_spot_in_fogbox", "density 3, g 0.5 (the spot's apex inside dense "
+                         "fog)", [("volume", dict(density=3.0, anisotropy=0.5))]),
+    "v_area_white": ("p_area_in_box", "density 2, albedo 0.99, g 0.8",
+                     [("volume", dict(density=2.0, color=0.99, anisotropy=0.8))]),
+    # v_glow_dense taken apart: its anisotropy alone, and its density and albedo at g 0
+    "v_glow_g6": ("p_glowing_smoke", "g 0.6", [("volume", dict(anisotropy=0.6))]),
+    "v_glow_dense_g0": ("p_glowing_smoke", "density 12, albedo 0.95, g 0",
+                        [("volume", dict(density=12.0, color=0.95, anisotropy=0.0))]),
 }
 
 
@@ -183,6 +208,8 @@ def apply(sc, step: str, kw: dict) -> None:
         data.energy = kw["energy"]
         if kw["kind"] == "AREA":
             data.size = kw["size"]
+        elif kw["kind"] == "SUN":
+            data.angle = kw.get("angle", data.angle)
         else:
             data.shadow_soft_size = kw["radius"]
         if kw["kind"] == "SPOT":
@@ -196,6 +223,15 @@ def apply(sc, step: str, kw: dict) -> None:
             ob.location = (0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]),
                            lo[2] + kw["height"] * (hi[2] - lo[2]) + kw.get("above", 0.0))
         ob.rotation_euler = kw.get("rotation", (0.0, 0.0, 0.0))
+    elif step == "noise_density":   # the shader texture's multiplier (families.noise_density)
+        for o in _volume_objects(sc):
+            for n in o.active_material.node_tree.nodes:
+                if n.bl_idname == "ShaderNodeMath" and n.operation == "MULTIPLY":
+                    n.inputs[1].default_value = kw["density"]
+    elif step == "sun":
+        for o in sc.objects:
+            if o.type == "LIGHT" and o.data.type == "SUN":
+                o.rotation_euler = kw["rotation"]
     elif step == "camera":
         sc.camera.location = kw["location"]
         if "rotation" in kw:

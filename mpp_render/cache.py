@@ -320,7 +320,8 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
         stats = dict(pre.stats, reused=reused)
         if stale:
             stats["stale_camera"] = True
-        return pre_mod.Precomputed(pre.fields, pre.layout, pre.multiple, pre.seconds, stats)
+        return pre_mod.Precomputed(pre.fields, pre.layout, pre.multiple, pre.seconds, stats,
+                                   pre.glow_moments)
 
     entry = cache.get("precompute", light_key)
     if entry is not None:
@@ -333,6 +334,7 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
         first = pre.layout.world_first
         for f, w in zip(pre.fields, part.fields):
             f[..., first:] = w[..., 1:]
+        pre.glow_moments = part.glow_moments   # the glow's, with the world channels
         entry["world"] = world_key
         return result(pre, ["lights"])
     if any_camera:
@@ -362,7 +364,8 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
             fields.append(f)
         pre = pre_mod.Precomputed(fields, old.layout, part.multiple, part.seconds,
                                   dict(part.stats,
-                                       ambient_points=old.stats.get("ambient_points", 0)))
+                                       ambient_points=old.stats.get("ambient_points", 0)),
+                                  old.glow_moments)
         _keep(cache, light_key, donor["world"], scene_key, pre, world_any_key)
         return result(pre, ["world"], stale=donor["world"] != world_key)
     pre = pre_mod.precompute(media, lights, world, camera, **kw)

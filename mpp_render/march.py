@@ -54,6 +54,7 @@ from .walk import RHO_TABLE
 from .passes import DEPTH_MISS, DEPTH_OPACITY
 from .rng import hash32
 from .precompute.layout import FieldLayout
+from .precompute.lightpyramid import MultipleField
 from .scene import Camera, Light, Tuning
 
 __all__ = ["MarchContext", "march_rays", "pack_lights", "ray_keys", "REFINE_STEPS", "T_MIN"]
@@ -66,6 +67,9 @@ __all__ = ["MarchContext", "march_rays", "pack_lights", "ray_keys", "REFINE_STEP
 # Cycles (0.0066); larger values (0.2, 0.4) biased slab_isotropic when its surfaces were still
 # adapted.  With Tuning.skip_empty the kernel gets the media's brick bounds (empty super-steps
 # skipped).
+
+MARCH_MAX_LIGHTS = 64   # the lights the march kernel takes (csrc/march.c MAX_LIGHTS)
+
 
 def pack_lights(lights: List[Light], layout: FieldLayout) -> np.ndarray:
     """(L, LIGHT_FIELDS) float64 records of the lights for the march kernel."""
@@ -97,7 +101,9 @@ class MarchContext:
     ``multiple``: what the march kernel reads of them (a kernels.MultipleInputs, or None).
     ``gathers``: the context marches a surface's gathers, not camera rays: the traced paths'
     M is read from its moments towards each ray's own origin where it has them
-    (MultipleField.moments; ``for_gathers``)."""
+    (MultipleField.moments; ``for_gathers``).  ``glow_moments``: None, or per medium None
+    or (stride, h, moments (LX,LY,LZ,12)) of its own glow's light (Precomputed.glow_moments),
+    which the gathers read in place of the camera's E1 and Em (``for_gathers``)."""
 
     media: List[PreparedMedium]
     fields: List[np.ndarray]
@@ -108,6 +114,7 @@ class MarchContext:
     camera: Optional[Camera] = None
     tuning: Tuning = field(default_factory=Tuning)
     gathers: bool = False
+    glow_moments: Optional[list] = None
 
     def __post_init__(self):
         self.packed = pack_lights(self.lights, self.layout)
@@ -165,10 +172,35 @@ class MarchContext:
             moments = any(m is not None and m.moments is not None
                           for mfs in (self.multiple_fields or []) for m in mfs)
             step = self.step * max(1.0, float(self.tuning.gather_step))
-            made = self if not moments and step == self.step else \
-                dataclasses.replace(self, gathers=moments, step=step)
+            glow = self.multiple_fields is not None and self.glow_moments is not None \
+                and self.layout is not None and self.layout.gather_ambient_channel is not None \
+                and len(self.lights) < MARCH_MAX_LIGHTS
+            if glow:
+                made = self._with_glow(step)
+            else:
+                made = self if not moments and step == self.step else \
+                    dataclasses.replace(self, gathers=moments, step=step)
             self.__dict__["_for_gathers"] = made
         return made
+
+    def _with_glow(self, step: float) -> "MarchContext":
+        """``for_gathers`` where the media's own glow has moments: the world light read from
+        the layout's gather channels (without that glow), and the glow's moments summed with
+        the lights' into each medium's one traced level through one more light without
+        channels (a dark sun: its level slot where no light has one; its single scattering
+        is nothing)."""
+        glow_slot = Light("SUN", "glow (gathers)", np.zeros(3))
+        fields = []
+        for mfs, gm in zip(self.multiple_fields, self.glow_moments):
+            mfs = list(mfs) + [None]
+            if gm is not None and all(m is None or m.traced for m in mfs):
+                stride, h, moments = gm
+                mfs[-1] = MultipleField(stride, h, [moments[..., :3]], traced=True,
+                                        moments=moments)
+            fields.append(mfs)
+        return dataclasses.replace(self, lights=list(self.lights) + [glow_slot],
+                                   layout=self.layout.for_gathers(1), multiple_fields=fields,
+                                   gathers=True, step=step)
 
 
 # A medium of one density wherever it has any (a mesh volume: density_from thresholds its

@@ -114,7 +114,9 @@ def _render(desc, progress, should_cancel, any_camera) -> RenderOutput:
         far = worldfog.far_field(pre.multiple[[m is fog_pm for m in media].index(True)])
     ctx = MarchContext(media, pre.fields if pre else [], pre.layout if pre else None,
                        media_lights, step, pre.multiple if st.multiple else None,
-                       cam, st.tuning) if media else None
+                       cam, st.tuning,
+                       glow_moments=pre.glow_moments if pre and st.multiple else None) \
+        if media else None
     frame = FrameMarch(st, cam, media, surf, lights, np.asarray(world.color, np.float64), fog,
                        fog_pm, far, ctx, step, out)
     t_march = time.perf_counter()

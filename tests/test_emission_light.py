@@ -89,7 +89,7 @@ def first_flight_errors(resolution, seed=3):
     # compares; at the default's fewer deposits seed 3's centre came out -0.022 against the
     # coarse lattice's -0.021 (and at 1.0 seed 4's -0.032 against -0.026: this compares one
     # draw, not the mean)
-    stride, once, _, _ = emission_light(pm, camera(), 400_000, resolution, multiple=False,
+    stride, once, _, _, _ = emission_light(pm, camera(), 400_000, resolution, multiple=False,
                                      seed=seed, deposits=1.0)
     assert np.all(np.ptp(once, axis=-1) == 0.0)        # grey medium, grey glow
     idx, y = lattice_point(pm, stride, (0.0, 0.0, 0.0))
@@ -125,7 +125,7 @@ def test_the_absorbed_power_is_the_emitted_power():
     st, albedo = 3.0, 0.6
     pm = prepare(glowing_cube(sigma_t=st, albedo=albedo, radius=0.5))
     lat = PathLattice.of(pm, camera(), 32)
-    stride, once, more, _ = emission_light(pm, camera(), 400_000, 32, multiple=True, seed=5)
+    stride, once, more, _, _ = emission_light(pm, camera(), 400_000, 32, multiple=True, seed=5)
     mass = lat.tent_mass[..., 0]
     fluence_once = 4.0 * np.pi * np.einsum("xyz,xyzc->c", mass, once.astype(np.float64))
     fluence_all = fluence_once + 4.0 * np.pi * np.einsum("xyz,xyzc->c", mass,
@@ -261,7 +261,7 @@ def test_a_glow_lights_a_medium_apart_from_it_even_without_scattering(absorbing)
     fire, smoke, vox = apart_scene(absorbing)
     assert not fire.scatters and fire.emits and lit_by_glow([fire, smoke], 0) == [1]
     lat = PathLattice.of(smoke, camera(), 16)
-    _, _, _, cross = emission_light(fire, camera(), 1_000_000, 16, multiple=True, seed=4,
+    _, _, _, cross, _ = emission_light(fire, camera(), 1_000_000, 16, multiple=True, seed=4,
                                     partners=[(smoke, lat)])
     once, more = cross[0]
     _, pts = lattice_points(smoke, once.shape[:3], lat.stride)

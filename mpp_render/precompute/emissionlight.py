@@ -57,24 +57,27 @@ def emission_light(pm: PreparedMedium, camera, n_paths: int, resolution: int,
                    multiple: bool, seed: int = 0, threads: int = 0, should_cancel=None,
                    around: Optional[Surroundings] = None, partners=(),
                    deposits: float = Tuning.path_deposits, nodal: bool = Tuning.path_nodal,
-                   lobe_window: int = Tuning.lobe_window):
-    """(stride, E1, Em, cross) on the light pyramid's lattice of ``pm`` (module docstring),
+                   lobe_window: int = Tuning.lobe_window, gathered: bool = False):
+    """(stride, E1, Em, cross, moments) on the light pyramid's lattice of ``pm`` (module docstring),
     float32 (LX,LY,LZ,3) W/(m^2 sr); Em None without ``multiple``.  ``n_paths`` paths (at
     most lightpaths.PATHS_PER_POINT per lattice point the medium fills, more with more Paths:
     lightpaths.path_budget), ``around`` the surfaces they reflect off, ``partners``
     (PreparedMedium, PathLattice) the overlapping media they fly through too (lightpaths.traced_multiple), ``cross`` per partner its
     (E1, Em) on its lattice.  None where nothing is emitted or the medium is too dense for
     paths.  ``deposits``, ``nodal``: Tuning.path_deposits, Tuning.path_nodal
-    (lightpaths.PathLattice.of); ``lobe_window``: Tuning.lobe_window (``scattered_glow``)."""
+    (lightpaths.PathLattice.of); ``lobe_window``: Tuning.lobe_window; ``gathered``: the
+    surfaces' gathers read the glow from its paths' moments (``scattered_glow``)."""
     if pm.endless:   # the world fog glows everywhere: its own estimate (fogglow.py)
-        return fog_glow(pm, camera, n_paths, resolution, multiple, seed=seed, threads=threads,
-                        should_cancel=should_cancel, around=around, deposits=deposits,
-                        nodal=nodal)
+        got = fog_glow(pm, camera, n_paths, resolution, multiple, seed=seed, threads=threads,
+                       should_cancel=should_cancel, around=around, deposits=deposits,
+                       nodal=nodal)
+        return None if got is None else tuple(got) + (None,)
     e = pm.emitted()
     return scattered_glow(pm, None if e is None else emitting_voxels(e), camera, n_paths,
                           resolution, multiple, seed=seed, threads=threads,
                           should_cancel=should_cancel, around=around, partners=partners,
-                          deposits=deposits, nodal=nodal, lobe_window=lobe_window)
+                          deposits=deposits, nodal=nodal, lobe_window=lobe_window,
+                          gathered=gathered)
 
 
 def scattered_glow(pm: PreparedMedium, emitting, camera, n_paths: int,
@@ -83,8 +86,8 @@ def scattered_glow(pm: PreparedMedium, emitting, camera, n_paths: int,
                    deposits: float = Tuning.path_deposits, nodal: bool = Tuning.path_nodal,
                    setting: Optional[int] = None, signed: bool = False,
                    first_order: bool = True, odds: Optional[np.ndarray] = None,
-                   lobe_window: int = Tuning.lobe_window):
-    """``emission_light``'s (stride, E1, Em, cross) for the emission ``emitting`` = (flat, e):
+                   lobe_window: int = Tuning.lobe_window, gathered: bool = False):
+    """``emission_light``'s (stride, E1, Em, cross, moments) for the emission ``emitting`` = (flat, e):
     the C-order indices (N,) of the emitting voxels of ``pm``'s padded grid and their
     emission (N,3) W/(m^3 sr) (``emitting_voxels``), or None (nothing emitted, no camera,
     nowhere to scatter, too dense for paths); ``setting``: the Paths setting that scales the
@@ -94,7 +97,12 @@ def scattered_glow(pm: PreparedMedium, emitting, camera, n_paths: int,
     ``odds``: None, or (N,) the relative odds of drawing a path from each emitting voxel
     (paths.from_power's bias: the weights stay unbiased).  ``lobe_window``: the own
     lattice's M towards the camera is the paths' lobe fitted to their deposits over windows of
-    this many lattice points (lightpaths.lobe_light, Tuning.lobe_window; 0: the deposits)."""
+    this many lattice points (lightpaths.lobe_light, Tuning.lobe_window; 0: the deposits).
+    ``gathered`` (with ``multiple``): every path also deposits its moments of order 0 and 1
+    (paths.py, "Moments"), and ``moments`` is float32 (LX,LY,LZ,12), those of E1 + Em on the
+    own lattice, which the surfaces' gathers read towards their own points instead of the
+    camera's E1 and Em (march.MarchContext.for_gathers), as they read a lamp's M; else
+    None."""
     if emitting is None or not len(emitting[0]) or camera is None:
         return None
     if not pm.scatters and not partners:
@@ -115,23 +123,33 @@ def scattered_glow(pm: PreparedMedium, emitting, camera, n_paths: int,
     # (lightpaths.lobe_light); the other media's lattices keep their deposits
     fit = fits_lobe(pm, camera, lobe_window)
 
+    gathered = bool(gathered and multiple)
+
     def traced(**kw):
+        """[own lattice's light, each partner's], and the own lattice's moments or None."""
         accs = _trace_all(sets, n, seed, threads, should_cancel, pm, lat, around,
-                          partners=partners, moments=fit, halves=fit,
-                          moment_share=LOBE_MOMENTS, **kw)
-        if not fit:
-            return [la.mean(a, signed) for la, a in zip(lats, accs)]
-        accs, split = accs
-        own = lobe_light(pm, lat, camera, lat.mean(accs[0], signed), split, lobe_window,
-                         threads, should_cancel, signed, around=around)
-        return [own] + [la.mean(a[..., :3], signed) for la, a in zip(lats[1:], accs[1:])]
+                          partners=partners, moments=fit or gathered, halves=fit,
+                          moment_share=1.0 if gathered else LOBE_MOMENTS, **kw)
+        split = None
+        if fit:
+            accs, split = accs
+        m = lat.mean(accs[0], signed)
+        own = lobe_light(pm, lat, camera, m, split, lobe_window, threads, should_cancel,
+                         signed, around=around) if fit else np.ascontiguousarray(m[..., :3])
+        rest = [la.mean(a[..., :3], signed) for la, a in zip(lats[1:], accs[1:])]
+        return [own] + rest, (m[..., 3:] if gathered else None)
 
     once, later = [None] * len(lats), [None] * len(lats)
+    moments = []
     if first_order:
-        once = traced(max_collisions=1)
+        once, mom = traced(max_collisions=1)
+        moments.append(mom)
     if multiple:   # the same paths (the same seed), their deposits after a first collision
-        later = traced(min_collisions=1)
-    return lat.stride, once[0], later[0], list(zip(once[1:], later[1:]))
+        later, mom = traced(min_collisions=1)
+        moments.append(mom)
+    moments = [x for x in moments if x is not None]
+    both = np.ascontiguousarray(sum(moments), np.float32) if moments else None
+    return lat.stride, once[0], later[0], list(zip(once[1:], later[1:])), both
 
 
 def flown_through(pm: PreparedMedium) -> PreparedMedium:

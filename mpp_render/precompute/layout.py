@@ -7,7 +7,9 @@ peak's light; per point or spot light with a radius (``lights.has_disc``) 3 chan
 its disc's depth change beyond the march's reach (precompute/discdepth.py); with a lit world or
 a medium's emission that lights a medium that scatters (media.glow_lights) 3 channels of
 world light, then with multiple scattering 3 of its multiply scattered part (the glow's
-light scattered once and more is added to them, precompute.emissionlight); then, for a medium with
+light scattered once and more is added to them, precompute.emissionlight), then where the
+surfaces' gathers read a glow from its paths' moments (``glow_gathered``) 3 + 3 channels of
+the same without each medium's own glow; then, for a medium with
 an emission grid only, 3 channels of its emitted radiance; then, for a medium with a scatter
 colour grid only (PreparedMedium.scatter_grid), 3 channels of its factor on sigma_s; last,
 for a medium whose extinction's colour varies only (PreparedMedium.extinction_density), 3
@@ -17,6 +19,7 @@ scatter colour's and the extinction's channels run to the end of the field
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import List, Optional, Sequence
 
@@ -41,7 +44,11 @@ class FieldLayout:
     (media.delta_scaled) from which it is made; right after the lights' channels.
     ``disc_channels[i]`` (a point or spot light with a radius, ``lights.has_disc``): the
     offset of light i's disc's optical-depth change beyond the march's reach (discdepth.py),
-    after the beams' channels, before the world's."""
+    after the beams' channels, before the world's.  ``gather_ambient_channel`` and
+    ``gather_ambient_multiple_channel`` (a medium's glow whose traced paths keep their
+    moments for the surfaces' gathers, precompute.emissionlight): 3 + 3 channels right after
+    the world light's, holding the same but for each medium's own glow, which the gathers
+    read from its moments instead (``for_gathers``)."""
 
     light_channels: List[Optional[int]]
     ambient_channel: Optional[int]
@@ -52,6 +59,25 @@ class FieldLayout:
     scatter_channels: Optional[List[Optional[int]]] = None
     extinction_channels: Optional[List[Optional[int]]] = None
     disc_channels: Optional[List[Optional[int]]] = None
+    gather_ambient_channel: Optional[int] = None
+    gather_ambient_multiple_channel: Optional[int] = None
+
+    def for_gathers(self, extra_lights: int = 0) -> "FieldLayout":
+        """The layout as the surfaces' gathers read it: the world light's channels without
+        the media's own glow (``gather_ambient_channel``; the layout itself where there are
+        none), and ``extra_lights`` more lights without channels after the others (the
+        glow's moments' slot, march.MarchContext.for_gathers)."""
+        if self.gather_ambient_channel is None and not extra_lights:
+            return self
+        def more(chans):
+            return None if chans is None else list(chans) + [None] * extra_lights
+        out = dataclasses.replace(self, light_channels=more(self.light_channels),
+                                  beam_channels=more(self.beam_channels),
+                                  disc_channels=more(self.disc_channels))
+        if self.gather_ambient_channel is not None:
+            out = dataclasses.replace(out, ambient_channel=self.gather_ambient_channel,
+                                      ambient_multiple_channel=self.gather_ambient_multiple_channel)
+        return out
 
     def own_grids(self, pm: PreparedMedium, m: int):
         """(first channel, grid) of each of medium ``pm``'s own grids (index ``m``) in its
@@ -92,7 +118,8 @@ def light_channels(lights) -> List[Optional[int]]:
 
 def field_layout(media: Sequence[PreparedMedium], lights, world_color, multiple: bool,
                  delta: Optional[Sequence[PreparedMedium]] = None,
-                 peak: bool = True, glow: bool = True, disc: bool = True) -> FieldLayout:
+                 peak: bool = True, glow: bool = True, disc: bool = True,
+                 gather_glow: bool = False) -> FieldLayout:
     """The layout of the fields the precompute gives ``media`` lit by ``lights`` and a world
     of colour ``world_color``, with or without ``multiple`` scattering.  ``delta``: the
     media delta-scaled (media.delta_scaled), where the caller has them.  ``peak``: whether
@@ -100,7 +127,9 @@ def field_layout(media: Sequence[PreparedMedium], lights, world_color, multiple:
     precompute.source.peak_light); traced paths (paths.py) carry it themselves.  ``glow``:
     whether the media's glow counts as world light (the cache's part without the world
     sets it False).  ``disc``: whether the lamps' discs are folded (Tuning.disc_fold_stride
-    > 0; ``lights.has_disc``)."""
+    > 0; ``lights.has_disc``).  ``gather_glow``: the surfaces' gathers read the media's own
+    glow from its paths' moments (``glow_gathered``), so the world light is kept a second
+    time without it (FieldLayout.gather_ambient_channel)."""
     chans = light_channels(lights)
     c = 1 + 3 * sum(ch is not None for ch in chans)
     beams = [None] * len(lights)
@@ -123,10 +152,27 @@ def field_layout(media: Sequence[PreparedMedium], lights, world_color, multiple:
         if multiple:
             amb_ms = c
             c += 3
+    g_amb = g_ms = None
+    if amb is not None and amb_ms is not None and gather_glow:
+        g_amb, g_ms = c, c + 3
+        c += 6
     own = [[pm.emission_grid is not None, pm.scatter_grid is not None,
             pm.extinction_density is not None] for pm in media]
     firsts = [[c + 3 * sum(has[:k]) if has[k] else None for k in range(3)] for has in own]
     emission, scatter, extinction = ([f[k] for f in firsts] for k in range(3))
     return FieldLayout(chans, amb, c, amb_ms, emission,
                        beams if any(b is not None for b in beams) else None, scatter,
-                       extinction, discs if any(k is not None for k in discs) else None)
+                       extinction, discs if any(k is not None for k in discs) else None,
+                       g_amb, g_ms)
+
+
+def glow_gathered(media: Sequence[PreparedMedium], traced: bool, surfaces, moments: bool,
+                  glow: bool = True) -> bool:
+    """Whether the surfaces' gathers read the media's glow from its traced paths' moments
+    (precompute.emissionlight): the glow counts (``glow``), some medium other than the
+    world's fog emits into a medium that scatters, the paths are traced (``traced``: multiple
+    scattering by traced paths, a camera), surfaces gather (``surfaces`` not empty) and their
+    gathers read moments (Tuning.gather_moments)."""
+    return bool(glow and traced and moments and surfaces is not None
+                and not getattr(surfaces, "empty", False) and glow_lights(list(media))
+                and any(pm.emits and not pm.endless for pm in media))

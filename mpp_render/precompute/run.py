@@ -13,7 +13,7 @@ from ..media import PreparedMedium, delta_scaled, density_from
 from ..parallel import check
 from ..scene import Camera, Light, Tuning, World
 from .lattice import MULTIPLE_RESOLUTION, grid_points, lamp_resolution, needed_flat
-from .layout import FieldLayout, field_layout
+from .layout import FieldLayout, field_layout, glow_gathered
 from .lightdepth import (SHADOW_TAU, light_optical_depth, near_sharp_surfaces, soft_visibility,
                          split_fog, sweep_light)
 from .discdepth import fold_disc
@@ -32,13 +32,17 @@ from .worldlight import fill_world_light
 @dataclass
 class Precomputed:
     """``fields``: per medium (X,Y,Z,C) float32 (layout.py); ``multiple``: per medium, per
-    light, a MultipleField or None (multiple scattering off, dark light, or no scattering)."""
+    light, a MultipleField or None (multiple scattering off, dark light, or no scattering).
+    ``glow_moments``: None, or per medium None or (stride, h, float32 (LX,LY,LZ,12)) the
+    moments of its own glow's light (precompute.emissionlight), which the surfaces' gathers
+    read (FieldLayout.gather_ambient_channel); part of the world light, as the glow is."""
 
     fields: List[np.ndarray]
     layout: FieldLayout
     multiple: list = field(default_factory=list)
     seconds: float = 0.0
     stats: dict = field(default_factory=dict)
+    glow_moments: Optional[list] = None
 
 
 def precompute(media: List[PreparedMedium], lights: List[Light], world: World, camera: Camera,
@@ -65,9 +69,13 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
     delta = [delta_scaled(pm) for pm in media]
     # a lamp's disc is folded into its own channels where a medium other than the world's
     # fog (homogeneous: the stretch is exact in it) lies round it (discdepth.py)
+    traces = multiple and multiple_paths > 0 and camera is not None
+    # the surfaces' gathers read a medium's own glow from its paths' moments, the rest of
+    # the world light from a second copy of its channels (layout.glow_gathered)
+    gather_glow = glow_gathered(media, traces, surfaces, tuning.gather_moments, glow)
     layout = field_layout(media, lights, world.color, multiple, delta, peak=multiple_paths <= 0,
                           glow=glow, disc=tuning.disc_fold_stride > 0
-                          and any(not pm.endless for pm in media))
+                          and any(not pm.endless for pm in media), gather_glow=gather_glow)
     world_lit = bool(np.any(np.asarray(world.color) > 0))
     sky_colour = np.asarray(world.color if sky is None else sky, np.float64)
     chans, beams = layout.light_channels, layout.beam_channels or [None] * len(lights)
@@ -91,7 +99,6 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
     # traced paths fly through every medium whose box overlaps theirs and deposit on it too
     # (precompute.lightpaths.overlapping); what one medium's paths leave on another's lattice
     # is added to that medium's M once every medium is traced
-    traces = multiple and multiple_paths > 0 and camera is not None
     partners_of = overlapping(media) if camera is not None else [[] for _ in media]
     partner_lats = {}
 
@@ -109,6 +116,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
 
     crossed = {}   # (medium, light) -> M (and moments) deposited there by other media's paths
     glowed = []    # (medium, stride, E1, Em): other media's glow scattered in that medium
+    own_glow = [None] * len(media)       # (stride, E1, Em): a medium's glow in itself
+    glow_moments = [None] * len(media)   # (stride, h, moments): the same for the gathers
     lost = []      # (medium, stride, D): the media's absorption of the sky (skydeficit.py)
     # the absorption's share of the sky's multiply scattered light is traced (skydeficit.py):
     # with multiple scattering, a camera, and no world fog (which hides the sky)
@@ -208,12 +217,16 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                  should_cancel=should_cancel, around=around,
                                  partners=[(media[j], lat) for j, lat in near],
                                  deposits=tuning.path_deposits,
-                                 nodal=tuning.path_nodal, lobe_window=tuning.lobe_window)
+                                 nodal=tuning.path_nodal, lobe_window=tuning.lobe_window,
+                                 gathered=layout.gather_ambient_channel is not None)
             if got is not None:
-                stride, once, more, cross = got
+                stride, once, more, cross, moments = got
                 glowed += [(j, lat.stride) + em for (j, lat), em in zip(near, cross)]
                 add_glow(f, layout, stride, once, more, flat)
                 n_glow += 1
+                if moments is not None:
+                    own_glow[mi] = (stride, once, more)
+                    glow_moments[mi] = (stride, stride * pm.voxel_size, moments)
         if glow and layout.ambient_channel is not None and fog is not None and fog.glows \
                 and pm is not fog and camera is not None and np.any(pm.sigma_s > 0):
             # the world fog's glow lights this medium too (precompute.fogglow.glow_on_medium)
@@ -312,6 +325,11 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
     for j, stride, d in lost:
         add_lattice(fields[j], layout.ambient_multiple_channel, -d, stride,
                     needed_flat(media[j]))
+    if layout.gather_ambient_channel is not None:
+        # the gathers' world light: the same less each medium's own glow (its moments stand
+        # for it; march.MarchContext.for_gathers)
+        for j, f in enumerate(fields):
+            gather_world_light(f, layout, own_glow[j], needed_flat(media[j]))
     for (j, li), m in crossed.items():
         mf = ms_all[j][li]
         if mf is None or not mf.traced:   # a medium without paths of its own (too dense)
@@ -322,7 +340,27 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
     return Precomputed(fields, layout, ms_all, time.perf_counter() - t_start,
                        {"points": n_pts, "ambient_points": n_ambient,
                         "backend": kernels.backend(), "glowing": n_glow,
-                        "disc_points": n_disc})
+                        "disc_points": n_disc},
+                       glow_moments if any(g is not None for g in glow_moments) else None)
+
+
+def gather_world_light(f: np.ndarray, layout: FieldLayout, glow, flat: np.ndarray) -> None:
+    """Fill ``f``'s gather world-light channels (FieldLayout.gather_ambient_channel, the
+    single and multiply scattered parts) at the voxels ``flat``: its world light's channels
+    less the medium's own glow ``glow`` = (stride, E1, Em) (None: nothing to take off), not
+    below 0 (float32 rounding where the glow is all of it)."""
+    view = f.reshape(-1, f.shape[-1])
+    for src, dst in ((layout.ambient_channel, layout.gather_ambient_channel),
+                     (layout.ambient_multiple_channel, layout.gather_ambient_multiple_channel)):
+        view[flat, dst:dst + 3] = view[flat, src:src + 3]
+    if glow is None:
+        return
+    stride, once, more = glow
+    for lat, dst in ((once, layout.gather_ambient_channel),
+                     (more, layout.gather_ambient_multiple_channel)):
+        if lat is not None:
+            add_lattice(f, dst, -lat, stride, flat)
+            view[flat, dst:dst + 3] = np.maximum(view[flat, dst:dst + 3], 0.0)
 
 
 def path_seed(seed: int, mi: int, li: int) -> int:

@@ -102,7 +102,7 @@ def sky_deficit(pm: PreparedMedium, colour, camera, n_paths: int, resolution: in
                          first_order=False, odds=odds, lobe_window=tuning.lobe_window)
     if got is None:
         return None
-    stride, _, later, cross = got
+    stride, _, later, cross, _ = got
     return stride, later, [m for _, m in cross]
 
 
