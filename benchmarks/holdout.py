@@ -140,6 +140,33 @@ VARIANTS = {
                          "fog)", [("volume", dict(density=3.0, anisotropy=0.5))]),
     "v_area_white": ("p_area_in_box", "density 2, albedo 0.99, g 0.8",
                      [("volume", dict(density=2.0, color=0.99, anisotropy=0.8))]),
+    # the seventh set (2026-12-07, forty-sixth session): features met together that the
+    # public scenes keep apart
+    "v_chromatic_sun_sky": ("p_chromatic_box", "its spot replaced by a sun (3 W/m^2) under a "
+                            "blue sky (0.3, 0.4, 0.6 x 0.5)",
+                            [("hide_lights", dict(kind="SPOT")),
+                             ("add_light", dict(kind="SUN", energy=3.0, radius=0.0,
+                                                location=(0, 0, 5),
+                                                rotation=(math.radians(45), 0.0,
+                                                          math.radians(40)))),
+                             ("world", dict(color=(0.3, 0.4, 0.6), strength=0.5))]),
+    "v_plume_area": ("p_point_in_plume", "its point light replaced by a 0.4 m square area "
+                     "light (150 W) in the same place, facing down",
+                     [("hide_lights", dict(kind="POINT")),
+                      ("add_light", dict(kind="AREA", energy=150.0, size=0.4,
+                                         location=(0.0, 0.0, -0.6)))]),
+    "v_backlit_vdb_dark": ("p_backlit_vdb", "albedo 0.7, g 0.6",
+                           [("volume", dict(color=0.7, anisotropy=0.6))]),
+    "v_slab_sun_sky": ("p_slab_over_ground", "its point light replaced by a sun (3 W/m^2) "
+                       "under a blue sky (0.3, 0.4, 0.6)",
+                       [("hide_lights", dict(kind="POINT")),
+                        ("add_light", dict(kind="SUN", energy=3.0, radius=0.0, location=(0, 0, 5),
+                                           rotation=(math.radians(40), 0.0, math.radians(30)))),
+                        ("world", dict(color=(0.3, 0.4, 0.6), strength=1.0))]),
+    "v_glow_slab": ("p_slab_over_ground", "its point light off; the slab (density 2) glows "
+                    "orange (1, 0.5, 0.2) at strength 2",
+                    [("hide_lights", dict(kind="POINT")), ("volume", dict(density=2.0)),
+                     ("emission", dict(color=(1.0, 0.5, 0.2), strength=2.0))]),
     # v_glow_dense taken apart: its anisotropy alone, and its density and albedo at g 0
     "v_glow_g6": ("p_glowing_smoke", "g 0.6", [("volume", dict(anisotropy=0.6))]),
     "v_glow_dense_g0": ("p_glowing_smoke", "density 12, albedo 0.95, g 0",
@@ -228,6 +255,15 @@ def apply(sc, step: str, kw: dict) -> None:
             for n in o.active_material.node_tree.nodes:
                 if n.bl_idname == "ShaderNodeMath" and n.operation == "MULTIPLY":
                     n.inputs[1].default_value = kw["density"]
+    elif step == "world":   # the background's colour and strength
+        bg = next(n for n in sc.world.node_tree.nodes if n.bl_idname == "ShaderNodeBackground")
+        bg.inputs["Color"].default_value = (*kw["color"], 1.0)
+        bg.inputs["Strength"].default_value = kw["strength"]
+    elif step == "emission":   # a constant emission on every volume's Principled Volume
+        for o in _volume_objects(sc):
+            node = _principled(o.active_material)
+            node.inputs["Emission Color"].default_value = (*kw["color"], 1.0)
+            node.inputs["Emission Strength"].default_value = kw["strength"]
     elif step == "sun":
         for o in sc.objects:
             if o.type == "LIGHT" and o.data.type == "SUN":
