@@ -650,6 +650,7 @@ def irradiance(light: Light, points, sample=None) -> np.ndarray:
 
 
 POLYGON_SIDES = 24  # sides of the polygon that stands for a disc or ellipse emitter
+PLANE_EPS = 1e-9    # a point this close to an area light's plane (times its side) lies on it
 
 
 def emitter_polygon(light: Light) -> np.ndarray:
@@ -698,9 +699,17 @@ def area_incident(light: Light, points, direction: bool = True):
     area = rec[L_AREA]
     radiance = np.asarray(light.strength, np.float64).reshape(3) / np.pi / \
         (area if (light.normalize and area > 0.0) else 1.0)
+    # a point on the emitter's plane itself (to rounding) takes half its front side's light,
+    # the mean of the two sides' limits: a quadrature point that falls on the plane counts
+    # the step there by halves
+    side = (points - c) @ normal
+    on = np.abs(side) <= PLANE_EPS * np.sqrt(max(float(area), 1e-300))
+    if np.any(on):
+        points = points + np.where(on, PLANE_EPS * np.sqrt(max(float(area), 1e-300)) - side,
+                                   0.0)[:, None] * normal[None, :]
     r, ln, omega = polygon_solid_angle(emitter_polygon(light), points)
-    front = (points - c) @ normal > 0.0
-    e = np.where(front, omega, 0.0)[:, None] * radiance[None, :]
+    front = ((points - c) @ normal > 0.0) | on
+    e = (np.where(front, omega, 0.0) * np.where(on, 0.5, 1.0))[:, None] * radiance[None, :]
     if not direction:
         return None, e
     u = r / ln[..., None]
