@@ -86,3 +86,32 @@ def test_only_an_area_light_has_an_emitter_band():
                 matrix=np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 9.0], [0, 0, 0, 1]]),
                 size_x=SIDE, direction=np.array([0.0, 0.0, -1.0]))
     assert emitter_band_source(pm, f, far, 1) is None   # its plane cuts no cell of the grid
+
+
+def test_a_tilted_emitters_band_is_every_cell_its_plane_cuts():
+    """The band's voxels, found column by column along the axis the plane crosses most
+    steeply, are those a test of every voxel of the grid finds (a rectangle tilted about two
+    axes, off the voxel centres)."""
+    from mpp_render.lights import area_geometry, emitter_normal
+    pm, _, f, _ = case(0.0)
+    a, b = 0.5, 0.35
+    rot = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]]) @ \
+        np.array([[1, 0, 0], [0, np.cos(b), -np.sin(b)], [0, np.sin(b), np.cos(b)]])
+    m = np.eye(4)
+    m[:3, :3] = rot
+    m[:3, 3] = [0.13, -0.07, 0.21]
+    light = Light("AREA", "t", np.full(3, POWER), position=m[:3, 3], matrix=m, size_x=1.1,
+                  size_y=0.6, shape="RECTANGLE", direction=-rot[:, 2])
+    band = emitter_band_source(pm, f, light, 1)
+    c, ax, ay, _ = area_geometry(light)
+    n = emitter_normal(light)
+    i2w = pm.i2w[:3, :3]
+    every = np.argwhere(np.ones(pm.grid.shape, bool))
+    rel = pm.to_world(every.astype(np.float64)) - c
+    on = np.abs(rel @ n) < 0.5 * np.abs(i2w.T @ n).sum()
+    for h in (ax, ay):
+        ln = np.linalg.norm(h)
+        on &= np.abs(rel @ h) / ln <= ln + np.max(np.linalg.norm(i2w, axis=0))
+    want = np.ravel_multi_index(tuple(every[on].T), pm.grid.shape)
+    assert len(want) > 100
+    np.testing.assert_array_equal(np.sort(band[0]), np.sort(want))

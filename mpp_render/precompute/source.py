@@ -375,8 +375,21 @@ def emitter_band_source(pm: PreparedMedium, fld: np.ndarray, light: Light, chann
     hi = np.clip(np.ceil(idx.max(axis=0)) + 2, 0, shape - 1).astype(int)
     if np.any(hi < lo):
         return None
-    ijk = np.stack(np.meshgrid(*[np.arange(a, b + 1) for a, b in zip(lo, hi)], indexing="ij"),
-                   -1).reshape(-1, 3)
+    # the plane in index coordinates, m . idx + s0 = 0: along the axis it crosses most
+    # steeply a column meets the band (|distance| < half_n) at no more than 4 voxels
+    m = i2w.T @ n
+    s0 = float(n @ (np.asarray(pm.i2w, np.float64)[:3, 3] - c))
+    k = int(np.argmax(np.abs(m)))
+    a_, b_ = [ax_ for ax_ in range(3) if ax_ != k]
+    pa, pb = np.meshgrid(np.arange(lo[a_], hi[a_] + 1), np.arange(lo[b_], hi[b_] + 1),
+                         indexing="ij")
+    kstar = -(m[a_] * pa + m[b_] * pb + s0) / m[k]
+    ijk = np.zeros(pa.shape + (4, 3), np.int64)
+    ijk[..., a_] = pa[..., None]
+    ijk[..., b_] = pb[..., None]
+    ijk[..., k] = np.floor(kstar)[..., None].astype(np.int64) + np.arange(-1, 3)
+    ijk = ijk.reshape(-1, 3)
+    ijk = ijk[np.all((ijk >= 0) & (ijk < shape), axis=1)]
     rel = pm.to_world(ijk.astype(np.float64)) - c
     voxel = float(np.max(np.linalg.norm(i2w, axis=0)))
     on = np.abs(rel @ n) < half_n
