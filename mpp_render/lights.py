@@ -703,10 +703,10 @@ def area_incident(light: Light, points, direction: bool = True):
     # the mean of the two sides' limits: a quadrature point that falls on the plane counts
     # the step there by halves
     side = (points - c) @ normal
-    on = np.abs(side) <= PLANE_EPS * np.sqrt(max(float(area), 1e-300))
+    eps = PLANE_EPS * np.sqrt(max(float(area), 1e-300))
+    on = np.abs(side) <= eps
     if np.any(on):
-        points = points + np.where(on, PLANE_EPS * np.sqrt(max(float(area), 1e-300)) - side,
-                                   0.0)[:, None] * normal[None, :]
+        points = points + np.where(on, eps - side, 0.0)[:, None] * normal[None, :]
     r, ln, omega = polygon_solid_angle(emitter_polygon(light), points)
     front = ((points - c) @ normal > 0.0) | on
     e = (np.where(front, omega, 0.0) * np.where(on, 0.5, 1.0))[:, None] * radiance[None, :]

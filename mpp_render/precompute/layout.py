@@ -173,6 +173,6 @@ def glow_gathered(media: Sequence[PreparedMedium], traced: bool, surfaces, momen
     world's fog emits into a medium that scatters, the paths are traced (``traced``: multiple
     scattering by traced paths, a camera), surfaces gather (``surfaces`` not empty) and their
     gathers read moments (Tuning.gather_moments)."""
-    return bool(glow and traced and moments and surfaces is not None
-                and not getattr(surfaces, "empty", False) and glow_lights(list(media))
+    return bool(glow and traced and moments and surfaces is not None and not surfaces.empty
+                and glow_lights(list(media))
                 and any(pm.emits and not pm.endless for pm in media))

@@ -12,8 +12,8 @@ import numpy as np
 
 from .. import kernels, pyramid
 from ..firstflight import fft_shape
-from ..lights import (area_geometry, disc_transmittance, emitter_normal, incident, irradiance,
-                      outside_spot, towards_light)
+from ..lights import (area_geometry, disc_transmittance, emitter_normal, emitter_polygon,
+                      incident, irradiance, outside_spot, towards_light)
 from ..media import PreparedMedium, delta_scaled, density_from
 from ..parallel import check, run_chunks
 from ..phase import delta_fraction, peak_msa
@@ -368,8 +368,7 @@ def emitter_band_source(pm: PreparedMedium, fld: np.ndarray, light: Light, chann
     n = emitter_normal(light)
     i2w = np.asarray(pm.i2w, np.float64)[:3, :3]
     half_n = 0.5 * float(np.abs(i2w.T @ n).sum())          # the cell's half extent along n, m
-    corners = c + np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], np.float64) @ np.stack([ax, ay])
-    idx = pm.to_index(corners)
+    idx = pm.to_index(emitter_polygon(light))
     shape = np.array(pm.grid.shape[:3])
     lo = np.clip(np.floor(idx.min(axis=0)) - 2, 0, shape - 1).astype(int)
     hi = np.clip(np.ceil(idx.max(axis=0)) + 2, 0, shape - 1).astype(int)
