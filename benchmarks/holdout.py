@@ -186,6 +186,22 @@ VARIANTS = {
                          ("add_light", dict(kind="SUN", energy=3.0, radius=0.0, location=(0, 0, 5),
                                             rotation=(math.radians(40), 0.0, math.radians(30)))),
                          ("world", dict(color=(0.3, 0.4, 0.6), strength=0.0))]),
+    # the sky over a ground alone, the ground black (no light off it): the sky's multiple
+    # scattering where the ground hides part of it, in a thick slab and a thin haze
+    "v_slab_sky_black": ("p_slab_over_ground", "v_slab_sky_only with the ground black",
+                         [("hide_lights", dict(kind="POINT")),
+                          ("world", dict(color=(0.3, 0.4, 0.6), strength=1.0)),
+                          ("ground", dict(color=(0.0, 0.0, 0.0)))]),
+    "v_haze_sky_black": ("p_haze_sun_ground", "its sun off, the haze lifted 5 cm off a black "
+                         "ground, under its sky at strength 2",
+                         [("hide_lights", dict(kind="SUN")), ("lift", dict(dz=0.05)),
+                          ("world", dict(color=(0.2, 0.25, 0.35), strength=2.0)),
+                          ("ground", dict(color=(0.0, 0.0, 0.0)))]),
+    "v_haze_sky_matte": ("p_haze_sun_ground", "v_haze_sky_black with the ground's specular "
+                         "layer off (Specular IOR Level 0)",
+                         [("hide_lights", dict(kind="SUN")), ("lift", dict(dz=0.05)),
+                          ("world", dict(color=(0.2, 0.25, 0.35), strength=2.0)),
+                          ("ground", dict(color=(0.0, 0.0, 0.0), specular=0.0))]),
     # v_glow_dense taken apart: its anisotropy alone, and its density and albedo at g 0
     "v_glow_g6": ("p_glowing_smoke", "g 0.6", [("volume", dict(anisotropy=0.6))]),
     "v_glow_dense_g0": ("p_glowing_smoke", "density 12, albedo 0.95, g 0",
@@ -283,6 +299,13 @@ def apply(sc, step: str, kw: dict) -> None:
             node = _principled(o.active_material)
             node.inputs["Emission Color"].default_value = (*kw["color"], 1.0)
             node.inputs["Emission Strength"].default_value = kw["strength"]
+    elif step == "ground":   # the base colour of the surfaces' materials named ground*
+        for mat in bpy.data.materials:
+            if mat.name.startswith("ground") and mat.node_tree is not None:
+                bsdf = mat.node_tree.nodes.get("Principled BSDF")
+                bsdf.inputs["Base Color"].default_value = (*kw["color"], 1.0)
+                if "specular" in kw:   # 'Specular IOR Level' (0.5: F0 0.04 at IOR 1.5)
+                    bsdf.inputs["Specular IOR Level"].default_value = kw["specular"]
     elif step == "sun":
         for o in sc.objects:
             if o.type == "LIGHT" and o.data.type == "SUN":

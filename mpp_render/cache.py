@@ -225,12 +225,13 @@ def media_key(media) -> str:
 
 
 def surfaces_key(surfaces) -> str:
-    """Content key of a SurfaceSet's geometry and diffuse albedo (the precompute's
-    occluders, and what the traced paths reflect off), or of None."""
+    """Content key of a SurfaceSet's geometry and shading (the precompute's occluders, what
+    the traced paths reflect off, and the share of the sky each reflects, which every layer
+    of its BSDF sets: precompute/skydeficit.py), or of None."""
     if surfaces is None or surfaces.empty:
         return digest(None)
-    from .precompute.pathstarts import surface_albedo
-    return digest(surfaces.v0, surfaces.e1, surfaces.e2, surface_albedo(surfaces))
+    return digest(surfaces.v0, surfaces.e1, surfaces.e2, surfaces.surface,
+                  *[np.asarray(surfaces.params[k]) for k in sorted(surfaces.params)])
 
 
 def camera_key(camera) -> tuple:
@@ -279,8 +280,8 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
     modify the returned arrays."""
     from . import precompute as pre_mod
     from .precompute.lattice import MULTIPLE_RESOLUTION
-    from .precompute.pathstarts import sky_paths_wanted
     from .precompute.layout import light_channels
+    from .precompute.skydeficit import walls_follow_lights
     from .scene import Tuning, World
     from .media import glow_lights
 
@@ -299,13 +300,12 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
               bool(surface_bounce) if multiple else None)
     # the light pyramids are moved towards what the camera sees (precompute.lightpyramid.drift_levels)
     seeded = int(seed) if multiple and multiple_paths > 0 else None
-    # the sky's light off the surfaces starts paths too (pathstarts.sky_surface_starts): the
-    # lights' part then holds the sky's colour
-    sky_paths = sky_paths_wanted(multiple, multiple_paths, surface_bounce, surfaces,
-                                 world.color, media)
+    # the surfaces' share of the sky's deficit takes as many paths as weigh what the lights'
+    # weigh (precompute/skydeficit.py): the two parts are made together then
+    walls = walls_follow_lights(multiple, multiple_paths, surfaces, world.color, media)
     light_key = digest("lights", common, list(lights), has_world,
                        camera_key(camera) if multiple else None, seeded,
-                       np.asarray(world.color, np.float64) if sky_paths else None)
+                       np.asarray(world.color, np.float64) if walls else None)
     scene_key = digest("scene", common, list(lights), has_world, seeded)
     world_key = digest("world", common, np.asarray(world.color, np.float64), camera_key(camera),
                        int(n_dirs), int(seed)) if has_world else None
@@ -351,9 +351,8 @@ def precompute_cached(media, lights, world, camera, *, n_dirs: int, seed: int, s
         donor = cache.get("precompute", donor_key) if donor_key is not None else None
     if donor is not None and (donor["world"] == world_key or any_camera) and \
             donor["pre"].layout.light_channels == light_channels(lights):
-        # a light changed (the sky's light off the surfaces still starts the lights' paths)
-        part = pre_mod.precompute(media, lights, World(), camera, glow=False,
-                                  sky=np.asarray(world.color, np.float64), **kw)
+        # a light changed
+        part = pre_mod.precompute(media, lights, World(), camera, glow=False, **kw)
         old = donor["pre"]
         first = old.layout.world_first
         fields = []

@@ -84,6 +84,15 @@ scattering was 0.91 of Cycles'.  ``lobe`` 1 (a surface): the direction is
 cosine-distributed about ``dirs`` (the lit side's normal), and the offset a tent of half-width
 ``jitter`` metres in the plane across it.  ``lobe`` 2 (an emitting voxel,
 precompute.emissionlight): the direction is uniform over the sphere, the offset as lobe 0's.
+``lobe`` 3 (a surface far from the medium, aimed): the offset as lobe 1's; the direction is
+cosine-distributed with probability ``AIM_COSINE``, else uniform within the cone that the
+reach sphere (``reach_centre``, ``reach_radius``) subtends from the start, and the weight
+is multiplied by the cosine lobe's density over that mixture's (a defensive mixture: every
+direction above the surface keeps a density, so the light that reaches the medium after a
+bounce elsewhere is kept; one below it ends the path).  From a ground tens of metres wide
+the cosine lobe alone sends nearly every path past a medium a metre across, and the few
+that reach it weigh the most (a sky's deficit off a black ground, tests/test_sky_ground.py).
+A start inside the sphere draws the cosine lobe alone.
 
 **Moments** (``moments``).  M above is the light scattered towards the camera, v(y) fixed per
 lattice point; a surface's gather looks through the medium along other directions (the ground
@@ -120,6 +129,7 @@ __all__ = ["PathInputs", "trace_paths_np", "MAX_COLLISIONS", "ROULETTE", "PATHS_
 
 MAX_COLLISIONS = 4096    # real collisions after which a path ends (albedo 1, optical depth 1e4)
 ROULETTE = 0.1           # below this fraction of its start weight a path plays roulette
+AIM_COSINE = 0.25        # an aimed surface start (lobe 3): the share drawn by the cosine lobe
 MAX_EVENTS = 1_000_000   # tentative collisions after which a path ends (csrc/paths.c)
 MAX_RATE_SPAN = 1e6      # the most tentative collisions along the grid's diagonal (csrc/paths.c)
 T_MIN = 1e-9             # m: a surface nearer than this along a flight is not hit (csrc/paths.c)
@@ -136,6 +146,7 @@ _D_ACCEPT = 512   # a start's acceptance draw, one dimension per try
 _D_CORNER = 600   # the lattice corner a deposit's moments go to
 _D_MEDIUM = 17    # which medium a tentative collision is in, with several (csrc/paths.c)
 _D_LIGHT = 700    # the emitter point a first scattering's light comes from (csrc/paths.c)
+_D_AIM = 5        # an aimed surface start's choice of lobe or cone (csrc/paths.c)
 _D_CAMERA = 800   # the camera's roulette at a real collision (csrc/paths.c)
 PATH_MEDIA = 8    # media one trace flies through at most: its own and 7 others
 BOX_TIE = 1e-9    # m (relative beyond 1 m): box faces this close are crossed together
@@ -378,13 +389,53 @@ def _surface_hit(inp, o, d, tmax, skip):
 
 def _cosine(u1, u2, n):
     """Cosine-distributed unit directions about unit normals ``n`` (csrc/paths.c cosine_dir)."""
+    return _about(np.sqrt(u1), u2, n)
+
+
+def _about(c, u2, axis):
+    """Unit directions at cosine ``c`` and azimuth 2 pi ``u2`` about the unit ``axis`` (N,3)
+    (csrc/paths.c about)."""
     from .phase import orthonormal_basis
-    c = np.sqrt(u1)
-    st = np.sqrt(np.maximum(0.0, 1.0 - u1))
+    st = np.sqrt(np.maximum(0.0, 1.0 - c * c))
     phi = 2.0 * np.pi * u2
-    t1, t2 = orthonormal_basis(n)
-    out = t1 * (st * np.cos(phi))[:, None] + t2 * (st * np.sin(phi))[:, None] + n * c[:, None]
+    t1, t2 = orthonormal_basis(axis)
+    out = t1 * (st * np.cos(phi))[:, None] + t2 * (st * np.sin(phi))[:, None] + axis * c[:, None]
     return out / np.sqrt(_dot(out, out))[:, None]
+
+
+def _aimed(inp: PathInputs, keys, pos, normal):
+    """(directions (N,3), aim (N,)) of aimed surface starts (lobe 3, module docstring,
+    "Starts"; csrc/paths.c trace_one): with probability ``AIM_COSINE`` cosine-distributed
+    about ``normal``, else uniform within the cone the reach sphere subtends from ``pos``;
+    ``aim`` the cosine lobe's density over the mixture's (0 below the surface).  A start
+    inside the sphere draws the cosine lobe alone (aim 1)."""
+    u1, u2 = uniform(keys, 0, _D_DIR), uniform(keys, 0, _D_DIR + 1)
+    d = _cosine(u1, u2, normal)
+    aim = np.ones(len(keys))
+    centre = np.asarray(inp.reach_centre, np.float64).reshape(1, 3)
+    r2 = float(inp.reach_radius) ** 2
+    axis = centre - pos
+    dist2 = _dot(axis, axis)
+    far = (dist2 > r2) & np.isfinite(dist2) & (r2 > 0.0)
+    if not np.any(far):
+        return d, aim
+    dist = np.sqrt(dist2[far])
+    ax = axis[far] / dist[:, None]
+    cmax = np.sqrt(1.0 - r2 / dist2[far])
+    omega = 2.0 * np.pi * (1.0 - cmax)
+    cone = ~(uniform(keys[far], 0, _D_AIM) < AIM_COSINE)
+    df = d[far]
+    if np.any(cone):
+        df[cone] = _about(1.0 - u1[far][cone] * (1.0 - cmax[cone]), u2[far][cone], ax[cone])
+    cn = _dot(df, normal[far])
+    ca = _dot(df, ax)
+    lobe = np.where(cn > 0.0, cn / np.pi, 0.0)
+    mix = AIM_COSINE * lobe + np.where((ca >= cmax) & (omega > 0.0),
+                                       (1.0 - AIM_COSINE) / np.where(omega > 0.0, omega, 1.0),
+                                       0.0)
+    d[far] = df
+    aim[far] = np.where(mix > 0.0, lobe / np.where(mix > 0.0, mix, 1.0), 0.0)
+    return d, aim
 
 
 def _survive(keys, ev, w, w0, hits, max_hits):
@@ -427,7 +478,7 @@ def start_positions(inp: PathInputs, keys: np.ndarray, k: np.ndarray) -> np.ndar
     n = len(keys)
     off = np.stack([uniform(keys, 0, _D_JIT + 2 * a) + uniform(keys, 0, _D_JIT + 2 * a + 1) - 1.0
                     for a in range(3)], axis=1)
-    if int(inp.lobe) == 1:      # a surface: a tent of half-width jitter metres in its plane
+    if int(inp.lobe) in (1, 3):   # a surface: a tent of half-width jitter metres in its plane
         from .phase import orthonormal_basis
         t1, t2 = orthonormal_basis(inp.dirs[k])
         off = off * float(inp.jitter)
@@ -563,12 +614,15 @@ def trace_paths_media_np(inp: PathInputs, paths: Optional[tuple] = None) -> list
                    len(inp.cdf) - 1)
     pos = start_positions(inp, keys, k)
     din = start_directions(inp, keys, k, pos)
+    aim = np.ones(len(keys))
     if int(inp.lobe) == 1:
         d = _cosine(uniform(keys, 0, _D_DIR), uniform(keys, 0, _D_DIR + 1), din)
+    elif int(inp.lobe) == 3:    # a surface aimed at the reach sphere
+        d, aim = _aimed(inp, keys, pos, din)
     else:                       # lobe 2, an emitting voxel: uniform (the phase of g 0)
         d = _turn(uniform(keys, 0, _D_DIR), uniform(keys, 0, _D_DIR + 1),
                   0.0 if int(inp.lobe) == 2 else g, din)
-    w = inp.weights[k] / n
+    w = inp.weights[k] / n * aim[:, None]
     w0 = w.max(axis=1)
     held = np.ones(len(keys))   # the lowest camera odds each path has survived
     odds = None if inp.odds is None or not np.size(inp.odds) else \
@@ -580,7 +634,7 @@ def trace_paths_media_np(inp: PathInputs, paths: Optional[tuple] = None) -> list
     inside = np.stack([np.all((np.floor(_to_index(m, pos) + 0.5) >= 0)
                               & (np.floor(_to_index(m, pos) + 0.5) < sh), axis=1)
                        for m, sh in zip(grids, shapes)], axis=1)
-    alive = np.arange(len(keys))
+    alive = np.flatnonzero(aim > 0.0)   # an aimed start below its surface: no light
     sts = [np.asarray(m.sigma_t, np.float64) for m in grids]
     sss = [np.asarray(m.sigma_s, np.float64) for m in grids]
     mus = [float(m.rate) for m in grids]

@@ -168,6 +168,39 @@ def facing_normals(ss: SurfaceSet, tri, d):
     return np.where(flip[:, None], -n, n)
 
 
+def sky_albedo(ss: SurfaceSet, tri, d) -> np.ndarray:
+    """(N,3) the directional albedo of triangles ``tri`` hit by rays ``d`` (unit): the share
+    of a uniform sky's radiance each reflects back along -d, every layer of its Principled
+    BSDF (principled.Principled.albedo)."""
+    tri = np.asarray(tri, np.int64)
+    if len(tri) == 0:
+        return np.zeros((0, 3))
+    d = np.asarray(d, np.float64)
+    bsdf = Principled({k: v[ss.surface[tri]] for k, v in ss.params.items()},
+                      facing_normals(ss, tri, d), -d)
+    return np.clip(bsdf.albedo(), 0.0, 1.0)
+
+
+SKY_ALBEDO_NODES = 16   # Gauss-Legendre nodes in the cosine of mean_sky_albedo's directions
+
+
+def mean_sky_albedo(ss: SurfaceSet) -> np.ndarray:
+    """(T,3) each triangle's ``sky_albedo`` averaged over the directions it reflects into,
+    cosine-weighted (what a uniform sky's light off it is, as a share of that light's
+    power): ``SKY_ALBEDO_NODES`` Gauss-Legendre nodes in the cosine, per surface."""
+    n_surf = len(ss.params["weight"])
+    x, w = np.polynomial.legendre.leggauss(SKY_ALBEDO_NODES)
+    mu = 0.5 * (x + 1.0)
+    weight = w * mu                      # 2 mu d mu over [0, 1], the nodes' half-width 1/2
+    k = len(mu)
+    prm = {key: np.repeat(v, k, axis=0) for key, v in ss.params.items()}
+    normal = np.tile([0.0, 0.0, 1.0], (n_surf * k, 1))
+    view = np.tile(np.stack([np.sqrt(1.0 - mu * mu), np.zeros(k), mu], axis=1), (n_surf, 1))
+    a = np.clip(Principled(prm, normal, view).albedo(), 0.0, 1.0).reshape(n_surf, k, 3)
+    per_surface = np.einsum("skc,k->sc", a, weight)
+    return np.ascontiguousarray(per_surface[ss.surface], np.float64)
+
+
 def shade(ss: SurfaceSet, tri, p, d, lights, world_color, media_optical_depth, rng,
           media_radiance=None, bounces: int = 1, gathers: int = 1, strata=None,
           guides=None, guided: float = 0.5, cached=None):

@@ -240,11 +240,12 @@ def test_a_cancelled_render_keeps_nothing(warm):
 
 
 @pytest.mark.parametrize("change", ["world", "light"])
-def test_the_skys_path_starts_follow_the_world_colour(warm, change):
-    """With traced paths, a ground and a lit sky, the sky's light off the ground starts paths
-    (pathstarts.sky_surface_starts), so the lights' part holds the sky's colour: another
-    world colour recomputes it, and a changed light, whose world channels are copied from
-    the cache, still starts the sky's paths: both equal a cold precompute."""
+def test_the_grounds_sky_deficit_follows_the_world_colour(warm, change):
+    """With traced paths, a ground and a lit sky, the ground's share of the sky's deficit
+    (skydeficit.sky_deficit's ``ground``) takes as many paths as weigh what the lights'
+    paths weigh, so the lights' part is keyed by the sky's colour: another world colour
+    recomputes both parts, and a changed light, whose world channels are copied from the
+    cache, equals a cold precompute.  The lights' own paths do not carry the sky's light."""
     kw = dict(n_dirs=8, seed=3, threads=2, multiple=True, multiple_paths=20_000,
               surface_bounce=True)
     first = scene()
@@ -258,6 +259,17 @@ def test_the_skys_path_starts_follow_the_world_colour(warm, change):
     cold = pre_mod.precompute(media, second.lights, second.world, second.camera, surfaces=surf,
                               **kw)
     assert_same_precompute(got, cold)
-    dark = pre_mod.precompute(media, second.lights, second.world, second.camera, surfaces=surf,
-                              sky=np.zeros(3), **kw)
-    assert not np.array_equal(cold.multiple[0][0].levels[0], dark.multiple[0][0].levels[0])
+    dark = pre_mod.precompute(media, second.lights, World(), second.camera, surfaces=surf,
+                              **kw)
+    np.testing.assert_array_equal(cold.multiple[0][0].levels[0], dark.multiple[0][0].levels[0])
+
+def test_the_grounds_specular_layer_keys_the_precompute(warm, calls):
+    """The share of the sky a surface reflects takes every layer of its BSDF (the sky's
+    deficit, precompute/skydeficit.py): a ground whose specular layer changes, its diffuse
+    colour the same, is a new precompute, not the kept one."""
+    render(scene())
+    calls.clear()
+    glossy = scene()
+    glossy.surfaces[0] = dataclasses.replace(glossy.surfaces[0], specular=0.04, roughness=0.3)
+    out = render(glossy)
+    assert calls == ["all"] and out.stats["reused"] == []

@@ -83,15 +83,15 @@ def test_points_denser_near_the_medium_integrate_its_light_with_less_noise(n):
     assert near > 0.3 and near_flat < 0.01
 
 
-def test_the_sky_lit_ground_sends_its_light_into_a_medium_above_it():
-    """pathstarts.sky_surface_starts: a grey ground under a constant sky and a thick cube of
-    medium above it.  Far from the cube a point's irradiance is pi L_w (all the sky), so its
-    power over the area it stands for is R pi L_w; under the cube, whose shadow the
-    directions cross, it is less; with a dark sky, a black ground, no bounce or no sky
-    there are no starts."""
+def test_a_ground_falls_short_of_the_furnace_by_what_it_does_not_reflect():
+    """pathstarts.sky_ground_starts: in the furnace a ground sends the sky's radiance L_w
+    back; a grey one of albedo R sends R L_w, so its deficit is a fictitious emission
+    pi (1 - R) L_w per area, from the side that faces the medium, over a wider reach than
+    the lights' surface points (GROUND_REACH); a black ground counts whole, and with the
+    surfaces' bounce off a grey one too; a white one or a dark sky has none."""
     from mpp_render.media import prepare
-    from mpp_render.precompute.pathstarts import (Surroundings, sky_surface_starts,
-                                                  surface_reach)
+    from mpp_render.precompute.pathstarts import (GROUND_REACH, SURFACE_REACH, Surroundings,
+                                                  sky_ground_starts, surface_reach)
     from mpp_render.scene import Medium
 
     n = 16
@@ -100,26 +100,56 @@ def test_the_sky_lit_ground_sends_its_light_into_a_medium_above_it():
     i2w[:3, 3] = [-0.5 + 0.5 / n, -0.5 + 0.5 / n, 0.2 + 0.5 / n]
     pm = prepare(Medium("cube", np.full((n, n, n), 1.0, np.float32), i2w, np.full(3, 8.0),
                         np.full(3, 2.0), 0.0))
-    ground = prepare_surfaces([square(30.0, z=0.0, albedo=0.5)])
     sky = np.array([0.2, 0.3, 0.4])
-    around = Surroundings([pm], None, ground, 0.02, True, sky=sky)
-    p, power, normals, jitter = sky_surface_starts(pm, around, seed=4)
-    centre, radius, scale = surface_reach(pm)
-    w = surface_points(ground, centre, radius, 16384, np.random.default_rng([4, 3571]),
-                       albedo_min=0.0, scale=scale)[2]
-    assert len(p) == len(w) and jitter > 0.0
-    np.testing.assert_allclose(normals, np.tile([0.0, 0.0, 1.0], (len(p), 1)))
-    per_area = power / w[:, None]
-    full = 0.5 * np.pi * sky
-    far = np.hypot(p[:, 0], p[:, 1]) > 6.0
-    under = np.hypot(p[:, 0], p[:, 1]) < 0.2
-    assert far.sum() > 100 and under.sum() > 50
-    np.testing.assert_allclose(per_area[far].mean(axis=0), full, rtol=0.01)
-    assert np.all(per_area <= full * (1.0 + 1e-9))
-    assert np.all(per_area[under] < 0.8 * full)
-    for off in (dict(sky=np.zeros(3)), dict(sky=None), dict(bounce=False)):
-        assert sky_surface_starts(pm, dataclasses.replace(around, **off), seed=4) is None
-    black = Surroundings([pm], None, prepare_surfaces([square(30.0, albedo=0.0)]), 0.02, True,
-                         sky=sky)
-    assert sky_surface_starts(pm, black, seed=4) is None
+    centre, radius, scale = surface_reach(pm, GROUND_REACH)
+    assert radius == pytest.approx(GROUND_REACH / SURFACE_REACH * surface_reach(pm)[1])
+    for albedo in (0.5, 0.0):
+        ground = prepare_surfaces([square(2.0 * radius, z=0.0, albedo=albedo)])
+        around = Surroundings([pm], None, ground, 0.02, True)
+        p, power, normals, jitter = sky_ground_starts(pm, around, 4, sky)
+        # the points and the area each stands for, as surface_points draws them
+        q, _, w = surface_points(ground, centre, radius, 16384,
+                                 np.random.default_rng([4, 6151]), albedo_min=-1.0,
+                                 scale=scale)
+        assert len(p) == len(w) and jitter > 0.0
+        assert np.hypot(p[:, 0], p[:, 1]).max() > 0.5 * radius   # far out, and
+        assert np.mean(np.hypot(p[:, 0], p[:, 1]) < 2.0) > 0.2    # mostly near the medium
+        np.testing.assert_allclose(normals, np.tile([0.0, 0.0, 1.0], (len(p), 1)))
+        np.testing.assert_allclose(power / w[:, None],
+                                   np.tile(np.pi * (1.0 - albedo) * sky, (len(p), 1)))
+        # with the surfaces' bounce off a ground reflects nothing: all of it counts
+        off = sky_ground_starts(pm, dataclasses.replace(around, bounce=False), 4, sky)
+        np.testing.assert_allclose(off[1] / w[:, None], np.tile(np.pi * sky, (len(p), 1)))
+    white = Surroundings([pm], None, prepare_surfaces([square(30.0, albedo=1.0)]), 0.02, True)
+    assert sky_ground_starts(pm, white, 4, sky) is None
+    assert sky_ground_starts(pm, around, 4, np.zeros(3)) is None
+    assert sky_ground_starts(pm, dataclasses.replace(around, surfaces=None), 4, sky) is None
 
+
+def test_a_surfaces_share_of_a_uniform_sky_counts_its_specular_layer():
+    """surfaces.sky_albedo / mean_sky_albedo: a Lambertian surface reflects its base colour
+    of a uniform sky in every direction; a black dielectric one (F0 0.04, roughness 1)
+    reflects little along its normal and more towards grazing (the Fresnel), and its mean is
+    the cosine-weighted mean of its directional albedo (checked against 20 000 cosine-drawn
+    directions)."""
+    from mpp_render.surfaces import mean_sky_albedo, sky_albedo
+
+    v = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], float)
+    tris = np.array([[0, 1, 2], [0, 2, 3]])
+    ss = prepare_surfaces([Surface("matte", v, tris, np.array([0.2, 0.5, 0.7])),
+                           Surface("black", v, tris, np.zeros(3), specular=0.04,
+                                   roughness=1.0)])
+    mean = mean_sky_albedo(ss)
+    np.testing.assert_allclose(mean[:2], np.tile([0.2, 0.5, 0.7], (2, 1)), rtol=1e-9)
+    rng = np.random.default_rng(3)
+    u1, u2 = rng.random(20000), rng.random(20000)
+    up = np.stack([np.sqrt(u1) * np.cos(2 * np.pi * u2), np.sqrt(u1) * np.sin(2 * np.pi * u2),
+                   np.sqrt(1.0 - u1)], axis=1)
+    black = sky_albedo(ss, np.full(20000, 2), -up)   # rays coming down onto it
+    assert 0.01 < mean[2, 0] < 0.05
+    assert black[:, 0].mean() == pytest.approx(mean[2, 0], rel=0.02)
+    normal, grazing = sky_albedo(ss, np.array([2, 2]), np.array([[0.0, 0.0, -1.0],
+                                                                  [0.995, 0.0, -0.0999]]))
+    assert grazing[0] > 3.0 * normal[0] > 0.0
+    np.testing.assert_allclose(sky_albedo(ss, np.array([0]), np.array([[0.6, 0.0, -0.8]]))[0],
+                               [0.2, 0.5, 0.7], rtol=1e-9)

@@ -61,6 +61,9 @@ const char trace_paths_doc[] =
 #define START_TRIES 64 /* offsets drawn for a first scattering until one is accepted */
 #define PATH_MEDIA 8    /* media one trace flies through: its own and 7 others */
 #define BOX_TIE 1e-9   /* m (relative beyond 1 m): box faces this close are crossed together */
+#define AIM_COSINE 0.25 /* an aimed surface start (lobe 3): the share of its paths drawn by the
+                         * cosine lobe alone, the rest within the reach sphere's cone */
+#define D_AIM 5        /* an aimed surface start's choice between the two (event 0) */
 
 /* The unit direction at cosine c and azimuth 2 pi u2 about the unit vector axis. */
 static inline void about(double c, double u2, const double axis[3], double out[3]) {
@@ -124,7 +127,8 @@ typedef struct {
     long max_hits;
     long min_hits;            /* real collisions and bounces before a path's deposits count */
     int lobe;                 /* 0: the first direction by the phase function, 1: cosine,
-                                 2: uniform over the sphere */
+                                 2: uniform over the sphere, 3: cosine, aimed at the reach
+                                 sphere (trace_one) */
     const double *tri, *alb;  /* (T,9) corner and two edges; (T,3) diffuse albedo */
     Py_ssize_t n_tri, n_box;
     const double *box;        /* (n_box,6) lo, hi of each TRI_CHUNK triangles */
@@ -456,7 +460,7 @@ static int cmp_u64(const void *a, const void *b) {
 static void trace_one(const Tracer *T, uint32_t key, const double *start, const double *w_start,
                       const double *dir, double inv_n, double peak) {
     double pos[3], d[3], w[3], off[3], w0 = 0.0;
-    if (T->lobe == 1) {   /* a surface: a tent of half-width jitter metres in its plane */
+    if (T->lobe == 1 || T->lobe == 3) {   /* a surface: a tent of half-width jitter metres in its plane */
         double t1[3], t2[3];
         basis(dir, t1, t2);
         for (int a = 0; a < 2; a++)
@@ -503,13 +507,44 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
             for (int a = 0; a < 3; a++) din[a] = dl[a] * inv;
         }
     }
+    double aim = 1.0;   /* the cosine lobe's density over the one drawn from (lobe 3) */
     if (T->lobe == 1)
         cosine_dir(uniform01(key, 0, D_DIR), uniform01(key, 0, D_DIR + 1), din, d);
-    else  /* lobe 2, an emitting voxel: uniform over the sphere (the phase function of g 0) */
+    else if (T->lobe == 3) {
+        /* a surface aimed at the reach sphere: with probability AIM_COSINE by the cosine
+         * lobe, else uniform within the cone the sphere subtends; the weight is the cosine
+         * lobe's density over the mixture's (every direction keeps a density, so light that
+         * reaches the medium after a bounce elsewhere is kept) */
+        double axis[3], dist2 = 0.0;
+        for (int a = 0; a < 3; a++) {
+            axis[a] = T->reach[a] - pos[a];
+            dist2 += axis[a] * axis[a];
+        }
+        double r2 = T->reach[3] * T->reach[3];
+        if (!(dist2 > r2) || !isfinite(dist2) || !(r2 > 0.0)) {
+            cosine_dir(uniform01(key, 0, D_DIR), uniform01(key, 0, D_DIR + 1), din, d);
+        } else {
+            double dist = sqrt(dist2), cmax = sqrt(1.0 - r2 / dist2);
+            for (int a = 0; a < 3; a++) axis[a] /= dist;
+            double omega = 2.0 * M_PI * (1.0 - cmax);
+            if (uniform01(key, 0, D_AIM) < AIM_COSINE)
+                cosine_dir(uniform01(key, 0, D_DIR), uniform01(key, 0, D_DIR + 1), din, d);
+            else
+                about(1.0 - uniform01(key, 0, D_DIR) * (1.0 - cmax),
+                      uniform01(key, 0, D_DIR + 1), axis, d);
+            double cn = d[0] * din[0] + d[1] * din[1] + d[2] * din[2];
+            double ca = d[0] * axis[0] + d[1] * axis[1] + d[2] * axis[2];
+            double lobe = cn > 0.0 ? cn / M_PI : 0.0;
+            double mix = AIM_COSINE * lobe + (ca >= cmax && omega > 0.0 ?
+                                              (1.0 - AIM_COSINE) / omega : 0.0);
+            aim = mix > 0.0 ? lobe / mix : 0.0;
+            if (!(aim > 0.0)) return;   /* below the surface: no light */
+        }
+    } else  /* lobe 2, an emitting voxel: uniform over the sphere (the phase function of g 0) */
         turn(uniform01(key, 0, D_DIR), uniform01(key, 0, D_DIR + 1),
              T->lobe == 2 ? 0.0 : T->m[0].g, din, d);
     for (int c = 0; c < 3; c++) {
-        w[c] = w_start[c] * inv_n;
+        w[c] = w_start[c] * inv_n * aim;
         if (w[c] > w0) w0 = w[c];
     }
     long hits = 0;
@@ -903,7 +938,7 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
         PyErr_SetString(PyExc_ValueError, "trace_paths: moments must have the lattice's shape");
         goto done;
     }
-    if (!(jitter >= 0.0) || !isfinite(jitter) || (lobe < 0 || lobe > 2) ||
+    if (!(jitter >= 0.0) || !isfinite(jitter) || (lobe < 0 || lobe > 3) ||
         !(outside >= 0.0) || !isfinite(outside) || !(((const double *)br.view.buf)[3] >= 0.0)) {
         PyErr_SetString(PyExc_ValueError, "trace_paths: bad jitter, lobe, outside or reach");
         goto done;

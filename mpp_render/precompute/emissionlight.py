@@ -86,7 +86,8 @@ def scattered_glow(pm: PreparedMedium, emitting, camera, n_paths: int,
                    deposits: float = Tuning.path_deposits, nodal: bool = Tuning.path_nodal,
                    setting: Optional[int] = None, signed: bool = False,
                    first_order: bool = True, odds: Optional[np.ndarray] = None,
-                   lobe_window: int = Tuning.lobe_window, gathered: bool = False):
+                   lobe_window: int = Tuning.lobe_window, gathered: bool = False,
+                   starts=()):
     """``emission_light``'s (stride, E1, Em, cross, moments) for the emission ``emitting`` = (flat, e):
     the C-order indices (N,) of the emitting voxels of ``pm``'s padded grid and their
     emission (N,3) W/(m^3 sr) (``emitting_voxels``), or None (nothing emitted, no camera,
@@ -102,8 +103,11 @@ def scattered_glow(pm: PreparedMedium, emitting, camera, n_paths: int,
     (paths.py, "Moments"), and ``moments`` is float32 (LX,LY,LZ,12), those of E1 + Em on the
     own lattice, which the surfaces' gathers read towards their own points instead of the
     camera's E1 and Em (march.MarchContext.for_gathers), as they read a lamp's M; else
-    None."""
-    if emitting is None or not len(emitting[0]) or camera is None:
+    None.  ``starts``: more sets of starts (lightpaths._trace_all's: points, power W,
+    directions, jitter, lobe), traced with the emitting voxels' (``emitting`` may then be
+    None): a surface's fictitious emission (skydeficit.py)."""
+    none = emitting is None or not len(emitting[0])
+    if (none and not len(starts)) or camera is None:
         return None
     if not pm.scatters and not partners:
         return None   # nothing its light could scatter in
@@ -113,9 +117,10 @@ def scattered_glow(pm: PreparedMedium, emitting, camera, n_paths: int,
                          nodal=nodal)
     if lat is None:
         return None
-    sets = voxel_starts(pm, emitting[0], emitting[1], lat.stride)
+    sets = [] if none else voxel_starts(pm, emitting[0], emitting[1], lat.stride)
     if odds is not None:
         sets = [item + (None, np.asarray(odds, np.float64)) for item in sets]
+    sets = sets + list(starts)
     lats = [lat] + [plat for _, plat in partners]
     # at most PATHS_PER_POINT per lattice point of every medium the light scatters in
     n = max(1, path_budget(n_paths, sum(la.cells for la in lats), setting))

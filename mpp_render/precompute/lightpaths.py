@@ -22,7 +22,7 @@ from .lattice import MULTIPLE_RESOLUTION, dilate, lattice_points, paths_lattice
 from .lightdepth import eye_depth
 from .lobefit import camera_weight, fitted
 from .nodal import nodal_values, tent_mass
-from .pathstarts import (Surroundings, fog_starts, reach, sky_surface_starts,
+from .pathstarts import (Surroundings, fog_starts, reach,
                          surface_albedo, surface_starts)
 from .source import CELL_POINTS, light_direction, near_light_cells, source_and_density
 
@@ -57,7 +57,7 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
                     nodal: bool = Tuning.path_nodal,
                     far_resolution: int = MULTIPLE_RESOLUTION,
                     cell_tau: float = Tuning.cell_tau, cell_walk: int = Tuning.cell_walk,
-                    sky: bool = False, lobe_window: int = Tuning.lobe_window,
+                    lobe_window: int = Tuning.lobe_window,
                     disc_channel: Optional[int] = None,
                     roulette_floor: float = Tuning.camera_roulette):
     """(stride, h, M, far, moments, cross, started) for ``light`` on medium ``pm`` (its field
@@ -87,17 +87,15 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     keeps the walk.  ``deposits``, ``nodal``: Tuning.path_deposits, Tuning.path_nodal
     (PathLattice.of).  ``far_resolution``: the far box's voxels along its longest side (the
     *Multiple Scattering Resolution* as set, not raised round a lamp).  ``cell_tau``,
-    ``cell_walk``: Tuning's (source.thick_band_source).  ``sky``: the paths also start where
-    the surfaces reflect the constant sky's light (``around.sky``, pathstarts.sky_surface_starts);
-    the caller asks it of one light per medium, whose M then holds that light too.
-    ``lobe_window``: with a ``camera`` and a medium of g != 0, M towards the camera is the
+    ``cell_walk``: Tuning's (source.thick_band_source).  (The constant sky's light off the
+    surfaces is the sky's, precompute/skydeficit.py.)  ``lobe_window``: with a ``camera`` and a medium of g != 0, M towards the camera is the
     paths' lobe fitted to their deposits over windows of this many lattice points round each
     (lobefit.py, Tuning.lobe_window; 0: the deposits alone).  ``disc_channel``: the light's
     disc channels in ``fld`` (precompute/discdepth.py), or None.  ``roulette_floor``:
     Tuning.camera_roulette, the floor of the camera's roulette odds (camerareach.py), played
     where the paths' light is for the camera alone (no surface gathers their moments)."""
     stride, shape, h, sets = path_sets(pm, fld, light, channel, resolution, around, cell_tau,
-                                       cell_walk, sky, seed, disc_channel, threads)
+                                       cell_walk, seed, disc_channel, threads)
     fog = pm.endless
     if not sets:
         return stride, h, np.zeros(tuple(shape) + (3,), np.float32), None, None, [], (0.0, 0)
@@ -137,12 +135,12 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
 
 
 def path_sets(pm, fld, light, channel: int, resolution: int, around, cell_tau: float,
-              cell_walk: int, sky: bool, seed: int, disc_channel: Optional[int] = None,
+              cell_walk: int, seed: int, disc_channel: Optional[int] = None,
               threads: int = 1):
     """(stride, shape, h, sets): the paths' lattice at ``resolution`` and the starts of
     ``light``'s paths in ``pm`` (``traced_multiple``'s): its first scatterings, and with
-    ``around`` where it first scatters in the world fog beyond the grid, where the surfaces
-    reflect it and (``sky``) the constant sky's light; each set (points, power (N,3) W,
+    ``around`` where it first scatters in the world fog beyond the grid and where the
+    surfaces reflect it; each set (points, power (N,3) W,
     directions, jitter, lobe[, start source and peaks]).  ``disc_channel``: the light's disc
     channels in ``fld`` (discdepth.py) or None; ``threads``: the source's
     (source.restricted_source)."""
@@ -175,22 +173,19 @@ def path_sets(pm, fld, light, channel: int, resolution: int, around, cell_tau: f
             got = surface_starts(pm, light, around, seed + 2)
             if got is not None:
                 sets.append(got[:3] + (got[3], 1))
-            got = sky_surface_starts(pm, around, seed + 3) if sky else None
-            if got is not None:
-                sets.append(got[:3] + (got[3], 1))
     return stride, shape, h, sets
 
 
 def start_power(pm, fld, light, channel: int, resolution: int,
                 around: Optional[Surroundings] = None, cell_tau: float = Tuning.cell_tau,
-                cell_walk: int = Tuning.cell_walk, sky: bool = False, seed: int = 0,
+                cell_walk: int = Tuning.cell_walk, seed: int = 0,
                 disc_channel: Optional[int] = None) -> float:
     """W: the power of ``light``'s paths' starts in ``pm`` (``path_sets``, every set, the
     channels summed), what ``traced_multiple`` reports as its ``started`` power for the same
     arguments (``across_media``)."""
     return float(sum(float(np.asarray(item[1]).sum()) for item in
                      path_sets(pm, fld, light, channel, resolution, around, cell_tau,
-                               cell_walk, sky, seed, disc_channel)[3]))
+                               cell_walk, seed, disc_channel)[3]))
 
 
 def across_media(powers) -> list:

@@ -27,15 +27,13 @@ from typing import List, Optional
 
 import numpy as np
 
-from ..gathers import directions as gather_directions
 from ..lights import disc_transmittance, incident
 from ..scene import Light
-from ..surfaces import intersect
 from .. import kernels
 from ..media import disc_reaches
+from ..surfaces import mean_sky_albedo
 from ..phase import orthonormal_basis
-from .lightdepth import (density_lengths, depth_rows, kernel_arrays, light_optical_depth,
-                         light_position)
+from .lightdepth import kernel_arrays, light_optical_depth, light_position
 from .source import light_direction
 
 FOG_POINTS = 16384       # first scatterings drawn round a light in the fog, per light
@@ -45,6 +43,10 @@ SURFACE_POINTS = 16384   # points drawn on the surfaces within reach, per light
 # irradiance the light arriving from beyond distance R falls as r0 / R, so 64 leaves out at
 # most about 1.6 % of it (docs/method.md §8)
 SURFACE_REACH = 64.0
+# The same for a surface's share of the sky's deficit (sky_ground_starts), whose paths are
+# aimed at the medium (paths.py, lobe 3): its light from beyond R falls as r0 / R too, and
+# with the points' 1/d^3 density the reach costs few of them (beyond 64 radii about 1.5 %)
+GROUND_REACH = 1024.0
 REACH_MFP = 10.0         # a path in the fog this many mean free paths beyond the grid ends
 LIFT = 1e-6              # surface points are lifted this fraction of the scene's size
 
@@ -59,9 +61,7 @@ class Surroundings:
     (Settings.surface_bounce; else they only absorb it), ``disc_exact`` the lamp radii within
     which a lamp's disc points get their own optical depth (Tuning.disc_exact,
     lights.disc_transmittance; 0: off), at least ``disc_voxels`` of the finest voxel
-    (Tuning.disc_voxels; media.disc_reaches), ``sky`` the constant world's RGB radiance
-    (W/(m^2 sr)) where it lights the surfaces (None: dark, or under a world fog, whose glow
-    is fogglow.py's)."""
+    (Tuning.disc_voxels; media.disc_reaches)."""
 
     solid: List
     fog_sigma_t: Optional[np.ndarray]
@@ -70,7 +70,6 @@ class Surroundings:
     bounce: bool = True
     disc_exact: float = 0.0
     disc_voxels: float = 0.0
-    sky: Optional[np.ndarray] = None
 
     def __post_init__(self):
         if self.surfaces is not None and self.surfaces.empty:
@@ -148,16 +147,16 @@ def reach(pm, grid=None) -> tuple:
     return centre, 2.0 * half
 
 
-def surface_reach(pm) -> tuple:
+def surface_reach(pm, radii: float = SURFACE_REACH) -> tuple:
     """(centre (3,) m, radius m, scale r0 m or None) of the sphere within which the surfaces'
     light that reaches medium ``pm`` is drawn (surface_points): a bounded medium's
-    ``SURFACE_REACH`` bounding radii, its points denser near it (r0 its bounding radius); a
+    ``radii`` bounding radii, its points denser near it (r0 its bounding radius); a
     world fog's ``reach``, its points uniform (its paths end beyond it)."""
     centre, radius = reach(pm)
     if pm.endless:
         return centre, radius, None
     scale = 0.5 * radius
-    return centre, SURFACE_REACH * scale, scale
+    return centre, float(radii) * scale, scale
 
 
 def _cone(light: Light):
@@ -341,63 +340,59 @@ def _falloff(d, r0: float) -> np.ndarray:
     return (r0 * r0 / (r0 * r0 + d * d)) ** 1.5
 
 
-SKY_DIRECTIONS = 16       # cosine-weighted directions per point for the sky's irradiance
-
-
-def sky_paths_wanted(multiple: bool, multiple_paths: int, surface_bounce: bool, surfaces,
-                     sky, media) -> bool:
-    """Whether the constant sky's light off the surfaces starts traced paths
-    (``sky_surface_starts``): multiple scattering by traced paths (``multiple_paths`` > 0),
-    surfaces that bounce the paths, a sky of RGB radiance ``sky`` above 0, and no world fog
-    among ``media`` (it hides the sky).  The precompute (run.py) and its cache's key of the
-    lights' part (cache.py) both ask it."""
-    return bool(multiple and int(multiple_paths) > 0 and surface_bounce
-                and surfaces is not None and not surfaces.empty
-                and np.any(np.asarray(sky, np.float64) > 0.0)
-                and not any(pm.endless for pm in media))
-
-
-def sky_surface_starts(pm, around: Surroundings, seed: int):
-    """(points, power, normals, jitter m) of the constant sky's light that the surfaces round
-    the bounded medium ``pm`` reflect, drawn as ``surface_starts`` draws the lights' (its
-    points, on the side of each surface that faces the medium's centre), or None without a
-    sky or surfaces.  A point's irradiance from the sky is pi L_w times the mean, over
-    ``SKY_DIRECTIONS`` cosine-weighted directions stratified in cos^2 (gathers.directions),
-    of each direction's transmittance through the media where no surface hides the sky (the media's
-    own shadows on the ground); its power R E w (W) leaves in a cosine lobe, as light that
-    has bounced."""
-    ss = around.surfaces
-    if ss is None or not around.bounce or around.sky is None or pm.endless:
-        return None
-    sky = np.asarray(around.sky, np.float64)
-    if not np.any(sky > 0.0):
-        return None
-    centre, radius, scale = surface_reach(pm)
-    rng = np.random.default_rng([seed, 3571])
-    got = surface_points(ss, centre, radius, SURFACE_POINTS, rng, albedo_min=0.0, scale=scale)
+def facing_points(pm, ss, rng, albedo_min: float = 0.0, radii: float = SURFACE_REACH):
+    """(points, triangles, normals, area weights m^2) about ``SURFACE_POINTS`` points on the
+    surfaces ``ss`` round the bounded medium ``pm`` (``surface_points`` within
+    ``surface_reach`` of ``radii``, denser near it; triangles of diffuse albedo not above
+    ``albedo_min`` left out), each lifted off its triangle on the side that faces the medium's centre,
+    ``normals`` that side's, drawn from ``rng`` (a numpy Generator); None where none lie
+    within reach."""
+    centre, radius, scale = surface_reach(pm, radii)
+    got = surface_points(ss, centre, radius, SURFACE_POINTS, rng, albedo_min=albedo_min,
+                         scale=scale)
     if got is None:
         return None
     p, pick, share = got
     n = ss.normal[pick]
     n = np.where((np.einsum("ij,ij->i", centre[None, :] - p, n) < 0.0)[:, None], -n, n)
-    p = p + n * (LIFT * ss.scale)
-    k = SKY_DIRECTIONS
-    # cosine-weighted, stratified in 1 - cos^2 theta (the surfaces' gathers' directions)
-    d = gather_directions(n, p, rng.random((len(p), k, 2)), k)[0].reshape(-1, 3)
-    pp = np.repeat(p, k, axis=0)
-    _, tri = intersect(ss, pp, d, np.full(len(pp), np.inf))
-    open_ = tri < 0
-    trans = np.zeros((len(pp), 3))
-    tracks, sig_t, _ = depth_rows(around.solid)
-    if np.any(open_):
-        if tracks:
-            lengths = density_lengths(tracks, pp[open_], d[open_],
-                                      np.full(int(open_.sum()), np.inf), around.step)
-            trans[open_] = np.exp(-(lengths @ sig_t))
-        else:
-            trans[open_] = 1.0
-    e = np.pi * sky[None, :] * trans.reshape(len(p), k, 3).mean(axis=1)
-    power = surface_albedo(ss)[pick] * e * share[:, None]
+    return p + n * (LIFT * ss.scale), pick, n, share
+
+
+def ground_albedo(around: Surroundings) -> Optional[np.ndarray]:
+    """(T,3) the share R of a uniform sky's light each triangle of ``around``'s surfaces
+    reflects (surfaces.mean_sky_albedo: every layer of its BSDF, cosine-weighted over the
+    directions; 0 where the surfaces do not bounce light), or None without surfaces."""
+    ss = around.surfaces
+    if ss is None:
+        return None
+    if not around.bounce:
+        return np.zeros((len(ss.v0), 3))
+    return mean_sky_albedo(ss)
+
+
+def sky_ground_starts(pm, around: Surroundings, seed: int, sky):
+    """(points, power, normals, jitter m) of the surfaces as the sky's deficit sees them
+    (precompute/skydeficit.py, docs/method.md §9.8): in the furnace every surface round the
+    medium sends the sky's radiance L_w back, as the sky would have from behind it; a surface
+    that reflects the share R of a uniform sky (``ground_albedo``) sends R L_w, so it falls
+    short by (1 - R) L_w, a fictitious emission of pi (1 - R) L_w w (W) a point (w its area,
+    m^2), in a cosine lobe from the side that faces the medium (``facing_points``, every
+    triangle whatever its albedo; R is taken as the same in every direction here).  Its first flight is the surface's light along the directions it hides, taken
+    in closed form (worldlight.world_light); its later flights are traced and taken off the
+    sky's multiply scattered light.  ``sky``: the sky's RGB radiance L_w (W/(m^2 sr)).
+    None without a sky or surfaces, or where every surface is white."""
+    ss = around.surfaces
+    if ss is None or sky is None or pm.endless:
+        return None
+    sky = np.asarray(sky, np.float64).reshape(3)
+    if not np.any(sky > 0.0):
+        return None
+    got = facing_points(pm, ss, np.random.default_rng([seed, 6151]), albedo_min=-1.0,
+                        radii=GROUND_REACH)
+    if got is None:
+        return None
+    p, pick, n, share = got
+    power = np.pi * (1.0 - ground_albedo(around)[pick]) * sky[None, :] * share[:, None]
     live = np.all(np.isfinite(power), axis=1) & (power.sum(axis=1) > 0.0)
     if not np.any(live):
         return None

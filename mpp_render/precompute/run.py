@@ -22,7 +22,7 @@ from .fogglow import glow_on_medium
 from .emissionlight import EMISSION_PATHS, add_glow, add_lattice, emission_light
 from .lightpaths import (across_media, lit_by_glow, overlapping, partner_lattice, start_power,
                          too_dense, traced_multiple)
-from .pathstarts import Surroundings, sky_paths_wanted
+from .pathstarts import Surroundings
 from .skydeficit import deficit_paths, sky_deficit
 from .lightpyramid import MultipleField, multiple_field
 from .source import peak_light
@@ -52,7 +52,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                surfaces=None, threads: int = 0, multiple: bool = False,
                multiple_resolution: int = MULTIPLE_RESOLUTION, multiple_paths: int = 0,
                tuning: Tuning = Tuning(), surface_bounce: bool = True,
-               glow: bool = True, sky=None) -> Precomputed:
+               glow: bool = True) -> Precomputed:
     """Field arrays for every medium, and with ``multiple`` the light pyramids; raises
     cancel.Cancelled when ``should_cancel`` says so.  ``surfaces`` (a SurfaceSet or None)
     shadow the lights and the sky.  Media that cannot scatter (sigma_s = 0) get no
@@ -62,9 +62,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
     start on the lit surfaces and reflect off them (else the surfaces only absorb them).
     ``glow``: the light the media give off, scattered in them (precompute.emissionlight), is
     added to the world channels (cache.precompute_cached's part without the world leaves it
-    out).  ``sky``: the constant sky's RGB radiance whose light off the surfaces starts
-    traced paths (pathstarts.sky_surface_starts); None: ``world.color`` (the cache's part
-    without the world gives the world's)."""
+    out).  The constant sky's light off the surfaces is the sky's (precompute/skydeficit.py),
+    in the world channels."""
     t_start = time.perf_counter()
     delta = [delta_scaled(pm) for pm in media]
     # a lamp's disc is folded into its own channels where a medium other than the world's
@@ -77,7 +76,6 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                           glow=glow, disc=tuning.disc_fold_stride > 0
                           and any(not pm.endless for pm in media), gather_glow=gather_glow)
     world_lit = bool(np.any(np.asarray(world.color) > 0))
-    sky_colour = np.asarray(world.color if sky is None else sky, np.float64)
     chans, beams = layout.light_channels, layout.beam_channels or [None] * len(lights)
     discs = layout.disc_channels or [None] * len(lights)
     c = layout.channels
@@ -90,10 +88,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
     fog_delta = None if fog is None else delta_of[id(fog)].sigma_t
     shadowed = surfaces is not None and not surfaces.empty
     around = Surroundings(solid, fog_st, surfaces, step, bool(surface_bounce),
-                          tuning.disc_exact, tuning.disc_voxels,
-                          sky=sky_colour if sky_paths_wanted(multiple, multiple_paths,
-                                                             surface_bounce, surfaces,
-                                                             sky_colour, media) else None)
+                          tuning.disc_exact, tuning.disc_voxels)
     # the traced paths' lattice of each medium, finer round a lamp inside it
     path_res = [lamp_resolution(pm, lights, multiple_resolution) for pm in media]
     # traced paths fly through every medium whose box overlaps theirs and deposit on it too
@@ -202,7 +197,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                    solid, pm, world, camera, flat, n_dirs, 2.0 * step,
                                    seed=seed + mi, should_cancel=should_cancel,
                                    surfaces=surfaces, threads=threads, tuning=tuning,
-                                   deficit=own_deficit)
+                                   deficit=own_deficit,
+                                   ground=bool(surface_bounce) if own_deficit else None)
             n_ambient += got
         if glow and layout.ambient_channel is not None and \
                 (pm.glows if pm.endless else pm.emits):
@@ -241,10 +237,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
     # the lights' paths once every medium's light is known: a light's paths weigh the same in
     # media that overlap (lightpaths.across_media), which needs the power of each one's
     # starts first; a medium apart from the others takes the whole Paths setting
-    # the sky's light off the surfaces rides with the first light that has paths
-    sky_li = next((li for li in range(len(lights)) if chans[li] is not None), None)
     shares = path_shares(media, fields, lights, chans, path_res, around, tuning,
-                         partners_of, seed, sky_li, discs) if traces and multiple else None
+                         partners_of, seed, discs) if traces and multiple else None
     for mi, pm in enumerate(media):
         f = fields[mi]
         ms = [None] * len(lights)
@@ -271,7 +265,6 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                                              far_resolution=multiple_resolution,
                                              cell_tau=tuning.cell_tau,
                                              cell_walk=tuning.cell_walk,
-                                             sky=li == sky_li,
                                              lobe_window=tuning.lobe_window,
                                              disc_channel=discs[li],
                                              roulette_floor=tuning.camera_roulette)
@@ -313,7 +306,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                           partners=[(media[j], lat) for j, lat in near],
                           surfaces=surfaces, n_dirs=n_dirs,
                           setting=max(int(multiple_paths), n_lost), tuning=tuning,
-                          path_weight=started[0] / started[1] if started[1] else None)
+                          path_weight=started[0] / started[1] if started[1] else None,
+                          ground=True)
         if got is not None:
             stride, own, cross = got
             lost.append((mi, stride, own))
@@ -370,11 +364,11 @@ def path_seed(seed: int, mi: int, li: int) -> int:
 
 
 def path_shares(media, fields, lights, chans, path_res, around, tuning: Tuning, partners_of,
-                seed: int, sky_li, discs=None):
+                seed: int, discs=None):
     """[light][medium] the share of the Paths setting each medium's paths for each light
     take: the power of its paths' starts (lightpaths.start_power: the first scatterings and
     the light the surfaces reflect into it, as traced_multiple will start them with the same
-    seeds, ``path_seed``, and sky light ``sky_li``) over the most among it and the media
+    seeds, ``path_seed``) over the most among it and the media
     whose boxes overlap its own (``partners_of``, whose lattices its paths deposit on, and
     theirs on its own; lightpaths.across_media).  1 for a medium apart from the others, the
     world fog (whose paths also start beyond its grid) and a light without paths; None
@@ -392,7 +386,7 @@ def path_shares(media, fields, lights, chans, path_res, around, tuning: Tuning, 
         if chans[li] is not None:
             power = {mi: start_power(media[mi], fields[mi], light, chans[li], path_res[mi],
                                      around, tuning.cell_tau, tuning.cell_walk,
-                                     sky=li == sky_li, seed=path_seed(seed, mi, li),
+                                     seed=path_seed(seed, mi, li),
                                      disc_channel=discs[li])
                      for mi in live}
             for mi in live:

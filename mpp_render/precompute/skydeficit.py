@@ -1,4 +1,5 @@
-"""The sky's light that absorbing media lose, once it has scattered (docs/method.md §9.8).
+"""The sky's light that absorbing media and the surfaces round them take away, once it has
+scattered (docs/method.md §9.8).
 
 Under a constant sky of radiance L_w (W/(m^2 sr)), a medium that absorbs nothing has the
 radiance L_w everywhere in it, along every direction, whatever its phase function and
@@ -19,10 +20,28 @@ traced as a glow's (emissionlight.scattered_glow, its Em), are taken off the wor
 multiply scattered channel here.  The estimate converges with the paths; the first flight,
 most of D where the medium absorbs much, has no noise.
 
-Where a surface hides part of the sky, a white medium's radiance at x is about L_w times the
-share s(x) of the sky x sees (worldlight.sky_share, as the collided part along a hidden
-direction takes it), and the emission is sigma_a L_w s(x): s on the world light's lattice,
-interpolated to the voxels.
+Where surfaces stand round the medium (a ground), the furnace holds if each surface sends the
+sky's radiance L_w back, as the sky behind it would.  A surface of diffuse albedo R under that
+light sends R L_w, so it falls short by (1 - R) L_w: a second fictitious emission, pi (1 - R)
+L_w per unit area in a cosine lobe from the side that faces the medium
+(pathstarts.sky_ground_starts), whose light spread by the medium (and reflected by the
+surfaces) is taken off too.  So, exactly,
+
+    L(x, w) = L_w - D(x, w) - G(x, w)
+
+with G the surfaces' deficit.  Along a direction that ends on a surface the sky's direct
+light is 0; the furnace's light there, L_w e^{-tau} unscattered from the surface, less G's
+first flight, (1 - R) L_w e^{-tau}, leaves R L_w e^{-tau}, and the collided part is the whole
+furnace's up to the surface (worldlight.world_light's ``ground``); G's later flights are
+traced (``sky_deficit``'s ``ground``: paths aimed at the medium, paths.py lobe 3) and taken off
+with D_2+.  This holds the ground's light too: the sky's light off the surfaces is the
+ground's R L_w less what G takes off.  (Scaling the collided light of the hidden directions
+by the share s(x) of the sky that x sees, as stood before, left the light the medium
+scatters to x from the directions that see the sky as bright as without the ground: over a
+black ground a cube's sky light was 2x the walks' at its bottom, tests/test_sky_ground.py.)
+Where the deficit is not traced (a world fog, no camera, a medium too dense for paths) that
+older model stands: the collided part of a hidden direction times s(x), and D's emission
+sigma_a L_w s(x) (``seen_share``).
 
 The paths start where the camera can see their light (``camera_odds``): the fictitious
 emission fills the whole medium, but in a thick absorbing one the camera sees a thin layer,
@@ -49,6 +68,7 @@ from .camerareach import largest_albedo, walk_reach
 from .emissionlight import scattered_glow
 from .lightdepth import eye_depth
 from .lightpaths import cell_volume
+from .pathstarts import reach, sky_ground_starts
 from .worldlight import on_lattice, sky_share, world_lattice
 
 SHARE_CHUNK = 1 << 11   # lattice points whose sky share is found at a time
@@ -61,49 +81,111 @@ def deficit_paths(multiple_paths: int, floor: int, share: float) -> int:
     return max(1, int(share * max(int(floor), int(multiple_paths))))
 
 
+def walls_follow_lights(multiple: bool, multiple_paths: int, surfaces, sky, media) -> bool:
+    """Whether the surfaces' deficit (``sky_deficit``'s ``ground``) is traced with as many
+    paths as weigh what the lights' paths weigh: multiple scattering by traced paths
+    (``multiple_paths`` > 0), surfaces, a sky of RGB radiance ``sky`` above 0 and no world
+    fog among ``media`` (it hides the sky).  The cache (cache.py) then keys the lights' part
+    by the sky's colour, and a changed sky recomputes both parts."""
+    return bool(multiple and int(multiple_paths) > 0 and surfaces is not None
+                and not surfaces.empty and np.any(np.asarray(sky, np.float64) > 0.0)
+                and not any(pm.endless for pm in media))
+
+
 def sky_deficit(pm: PreparedMedium, colour, camera, n_paths: int, resolution: int,
                 seed: int = 0, threads: int = 0, should_cancel=None, around=None, partners=(),
                 surfaces=None, n_dirs: int = 64, setting: Optional[int] = None,
-                tuning: Tuning = Tuning(), path_weight: Optional[float] = None):
+                tuning: Tuning = Tuning(), path_weight: Optional[float] = None,
+                ground: bool = False):
     """(stride, D, cross) or None: D_2+ (float32 (LX,LY,LZ,3), W/(m^2 sr), phase-weighted
     towards the camera, module docstring) on ``pm``'s light-path lattice from the
     fictitious emission sigma_a rho L_w s of ``pm`` (``colour`` L_w, RGB), and ``cross``
     the same on each of the ``partners``' lattices ((PreparedMedium, PathLattice), the media
-    its paths fly through).  None where ``pm`` absorbs nothing, the sky is black, there is
-    no camera or nowhere to scatter.  ``n_paths`` paths (``setting`` the Paths setting that
-    scales their cap), ``around`` the surfaces they reflect off; ``surfaces`` those that
-    hide the sky (s: ``n_dirs`` directions a point of the world light's lattice).
-    ``path_weight``: None, or the mean weight (W a path) of the lights' paths in ``pm``: the
-    paths are then as many as give the fictitious emission's scattered power the same weight
-    a path (``weighted_paths``), at most ``setting`` (or ``n_paths`` without one), where that
-    is more than ``n_paths`` (fewer, cloud_vdb's 78 000 instead of 375 000, took its full
-    render 0.0161 -> 0.0170)."""
+    its paths fly through).  None where ``pm`` absorbs nothing (and no surface's deficit is
+    traced), the sky is black, there is no camera or nowhere to scatter.  ``n_paths`` paths
+    (``setting`` the Paths setting that scales their cap), ``around`` the surfaces they
+    reflect off; ``surfaces`` those that hide the sky (s: ``n_dirs`` directions a point of
+    the world light's lattice).  ``path_weight``: None, or the mean weight (W a path) of the
+    lights' paths in ``pm``: the paths are then as many as give the fictitious emission's
+    scattered power the same weight a path (``weighted_paths``), at most ``setting`` (or
+    ``n_paths`` without one), where that is more than ``n_paths`` (fewer, cloud_vdb's 78 000
+    instead of 375 000, took its full render 0.0161 -> 0.0170).
+
+    ``ground`` (with ``around``'s surfaces): the surfaces round ``pm`` have their own
+    deficit (module docstring): s is 1, and D also holds the flights after the first of
+    the surfaces' fictitious emission (pathstarts.sky_ground_starts), ``n_paths`` paths of
+    their own that fly through ``pm`` alone (another medium traces its own)."""
     colour = np.asarray(colour, np.float64).reshape(3)
     if camera is None or pm.endless or not np.any(colour > 0.0):
         return None
+    walled = bool(ground and around is not None and around.surfaces is not None
+                  and not around.surfaces.empty)
     rho = density_from(pm.grid, pm.threshold).reshape(-1)
     flat = np.flatnonzero(rho > 0.0)
     e = absorption_at(pm, flat, rho[flat]) * colour[None, :]
     keep = e.sum(axis=1) > 0.0
     flat, e = flat[keep], e[keep]
-    if not len(flat):
+    got = None
+    if len(flat):
+        if surfaces is not None and not surfaces.empty and not walled:
+            e *= seen_share(pm, flat, surfaces, n_dirs, seed,
+                            tuning.ambient_resolution)[:, None]
+        n_abs = n_paths
+        if path_weight is not None and path_weight > 0.0:
+            n_abs = max(int(n_paths), weighted_paths(pm, e, path_weight,
+                                                     n_paths if setting is None else setting))
+        odds = camera_odds(pm, flat, e, camera, resolution, tuning.sky_deficit_mix,
+                           threads=threads, should_cancel=should_cancel)
+        got = scattered_glow(pm, (flat, e), camera, n_abs, resolution, True, seed=seed,
+                             threads=threads, should_cancel=should_cancel, around=around,
+                             partners=partners, deposits=tuning.path_deposits,
+                             nodal=tuning.path_nodal, setting=setting, signed=True,
+                             first_order=False, odds=odds, lobe_window=tuning.lobe_window)
+    walls = None
+    if walled:
+        starts = sky_ground_starts(pm, around, seed, colour)
+        if starts is not None:
+            p, power, normals, jitter = starts
+            # each point as likely as the next: they lie denser near the medium (1/d^3 a
+            # unit of area), where more of their light reaches it, and their paths are
+            # aimed at it (paths.py, lobe 3); each path's weight is its point's power over
+            # those odds.  (Drawn by the power each sends into the medium's bounding sphere
+            # instead, the cube of tests/test_sky_ground.py over a black ground scattered
+            # 0.97-1.07 of the walks over four seeds, against 1.00-1.05.)
+            entering = power.sum(axis=1) * sphere_share(pm, p, normals)
+            bias = 1.0 / np.maximum(power.sum(axis=1), 1e-300)
+            most = n_paths if setting is None else max(int(n_paths), int(setting))
+            n_walls = most if path_weight is None or not path_weight > 0.0 else \
+                int(min(most, max(int(n_paths), np.ceil(
+                    float(entering.sum()) * largest_albedo(pm) / float(path_weight)))))
+            walls = scattered_glow(pm, None, camera, n_walls, resolution, True,
+                                   seed=seed + 7, threads=threads,
+                                   should_cancel=should_cancel, around=around,
+                                   deposits=tuning.path_deposits, nodal=tuning.path_nodal,
+                                   setting=setting, signed=True, first_order=False,
+                                   lobe_window=tuning.lobe_window,
+                                   starts=[(p, power, normals, jitter, 3, None, bias)])
+    if got is None and walls is None:
         return None
-    if surfaces is not None and not surfaces.empty:
-        e *= seen_share(pm, flat, surfaces, n_dirs, seed, tuning.ambient_resolution)[:, None]
-    if path_weight is not None and path_weight > 0.0:
-        n_paths = max(int(n_paths), weighted_paths(pm, e, path_weight,
-                                                   n_paths if setting is None else setting))
-    odds = camera_odds(pm, flat, e, camera, resolution, tuning.sky_deficit_mix,
-                       threads=threads, should_cancel=should_cancel)
-    got = scattered_glow(pm, (flat, e), camera, n_paths, resolution, True, seed=seed,
-                         threads=threads, should_cancel=should_cancel, around=around,
-                         partners=partners, deposits=tuning.path_deposits,
-                         nodal=tuning.path_nodal, setting=setting, signed=True,
-                         first_order=False, odds=odds, lobe_window=tuning.lobe_window)
     if got is None:
-        return None
+        return walls[0], walls[2], []
     stride, _, later, cross, _ = got
+    if walls is not None:
+        later = later + walls[2]
     return stride, later, [m for _, m in cross]
+
+
+def sphere_share(pm: PreparedMedium, points, normals) -> np.ndarray:
+    """(N,) about the share of a cosine lobe from each of ``points`` (normals ``normals``)
+    that enters ``pm``'s bounding sphere: cos(theta) sin^2(alpha) (theta the sphere's centre
+    off the normal, alpha the half-angle of its cone), 1 inside the sphere."""
+    centre, radius = reach(pm)
+    radius = 0.5 * radius   # reach is twice the bounding sphere
+    axis = centre[None, :] - np.asarray(points, np.float64)
+    d2 = np.einsum("ij,ij->i", axis, axis)
+    cos = np.einsum("ij,ij->i", axis, normals) / np.sqrt(np.maximum(d2, 1e-300))
+    return np.where(d2 > radius * radius,
+                    np.clip(cos, 0.0, 1.0) * radius * radius / np.maximum(d2, 1e-300), 1.0)
 
 
 def absorption_at(pm: PreparedMedium, flat: np.ndarray, rho: np.ndarray) -> np.ndarray:

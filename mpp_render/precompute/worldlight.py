@@ -30,7 +30,7 @@ from ..media import PreparedMedium, density_from
 from ..parallel import run_chunks
 from ..phase import sample_hg
 from ..scene import Camera, Tuning, World
-from ..surfaces import intersect, occluded
+from ..surfaces import intersect, occluded, sky_albedo
 from .lattice import coarse_lattice, grid_points, lattice_index, lattice_values
 from .lightdepth import density_lengths, depth_rows
 
@@ -92,7 +92,7 @@ def sky_share(surfaces, points, seed: int, a: int, b: int, n_dirs: int) -> np.nd
 def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, camera: Camera,
                 points, n_dirs, step, seed=0, chunk=None, should_cancel=None, surfaces=None,
                 threads=0, multiple=False, tuning: Tuning = Tuning(), fog_sigma_t=None,
-                deficit: bool = False):
+                deficit: bool = False, ground: Optional[bool] = None):
     """A(x) (N,3): world radiance scattered towards the camera per unit sigma_s, attenuated;
     with ``multiple`` also A_ms(x) (N,3), the same for the sky light that has scattered on
     its way in, and the pair is returned: with ``deficit`` (the absorption's later flights
@@ -105,7 +105,15 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
     ``fog_sigma_t``: None for the sky (the surfaces cut it off), or the RGB extinction (1/m)
     of the endless fog whose glow ``world.color`` is (precompute.fogglow.glow_on_medium): a
     surface at t metres along a direction hides only the fog behind it, the glow from there
-    scaled by 1 - exp(-sigma t).  Raises cancel.Cancelled on Esc."""
+    scaled by 1 - exp(-sigma t).  ``ground``: with ``deficit``, None, or where the
+    surfaces' own deficit is traced (pathstarts.sky_ground_starts) whether they reflect
+    light (Settings.surface_bounce): along a direction that ends on a surface the furnace
+    holds as if the surface sent L_w back, so the collided part is the whole furnace's up to
+    it, and the multiply scattered part also takes the surface's light less that deficit's
+    first flight, R L_w exp(-tau), R the surface's directional albedo towards the point
+    (surfaces.sky_albedo; 0 where they do not reflect) (docs/method.md §9.8); without
+    ``ground`` the collided part there is scaled by the point's share of the sky
+    (``sky_share``).  Raises cancel.Cancelled on Esc."""
     colour = np.asarray(world.color, np.float64)
     n = len(points)
     if n == 0 or not np.any(colour > 0):
@@ -128,6 +136,7 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
         seen = 1.0
         walled = surfaces is not None and not surfaces.empty
         hidden = None
+        tri = None
         if walled:   # the media's path ends at the surface
             t, tri = intersect(surfaces, pp, d, t_max)
             t_max = np.where(tri >= 0, t, np.inf)
@@ -151,7 +160,14 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
                     -np.expm1(-tau) * seen
             else:
                 collided = np.exp(-(tau - tau_s)) * -np.expm1(-tau_s) * seen
-            if hidden is not None and np.any(hidden):
+            if hidden is not None and np.any(hidden) and deficit and ground is not None:
+                # the furnace with the surface sending L_w back: its traced deficit
+                # (skydeficit.py) takes off what the surface lacks of that, but for its
+                # first flight, which is this
+                if ground:
+                    collided[hidden] += sky_albedo(surfaces, tri[hidden], d[hidden]) * \
+                        np.exp(-tau[hidden])
+            elif hidden is not None and np.any(hidden):
                 # the medium between the point and a surface is lit by the share of the
                 # sky the point itself sees (half over a wide ground)
                 vis = sky_share(surfaces, p, seed, a, b, n_dirs)
@@ -166,13 +182,13 @@ def world_light(media: List[PreparedMedium], pm: PreparedMedium, world: World, c
 def fill_world_light(f: np.ndarray, channels, media: List[PreparedMedium], pm: PreparedMedium,
                      world: World, camera: Camera, flat, n_dirs, step, seed=0,
                      should_cancel=None, surfaces=None, threads=0, tuning: Tuning = Tuning(),
-                     deficit: bool = False):
+                     deficit: bool = False, ground: Optional[bool] = None):
     """Write the world light (``world_light`` through ``media``, on ``coarse_lattice``,
     interpolated to the needed voxels ``flat``: geometrically in the cells inside the
     medium, A_ms from A where ``furnace_albedo`` holds, see the module's docstring) into
     ``pm``'s field ``f`` at ``channels`` = (A's first channel, A_ms's or None); the voxels
     of the lattice cells that ``refine_flat`` picks (``tuning.ambient_refine``) get A computed at their own
-    centres instead; ``deficit``: world_light's.  Returns the number of points computed
+    centres instead; ``deficit``, ``ground``: world_light's.  Returns the number of points computed
     (lattice and voxels)."""
     amb, amb_ms = channels
     stride, cshape, cflat, cpts = world_lattice(pm, tuning.ambient_resolution)
@@ -180,7 +196,8 @@ def fill_world_light(f: np.ndarray, channels, media: List[PreparedMedium], pm: P
     def light(points, s):
         return world_light(media, pm, world, camera, points, n_dirs, step, seed=s,
                            should_cancel=should_cancel, surfaces=surfaces, threads=threads,
-                           multiple=amb_ms is not None, tuning=tuning, deficit=deficit)
+                           multiple=amb_ms is not None, tuning=tuning, deficit=deficit,
+                           ground=ground)
     a = light(cpts, seed)
     lattices = [on_lattice(cshape, cflat, vals) for vals in (a if amb_ms is not None else (a,))]
     # A falls into the medium: geometric in the cells wholly inside it.  Its collided part
