@@ -21,10 +21,11 @@ multiply scattered channel here.  The estimate converges with the paths; the fir
 most of D where the medium absorbs much, has no noise.
 
 Where surfaces stand round the medium (a ground), the furnace holds if each surface sends the
-sky's radiance L_w back, as the sky behind it would.  A surface of diffuse albedo R under that
-light sends R L_w, so it falls short by (1 - R) L_w: a second fictitious emission, pi (1 - R)
-L_w per unit area in a cosine lobe from the side that faces the medium
-(pathstarts.sky_ground_starts), whose light spread by the medium (and reflected by the
+sky's radiance L_w back, as the sky behind it would.  A surface that reflects the share R of a
+uniform sky (its directional albedo, every layer of its BSDF: surfaces.sky_albedo) sends
+R L_w, so it falls short by (1 - R) L_w: a second fictitious emission, pi (1 - R) L_w per unit
+area in a cosine lobe from the side that faces the medium (pathstarts.sky_ground_starts, R
+its cosine-weighted mean there), whose light spread by the medium (and reflected by the
 surfaces) is taken off too.  So, exactly,
 
     L(x, w) = L_w - D(x, w) - G(x, w)
@@ -113,8 +114,10 @@ def sky_deficit(pm: PreparedMedium, colour, camera, n_paths: int, resolution: in
 
     ``ground`` (with ``around``'s surfaces): the surfaces round ``pm`` have their own
     deficit (module docstring): s is 1, and D also holds the flights after the first of
-    the surfaces' fictitious emission (pathstarts.sky_ground_starts), ``n_paths`` paths of
-    their own that fly through ``pm`` alone (another medium traces its own)."""
+    the surfaces' fictitious emission (pathstarts.sky_ground_starts), on paths of their own
+    that fly through ``pm`` alone (another medium traces its own): as many as give their
+    light into its bounding sphere (``sphere_share``) the lights' paths' weight, at least
+    ``n_paths`` and at most ``setting`` (all of it without a ``path_weight``: no lamp)."""
     colour = np.asarray(colour, np.float64).reshape(3)
     if camera is None or pm.endless or not np.any(colour > 0.0):
         return None
