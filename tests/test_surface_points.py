@@ -153,3 +153,42 @@ def test_a_surfaces_share_of_a_uniform_sky_counts_its_specular_layer():
     assert grazing[0] > 3.0 * normal[0] > 0.0
     np.testing.assert_allclose(sky_albedo(ss, np.array([0]), np.array([[0.6, 0.0, -0.8]]))[0],
                                [0.2, 0.5, 0.7], rtol=1e-9)
+
+
+def test_a_lit_ground_sends_into_the_medium_what_every_layer_reflects():
+    """pathstarts.surface_starts: a ground under a sun at 60 degrees from the vertical and a
+    cube of medium above it.  Each point's power over the area it stands for is the sun's
+    irradiance times the cosine times the directional albedo towards the sun of every layer
+    (surfaces.sky_albedo): the base colour for a Lambertian ground; for a black glossy one
+    (F0 0.04) the specular layer's share, which its diffuse albedo (0) would leave out."""
+    from mpp_render.media import prepare
+    from mpp_render.precompute.pathstarts import Surroundings, surface_reach, surface_starts
+    from mpp_render.scene import Light, Medium
+    from mpp_render.surfaces import sky_albedo
+
+    n = 8
+    i2w = np.eye(4)
+    i2w[:3, :3] = np.diag([1.0 / n] * 3)
+    i2w[:3, 3] = [-0.5 + 0.5 / n, -0.5 + 0.5 / n, 0.2 + 0.5 / n]
+    pm = prepare(Medium("cube", np.full((n, n, n), 0.01, np.float32), i2w, np.full(3, 1.0),
+                        np.zeros(3), 0.0))
+    d = np.array([np.sin(np.pi / 3), 0.0, -np.cos(np.pi / 3)])
+    sun = Light("SUN", "sun", np.full(3, 2.0), direction=d)
+    v = np.array([[-30, -30, 0], [30, -30, 0], [30, 30, 0], [-30, 30, 0]], float)
+    tris = np.array([[0, 1, 2], [0, 2, 3]])
+    for surface in (Surface("matte", v, tris, np.array([0.2, 0.5, 0.7])),
+                    Surface("glossy", v, tris, np.zeros(3), specular=0.04, roughness=0.4)):
+        ss = prepare_surfaces([surface])
+        p, power, normals, _ = surface_starts(pm, sun, Surroundings([pm], None, ss, 0.02), 5)
+        centre, radius, scale = surface_reach(pm)
+        w = surface_points(ss, centre, radius, 16384, np.random.default_rng(5),
+                           albedo_min=-1.0, scale=scale)[2]
+        far = np.hypot(p[:, 0], p[:, 1]) > 3.0          # out of the cube's (thin) shadow
+        want = 2.0 * 0.5 * sky_albedo(ss, np.zeros(1, np.int64), d[None, :])[0]
+        assert far.sum() > 100 and want.max() > 0.0
+        np.testing.assert_allclose(power[far] / w[far, None], np.tile(want, (far.sum(), 1)),
+                                   rtol=1e-6)
+    np.testing.assert_allclose(2.0 * 0.5 * np.array([0.2, 0.5, 0.7]),
+                               2.0 * 0.5 * sky_albedo(prepare_surfaces([Surface(
+                                   "m", v, tris, np.array([0.2, 0.5, 0.7]))]),
+                                   np.zeros(1, np.int64), d[None, :])[0], rtol=1e-9)

@@ -10,12 +10,13 @@
   power Q(x) / (p(x) M) (W, M the points drawn) with Q = sigma_s E e^(-tau) the
   first-scattering source (W/m^3): E the light's irradiance, tau its optical depth through
   the fog, the other media and the surfaces' shadows (lightdepth.light_optical_depth).
-* **Lit surfaces** (``surface_starts``).  A diffuse surface sends back R E cos(theta) of the
-  light it receives (R its diffuse albedo, base colour x (1 - metallic), W/m^2), a cosine
-  lobe about its normal on the lit side.  Points are drawn over the triangles within
-  ``SURFACE_REACH`` bounding radii of a bounded medium, denser near it as the light it
-  gets from them falls (``surface_points``), and uniformly within a world fog's reach; each
-  carries power R E cos(theta) e^(-tau) w (W), w the area it stands for (m^2).
+* **Lit surfaces** (``surface_starts``).  A surface sends back R E cos(theta) of the light it
+  receives (W/m^2; R its directional albedo towards the light, every layer of its Principled
+  BSDF, surfaces.sky_albedo: the specular's Fresnel too), taken as a cosine lobe about its
+  normal on the lit side (the paths then bounce off surfaces with their diffuse albedo).
+  Points are drawn over the triangles within ``SURFACE_REACH`` bounding radii of a bounded
+  medium, denser near it as the light it gets from them falls (``surface_points``), and
+  uniformly within a world fog's reach; each carries power R E cos(theta) e^(-tau) w (W), w the area it stands for (m^2).
 
 Both return (points (N,3) m, power (N,3) W, directions (N,3) unit): the light's propagation
 for fog points, the lit side's normal for surface points.  All lengths in metres.
@@ -31,7 +32,7 @@ from ..lights import disc_transmittance, incident
 from ..scene import Light
 from .. import kernels
 from ..media import disc_reaches
-from ..surfaces import mean_sky_albedo
+from ..surfaces import mean_sky_albedo, sky_albedo
 from ..phase import orthonormal_basis
 from .lightdepth import kernel_arrays, light_optical_depth, light_position
 from .source import light_direction
@@ -409,11 +410,10 @@ def surface_starts(pm, light: Light, around: Surroundings, seed: int):
         return None
     centre, radius, scale = surface_reach(pm)
     rng = np.random.default_rng(seed)
-    got = surface_points(ss, centre, radius, SURFACE_POINTS, rng, albedo_min=0.0, scale=scale)
+    got = surface_points(ss, centre, radius, SURFACE_POINTS, rng, albedo_min=-1.0, scale=scale)
     if got is None:
         return None
     p, pick, share = got
-    albedo = surface_albedo(ss)
     d, e = incident(light, p, sample=kernels.light_sample)
     n = ss.normal[pick]
     cos = -np.einsum("ij,ij->i", d, n)
@@ -424,7 +424,9 @@ def surface_starts(pm, light: Light, around: Surroundings, seed: int):
     p = p[lit] + n[lit] * (LIFT * ss.scale)
     tau = light_optical_depth(around.solid, light, p, around.step, surfaces=ss,
                               fog_sigma_t=around.fog_sigma_t)
-    power = albedo[pick[lit]] * e[lit] * np.abs(cos[lit])[:, None] * \
+    # the share of the light from d that the surface reflects: every layer of its BSDF
+    # (the directional albedo towards the light, surfaces.sky_albedo; by reciprocity)
+    power = sky_albedo(ss, pick[lit], d[lit]) * e[lit] * np.abs(cos[lit])[:, None] * \
         around.disc(light, p, tau) * share[lit, None]
     live = np.all(np.isfinite(power), axis=1) & (power.sum(axis=1) > 0.0)
     if not np.any(live):
