@@ -202,6 +202,10 @@ VARIANTS = {
                          [("hide_lights", dict(kind="SUN")), ("lift", dict(dz=0.05)),
                           ("world", dict(color=(0.2, 0.25, 0.35), strength=2.0)),
                           ("ground", dict(color=(0.0, 0.0, 0.0), specular=0.0))]),
+    "v_slab_sky_g9": ("p_slab_over_ground", "v_slab_sky_only at g 0.9",
+                      [("hide_lights", dict(kind="POINT")),
+                       ("world", dict(color=(0.3, 0.4, 0.6), strength=1.0)),
+                       ("volume", dict(anisotropy=0.9))]),
     # v_glow_dense taken apart: its anisotropy alone, and its density and albedo at g 0
     "v_glow_g6": ("p_glowing_smoke", "g 0.6", [("volume", dict(anisotropy=0.6))]),
     "v_glow_dense_g0": ("p_glowing_smoke", "density 12, albedo 0.95, g 0",

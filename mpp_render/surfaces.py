@@ -178,7 +178,8 @@ def sky_albedo(ss: SurfaceSet, tri, d) -> np.ndarray:
     d = np.asarray(d, np.float64)
     bsdf = Principled({k: v[ss.surface[tri]] for k, v in ss.params.items()},
                       facing_normals(ss, tri, d), -d)
-    return np.clip(bsdf.albedo(), 0.0, 1.0)
+    # a degenerate triangle's normal reads nothing back (no NaN into the media's light)
+    return np.clip(np.nan_to_num(bsdf.albedo(), nan=0.0, posinf=0.0, neginf=0.0), 0.0, 1.0)
 
 
 SKY_ALBEDO_NODES = 16   # Gauss-Legendre nodes in the cosine of mean_sky_albedo's directions
