@@ -460,7 +460,8 @@ static int cmp_u64(const void *a, const void *b) {
 static void trace_one(const Tracer *T, uint32_t key, const double *start, const double *w_start,
                       const double *dir, double inv_n, double peak) {
     double pos[3], d[3], w[3], off[3], w0 = 0.0;
-    if (T->lobe == 1 || T->lobe == 3) {   /* a surface: a tent of half-width jitter metres in its plane */
+    if (T->lobe == 1 || T->lobe == 3) {
+        /* a surface: a tent of half-width jitter metres in its plane */
         double t1[3], t2[3];
         basis(dir, t1, t2);
         for (int a = 0; a < 2; a++)

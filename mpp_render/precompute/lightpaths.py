@@ -88,9 +88,10 @@ def traced_multiple(pm, fld: np.ndarray, light, channel: int, camera, n_paths: i
     (PathLattice.of).  ``far_resolution``: the far box's voxels along its longest side (the
     *Multiple Scattering Resolution* as set, not raised round a lamp).  ``cell_tau``,
     ``cell_walk``: Tuning's (source.thick_band_source).  (The constant sky's light off the
-    surfaces is the sky's, precompute/skydeficit.py.)  ``lobe_window``: with a ``camera`` and a medium of g != 0, M towards the camera is the
-    paths' lobe fitted to their deposits over windows of this many lattice points round each
-    (lobefit.py, Tuning.lobe_window; 0: the deposits alone).  ``disc_channel``: the light's
+    surfaces is the sky's, precompute/skydeficit.py.)  ``lobe_window``: with a ``camera``
+    and a medium of g != 0, M towards the camera is the paths' lobe fitted to their deposits
+    over windows of this many lattice points round each (lobefit.py, Tuning.lobe_window; 0:
+    the deposits alone).  ``disc_channel``: the light's
     disc channels in ``fld`` (precompute/discdepth.py), or None.  ``roulette_floor``:
     Tuning.camera_roulette, the floor of the camera's roulette odds (camerareach.py), played
     where the paths' light is for the camera alone (no surface gathers their moments)."""
@@ -140,8 +141,8 @@ def path_sets(pm, fld, light, channel: int, resolution: int, around, cell_tau: f
     """(stride, shape, h, sets): the paths' lattice at ``resolution`` and the starts of
     ``light``'s paths in ``pm`` (``traced_multiple``'s): its first scatterings, and with
     ``around`` where it first scatters in the world fog beyond the grid and where the
-    surfaces reflect it; each set (points, power (N,3) W,
-    directions, jitter, lobe[, start source and peaks]).  ``disc_channel``: the light's disc
+    surfaces reflect it; each set (points, power (N,3) W, directions, jitter, lobe[, start
+    source and peaks]).  ``disc_channel``: the light's disc
     channels in ``fld`` (discdepth.py) or None; ``threads``: the source's
     (source.restricted_source)."""
     stride, shape, h = paths_lattice(pm, resolution)

@@ -16,7 +16,8 @@
   normal on the lit side (the paths then bounce off surfaces with their diffuse albedo).
   Points are drawn over the triangles within ``SURFACE_REACH`` bounding radii of a bounded
   medium, denser near it as the light it gets from them falls (``surface_points``), and
-  uniformly within a world fog's reach; each carries power R E cos(theta) e^(-tau) w (W), w the area it stands for (m^2).
+  uniformly within a world fog's reach; each carries power R E cos(theta) e^(-tau) w (W),
+  w the area it stands for (m^2).
 
 Both return (points (N,3) m, power (N,3) W, directions (N,3) unit): the light's propagation
 for fog points, the lit side's normal for surface points.  All lengths in metres.
@@ -341,24 +342,6 @@ def _falloff(d, r0: float) -> np.ndarray:
     return (r0 * r0 / (r0 * r0 + d * d)) ** 1.5
 
 
-def facing_points(pm, ss, rng, albedo_min: float = 0.0, radii: float = SURFACE_REACH):
-    """(points, triangles, normals, area weights m^2) about ``SURFACE_POINTS`` points on the
-    surfaces ``ss`` round the bounded medium ``pm`` (``surface_points`` within
-    ``surface_reach`` of ``radii``, denser near it; triangles of diffuse albedo not above
-    ``albedo_min`` left out), each lifted off its triangle on the side that faces the medium's centre,
-    ``normals`` that side's, drawn from ``rng`` (a numpy Generator); None where none lie
-    within reach."""
-    centre, radius, scale = surface_reach(pm, radii)
-    got = surface_points(ss, centre, radius, SURFACE_POINTS, rng, albedo_min=albedo_min,
-                         scale=scale)
-    if got is None:
-        return None
-    p, pick, share = got
-    n = ss.normal[pick]
-    n = np.where((np.einsum("ij,ij->i", centre[None, :] - p, n) < 0.0)[:, None], -n, n)
-    return p + n * (LIFT * ss.scale), pick, n, share
-
-
 def ground_albedo(around: Surroundings) -> Optional[np.ndarray]:
     """(T,3) the share R of a uniform sky's light each triangle of ``around``'s surfaces
     reflects (surfaces.mean_sky_albedo: every layer of its BSDF, cosine-weighted over the
@@ -377,10 +360,12 @@ def sky_ground_starts(pm, around: Surroundings, seed: int, sky):
     medium sends the sky's radiance L_w back, as the sky would have from behind it; a surface
     that reflects the share R of a uniform sky (``ground_albedo``) sends R L_w, so it falls
     short by (1 - R) L_w, a fictitious emission of pi (1 - R) L_w w (W) a point (w its area,
-    m^2), in a cosine lobe from the side that faces the medium (``facing_points``, every
-    triangle whatever its albedo; R is taken as the same in every direction here).  Its first flight is the surface's light along the directions it hides, taken
-    in closed form (worldlight.world_light); its later flights are traced and taken off the
-    sky's multiply scattered light.  ``sky``: the sky's RGB radiance L_w (W/(m^2 sr)).
+    m^2), in a cosine lobe from the side that faces the medium (every triangle whatever its
+    albedo; R is taken as the same in every direction here), drawn as ``surface_points``
+    draws them within ``GROUND_REACH`` bounding radii.  Its first
+    flight is the surface's light along the directions it hides, taken in closed form
+    (worldlight.world_light); its later flights are traced and taken off the sky's multiply
+    scattered light.  ``sky``: the sky's RGB radiance L_w (W/(m^2 sr)).
     None without a sky or surfaces, or where every surface is white."""
     ss = around.surfaces
     if ss is None or sky is None or pm.endless:
@@ -388,11 +373,15 @@ def sky_ground_starts(pm, around: Surroundings, seed: int, sky):
     sky = np.asarray(sky, np.float64).reshape(3)
     if not np.any(sky > 0.0):
         return None
-    got = facing_points(pm, ss, np.random.default_rng([seed, 6151]), albedo_min=-1.0,
-                        radii=GROUND_REACH)
+    centre, radius, scale = surface_reach(pm, GROUND_REACH)
+    rng = np.random.default_rng([seed, 6151])
+    got = surface_points(ss, centre, radius, SURFACE_POINTS, rng, scale=scale)
     if got is None:
         return None
-    p, pick, n, share = got
+    p, pick, share = got
+    n = ss.normal[pick]     # the side that faces the medium's centre
+    n = np.where((np.einsum("ij,ij->i", centre[None, :] - p, n) < 0.0)[:, None], -n, n)
+    p = p + n * (LIFT * ss.scale)
     power = np.pi * (1.0 - ground_albedo(around)[pick]) * sky[None, :] * share[:, None]
     live = np.all(np.isfinite(power), axis=1) & (power.sum(axis=1) > 0.0)
     if not np.any(live):
@@ -410,7 +399,7 @@ def surface_starts(pm, light: Light, around: Surroundings, seed: int):
         return None
     centre, radius, scale = surface_reach(pm)
     rng = np.random.default_rng(seed)
-    got = surface_points(ss, centre, radius, SURFACE_POINTS, rng, albedo_min=-1.0, scale=scale)
+    got = surface_points(ss, centre, radius, SURFACE_POINTS, rng, scale=scale)
     if got is None:
         return None
     p, pick, share = got

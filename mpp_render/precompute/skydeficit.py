@@ -69,7 +69,7 @@ from .camerareach import largest_albedo, walk_reach
 from .emissionlight import scattered_glow
 from .lightdepth import eye_depth
 from .lightpaths import cell_volume
-from .pathstarts import reach, sky_ground_starts
+from .pathstarts import sky_ground_starts, surface_reach
 from .worldlight import on_lattice, sky_share, world_lattice
 
 SHARE_CHUNK = 1 << 11   # lattice points whose sky share is found at a time
@@ -182,8 +182,7 @@ def sphere_share(pm: PreparedMedium, points, normals) -> np.ndarray:
     """(N,) about the share of a cosine lobe from each of ``points`` (normals ``normals``)
     that enters ``pm``'s bounding sphere: cos(theta) sin^2(alpha) (theta the sphere's centre
     off the normal, alpha the half-angle of its cone), 1 inside the sphere."""
-    centre, radius = reach(pm)
-    radius = 0.5 * radius   # reach is twice the bounding sphere
+    centre, _, radius = surface_reach(pm)   # its scale r0: the bounding radius
     axis = centre[None, :] - np.asarray(points, np.float64)
     d2 = np.einsum("ij,ij->i", axis, axis)
     cos = np.einsum("ij,ij->i", axis, normals) / np.sqrt(np.maximum(d2, 1e-300))
