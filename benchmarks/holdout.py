@@ -140,6 +140,15 @@ VARIANTS = {
                          "fog)", [("volume", dict(density=3.0, anisotropy=0.5))]),
     "v_area_white": ("p_area_in_box", "density 2, albedo 0.99, g 0.8",
                      [("volume", dict(density=2.0, color=0.99, anisotropy=0.8))]),
+    # the ninth set (2026-12-07, forty-eighth session): area lights inside uneven smoke
+    "v_smoke_area": ("smoke_plume", "its point light replaced by a 0.3 m square area light "
+                     "(100 W) inside the plume at 30 % of the grid's height, tilted",
+                     [("hide_lights", dict(kind="POINT")),
+                      ("add_light", dict(kind="AREA", energy=100.0, size=0.3, height=0.3,
+                                         rotation=(0.9, 0.0, 0.6)))]),
+    "v_cloud_area": ("cloud_vdb", "a 0.5 m square area light (300 W) inside the cloud at half "
+                     "its height, facing down, beside the sun and sky",
+                     [("add_light", dict(kind="AREA", energy=300.0, size=0.5, height=0.5))]),
     # the seventh set (2026-12-07, forty-sixth session): features met together that the
     # public scenes keep apart
     "v_chromatic_sun_sky": ("p_chromatic_box", "its spot replaced by a sun (3 W/m^2) under a "

@@ -307,8 +307,9 @@ class MarchInputs:
     (media.brick_bounds), ``adapt_tau`` (> 0: longer steps in thin media) and
     ``emission_channels`` (per medium the first channel of its emission grid, or -1) and
     ``roulette`` (> 0: Russian roulette below that transmittance) and ``disc_reach`` (per
-    light, the distance in metres within which a point or spot light's disc point gets its
-    optical depth corrected by a march, kernels_np.disc_correction; None or 0: off) and
+    light, the distance in metres within which a point or spot light's disc point or an area
+    light's emitter point gets its optical depth corrected by a march,
+    kernels_np.disc_correction; None or 0: off) and
     ``scatter_channels`` (per medium the first channel of its scatter colour grid, or -1) and
     ``extinction_channels`` (per medium the first channel of its extinction density, or -1:
     its extinction reads the density) and ``cell_tau`` (> 0: a density grid's cell whose most
@@ -525,6 +526,11 @@ def trace_paths_media(inp, *, threads: int = 1, should_cancel=None, backend=None
     light = _f64(inp.light).reshape(-1) if inp.light is not None else np.zeros(0)
     # the camera's roulette odds, after the stop flag where there are some
     odds = (_f32(inp.odds),) if inp.odds is not None else ()
+    if inp.start_rate is not None:   # the starts' rates, after the odds (None: no odds)
+        rate = np.ascontiguousarray(np.asarray(inp.start_rate, np.float64).reshape(-1))
+        if len(rate) != len(inp.starts):
+            raise ValueError("trace_paths: start_rate must hold one value per start")
+        odds = (odds[0] if odds else None, rate)
 
     stop = np.zeros(1, np.uint8)   # set by run_chunks on Esc: the compiled loops stop
 

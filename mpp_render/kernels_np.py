@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .lightrecord import (KIND_AREA, KIND_POINT, KIND_SPOT, KIND_SUN, L_AREA, L_AX, L_AY, L_BEAM,
+from .lightrecord import (KIND_AREA, KIND_SUN, L_AREA, L_AX, L_AY, L_BEAM,
                           L_BLEND, L_CHANNEL, L_COND, L_COSHALF, L_DIR, L_DISC, L_INDIRECT, L_INV,
                           L_KIND, L_NORMAL, L_NORMALIZE, L_POS, L_RADIUS, L_ROUND, L_STRENGTH,
                           LIGHT_FIELDS)
@@ -505,12 +505,13 @@ DISC_STEP_VOXELS = 2.0
 
 def disc_correction(fields, w2is, thrs, sig_ts, x, wc, dc, wd, ds, stretch, step, xcs=None):
     """(N,3) optical depth over every medium from points ``x`` (N,3, m) to a lamp's disc
-    point (unit directions ``wd``, distances ``ds``) minus ``stretch`` (N,) times that to the
-    lamp's centre (``wc``, ``dc``): what the field's stretched depth to the centre
-    (lights.path_stretch) misses where the medium is not homogeneous across the disc.  Both
-    paths take n = ceil(dc / ``step``) steps (at least 1, at most DISC_STEPS_MAX), each read
-    at its midpoint (trilinear density; ``xcs``: None or per medium its extinction channel,
-    ``_extinction``).  Twin of csrc/march.c disc_correction."""
+    point or an area light's emitter point (unit directions ``wd``, distances ``ds``) minus
+    ``stretch`` (N,) times that to the lamp's centre (``wc``, ``dc``): what the field's
+    stretched depth to the centre (lights.path_stretch) misses where the medium is not
+    homogeneous across the disc or emitter.  Both paths take n = ceil(dc / ``step``) steps
+    (at least 1, at most DISC_STEPS_MAX), each read at its midpoint (trilinear density;
+    ``xcs``: None or per medium its extinction channel, ``_extinction``).  Twin of
+    csrc/march.c disc_correction."""
     n = np.clip(np.ceil(dc / step), 1, DISC_STEPS_MAX).astype(np.int64)
     hc, hd = dc / n, ds / n
     tc = np.zeros((len(x), 3))
@@ -737,8 +738,9 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
     channel of T is below it: the ray goes on with probability q = max T / ``roulette``
     (random dimension DIM_ROULETTE of the step), T divided by q, or ends with T = 0 (the
     same mean, fewer steps behind nearly opaque media).  ``disc_reach``: None or per light
-    the distance (m) within which a point or spot light's sampled disc point gets the
-    optical depth ``disc_correction`` adds to the stretched centre's.  Returns (single (N,3), T (N,3),
+    the distance (m) within which a point or spot light's sampled disc point, or an area
+    light's emitter point, gets the optical depth ``disc_correction`` adds to the stretched
+    centre's.  Returns (single (N,3), T (N,3),
     depth (N,), multiple (N,3), steps (N,), emission (N,3)) float64, steps being the number
     of samples each ray took."""
     n = len(origins)
@@ -874,7 +876,7 @@ def march(origins, dirs, t0, t1, axial, keys, fields, w2is, sigma_ss, sigma_ts, 
                             far = np.flatnonzero(off)[~(dc[off] < reach)] \
                                 if reach > 0.0 else np.flatnonzero(off)
                             tau[far] = np.maximum(tau[far] + v[far, cd:cd + 3], 0.0)
-                        if reach > 0.0 and int(rec[L_KIND]) in (KIND_POINT, KIND_SPOT):
+                        if reach > 0.0:
                             near = np.flatnonzero(dc[off] < reach)
                             if near.size:
                                 on = np.flatnonzero(off)[near]

@@ -343,10 +343,15 @@ def disc_transmittance(light: Light, x, tau, voxel: float, nodes: int = DISC_NOD
     pseudo-random offset per point: the stretched depth is exact only where the medium is
     the same across the disc.  ``change`` (N,3) or None: beyond that, the disc's depth
     change (precompute/discdepth.py, the field's disc channels) added to every node's
-    stretched depth, as the march adds it.  ``transmit``: area_transmittance's."""
+    stretched depth, as the march adds it.  ``transmit``: area_transmittance's.  For an AREA
+    light ``reach`` counts half-diagonals (extent_radius) and ``nodes`` the corrected
+    emitter points, about sqrt(nodes) per axis and at least AREA_EXACT_NODES
+    (area_transmittance)."""
     tau = np.asarray(tau, np.float64)
     if light.kind == "AREA":
-        return area_transmittance(light, x, tau, voxel, transmit=transmit)
+        return area_transmittance(light, x, tau, voxel, transmit=transmit, depth=depth,
+                                  reach=reach, change=change,
+                                  exact_nodes=max(AREA_EXACT_NODES, int(round(np.sqrt(nodes)))))
     if not has_disc(light):
         return np.exp(-tau)
     radius = float(light.radius)
@@ -511,6 +516,8 @@ def spot_incident(light: Light, points, sample=None):
 
 
 AREA_NODES = 6   # Gauss-Legendre points per axis of area_transmittance over an emitter
+AREA_EXACT_NODES = 4   # emitter points per axis whose own paths area_depth_change marches,
+# at least (disc_transmittance)
 # within AREA_NEAR emitter half-diagonals of its centre the weight cos / d^2 peaks where the
 # emitter is nearest: AREA_NEAR_NODES per axis there; beyond AREA_MID the weight is smooth
 # and the transmittance varies across the emitter as exp(-sigma a s) (sigma the extinction,
@@ -590,7 +597,8 @@ def emitter_normal(light: Light) -> np.ndarray:
 
 
 def area_transmittance(light: Light, x, tau, voxel: float, nodes: int = AREA_NODES,
-                       transmit=None):
+                       transmit=None, depth=None, reach: float = 0.0, change=None,
+                       exact_nodes: int = AREA_EXACT_NODES):
     """The transmittance (N,3) an AREA light's light reaches points ``x`` (N,3, m) with,
     from the optical depth ``tau`` (N,3) to its centre: the mean over its emitter, weighed by
     the solid angle each part subtends (cos theta_l dA / d^2, the front side only), of
@@ -603,7 +611,16 @@ def area_transmittance(light: Light, x, tau, voxel: float, nodes: int = AREA_NOD
     The centre's depth alone read the light that reaches a point beside a large emitter
     from its near parts as if it came the longer way from its centre (p_area_in_box's
     multiple scattering 0.967 of Cycles').  ``transmit``: ``emitter_transmittance`` (None)
-    or its compiled twin (kernels.emitter_transmittance, which the layers above pass in)."""
+    or its compiled twin (kernels.emitter_transmittance, which the layers above pass in).
+
+    The stretch is exact only where the medium is the same across the emitter.  ``depth``
+    (callable (points, unit dirs, lengths) -> (N,3) optical depth through the media) and
+    ``reach`` (half-diagonals, Tuning.disc_exact): within ``reach`` of the centre the
+    transmittance is multiplied by exp(-D), D the change ``area_depth_change`` finds on
+    ``exact_nodes`` per axis with each node's own path marched through ``depth`` (the
+    march marches each sampled point's own path there, kernels_np.disc_correction).
+    ``change`` (N,3) or None: beyond, that change as the field's disc channels hold it
+    (precompute/discdepth.py), as the march adds it."""
     transmit = transmit or emitter_transmittance
     x = np.asarray(x, np.float64).reshape(-1, 3)
     tau = np.asarray(tau, np.float64).reshape(len(x), -1)
@@ -618,7 +635,47 @@ def area_transmittance(light: Light, x, tau, voxel: float, nodes: int = AREA_NOD
         if len(sel):
             pts, wa = _emitter_nodes(light, n)
             out[sel] = transmit(x[sel], tau[sel], dc[sel], pts, wa, normal, voxel)
+    d = None if change is None else np.array(change, np.float64).reshape(len(x), 3)
+    near = np.flatnonzero((dc < reach * half) & (dc > 0.0)) if depth is not None else []
+    if len(near):
+        d = np.zeros((len(x), 3)) if d is None else d
+        d[near] = area_depth_change(light, x[near], tau[near], voxel, depth, exact_nodes)
+    if d is not None:
+        out *= np.exp(-np.maximum(d, -tau))
     return out
+
+
+def area_depth_change(light: Light, x, tau, voxel: float, depth, nodes: int) -> np.ndarray:
+    """(N,3) the change D in the optical depth to an AREA light that makes the stretched
+    centre's depth ``tau`` (N,3) at points ``x`` (N,3, m) give the emitter's mean
+    transmittance: D = log(sum_k w_k exp(-s_k tau)) - log(sum_k w_k exp(-tau_k)) over a
+    ``nodes`` x ``nodes`` Gauss-Legendre rule on the emitter, w_k each node's solid angle
+    (emitter_transmittance's weights), s_k its path_stretch and tau_k its own path's depth,
+    the field's stretched depth plus what ``depth`` (callable (points, unit dirs, lengths)
+    -> (N,3)) finds along its path less the stretched centre's, as the march corrects it
+    (kernels_np.disc_correction).  0 where no node faces the point."""
+    x = np.asarray(x, np.float64).reshape(-1, 3)
+    tau = np.asarray(tau, np.float64).reshape(len(x), 3)
+    centre = np.asarray(light.position, np.float64)
+    normal = emitter_normal(light)
+    pts, wa = _emitter_nodes(light, nodes)
+    dc = np.linalg.norm(x - centre, axis=1)
+    ok = dc > 0.0
+    wc = (centre - x) / np.where(ok, dc, 1.0)[:, None]
+    tau_c = depth(x, wc, dc)
+    num_s = np.zeros((len(x), 3))
+    num_e = np.zeros((len(x), 3))
+    for p, a in zip(pts, wa):
+        v = x - p                                             # emitter -> point
+        dn = np.maximum(np.linalg.norm(v, axis=1), 1e-9)
+        w = a * np.maximum(v @ normal, 0.0) / (dn * dn * dn)
+        st = path_stretch(dn, dc, voxel)[:, None]
+        tk = tau * st + depth(x, -v / dn[:, None], dn) - st * tau_c
+        num_s += w[:, None] * np.exp(-tau * st)
+        num_e += w[:, None] * np.exp(-np.maximum(tk, 0.0))
+    good = ok[:, None] & (num_s > 0.0) & (num_e > 0.0)
+    return np.where(good, np.log(np.where(good, num_s, 1.0)) - np.log(np.where(good, num_e, 1.0)),
+                    0.0)
 
 
 def point_jitter(points) -> np.ndarray:
@@ -776,6 +833,22 @@ def has_disc(light: Light) -> bool:
     """Whether ``light`` shines from a disc facing the lit point: a point or spot light with
     a radius (light_sample, disc_transmittance; media.disc_reaches, precompute/discdepth.py)."""
     return light.kind in ("POINT", "SPOT") and float(getattr(light, "radius", 0.0) or 0.0) > 0.0
+
+
+def has_extent(light: Light) -> bool:
+    """Whether ``light`` shines from points off its centre: a lamp with a disc (has_disc) or
+    an area light."""
+    return has_disc(light) or (light.kind == "AREA" and extent_radius(light) > 0.0)
+
+
+def extent_radius(light: Light) -> float:
+    """The distance (m) from a lamp's centre to the farthest point it shines from: a point or
+    spot light's radius, half an area light's diagonal; 0 for a sun."""
+    if light.kind == "AREA":
+        sx = float(light.size_x)
+        sy = float(light.size_y) if light.shape in ("RECTANGLE", "ELLIPSE") else sx
+        return 0.5 * float(np.hypot(sx, sy))
+    return float(getattr(light, "radius", 0.0) or 0.0) if light.kind in ("POINT", "SPOT") else 0.0
 
 
 def is_dark(light: Light) -> bool:

@@ -13,7 +13,7 @@ from typing import List, Optional
 
 import numpy as np
 
-from .lights import has_disc
+from .lights import extent_radius, has_extent
 from .phase import clamp_g, delta_fraction, delta_g
 from .scene import Medium
 
@@ -513,15 +513,16 @@ def uneven_within(media, centre, radius: float) -> bool:
 
 
 def disc_reaches(media, lights, disc_exact: float, disc_voxels: float = 0.0) -> list:
-    """Per light, the distance (m) within which the march corrects a lamp's disc points'
-    optical depth (kernels_np.disc_correction): for a point or spot light with a radius
-    whose surroundings within it are uneven (``uneven_within``), ``disc_exact`` (Tuning)
-    times its radius or ``disc_voxels`` (Tuning) times the finest voxel of ``media``,
+    """Per light, the distance (m) within which the march corrects the optical depth to a
+    lamp's disc points or an area light's emitter points (kernels_np.disc_correction): for
+    a light that shines from points off its centre (lights.has_extent) whose surroundings
+    within it are uneven (``uneven_within``), ``disc_exact`` (Tuning) times its
+    lights.extent_radius or ``disc_voxels`` (Tuning) times the finest voxel of ``media``,
     whichever is longer; else 0."""
     out = []
     finest = min((float(pm.voxel_size) for pm in media), default=0.0)
     for light in lights:
-        reach = max(disc_exact * float(light.radius), disc_voxels * finest) \
-            if has_disc(light) else 0.0
+        reach = max(disc_exact * extent_radius(light), disc_voxels * finest) \
+            if has_extent(light) else 0.0
         out.append(reach if reach > 0.0 and uneven_within(media, light.position, reach) else 0.0)
     return out

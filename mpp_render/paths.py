@@ -146,6 +146,9 @@ _D_ACCEPT = 512   # a start's acceptance draw, one dimension per try
 _D_CORNER = 600   # the lattice corner a deposit's moments go to
 _D_MEDIUM = 17    # which medium a tentative collision is in, with several (csrc/paths.c)
 _D_LIGHT = 700    # the emitter point a first scattering's light comes from (csrc/paths.c)
+_D_LIGHT_MORE = 702   # the other candidate emitter points, two dimensions each
+LIGHT_CANDIDATES = 8  # emitter points a start with a start_rate draws one from (csrc/paths.c)
+_D_LIGHT_PICK = _D_LIGHT_MORE + 2 * (LIGHT_CANDIDATES - 1)   # which of them (716)
 _D_AIM = 5        # an aimed surface start's choice of lobe or cone (csrc/paths.c)
 _D_CAMERA = 800   # the camera's roulette at a real collision (csrc/paths.c)
 PATH_MEDIA = 8    # media one trace flies through at most: its own and 7 others
@@ -227,7 +230,11 @@ class PathInputs:
     share of the paths (the first ones of each of kernels.PATH_BLOCKS blocks) whose moments
     are deposited, scaled to all of them (kernels.moment_ends); 1: every path's.
     ``odds``: None, or float32 (LX,LY,LZ) on the lattice, each point's odds in (0, 1] for the
-    camera's roulette (module docstring, "The camera's roulette")."""
+    camera's roulette (module docstring, "The camera's roulette").  ``start_rate``: None, or
+    float64 (N,) per start the mean extinction (1/m) along the light's path to its centre
+    (the field's depth over the distance): with ``light`` the emitter point is then drawn
+    among ``LIGHT_CANDIDATES`` by their stretched transmittance exp(-rate d) times their
+    light (``start_directions``), as the light arrives there, not by the solid angle alone."""
 
     density: np.ndarray
     w2i: np.ndarray
@@ -263,6 +270,7 @@ class PathInputs:
     min_collisions: int = 0
     moment_share: float = 1.0
     odds: Optional[np.ndarray] = None
+    start_rate: Optional[np.ndarray] = None
 
     @property
     def channels(self) -> int:
@@ -577,13 +585,48 @@ def start_directions(inp: PathInputs, keys, k, pos) -> np.ndarray:
     """(N,3) the propagation of the light at each path's start ``pos`` (N,3, m; start ``k``):
     ``dirs[k]``, or with ``inp.light`` and ``lobe`` 0 the direction drawn from the light's
     emitter there (lights.light_sample with the path's own jitter, dimensions ``_D_LIGHT``),
-    kept where it is a unit vector that brings light (csrc/paths.c trace_one)."""
+    kept where it is a unit vector that brings light (csrc/paths.c trace_one).  With
+    ``inp.start_rate`` > 0 at the start, ``LIGHT_CANDIDATES`` emitter points (the first at
+    ``_D_LIGHT``, the others at ``_D_LIGHT_MORE``) and one of them drawn (``_D_LIGHT_PICK``)
+    with probability proportional to its light's mean over the channels times
+    exp(-rate (d - d_min)), d its distance: through a dense medium the light of a wide
+    emitter arrives mostly along the shorter paths (resampled importance: the candidates'
+    distribution tends to that one as their count grows)."""
     din = np.asarray(inp.dirs, np.float64)[k]
     if inp.light is None or int(inp.lobe) != 0:
         return din
     from .lights import light_sample
-    dl, el = light_sample(np.asarray(inp.light, np.float64), pos, uniform(keys, 0, _D_LIGHT),
-                          uniform(keys, 0, _D_LIGHT + 1))[:2]
+    rec = np.asarray(inp.light, np.float64)
+    dl, el, _, _, ds = light_sample(rec, pos, uniform(keys, 0, _D_LIGHT),
+                                    uniform(keys, 0, _D_LIGHT + 1))
+    rate = np.zeros(len(pos)) if inp.start_rate is None else \
+        np.asarray(inp.start_rate, np.float64).reshape(-1)[k]
+    many = np.flatnonzero(rate > 0.0)
+    if many.size:
+        c_d = [dl[many]]
+        c_e = [el[many]]
+        c_s = [ds[many]]
+        for j in range(1, LIGHT_CANDIDATES):
+            got = light_sample(rec, pos[many], uniform(keys[many], 0, _D_LIGHT_MORE + 2 * (j - 1)),
+                               uniform(keys[many], 0, _D_LIGHT_MORE + 2 * (j - 1) + 1))
+            c_d.append(got[0])
+            c_e.append(got[1])
+            c_s.append(got[4])
+        cd, ce, cs = np.stack(c_d, 1), np.stack(c_e, 1), np.stack(c_s, 1)   # (M,K,3), (M,K)
+        n2 = np.einsum("mkc,mkc->mk", cd, cd)
+        good = (n2 > 0.25) & (n2 < 4.0) & (ce.max(axis=2) > 0.0) & np.isfinite(cs)
+        dmin = np.min(np.where(good, cs, np.inf), axis=1)
+        w = np.where(good, ce.mean(axis=2) * np.exp(-rate[many, None] * np.maximum(
+            np.where(good, cs, 0.0) - np.where(np.isfinite(dmin), dmin, 0.0)[:, None], 0.0)),
+            0.0)
+        cum = np.cumsum(w, axis=1)
+        tot = cum[:, -1]
+        u = uniform(keys[many], 0, _D_LIGHT_PICK) * tot
+        pick = np.minimum(np.sum(cum <= u[:, None], axis=1), LIGHT_CANDIDATES - 1)
+        has = tot > 0.0
+        sel = many[has]
+        dl[sel] = cd[has, pick[has]]
+        el[sel] = ce[has, pick[has]]
     n2 = np.einsum("ij,ij->i", dl, dl)
     ok = (n2 > 0.25) & (n2 < 4.0) & (el.max(axis=1) > 0.0)
     unit = dl / np.sqrt(np.where(ok, n2, 1.0))[:, None]

@@ -255,9 +255,10 @@ class Tuning:
     probability T / roulette, T scaled up to keep the mean; 0: every ray marches on until
     T < 1e-6): unbiased, with fewer steps behind nearly opaque media.
     ``gather_step``: the surfaces' gathers march with steps this many times the camera's.
-    ``disc_exact``: within this many lamp radii of a point or spot light with a radius, the
-    optical depth to the sampled disc point is corrected by marching the disc point's path
-    and the centre's through the media (kernels_np.disc_correction; 0: the centre's depth
+    ``disc_exact``: within this many lamp radii of a point or spot light with a radius (half
+    diagonals of an area light, lights.extent_radius), the optical depth to the sampled disc
+    (emitter) point is corrected by marching that point's path and the centre's through the
+    media (kernels_np.disc_correction; 0: the centre's depth
     stretched alone, exact only in a homogeneous medium); only where the media within it are
     uneven (media.disc_reaches).  Beyond it the disc subtends under atan(1/2) = 27 degrees.
     p_point_in_plume's single scattering: 0.138 at 0, within the references' noise at 1.5
@@ -278,7 +279,8 @@ class Tuning:
     precompute 0.07 / 0.15 / 1.7 s more: the stride is not what is left.
     ``disc_fold_nodes``: the disc's nodes per lattice point (Gauss-Legendre in the squared
     radius, lights.disc_transmittance): in a density step at the lamp (tests/test_disc_fold.py)
-    8 nodes missed the disc's mean by up to 10 %, 16 by about 1 %.
+    8 nodes missed the disc's mean by up to 10 %, 16 by about 1 %.  An area light's emitter
+    takes about sqrt(nodes) per axis, at least lights.AREA_EXACT_NODES (4 x 4 at 16).
     ``guided_gathers``: the share of a surface's gathers drawn about the lamps that a medium
     surrounds rather than cosine-weighted, the two weighed by the balance heuristic
     (gathers.py; 0: all cosine-weighted).  Round a lamp in fog or smoke its glow on a ground

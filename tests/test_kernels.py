@@ -112,10 +112,12 @@ def test_march_twins_agree_on_random_rays(lights, density):
     for x, y, name in zip(a, b, MarchResult._fields):
         assert np.all(np.isfinite(y)), name
         assert np.all(np.abs(x - y) <= 1e-4 * np.maximum(np.abs(x), 1e-6)), name
-    # the lamps with a radius carry their disc's depth change in this uneven smoke
-    # (precompute/discdepth.py): both twins read it, and it changes the light
+    # the lamps with a radius and the area lights carry their disc's (emitter's) depth change
+    # in this uneven smoke (precompute/discdepth.py): both twins read it, and it changes the
+    # light
+    from mpp_render.lights import has_extent
     discs = [k for k in (pre.layout.disc_channels or []) if k is not None]
-    assert len(discs) == sum(lt.kind in ("POINT", "SPOT") and lt.radius > 0 for lt in lights)
+    assert len(discs) == sum(has_extent(lt) for lt in lights)
     if discs:
         assert max(np.abs(f[..., k:k + 3]).max() for f in pre.fields for k in discs) > 1e-3
         bare = [f.copy() for f in pre.fields]

@@ -457,6 +457,18 @@ def test_starts_draw_the_light_from_its_emitter_and_the_twins_agree(which):
     # a record of the wrong size is refused
     with pytest.raises(ValueError, match="light"):
         kernels.trace_paths(dataclasses.replace(inp, light=np.zeros(5)), threads=1)
+    # the emitter point drawn among its candidates by their stretched transmittance
+    # (start_rate): the twins agree, a rate of 0 is the draw without it, and a dense rate
+    # changes the deposits
+    rated = dataclasses.replace(inp, start_rate=np.array([8.0, 0.0, 3.0]))
+    ra, rb = trace_paths_np(rated), kernels.trace_paths(rated, threads=2)
+    assert np.abs(ra - rb).max() <= 1e-9 * np.abs(ra).max()
+    assert np.abs(rb - b).max() > 1e-3 * np.abs(b).max()
+    zero = kernels.trace_paths(dataclasses.replace(inp, start_rate=np.zeros(3)), threads=2)
+    np.testing.assert_array_equal(zero, b)
+    for bad in (np.array([1.0, -1.0, 0.0]), np.array([1.0, np.nan, 0.0]), np.ones(2)):
+        with pytest.raises(ValueError, match="start_rate"):
+            kernels.trace_paths(dataclasses.replace(inp, start_rate=bad), threads=1)
 
 
 def test_the_sun_keeps_its_one_direction():

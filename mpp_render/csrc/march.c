@@ -272,9 +272,10 @@ static void walk_tau(const Grid *f, const int *xcs, int nm, int mi, int c, const
     for (int q = 0; q < 3; q++) tau[q] += acc[q];
 }
 
-/* Optical depth (RGB) over every medium from x to a lamp's disc point (unit direction wd,
- * distance ds) minus `stretch` times that to its centre (wc, dc): what the field's stretched
- * depth to the centre misses in a medium that is not homogeneous across the disc.  Both paths
+/* Optical depth (RGB) over every medium from x to a lamp's disc point or an area light's
+ * emitter point (unit direction wd, distance ds) minus `stretch` times that to its centre (wc,
+ * dc): what the field's stretched depth to the centre misses in a medium that is not
+ * homogeneous across the disc or emitter.  Both paths
  * take n = ceil(dc / step) steps, each read at its midpoint.  Twin of
  * kernels_np.disc_correction. */
 static void disc_correction(const Grid *f, const int *xcs, int nm, const double x[3],
@@ -505,7 +506,9 @@ typedef struct {
     double disc_step;                      /* disc_correction's step: DISC_STEP_VOXELS finest
                                             * voxels (m) */
     double disc_reach[MAX_LIGHTS];         /* per light, the distance (m) within which a disc
-                                            * point's depth is corrected (disc_correction) */
+                                            * or emitter point's depth is corrected
+                                            * (disc_correction); 0 for lights that draw no
+                                            * point (jitter) */
     int use_ms;                            /* multiple scattering from the pyramid levels lv */
     MS ms;
     Grid *lv;
@@ -880,7 +883,7 @@ static void march_prepare(March *c) {
         int kind = (int)L[L_KIND];
         c->sun[l] = kind == KIND_SUN;
         c->jitter[l] = kind == KIND_AREA || ((kind == KIND_POINT || kind == KIND_SPOT) && L[L_RADIUS] > 0.0);
-        if (!((kind == KIND_POINT || kind == KIND_SPOT) && L[L_RADIUS] > 0.0)) c->disc_reach[l] = 0.0;
+        if (!c->jitter[l]) c->disc_reach[l] = 0.0;
     }
     c->disc_step = HUGE_VAL;
     for (int m = 0; m < ng; m++) if (c->voxel[m] < c->disc_step) c->disc_step = c->voxel[m];

@@ -57,6 +57,9 @@ const char trace_paths_doc[] =
 #define D_CORNER 600   /* the lattice corner a deposit's moments go to */
 #define D_MEDIUM 17    /* which medium a tentative collision is in, with several (event >= 1) */
 #define D_LIGHT 700    /* the emitter point a first scattering's light comes from (event 0) */
+#define D_LIGHT_MORE 702   /* the other candidate emitter points, two dimensions each */
+#define LIGHT_CANDIDATES 8 /* emitter points a start with a rate draws one from (trace_one) */
+#define D_LIGHT_PICK (D_LIGHT_MORE + 2 * (LIGHT_CANDIDATES - 1))   /* which of them (716) */
 #define D_CAMERA 800   /* the camera's roulette at a real collision (camera_roulette) */
 #define START_TRIES 64 /* offsets drawn for a first scattering until one is accepted */
 #define PATH_MEDIA 8    /* media one trace flies through: its own and 7 others */
@@ -137,6 +140,9 @@ typedef struct {
                                  drawn at the start from the emitter (light_sample) */
     const float *odds;        /* NULL, or (LX,LY,LZ) of m[0]'s lattice: each point's odds in
                                  (0, 1] of a path surviving there (camera_roulette) */
+    const double *start_rate; /* NULL, or per start the mean extinction (1/m) along the
+                                 light's path to its centre: the emitter point is drawn among
+                                 LIGHT_CANDIDATES by its stretched transmittance (trace_one) */
 } Tracer;
 
 /* Where the ray o + t d (t >= 0) enters (want_exit 0) or leaves (1) the grid's box in index
@@ -458,7 +464,7 @@ static int cmp_u64(const void *a, const void *b) {
 }
 
 static void trace_one(const Tracer *T, uint32_t key, const double *start, const double *w_start,
-                      const double *dir, double inv_n, double peak) {
+                      const double *dir, double inv_n, double peak, double lrate) {
     double pos[3], d[3], w[3], off[3], w0 = 0.0;
     if (T->lobe == 1 || T->lobe == 3) {
         /* a surface: a tent of half-width jitter metres in its plane */
@@ -502,6 +508,44 @@ static void trace_one(const Tracer *T, uint32_t key, const double *start, const 
         double dl[3], el[3], wc[3], dc, ds;
         light_sample(T->light, pos, uniform01(key, 0, D_LIGHT), uniform01(key, 0, D_LIGHT + 1),
                      dl, el, wc, &dc, &ds);
+        if (lrate > 0.0) {
+            /* through a dense medium a wide emitter's light arrives mostly along the shorter
+             * paths: one of LIGHT_CANDIDATES emitter points, drawn by its light (the mean of
+             * its channels) times exp(-lrate (d - d_min)) (paths.start_directions) */
+            double cd[LIGHT_CANDIDATES][3], ce[LIGHT_CANDIDATES], cs[LIGHT_CANDIDATES];
+            int good[LIGHT_CANDIDATES];
+            double dmin = INFINITY;
+            for (int j = 0; j < LIGHT_CANDIDATES; j++) {
+                double e3[3], w3[3], dcj, dsj;
+                if (j == 0) {
+                    for (int a = 0; a < 3; a++) { cd[0][a] = dl[a]; e3[a] = el[a]; }
+                    dsj = ds;
+                } else {
+                    light_sample(T->light, pos, uniform01(key, 0, D_LIGHT_MORE + 2 * (j - 1)),
+                                 uniform01(key, 0, D_LIGHT_MORE + 2 * (j - 1) + 1), cd[j], e3,
+                                 w3, &dcj, &dsj);
+                }
+                double m2 = cd[j][0] * cd[j][0] + cd[j][1] * cd[j][1] + cd[j][2] * cd[j][2];
+                good[j] = m2 > 0.25 && m2 < 4.0 && max_d(e3[0], max_d(e3[1], e3[2])) > 0.0 &&
+                          isfinite(dsj);
+                ce[j] = (e3[0] + e3[1] + e3[2]) / 3.0;
+                cs[j] = dsj;
+                if (good[j] && dsj < dmin) dmin = dsj;
+            }
+            double cum[LIGHT_CANDIDATES], tot = 0.0;
+            for (int j = 0; j < LIGHT_CANDIDATES; j++) {
+                double gap = good[j] ? cs[j] - (isfinite(dmin) ? dmin : 0.0) : 0.0;
+                tot += good[j] ? ce[j] * exp(-lrate * (gap > 0.0 ? gap : 0.0)) : 0.0;
+                cum[j] = tot;
+            }
+            if (tot > 0.0) {
+                double u = uniform01(key, 0, D_LIGHT_PICK) * tot;
+                int pick = 0;
+                while (pick < LIGHT_CANDIDATES - 1 && cum[pick] <= u) pick++;
+                for (int a = 0; a < 3; a++) dl[a] = cd[pick][a];
+                el[0] = el[1] = el[2] = 1.0;   /* a candidate that brings light */
+            }
+        }
         double n2 = dl[0] * dl[0] + dl[1] * dl[1] + dl[2] * dl[2];
         if (n2 > 0.25 && n2 < 4.0 && max_d(el[0], max_d(el[1], el[2])) > 0.0) {
             double inv = 1.0 / sqrt(n2);
@@ -862,15 +906,15 @@ static int other_grid(PyObject *item, Buf b[OTHER_BUFS], PathGrid *G) {
 PyObject *trace_paths(PyObject *self, PyObject *args) {
     PyObject *po, *pd, *pw2i, *pi2w, *pss, *pst, *ptw, *pstarts, *pws, *pdirs, *pcdf, *preach,
         *ptri, *palb, *psrc, *ppeak, *pmom, *pothers, *pcells, *plight, *pcol, *pext,
-        *pstop = Py_None, *podds = Py_None;
+        *pstop = Py_None, *podds = Py_None, *prate = Py_None;
     double g, rate, roulette, jitter, outside, thr0;
     long stride, lo, hi, n_paths, max_hits, lobe, min_hits = 0;
     unsigned long seed;
-    if (!PyArg_ParseTuple(args, "OOOOOOdlOOOOOdlllklddldOOOOOOOdOOOO|lOO", &po, &pd, &pw2i, &pi2w,
+    if (!PyArg_ParseTuple(args, "OOOOOOdlOOOOOdlllklddldOOOOOOOdOOOO|lOOO", &po, &pd, &pw2i, &pi2w,
                           &pss, &pst, &g, &stride, &ptw, &pstarts, &pws, &pdirs, &pcdf, &rate,
                           &lo, &hi, &n_paths, &seed, &max_hits, &roulette, &jitter, &lobe,
                           &outside, &preach, &ptri, &palb, &psrc, &ppeak, &pmom, &pothers, &thr0,
-                          &pcells, &plight, &pcol, &pext, &min_hits, &pstop, &podds))
+                          &pcells, &plight, &pcol, &pext, &min_hits, &pstop, &podds, &prate))
         return NULL;
     if (!PyTuple_Check(pothers) || PyTuple_GET_SIZE(pothers) > PATH_MEDIA - 1) {
         PyErr_SetString(PyExc_ValueError, "trace_paths: others must be a tuple of at most 7 media");
@@ -878,7 +922,7 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
     }
     Buf bo = {0}, bd = {0}, bw = {0}, bi = {0}, bss = {0}, bst = {0}, btw = {0}, bs = {0},
         bws = {0}, bdir = {0}, bc = {0}, br = {0}, bt = {0}, ba = {0}, bq = {0}, bp = {0}, bm = {0},
-        bcl = {0}, bli = {0}, bcol = {0}, bext = {0}, bstop = {0}, bodds = {0};
+        bcl = {0}, bli = {0}, bcol = {0}, bext = {0}, bstop = {0}, bodds = {0}, brate = {0};
     const volatile unsigned char *stop = NULL;
     /* per other medium: out, moments, density, w2i, sigma_s, sigma_t, towards, cells, colour,
      * extinction */
@@ -1011,6 +1055,18 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
             T.odds = q;
         }
     }
+    T.start_rate = NULL;
+    if (prate != Py_None) {   /* the starts' rates: one finite value >= 0 per start */
+        Py_ssize_t srt[1] = {sn[0]};
+        if (get_buf(prate, &brate, 'd', 1, srt, "start_rate") < 0) goto done;
+        const double *r = (const double *)brate.view.buf;
+        for (Py_ssize_t k = 0; k < sn[0]; k++)
+            if (!(r[k] >= 0.0) || !isfinite(r[k])) {
+                PyErr_SetString(PyExc_ValueError, "trace_paths: start_rate must be finite and >= 0");
+                goto done;
+            }
+        T.start_rate = r;
+    }
     T.src = has_src ? (const float *)bq.view.buf : NULL;
     T.peak = has_src ? (const double *)bp.view.buf : NULL;
     memcpy(T.i2w, bi.view.buf, sizeof T.i2w);
@@ -1070,7 +1126,7 @@ PyObject *trace_paths(PyObject *self, PyObject *args) {
         Py_ssize_t a = (Py_ssize_t)(order[q] >> 32);
         uint32_t key = hash32((uint32_t)i ^ base);
         trace_one(&T, key, S + 3 * a, W + 3 * a, D + 3 * a, 1.0 / (double)n_paths,
-                  T.peak ? T.peak[a] : 1.0);
+                  T.peak ? T.peak[a] : 1.0, T.start_rate ? T.start_rate[a] : 0.0);
     }
     Py_END_ALLOW_THREADS
     ok = 1;
@@ -1080,7 +1136,7 @@ done:
     buf_release(&bdir); buf_release(&bc); buf_release(&br); buf_release(&bt); buf_release(&ba);
     buf_release(&bq); buf_release(&bp); buf_release(&bm); buf_release(&bcl);
     buf_release(&bli); buf_release(&bcol); buf_release(&bext); buf_release(&bstop);
-    buf_release(&bodds);
+    buf_release(&bodds); buf_release(&brate);
     for (Py_ssize_t k = 0; k < n_others; k++)
         for (int q = 0; q < OTHER_BUFS; q++) buf_release(&ob[k][q]);
     free(boxes);

@@ -31,6 +31,11 @@ cone) weighs the disc's directions unequally, which the unweighted mean ignores;
 subtends under 27 degrees beyond the reach (Tuning.disc_exact), and the march's exact zone
 takes the nearer points.
 
+An area light's emitter (lights.has_extent) is folded the same way: lights.disc_transmittance
+hands it to lights.area_transmittance, whose D is lights.area_depth_change's over a
+Gauss-Legendre rule on the emitter, each node weighed by its solid angle; its reach counts
+half-diagonals (lights.extent_radius).
+
 Units: world metres; optical depths dimensionless, RGB.
 """
 from __future__ import annotations

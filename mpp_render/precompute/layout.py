@@ -3,8 +3,9 @@ the precompute fills it, the cache patches its parts, the march reads it.
 
 In order: channel 0 the density; per lit light 3 channels of RGB optical depth to it; with
 multiple scattering in a forward-scattering medium per lit light 3 channels of its forward
-peak's light; per point or spot light with a radius (``lights.has_disc``) 3 channels of
-its disc's depth change beyond the march's reach (precompute/discdepth.py); with a lit world or
+peak's light; per point or spot light with a radius or area light (``lights.has_extent``) 3
+channels of its disc's (emitter's) depth change beyond the march's reach
+(precompute/discdepth.py); with a lit world or
 a medium's emission that lights a medium that scatters (media.glow_lights) 3 channels of
 world light, then with multiple scattering 3 of its multiply scattered part (the glow's
 light scattered once and more is added to them, precompute.emissionlight), then where the
@@ -25,7 +26,7 @@ from typing import List, Optional, Sequence
 
 import numpy as np
 
-from ..lights import has_disc, is_dark
+from ..lights import has_extent, is_dark
 from ..media import PreparedMedium, delta_scaled, glow_lights
 
 
@@ -42,13 +43,13 @@ class FieldLayout:
     forward peak's light (W/m^2, ``peak_light``: what has scattered into the peak and not
     out of it, spread sideways), first the optical depth through the delta-scaled media
     (media.delta_scaled) from which it is made; right after the lights' channels.
-    ``disc_channels[i]`` (a point or spot light with a radius, ``lights.has_disc``): the
-    offset of light i's disc's optical-depth change beyond the march's reach (discdepth.py),
-    after the beams' channels, before the world's.  ``gather_ambient_channel`` and
-    ``gather_ambient_multiple_channel`` (a medium's glow whose traced paths keep their
-    moments for the surfaces' gathers, precompute.emissionlight): 3 + 3 channels right after
-    the world light's, holding the same but for each medium's own glow, which the gathers
-    read from its moments instead (``for_gathers``)."""
+    ``disc_channels[i]`` (a point or spot light with a radius or an area light,
+    ``lights.has_extent``): the offset of light i's disc's (emitter's) optical-depth change
+    beyond the march's reach (discdepth.py), after the beams' channels, before the world's.
+    ``gather_ambient_channel`` and ``gather_ambient_multiple_channel`` (a medium's glow whose
+    traced paths keep their moments for the surfaces' gathers, precompute.emissionlight):
+    3 + 3 channels right after the world light's, holding the same but for each medium's own
+    glow, which the gathers read from its moments instead (``for_gathers``)."""
 
     light_channels: List[Optional[int]]
     ambient_channel: Optional[int]
@@ -127,7 +128,7 @@ def field_layout(media: Sequence[PreparedMedium], lights, world_color, multiple:
     precompute.source.peak_light); traced paths (paths.py) carry it themselves.  ``glow``:
     whether the media's glow counts as world light (the cache's part without the world
     sets it False).  ``disc``: whether the lamps' discs are folded (Tuning.disc_fold_stride
-    > 0; ``lights.has_disc``).  ``gather_glow``: the surfaces' gathers read the media's own
+    > 0; ``lights.has_extent``).  ``gather_glow``: the surfaces' gathers read the media's own
     glow from its paths' moments (``glow_gathered``), so the world light is kept a second
     time without it (FieldLayout.gather_ambient_channel)."""
     chans = light_channels(lights)
@@ -141,7 +142,7 @@ def field_layout(media: Sequence[PreparedMedium], lights, world_color, multiple:
                 c += 3
     discs = [None] * len(lights)
     for i, light in enumerate(lights):
-        if disc and chans[i] is not None and has_disc(light):
+        if disc and chans[i] is not None and has_extent(light):
             discs[i] = c
             c += 3
     lit = np.any(np.asarray(world_color) > 0) or (glow and glow_lights(media))

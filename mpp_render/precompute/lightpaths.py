@@ -11,14 +11,15 @@ import numpy as np
 
 from .. import kernels
 from ..camera import towards_camera
-from ..lights import pack_light
+from ..lights import area_geometry, extent_radius, has_extent, pack_light
 from ..media import box_distance, density_from, trilinear
 from ..parallel import worker_count
 from ..paths import (MAX_COLLISIONS, MOMENT_CHANNELS, PATH_MEDIA, PATHS_MAX_SPAN,
                      SIGNED_CHANNELS, PathInputs, PathMedium, from_power, rate_span)
 from ..scene import MULTIPLE_PATHS, Tuning
 from .camerareach import roulette_odds
-from .lattice import MULTIPLE_RESOLUTION, dilate, lattice_points, paths_lattice
+from .lattice import (MULTIPLE_RESOLUTION, dilate, lattice_points, lattice_values,
+                      paths_lattice)
 from .lightdepth import eye_depth
 from .lobefit import camera_weight, fitted
 from .nodal import nodal_values, tent_mass
@@ -163,8 +164,9 @@ def path_sets(pm, fld, light, channel: int, resolution: int, around, cell_tau: f
             # is the cells' mean, source.cell_mean_source): there the starts only keep to the
             # medium (a peak of 0 accepts any draw with source)
             peak[near_light_cells(pm, light, stride, shape)] = 0.0
+        rate = start_rates(pm, fld, light, channel, stride, shape, pts)
         sets.append((pts[live], power[live], light_direction(light, pts[live]), 1.0, 0,
-                     (voxels, peak[live])))
+                     (voxels, peak[live]), None, None if rate is None else rate[live]))
     if around is not None:
         if fog:
             got = fog_starts(pm, light, around, seed + 1)
@@ -199,6 +201,54 @@ def across_media(powers) -> list:
     mostly by the others' paths."""
     top = max([float(p) for p in powers] + [0.0])
     return [float(p) / top if top > 0.0 else 1.0 for p in powers]
+
+
+def start_rates(pm, fld, light, channel: int, stride: int, shape, pts) -> Optional[np.ndarray]:
+    """(N,) per point of the paths' lattice (``shape``, ``stride`` voxels apart, world
+    positions ``pts``) the mean extinction (1/m) along ``light``'s path to its centre: the
+    field's optical depth there (channel ``channel`` on, the mean of its three) over the
+    distance, at least half a voxel (lights.path_stretch's); None for a light that shines
+    from its centre alone (lights.has_extent).  Its first scatterings draw their emitter
+    point by the transmittance this stretches to each (paths.PathInputs.start_rate): below
+    a wide emitter in a dense cloud the light arrives mostly from straight above, where the
+    solid angle alone sends half of it in from the side.  0 (the solid angle alone) where
+    the emitter's points' distances spread so little (``distance_spread``) that their
+    transmittances differ by under RATE_SPREAD: a small lamp seen from afar."""
+    if not has_extent(light):
+        return None
+    idx, _ = lattice_points(pm, shape, stride)
+    tau = sum(lattice_values(fld[..., channel + c], idx, stride) for c in range(3)) / 3.0
+    dc = np.linalg.norm(pts - np.asarray(light.position, np.float64), axis=1)
+    rate = tau / np.maximum(dc, 0.5 * float(pm.voxel_size))
+    rate = np.where(np.isfinite(rate) & (rate > 0.0), rate, 0.0)
+    return np.where(rate * distance_spread(light, pts) >= RATE_SPREAD, rate, 0.0)
+
+
+RATE_SPREAD = 0.01   # start_rates: optical depths that differ by less draw by the solid angle
+
+
+def distance_spread(light, pts) -> np.ndarray:
+    """(N,) an upper bound (m) on how far the distances from ``pts`` (N,3) to the points a
+    lamp's disc or an area light's emitter shines from differ: sqrt(d^2 + r^2) - d for a
+    disc of radius r facing a point at d from its centre (lights.light_sample), the
+    farthest corner's distance less the emitter's rectangle's own for an area light (its
+    bounding rectangle for a disc or ellipse)."""
+    pts = np.asarray(pts, np.float64).reshape(-1, 3)
+    if light.kind != "AREA":
+        r = extent_radius(light)
+        d = np.linalg.norm(pts - np.asarray(light.position, np.float64), axis=1)
+        return np.sqrt(d * d + r * r) - d
+    c, ax, ay, _ = area_geometry(light)
+    rel = pts - c
+    far = np.max([np.linalg.norm(rel - sx * ax - sy * ay, axis=1)
+                  for sx in (-1.0, 1.0) for sy in (-1.0, 1.0)], axis=0)
+    near = rel.copy()
+    for a in (ax, ay):   # the nearest point of the rectangle: clamp along each half axis
+        la2 = float(np.dot(a, a))
+        if la2 > 0.0:
+            t = rel @ a / la2
+            near -= np.clip(t, -1.0, 1.0)[:, None] * a
+    return far - np.linalg.norm(near, axis=1)
 
 
 def start_light(light):
@@ -427,7 +477,8 @@ def _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
     """``_trace``'s deposits on ``lat``, then on each of the ``partners``' lattices
     ((PreparedMedium, PathLattice), traced_multiple), which the paths fly through too.  Each
     set of ``sets``: (points, power W, directions, jitter, lobe[, (start source, peaks) or
-    None[, bias]]), bias (N,) the relative odds of drawing each start (paths.from_power).
+    None[, bias[, rates]]]), bias (N,) the relative odds of drawing each start
+    (paths.from_power) or None, rates (N,) or None a lobe-0 set's ``start_rates``.
     ``light``: None, or the packed light record the first scatterings (the tracer reads it
     for lobe 0 sets only) draw their incoming direction from (``start_light``).
     ``min_collisions``: the real collisions and bounces a path makes before its deposits
@@ -472,7 +523,7 @@ def _trace_all(sets, n_paths, seed, threads, should_cancel, pm, lat, around,
                          others=others, threshold=lat.threshold, light=light,
                          scatter=scatter, extinction=extinction,
                          min_collisions=min_collisions, moment_share=moment_share, odds=odds,
-                         **extra)
+                         start_rate=item[7] if len(item) > 7 and lobe == 0 else None, **extra)
         got = kernels.trace_paths_media(inp, threads=worker_count(threads),
                                         should_cancel=should_cancel, halves=halves)
         if halves:

@@ -29,7 +29,7 @@ from typing import List, Optional
 
 import numpy as np
 
-from ..lights import disc_transmittance, incident
+from ..lights import disc_transmittance, extent_radius, incident
 from ..scene import Light
 from .. import kernels
 from ..media import disc_reaches
@@ -60,8 +60,9 @@ class Surroundings:
     (1/m, None without one), ``surfaces`` a surfaces.SurfaceSet or None (an empty set becomes
     None), ``step`` the march
     step (m) of the light's optical depth, ``bounce`` whether the surfaces reflect light
-    (Settings.surface_bounce; else they only absorb it), ``disc_exact`` the lamp radii within
-    which a lamp's disc points get their own optical depth (Tuning.disc_exact,
+    (Settings.surface_bounce; else they only absorb it), ``disc_exact`` the lamp radii (an
+    area light's half-diagonals) within which a lamp's disc points or an area light's emitter
+    points get their own optical depth (Tuning.disc_exact,
     lights.disc_transmittance; 0: off), at least ``disc_voxels`` of the finest voxel
     (Tuning.disc_voxels; media.disc_reaches)."""
 
@@ -92,12 +93,13 @@ class Surroundings:
 
     def disc(self, light: Light, x, tau, change=None) -> np.ndarray:
         """lights.disc_transmittance of ``light`` at points ``x`` (N,3, m) from the optical
-        depth ``tau`` (N,3) to its centre, the disc points within media.disc_reaches of the
-        lamp marched through the solid media (the world fog, homogeneous, needs no
-        correction); beyond, ``change`` (N,3, the field's disc channels) or None."""
+        depth ``tau`` (N,3) to its centre, the disc (emitter) points within
+        media.disc_reaches of the lamp marched through the solid media (the world fog,
+        homogeneous, needs no correction); beyond, ``change`` (N,3, the field's disc
+        channels) or None."""
         if id(light) not in self._disc_depth:   # asked once per chunk of voxels: decide once
             reach = disc_reaches(self.solid, [light], self.disc_exact, self.disc_voxels)[0]
-            radius = float(getattr(light, "radius", 0.0) or 0.0)
+            radius = extent_radius(light)
             self._disc_depth[id(light)] = (self.solid_depth(), reach / radius) \
                 if reach and radius > 0.0 else (None, 0.0)
         depth, radii = self._disc_depth[id(light)]

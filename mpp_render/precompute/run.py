@@ -174,7 +174,7 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
                         tau = tau - np.log(np.maximum(vis, np.exp(-SHADOW_TAU)))[:, None]
                     view[flat, ch:ch + 3] = tau
             if discs[li] is not None and pm is not fog and solid:
-                # the lamp's disc beyond the march's reach (discdepth.py)
+                # the lamp's disc or emitter beyond the march's reach (discdepth.py)
                 if progress:
                     progress(0.0, f"Light attenuation: {light.name}'s disc on {pm.medium.name}")
                 n_disc += fold_disc(pm, f, chans[li], discs[li], light, around.solid_depth(),
