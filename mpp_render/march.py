@@ -53,6 +53,7 @@ from .media import PreparedMedium, disc_reaches
 from .walk import RHO_TABLE
 from .passes import DEPTH_MISS, DEPTH_OPACITY
 from .rng import hash32
+from .precompute.discdepth import disc_changes
 from .precompute.layout import FieldLayout
 from .precompute.lightpyramid import MultipleField
 from .scene import Camera, Light, Tuning
@@ -118,9 +119,13 @@ class MarchContext:
 
     def __post_init__(self):
         self.packed = pack_lights(self.lights, self.layout)
-        # per light, where the disc points' optical depth is marched (media.disc_reaches)
-        self.disc_reach = disc_reaches(self.media, self.lights, self.tuning.disc_exact,
-                                       self.tuning.disc_voxels)
+        # per light, where the disc points' optical depth is marched (media.disc_reaches),
+        # none where its fold found no medium uneven across it (discdepth.disc_changes)
+        discs = self.layout.disc_channels or [None] * len(self.lights)
+        self.disc_reach = [0.0 if k is not None and not disc_changes(self.fields, k) else r
+                           for r, k in zip(disc_reaches(self.media, self.lights,
+                                                        self.tuning.disc_exact,
+                                                        self.tuning.disc_voxels), discs)]
         self.multiple = None
         if self.multiple_fields is not None:
             amb = self.layout.ambient_multiple_channel

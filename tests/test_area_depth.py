@@ -226,3 +226,23 @@ def test_the_paths_draw_their_first_light_by_its_transmittance(height, rate):
     target = float(np.sum(w * v[:, 2] / d) / w.sum())
     assert rated == pytest.approx(target, rel=0.025), (rated, plain, target)
     assert abs(plain / target - 1.0) > 0.05, (rated, plain, target)
+
+
+def test_no_exact_zone_where_the_fold_finds_no_change():
+    """The march marches the emitter points' own paths only where the fold found a medium
+    uneven across the emitter (discdepth.disc_changes): the density step keeps its reach;
+    with the disc channels 0 (what the fold's pilot leaves where no depth changes, e.g. a
+    lamp in a homogeneous box whose faces make media.disc_reaches count it uneven) the
+    reach is 0 and no sample marches two paths."""
+    from mpp_render.march import MarchContext
+    from mpp_render.precompute.discdepth import disc_changes
+    pm, light, pre = scene()
+    k = pre.layout.disc_channels[0]
+    assert disc_changes(pre.fields, k)
+    ctx = MarchContext([pm], pre.fields, pre.layout, [light], 0.01)
+    assert ctx.disc_reach[0] > 0.0
+    assert ctx.disc_reach[0] == pytest.approx(disc_reaches([pm], [light], 2.0, 16.0)[0])
+    flat = [f.copy() for f in pre.fields]
+    flat[0][..., k:k + 3] = 0.0
+    assert not disc_changes(flat, k)
+    assert MarchContext([pm], flat, pre.layout, [light], 0.01).disc_reach == [0.0]

@@ -85,6 +85,17 @@ def _changes(pm, field, channel, light, depth, stride, nodes, threads, should_ca
     return lattice, len(todo), float(np.abs(d[inside]).max()) if inside.any() else np.inf
 
 
+def disc_changes(fields, disc_channel: int) -> bool:
+    """Whether any of the media's ``fields`` holds a depth change D in a light's disc
+    channels ``disc_channel`` (fold_disc leaves them 0 where its pilot finds the disc changes
+    no depth by NEGLIGIBLE: a lamp or emitter inside a homogeneous medium, whose points'
+    paths stay in it, or by a mesh volume's face its paths do not cross).  Where none does,
+    its points' own depths are the stretched centre's, and neither the march's exact zone
+    (march.MarchContext) nor the source's (pathstarts.Surroundings.skip_disc) is run."""
+    return any(f.shape[-1] >= disc_channel + 3 and np.any(f[..., disc_channel:disc_channel + 3])
+               for f in fields)
+
+
 def fold_disc(pm, field: np.ndarray, channel: int, disc_channel: int, light, depth,
               stride: int, nodes: int, threads: int = 0, should_cancel=None) -> int:
     """Write ``light``'s disc's depth change D (module docstring) into

@@ -91,6 +91,11 @@ class Surroundings:
             self._enclosed[id(pm)] = enclosed_voxels(pm, self.surfaces)
         return self._enclosed[id(pm)]
 
+    def skip_disc(self, light: Light) -> None:
+        """``light``'s disc (emitter) points take the stretched centre's depth alone in
+        ``disc``: its fold found no medium uneven across it (discdepth.disc_changes)."""
+        self._disc_depth[id(light)] = (None, 0.0)
+
     def disc(self, light: Light, x, tau, change=None) -> np.ndarray:
         """lights.disc_transmittance of ``light`` at points ``x`` (N,3, m) from the optical
         depth ``tau`` (N,3) to its centre, the disc (emitter) points within

@@ -16,7 +16,7 @@ from .lattice import MULTIPLE_RESOLUTION, grid_points, lamp_resolution, needed_f
 from .layout import FieldLayout, field_layout, glow_gathered
 from .lightdepth import (SHADOW_TAU, light_optical_depth, near_sharp_surfaces, soft_visibility,
                          split_fog, sweep_light)
-from .discdepth import fold_disc
+from .discdepth import disc_changes, fold_disc
 from .flatten import flattened
 from .fogglow import glow_on_medium
 from .emissionlight import EMISSION_PATHS, add_glow, add_lattice, emission_light
@@ -234,6 +234,9 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
         if own_deficit:
             absorbing.append(mi)
         fields.append(f)
+    for li, light in enumerate(lights):
+        if discs[li] is not None and not disc_changes(fields, discs[li]):
+            around.skip_disc(light)   # no medium uneven across it: the stretch is exact
     # the lights' paths once every medium's light is known: a light's paths weigh the same in
     # media that overlap (lightpaths.across_media), which needs the power of each one's
     # starts first; a medium apart from the others takes the whole Paths setting
