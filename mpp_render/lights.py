@@ -843,10 +843,13 @@ def has_extent(light: Light) -> bool:
 
 def extent_radius(light: Light) -> float:
     """The distance (m) from a lamp's centre to the farthest point it shines from: a point or
-    spot light's radius, half an area light's diagonal; 0 for a sun."""
+    spot light's radius, half an area light's diagonal (half its longer axis for a disc or
+    ellipse); 0 for a sun."""
     if light.kind == "AREA":
         sx = float(light.size_x)
         sy = float(light.size_y) if light.shape in ("RECTANGLE", "ELLIPSE") else sx
+        if light.shape in ("DISK", "ELLIPSE"):
+            return 0.5 * max(sx, sy)
         return 0.5 * float(np.hypot(sx, sy))
     return float(getattr(light, "radius", 0.0) or 0.0) if light.kind in ("POINT", "SPOT") else 0.0
 

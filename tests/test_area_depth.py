@@ -116,6 +116,12 @@ def test_an_area_light_is_marched_near_it_only_in_uneven_media():
     disc_voxels voxels) where the media round it are uneven, 0 where they are not."""
     pm, light, _ = scene()
     assert has_extent(light) and extent_radius(light) == pytest.approx(SIDE / np.sqrt(2))
+    for shape, want in (("RECTANGLE", np.hypot(1.0, 0.5) / 2), ("DISK", 0.5), ("ELLIPSE", 0.5)):
+        other = Light("AREA", "b", np.ones(3), matrix=np.eye(4), shape=shape, size_x=1.0,
+                      size_y=0.5)
+        assert extent_radius(other) == pytest.approx(want), shape
+    sun = Light("SUN", "s", np.ones(3), direction=np.array([0.0, 0.0, -1.0]))
+    assert not has_extent(sun) and extent_radius(sun) == 0.0
     assert disc_reaches([pm], [light], 2.0) == [pytest.approx(np.sqrt(2) * SIDE)]
     assert disc_reaches([pm], [light], 2.0, 40.0) == [pytest.approx(40 * VOX)]
     i2w = np.eye(4)
