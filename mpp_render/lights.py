@@ -854,6 +854,30 @@ def extent_radius(light: Light) -> float:
     return float(getattr(light, "radius", 0.0) or 0.0) if light.kind in ("POINT", "SPOT") else 0.0
 
 
+def distance_spread(light: Light, pts) -> np.ndarray:
+    """(N,) an upper bound (m) on how far the distances from ``pts`` (N,3) to the points a
+    lamp's disc or an area light's emitter shines from differ: sqrt(d^2 + r^2) - d for a
+    disc of radius r facing a point at d from its centre (light_sample), the
+    farthest corner's distance less the emitter's rectangle's own for an area light (its
+    bounding rectangle for a disc or ellipse)."""
+    pts = np.asarray(pts, np.float64).reshape(-1, 3)
+    if light.kind != "AREA":
+        r = extent_radius(light)
+        d = np.linalg.norm(pts - np.asarray(light.position, np.float64), axis=1)
+        return np.sqrt(d * d + r * r) - d
+    c, ax, ay, _ = area_geometry(light)
+    rel = pts - c
+    far = np.max([np.linalg.norm(rel - sx * ax - sy * ay, axis=1)
+                  for sx in (-1.0, 1.0) for sy in (-1.0, 1.0)], axis=0)
+    near = rel.copy()
+    for a in (ax, ay):   # the nearest point of the rectangle: clamp along each half axis
+        la2 = float(np.dot(a, a))
+        if la2 > 0.0:
+            t = rel @ a / la2
+            near -= np.clip(t, -1.0, 1.0)[:, None] * a
+    return far - np.linalg.norm(near, axis=1)
+
+
 def is_dark(light: Light) -> bool:
     """True when the light emits nothing (zero or negative strength)."""
     return not np.any(np.asarray(light.strength, np.float64) > 0.0)

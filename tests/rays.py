@@ -1,5 +1,6 @@
 """Random rays for the march-kernel tests, the march's inputs along them, and the twins'
-agreement on them (shared by test_kernels, test_emission_grid and test_scatter_grid)."""
+agreement on them (shared by test_kernels, test_emission_grid and test_scatter_grid); the
+path tracer's twins' agreement (``path_twins``, shared by the path tests)."""
 import numpy as np
 
 
@@ -43,3 +44,15 @@ def march_inputs(rng, media, lights, pre, n, half_width, step, **optional):
                        [m.sigma_t for m in media], [m.g for m in media],
                        [m.threshold for m in media], [m.voxel_size for m in media],
                        pack_lights(lights, pre.layout), -1, step, 0.01, 1e10, **optional)
+
+
+def path_twins(inp):
+    """(numpy, C) deposits of the path tracer on ``inp`` (paths.PathInputs), asserted to
+    hold light and to agree to 1e-9 of the largest."""
+    from mpp_render import kernels
+    from mpp_render.paths import trace_paths_np
+    a = trace_paths_np(inp)
+    b = kernels.trace_paths(inp, threads=2)
+    assert a.sum() > 0.0
+    assert np.abs(a - b).max() <= 1e-9 * np.abs(a).max()
+    return a, b

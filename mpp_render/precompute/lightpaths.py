@@ -11,7 +11,7 @@ import numpy as np
 
 from .. import kernels
 from ..camera import towards_camera
-from ..lights import area_geometry, extent_radius, has_extent, pack_light
+from ..lights import distance_spread, has_extent, pack_light
 from ..media import box_distance, density_from, trilinear
 from ..parallel import worker_count
 from ..paths import (MAX_COLLISIONS, MOMENT_CHANNELS, PATH_MEDIA, PATHS_MAX_SPAN,
@@ -212,7 +212,7 @@ def start_rates(pm, fld, light, channel: int, stride: int, shape, pts) -> Option
     point by the transmittance this stretches to each (paths.PathInputs.start_rate): below
     a wide emitter in a dense cloud the light arrives mostly from straight above, where the
     solid angle alone sends half of it in from the side.  0 (the solid angle alone) where
-    the emitter's points' distances spread so little (``distance_spread``) that their
+    the emitter's points' distances spread so little (lights.distance_spread) that their
     transmittances differ by under RATE_SPREAD: a small lamp seen from afar."""
     if not has_extent(light):
         return None
@@ -225,30 +225,6 @@ def start_rates(pm, fld, light, channel: int, stride: int, shape, pts) -> Option
 
 
 RATE_SPREAD = 0.01   # start_rates: optical depths that differ by less draw by the solid angle
-
-
-def distance_spread(light, pts) -> np.ndarray:
-    """(N,) an upper bound (m) on how far the distances from ``pts`` (N,3) to the points a
-    lamp's disc or an area light's emitter shines from differ: sqrt(d^2 + r^2) - d for a
-    disc of radius r facing a point at d from its centre (lights.light_sample), the
-    farthest corner's distance less the emitter's rectangle's own for an area light (its
-    bounding rectangle for a disc or ellipse)."""
-    pts = np.asarray(pts, np.float64).reshape(-1, 3)
-    if light.kind != "AREA":
-        r = extent_radius(light)
-        d = np.linalg.norm(pts - np.asarray(light.position, np.float64), axis=1)
-        return np.sqrt(d * d + r * r) - d
-    c, ax, ay, _ = area_geometry(light)
-    rel = pts - c
-    far = np.max([np.linalg.norm(rel - sx * ax - sy * ay, axis=1)
-                  for sx in (-1.0, 1.0) for sy in (-1.0, 1.0)], axis=0)
-    near = rel.copy()
-    for a in (ax, ay):   # the nearest point of the rectangle: clamp along each half axis
-        la2 = float(np.dot(a, a))
-        if la2 > 0.0:
-            t = rel @ a / la2
-            near -= np.clip(t, -1.0, 1.0)[:, None] * a
-    return far - np.linalg.norm(near, axis=1)
 
 
 def start_light(light):
