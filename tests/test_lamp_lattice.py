@@ -1,22 +1,29 @@
-"""The traced paths' lattice round a lamp inside a medium (precompute.lattice.lamp_resolution):
-its spacing at most half the lamp's radius, one voxel at the finest; elsewhere the user's
-Multiple Scattering Resolution."""
+"""The traced paths' lattice round a light inside a medium (precompute.lattice.lamp_resolution):
+its spacing at most half the radius of the core of the light's first scatterings (the lamp's
+radius, half an area light's diagonal, or the mean free path there, whichever is less:
+``core_radius``), one voxel at the finest; elsewhere the user's Multiple Scattering
+Resolution."""
 import numpy as np
 import pytest
 
 from mpp_render.media import prepare
-from mpp_render.precompute.lattice import lamp_resolution, paths_lattice
+from mpp_render.precompute.lattice import core_radius, lamp_resolution, paths_lattice
 from mpp_render.scene import Light, Medium
 
 VOXEL = 0.03   # m: 100 voxels over 3 m
 
 
-@pytest.fixture(scope="module")
-def cube():
+def smoke(density):
+    """A 3 m cube of 100 voxels a side, extinction ``density`` (1/m; albedo 1)."""
     i2w = np.eye(4)
     i2w[:3, :3] *= VOXEL
-    return prepare(Medium("smoke", np.ones((100, 100, 100), np.float32), i2w, np.ones(3),
-                          np.zeros(3), 0.3))
+    grid = np.broadcast_to(np.asarray(density, np.float32), (100, 100, 100)).copy()
+    return prepare(Medium("smoke", grid, i2w, np.ones(3), np.zeros(3), 0.3))
+
+
+@pytest.fixture(scope="module")
+def cube():
+    return smoke(1.0)
 
 
 def lamp(radius, at=(1.5, 1.5, 1.5), kind="POINT", power=100.0):
@@ -44,3 +51,40 @@ def test_lamps_outside_dark_or_distant_leave_the_resolution(cube):
               Light("AREA", "area", np.full(3, 50.0), position=np.array([1.5, 1.5, 1.5]))]
     assert lamp_resolution(cube, others, 64) == 64
     assert lamp_resolution(cube, [lamp(0.3)], 100) == 100
+
+
+def area(size, at=(1.5, 1.5, 1.5), power=100.0):
+    return Light("AREA", "area", np.full(3, power), position=np.array(at, float), size_x=size,
+                 size_y=size)
+
+
+def test_the_core_is_the_extent_or_the_mean_free_path():
+    """core_radius: the lamp's radius (half an area light's diagonal) where the mean free path
+    is longer; the mean free path where it is shorter; the extinction averaged where it is
+    (an empty half of the cube round the light does not lengthen it); the extent where the
+    cube round the light is empty."""
+    thin, dense = smoke(1.0), smoke(10.0)
+    assert core_radius(thin, lamp(0.3)) == pytest.approx(0.3)
+    assert core_radius(thin, area(0.4)) == pytest.approx(0.2 * np.sqrt(2.0))
+    assert core_radius(dense, lamp(0.3)) == pytest.approx(0.1)
+    assert core_radius(dense, area(0.4)) == pytest.approx(0.1)
+    half = np.zeros((100, 100, 100), np.float32)
+    half[:, :, 50:] = 10.0
+    assert core_radius(smoke(half), lamp(0.3)) == pytest.approx(0.1, rel=1e-6)
+    assert core_radius(smoke(0.0), lamp(0.3)) == pytest.approx(0.3)
+
+
+@pytest.mark.parametrize("density,stride", [(1.0, 2), (4.0, 2), (10.0, 1), (40.0, 1)])
+def test_a_light_in_dense_smoke_gets_a_lattice_half_its_free_path_apart(density, stride):
+    """A 0.3 m lamp and a 0.4 m area light inside smoke of mean free path l = 1 / density:
+    the spacing at most min(extent, l) / 2, so the 6 cm lattice of Resolution 64 holds up to
+    l = 12 cm (density 8) and turns to the voxels (3 cm) beyond."""
+    med = smoke(density)
+    for light in (lamp(0.3), area(0.4)):
+        got, _, h = paths_lattice(med, lamp_resolution(med, [light], 64))
+        assert got == stride, (density, light.kind)
+        assert h <= max(0.5 * min(extent_of(light), 1.0 / density), VOXEL) + 1e-9
+
+
+def extent_of(light):
+    return light.radius if light.kind != "AREA" else 0.5 * np.hypot(light.size_x, light.size_y)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..lights import extent_radius
 from ..media import PAD, PreparedMedium, box_distance
 
 
@@ -56,24 +57,46 @@ def paths_lattice(pm: PreparedMedium, resolution: int = MULTIPLE_RESOLUTION):
     return _lattice_along(pm, max(max(pm.grid.shape) - 2 * PAD, 1), resolution)
 
 
+def core_radius(pm: PreparedMedium, light) -> float:
+    """The radius (m) of the core of the first scatterings round ``light`` inside ``pm``:
+    the light's extent (lights.extent_radius: a lamp's radius, half an area light's
+    diagonal) or the mean free path where it sits, whichever is less.  Within its extent a
+    light's first-scattering source is about even (~ 1 / max(d, r)^2 round a lamp, flat
+    under an emitter), and it falls as e^{-d / l} over a mean free path l.  l is 1 over
+    the extinction (1/m, its largest channel) averaged over the cube of half-side the
+    extent round the light (at least a voxel's), weighted by the extinction itself: where
+    the first scatterings are; infinite where the cube is empty."""
+    extent = float(extent_radius(light))
+    voxel = float(np.cbrt(abs(np.linalg.det(pm.i2w[:3, :3]))))
+    centre = np.rint(pm.to_index(np.asarray(light.position, np.float64).reshape(1, 3))[0])
+    centre = np.clip(centre.astype(np.int64), 0, np.array(pm.grid.shape) - 1)
+    half = max(1, int(np.ceil(extent / voxel)))
+    cube = pm.grid[tuple(slice(max(0, c - half), c + half + 1) for c in centre)]
+    sigma = float(np.max(pm.sigma_t)) * cube.astype(np.float64)
+    mass = float(sigma.sum())
+    free_path = mass / float(np.square(sigma).sum()) if mass > 0.0 else np.inf
+    return min(extent, free_path)
+
+
 def lamp_resolution(pm: PreparedMedium, lights, resolution: int = MULTIPLE_RESOLUTION) -> int:
     """The traced paths' Resolution on ``pm`` (``paths_lattice``): ``resolution``, raised
-    where a point or spot light of radius r sits inside the medium's box until the lattice's
-    spacing h is at most r / 2, one voxel at the finest.  Round such a lamp the multiply
-    scattered light has a core about as wide as the lamp (the first scatterings' source,
-    ~ 1 / max(d, r)^2, and what it scatters), over which the lattice's splat and read smooth
-    M with a tent of half-width h on each side; with h <= r / 2 the smoothing's standard
-    deviation (h / sqrt(3) per pass, about 0.8 h for both) stays under half the core's
-    radius.  A pure point light (r = 0) asks for the voxels themselves."""
+    where a point, spot or area light sits inside the medium's box until the lattice's
+    spacing h is at most half the radius of the core of its first scatterings
+    (``core_radius``: its extent or the mean free path there, the less), one voxel at the
+    finest.  Round such a light the multiply scattered light has a core as wide as that of
+    its source, over which the lattice's splat and read smooth M with a tent of half-width
+    h on each side; with h <= R / 2 the smoothing's standard deviation (h / sqrt(3) per
+    pass, about 0.8 h for both) stays under half the core's radius R.  A pure point light
+    (r = 0) asks for the voxels themselves."""
     voxels = max(max(pm.grid.shape) - 2 * PAD, 1)
     voxel = float(np.cbrt(abs(np.linalg.det(pm.i2w[:3, :3]))))
     res = int(resolution)
     for light in lights:
-        if light.kind not in ("POINT", "SPOT") or not np.any(np.asarray(light.strength) > 0):
+        if light.kind not in ("POINT", "SPOT", "AREA") or not np.any(np.asarray(light.strength) > 0):
             continue
         if box_distance(pm, light.position) > 0.0:
             continue
-        finest = max(1, int(np.floor(0.5 * float(light.radius) / voxel + 1e-9)))
+        finest = max(1, int(np.floor(0.5 * core_radius(pm, light) / voxel + 1e-9)))
         if int(np.ceil(voxels / max(res, 2))) > finest:
             res = max(res, int(np.ceil(voxels / finest)))
     return res
