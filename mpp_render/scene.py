@@ -403,7 +403,14 @@ class Tuning:
     p_sphere_thick (one roulette a path at an optical depth of 20 from the camera:
     precompute 51 / 56 -> 32 / 36 s, full render 0.0246 / 0.0261 -> 0.0246 / 0.0257 at
     seeds 0 / 1; at 0.25 37 / 40 s, 0.0243 / 0.0265); as now 70 / 62 -> 53 / 57 s, 0.0246 /
-    0.0261 -> 0.0247 / 0.0261 (docs/performance.md, 2026-12-07)."""
+    0.0261 -> 0.0247 / 0.0261 (docs/performance.md, 2026-12-07).
+    ``core_refine``: round a light inside a medium the traced paths' lattice keeps to half
+    the core of its first scatterings (precompute.lattice.lamp_resolution), at most this
+    many times finer along the longest side than the Multiple Scattering Resolution: on a
+    large grid the voxels themselves cost what the field does and more (a 200-voxel cloud
+    with a pure point light inside, on its voxels: 294 s and 3.7 GB peak, against 53 s and
+    1.1 GB at Resolution 64; docs/performance.md, 2026-12-08); no scene of the suite or the
+    hold-outs asks for more than 2x."""
 
     skip_min_voxels: int = 1 << 20
     spot_cull: bool = True
@@ -446,6 +453,7 @@ class Tuning:
     sky_deficit_paths: float = 0.125
     sky_deficit_mix: float = 0.2
     camera_roulette: float = 0.1
+    core_refine: int = 2
 
 
 # The default Noise Threshold (pilot.py's unit: the standard error over sqrt(I S), S the

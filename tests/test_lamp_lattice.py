@@ -88,3 +88,14 @@ def test_a_light_in_dense_smoke_gets_a_lattice_half_its_free_path_apart(density,
 
 def extent_of(light):
     return light.radius if light.kind != "AREA" else 0.5 * np.hypot(light.size_x, light.size_y)
+
+
+def test_the_refinement_stops_at_most_times_the_resolution(cube):
+    """A pure point light asks for the voxels (100 here); ``most`` bounds the lattice at that
+    many times the Resolution along the longest side (the memory and time the refinement
+    adds on a large grid), and never coarsens a Resolution set above it."""
+    assert lamp_resolution(cube, [lamp(0.0)], 64) == 100
+    assert lamp_resolution(cube, [lamp(0.0)], 16, most=2) == 32
+    assert paths_lattice(cube, lamp_resolution(cube, [lamp(0.0)], 16, most=2))[0] == 4
+    assert lamp_resolution(cube, [lamp(0.0)], 16, most=1) == 16
+    assert lamp_resolution(cube, [lamp(0.3)], 100, most=1) == 100

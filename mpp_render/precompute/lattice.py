@@ -78,7 +78,8 @@ def core_radius(pm: PreparedMedium, light) -> float:
     return min(extent, free_path)
 
 
-def lamp_resolution(pm: PreparedMedium, lights, resolution: int = MULTIPLE_RESOLUTION) -> int:
+def lamp_resolution(pm: PreparedMedium, lights, resolution: int = MULTIPLE_RESOLUTION,
+                    most: int = 2) -> int:
     """The traced paths' Resolution on ``pm`` (``paths_lattice``): ``resolution``, raised
     where a point, spot or area light sits inside the medium's box until the lattice's
     spacing h is at most half the radius of the core of its first scatterings
@@ -87,7 +88,10 @@ def lamp_resolution(pm: PreparedMedium, lights, resolution: int = MULTIPLE_RESOL
     its source, over which the lattice's splat and read smooth M with a tent of half-width
     h on each side; with h <= R / 2 the smoothing's standard deviation (h / sqrt(3) per
     pass, about 0.8 h for both) stays under half the core's radius R.  A pure point light
-    (r = 0) asks for the voxels themselves."""
+    (r = 0) asks for the voxels themselves.  ``most`` (Tuning.core_refine): the lattice
+    is at most that many times finer along the longest side than ``resolution``, which
+    bounds what the refinement adds on a large grid (its points, 8x at 2, hold about 600
+    bytes each while the paths are traced)."""
     voxels = max(max(pm.grid.shape) - 2 * PAD, 1)
     voxel = float(np.cbrt(abs(np.linalg.det(pm.i2w[:3, :3]))))
     res = int(resolution)
@@ -99,7 +103,7 @@ def lamp_resolution(pm: PreparedMedium, lights, resolution: int = MULTIPLE_RESOL
         finest = max(1, int(np.floor(0.5 * core_radius(pm, light) / voxel + 1e-9)))
         if int(np.ceil(voxels / max(res, 2))) > finest:
             res = max(res, int(np.ceil(voxels / finest)))
-    return res
+    return min(res, max(int(resolution), int(most) * int(resolution)))
 
 
 def _lattice_along(pm: PreparedMedium, voxels: int, resolution: int):

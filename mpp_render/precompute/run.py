@@ -90,7 +90,8 @@ def precompute(media: List[PreparedMedium], lights: List[Light], world: World, c
     around = Surroundings(solid, fog_st, surfaces, step, bool(surface_bounce),
                           tuning.disc_exact, tuning.disc_voxels)
     # the traced paths' lattice of each medium, finer round a lamp inside it
-    path_res = [lamp_resolution(pm, lights, multiple_resolution) for pm in media]
+    path_res = [lamp_resolution(pm, lights, multiple_resolution, tuning.core_refine)
+                for pm in media]
     # traced paths fly through every medium whose box overlaps theirs and deposit on it too
     # (precompute.lightpaths.overlapping); what one medium's paths leave on another's lattice
     # is added to that medium's M once every medium is traced
