@@ -140,6 +140,22 @@ VARIANTS = {
                          "fog)", [("volume", dict(density=3.0, anisotropy=0.5))]),
     "v_area_white": ("p_area_in_box", "density 2, albedo 0.99, g 0.8",
                      [("volume", dict(density=2.0, color=0.99, anisotropy=0.8))]),
+    # the tenth set (2026-12-08, forty-ninth session): lights in smoke denser than they are
+    # wide, built after the lattice's rule round a light's core (method.md §9.9) to check it
+    "v_smoke_lamp_dense": ("smoke_plume", "v_smoke_lamp (200 W, radius 0.15 m, at 30 % of "
+                           "the grid's height) in the plume at density 18",
+                           [("lamp_in_volume", dict(energy=200.0, radius=0.15, height=0.3)),
+                            ("volume", dict(density=18.0))]),
+    "v_plume_area_dense": ("p_point_in_plume", "v_plume_area (a 0.4 m square area light, "
+                           "150 W, facing down) in the plume at density 18",
+                           [("hide_lights", dict(kind="POINT")),
+                            ("add_light", dict(kind="AREA", energy=150.0, size=0.4,
+                                               location=(0.0, 0.0, -0.6))),
+                            ("volume", dict(density=18.0))]),
+    "v_cloud_spot": ("cloud_vdb", "a spot (300 W, radius 0.3 m, 60 deg, blend 0.2) inside "
+                     "the cloud at half its height, pointing down, beside the sun and sky",
+                     [("add_light", dict(kind="SPOT", energy=300.0, radius=0.3, height=0.5,
+                                         spot_size=math.radians(60), spot_blend=0.2))]),
     # the ninth set (2026-12-07, forty-eighth session): area lights inside uneven smoke
     "v_smoke_area": ("smoke_plume", "its point light replaced by a 0.3 m square area light "
                      "(100 W) inside the plume at 30 % of the grid's height, tilted",

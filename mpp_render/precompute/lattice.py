@@ -57,6 +57,11 @@ def paths_lattice(pm: PreparedMedium, resolution: int = MULTIPLE_RESOLUTION):
     return _lattice_along(pm, max(max(pm.grid.shape) - 2 * PAD, 1), resolution)
 
 
+def voxel_length(pm: PreparedMedium) -> float:
+    """The side (m) of a cube of one voxel's volume: the lattices' spacing per voxel."""
+    return float(np.cbrt(abs(np.linalg.det(pm.i2w[:3, :3]))))
+
+
 def core_radius(pm: PreparedMedium, light) -> float:
     """The radius (m) of the core of the first scatterings round ``light`` inside ``pm``:
     the light's extent (lights.extent_radius: a lamp's radius, half an area light's
@@ -67,7 +72,7 @@ def core_radius(pm: PreparedMedium, light) -> float:
     extent round the light (at least a voxel's), weighted by the extinction itself: where
     the first scatterings are; infinite where the cube is empty."""
     extent = float(extent_radius(light))
-    voxel = float(np.cbrt(abs(np.linalg.det(pm.i2w[:3, :3]))))
+    voxel = voxel_length(pm)
     centre = np.rint(pm.to_index(np.asarray(light.position, np.float64).reshape(1, 3))[0])
     centre = np.clip(centre.astype(np.int64), 0, np.array(pm.grid.shape) - 1)
     half = max(1, int(np.ceil(extent / voxel)))
@@ -93,7 +98,7 @@ def lamp_resolution(pm: PreparedMedium, lights, resolution: int = MULTIPLE_RESOL
     bounds what the refinement adds on a large grid (its points, 8x at 2, hold about 600
     bytes each while the paths are traced)."""
     voxels = max(max(pm.grid.shape) - 2 * PAD, 1)
-    voxel = float(np.cbrt(abs(np.linalg.det(pm.i2w[:3, :3]))))
+    voxel = voxel_length(pm)
     res = int(resolution)
     for light in lights:
         if light.kind not in ("POINT", "SPOT", "AREA") or not np.any(np.asarray(light.strength) > 0):
@@ -110,7 +115,7 @@ def _lattice_along(pm: PreparedMedium, voxels: int, resolution: int):
     """(stride, shape, h): the fewest whole voxels a step that put at most ``resolution``
     points along ``voxels`` voxels of ``pm``'s grid; h the spacing, m."""
     stride = max(1, int(np.ceil(voxels / max(int(resolution), 2))))
-    h = stride * float(np.cbrt(abs(np.linalg.det(pm.i2w[:3, :3]))))
+    h = stride * voxel_length(pm)
     return stride, lattice_shape(pm.grid.shape, stride), h
 
 
