@@ -99,3 +99,13 @@ def test_the_refinement_stops_at_most_times_the_resolution(cube):
     assert paths_lattice(cube, lamp_resolution(cube, [lamp(0.0)], 16, most=2))[0] == 4
     assert lamp_resolution(cube, [lamp(0.0)], 16, most=1) == 16
     assert lamp_resolution(cube, [lamp(0.3)], 100, most=1) == 100
+
+
+def test_a_wide_emitter_reads_a_bounded_cube():
+    """A 30 m emitter in the 100-voxel cube: the extinction is averaged over at most
+    CORE_CUBE voxels round it (here the dense half within them), not the whole grid."""
+    from mpp_render.precompute.lattice import CORE_CUBE
+    grid = np.ones((100, 100, 100), np.float32)
+    grid[50 - CORE_CUBE:50 + CORE_CUBE + 1, 50 - CORE_CUBE:50 + CORE_CUBE + 1,
+         50 - CORE_CUBE:50 + CORE_CUBE + 1] = 20.0
+    assert core_radius(smoke(grid), area(30.0)) == pytest.approx(0.05, rel=1e-6)

@@ -15,6 +15,7 @@ from ..media import PAD, PreparedMedium, box_distance
 
 
 MULTIPLE_RESOLUTION = 64  # lattice points along the longest side for the light pyramid
+CORE_CUBE = 32  # voxels: the largest half-side of core_radius's cube
 
 
 def needed_flat(pm: PreparedMedium):
@@ -69,13 +70,14 @@ def core_radius(pm: PreparedMedium, light) -> float:
     light's first-scattering source is about even (~ 1 / max(d, r)^2 round a lamp, flat
     under an emitter), and it falls as e^{-d / l} over a mean free path l.  l is 1 over
     the extinction (1/m, its largest channel) averaged over the cube of half-side the
-    extent round the light (at least a voxel's), weighted by the extinction itself: where
+    extent round the light (at least a voxel's, at most ``CORE_CUBE`` voxels: a wide
+    emitter in a large grid reads a bounded cube), weighted by the extinction itself: where
     the first scatterings are; infinite where the cube is empty."""
     extent = float(extent_radius(light))
     voxel = voxel_length(pm)
     centre = np.rint(pm.to_index(np.asarray(light.position, np.float64).reshape(1, 3))[0])
     centre = np.clip(centre.astype(np.int64), 0, np.array(pm.grid.shape) - 1)
-    half = max(1, int(np.ceil(extent / voxel)))
+    half = min(max(1, int(np.ceil(extent / voxel))), CORE_CUBE)
     cube = pm.grid[tuple(slice(max(0, c - half), c + half + 1) for c in centre)]
     sigma = float(np.max(pm.sigma_t)) * cube.astype(np.float64)
     mass = float(sigma.sum())
@@ -101,7 +103,9 @@ def lamp_resolution(pm: PreparedMedium, lights, resolution: int = MULTIPLE_RESOL
     voxel = voxel_length(pm)
     res = int(resolution)
     for light in lights:
-        if light.kind not in ("POINT", "SPOT", "AREA") or not np.any(np.asarray(light.strength) > 0):
+        if light.kind not in ("POINT", "SPOT", "AREA"):
+            continue
+        if not np.any(np.asarray(light.strength) > 0):
             continue
         if box_distance(pm, light.position) > 0.0:
             continue
