@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..lights import extent_radius
+from ..lights import extent_radius, is_dark
 from ..media import PAD, PreparedMedium, box_distance
 
 
@@ -103,9 +103,7 @@ def lamp_resolution(pm: PreparedMedium, lights, resolution: int = MULTIPLE_RESOL
     voxel = voxel_length(pm)
     res = int(resolution)
     for light in lights:
-        if light.kind not in ("POINT", "SPOT", "AREA"):
-            continue
-        if not np.any(np.asarray(light.strength) > 0):
+        if light.kind == "SUN" or is_dark(light):
             continue
         if box_distance(pm, light.position) > 0.0:
             continue
